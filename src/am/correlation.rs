@@ -1,0 +1,174 @@
+//! The normalised-correlation core shared by ZNCC and NCC.
+//!
+//! With `P` the centring projector (ZNCC) or the identity (NCC), unit vectors `a = P I* / |P I*|`
+//! and `c = P I / |P I|`, and `rho = a . c`, the similarity is `f = beta rho + const` with
+//! `beta = N` for ZNCC (`f = -1/2 |z* - z|^2` of the z-scores) and `beta = 1` for NCC. With `x`
+//! the variable patch (norm `n`, unit `v`) and `o` the other unit vector:
+//! - gradient `df/dx = beta / n (o - rho v)`;
+//! - exact Hessian `beta / n^2 (-o v^T - v o^T - rho P + 3 rho v v^T)`;
+//! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
+//! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
+
+use super::{accumulate_jtj, jt_times, HessianKind, Wrt};
+use crate::linalg::MAX_DOF;
+
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Correlation {
+    centered: bool,
+    template: Vec<f32>,
+    t_unit: Vec<f32>,
+    t_norm: f64,
+    /// `P I*` in double precision, for an accurate `rho`.
+    t_centered: Vec<f64>,
+    c_unit: Vec<f32>,
+}
+
+/// Writes the unit vector of `P x` into `out`; returns `|P x|` (0 for a flat patch, with `out`
+/// zero).
+fn unit(x: &[f32], centered: bool, out: &mut Vec<f32>) -> f64 {
+    out.clear();
+    let mean = mean(x, centered);
+    let norm = x.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>().sqrt();
+    out.extend(x.iter().map(|&v| (v as f64 - mean) as f32));
+    if norm > 1e-9 {
+        let inv = (1.0 / norm) as f32;
+        out.iter_mut().for_each(|v| *v *= inv);
+        norm
+    } else {
+        out.iter_mut().for_each(|v| *v = 0.0);
+        0.0
+    }
+}
+
+/// The mean of a patch (0 when not centring).
+fn mean(x: &[f32], centered: bool) -> f64 {
+    if centered {
+        x.iter().map(|&v| v as f64).sum::<f64>() / x.len().max(1) as f64
+    } else {
+        0.0
+    }
+}
+
+impl Correlation {
+    pub fn new(centered: bool) -> Self {
+        Correlation {
+            centered,
+            ..Default::default()
+        }
+    }
+
+    fn beta(&self) -> f64 {
+        if self.centered {
+            self.template.len() as f64
+        } else {
+            1.0
+        }
+    }
+
+    fn value(&self, rho: f64) -> f64 {
+        let b = self.beta();
+        if self.centered { b * rho - b } else { b * rho }
+    }
+
+    pub fn set_template(&mut self, template: &[f32]) {
+        self.template.clear();
+        self.template.extend_from_slice(template);
+        self.t_norm = unit(template, self.centered, &mut self.t_unit);
+        let mean = mean(template, self.centered);
+        self.t_centered.clear();
+        self.t_centered.extend(template.iter().map(|&v| v as f64 - mean));
+    }
+
+    pub fn template(&self) -> &[f32] {
+        &self.template
+    }
+
+    /// Normalises the current patch into the scratch buffer; returns `(|P I|, rho)`.
+    fn current(&mut self, current: &[f32]) -> (f64, f64) {
+        let n = unit(current, self.centered, &mut self.c_unit);
+        let mc = mean(current, self.centered);
+        let num: f64 = self.t_centered.iter().zip(current).map(|(&t, &c)| t * (c as f64 - mc)).sum();
+        let rho = if n > 0.0 && self.t_norm > 0.0 { num / (n * self.t_norm) } else { 0.0 };
+        (n, rho)
+    }
+
+    pub fn similarity(&mut self, current: &[f32]) -> f64 {
+        let (_, rho) = self.current(current);
+        self.value(rho)
+    }
+
+    pub fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
+        let (nc, rho) = self.current(current);
+        let beta = self.beta();
+        let (n, var, other) = match wrt {
+            Wrt::Current => (nc, &self.c_unit, &self.t_unit),
+            Wrt::Template => (self.t_norm, &self.t_unit, &self.c_unit),
+        };
+        if n > 0.0 {
+            let s = (beta / n) as f32;
+            let r = rho as f32;
+            for ((g, &o), &v) in grad.iter_mut().zip(other).zip(var) {
+                *g = s * (o - r * v);
+            }
+        } else {
+            grad.iter_mut().for_each(|g| *g = 0.0);
+        }
+        self.value(rho)
+    }
+
+    pub fn hessian(
+        &mut self,
+        wrt: Wrt,
+        kind: HessianKind,
+        current: &[f32],
+        jac: &[f32],
+        dof: usize,
+        out: &mut [f64; MAX_DOF * MAX_DOF],
+    ) {
+        let beta = self.beta();
+        let npx = self.template.len() as f64;
+        let after = kind == HessianKind::AfterConvergence;
+        let (nc, rho) = if after {
+            (self.t_norm, 1.0)
+        } else {
+            self.current(current)
+        };
+        let (n, var, other): (f64, &[f32], &[f32]) = match (after, wrt) {
+            (true, _) => (self.t_norm, &self.t_unit, &self.t_unit),
+            (false, Wrt::Current) => (nc, &self.c_unit, &self.t_unit),
+            (false, Wrt::Template) => (self.t_norm, &self.t_unit, &self.c_unit),
+        };
+        out.iter_mut().for_each(|v| *v = 0.0);
+        if n <= 0.0 {
+            return;
+        }
+        let mut jtj = [0.0f64; MAX_DOF * MAX_DOF];
+        accumulate_jtj(jac, dof, &mut jtj);
+        let (mut u, mut v, mut w) = ([0.0; MAX_DOF], [0.0; MAX_DOF], [0.0; MAX_DOF]);
+        jt_times(jac, other, dof, &mut u);
+        jt_times(jac, var, dof, &mut v);
+        if self.centered {
+            // w = J^T 1: the column sums of J.
+            for row in jac.chunks_exact(dof) {
+                for k in 0..dof {
+                    w[k] += row[k] as f64;
+                }
+            }
+        }
+        let s = beta / (n * n);
+        let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);
+        for i in 0..dof {
+            for j in 0..dof {
+                let mut pj = jtj[i * MAX_DOF + j];
+                if self.centered {
+                    pj -= w[i] * w[j] / npx;
+                }
+                out[i * dof + j] = if newton {
+                    s * (-u[i] * v[j] - v[i] * u[j] - rho * pj + 3.0 * rho * v[i] * v[j])
+                } else {
+                    -s * (pj - v[i] * v[j])
+                };
+            }
+        }
+    }
+}

@@ -1,0 +1,161 @@
+//! Finite-difference checks of every AM's gradient and Hessian.
+
+use super::*;
+use crate::rng::Rng;
+
+fn patch(rng: &mut Rng, n: usize) -> Vec<f32> {
+    (0..n).map(|_| rng.range(20.0, 230.0) as f32).collect()
+}
+
+/// Similarity with the `wrt` argument replaced by `x`.
+fn f_at(am: &mut dyn Am, wrt: Wrt, template: &[f32], current: &[f32], x: &[f32]) -> f64 {
+    match wrt {
+        Wrt::Current => {
+            am.set_template(template);
+            am.similarity(x)
+        }
+        Wrt::Template => {
+            am.set_template(x);
+            let v = am.similarity(current);
+            am.set_template(template);
+            v
+        }
+    }
+}
+
+#[test]
+fn gradients_match_finite_differences() {
+    let mut rng = Rng::new(3);
+    let n = 40;
+    for e in REGISTRY {
+        let mut am = (e.build)();
+        for trial in 0..5 {
+            let t = patch(&mut rng, n);
+            let c: Vec<f32> = t.iter().map(|&v| 0.8 * v + 10.0 + rng.range(-25.0, 25.0) as f32).collect();
+            for wrt in [Wrt::Current, Wrt::Template] {
+                am.set_template(&t);
+                let mut g = vec![0f32; n];
+                let f = am.gradient(wrt, &c, &mut g);
+                assert!((f - am.similarity(&c)).abs() <= 1e-6 * (1.0 + f.abs()), "{} value", e.name);
+                let x0 = if wrt == Wrt::Current { c.clone() } else { t.clone() };
+                let scale = g.iter().fold(0f32, |m, v| m.max(v.abs())) as f64;
+                for i in 0..n {
+                    let h = 1.0;
+                    let (mut xp, mut xm) = (x0.clone(), x0.clone());
+                    xp[i] += h;
+                    xm[i] -= h;
+                    let fd = (f_at(&mut *am, wrt, &t, &c, &xp) - f_at(&mut *am, wrt, &t, &c, &xm)) / (2.0 * h as f64);
+                    assert!(
+                        (fd - g[i] as f64).abs() <= 2e-3 * scale + 1e-9,
+                        "{} {:?} trial {} pixel {}: analytic {} vs fd {}",
+                        e.name, wrt, trial, i, g[i], fd
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn hessians_match_finite_differences() {
+    // d/dd [J^T g(x + J d)] at d = 0 is J^T (d2f/dI2) J: compare with the Newton Hessian.
+    let mut rng = Rng::new(5);
+    let (n, s) = (60, 3);
+    for e in REGISTRY {
+        let mut am = (e.build)();
+        let t = patch(&mut rng, n);
+        let c: Vec<f32> = t.iter().map(|&v| 1.1 * v - 5.0 + rng.range(-30.0, 30.0) as f32).collect();
+        let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
+        for wrt in [Wrt::Current, Wrt::Template] {
+            am.set_template(&t);
+            let mut h = [0.0; 64];
+            am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut h);
+            let jtg = |am: &mut dyn Am, d: &[f64]| -> [f64; 8] {
+                let moved = |x: &[f32]| -> Vec<f32> {
+                    x.iter().enumerate().map(|(i, &v)| v + (0..s).map(|k| jac[i * s + k] as f64 * d[k]).sum::<f64>() as f32).collect()
+                };
+                let mut g = vec![0f32; n];
+                match wrt {
+                    Wrt::Current => {
+                        am.set_template(&t);
+                        am.gradient(wrt, &moved(&c), &mut g);
+                    }
+                    Wrt::Template => {
+                        am.set_template(&moved(&t));
+                        am.gradient(wrt, &c, &mut g);
+                    }
+                }
+                let mut out = [0.0; 8];
+                jt_times(&jac, &g, s, &mut out);
+                out
+            };
+            let scale = h[..s * s].iter().fold(0f64, |m, v| m.max(v.abs()));
+            for k in 0..s {
+                let step = 0.02;
+                let mut dp = [0.0; 3];
+                dp[k] = step;
+                let gp = jtg(&mut *am, &dp);
+                dp[k] = -step;
+                let gm = jtg(&mut *am, &dp);
+                for i in 0..s {
+                    let fd = (gp[i] - gm[i]) / (2.0 * step);
+                    assert!(
+                        (fd - h[i * s + k]).abs() <= 5e-3 * scale,
+                        "{} {:?} H[{},{}]: analytic {} vs fd {}",
+                        e.name, wrt, i, k, h[i * s + k], fd
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
+    let mut rng = Rng::new(9);
+    let (n, s) = (50, 4);
+    for e in REGISTRY {
+        let mut am = (e.build)();
+        let t = patch(&mut rng, n);
+        let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
+        am.set_template(&t);
+        let mut hn = [0.0; 64];
+        let mut hg = [0.0; 64];
+        let mut ha = [0.0; 64];
+        am.hessian(Wrt::Current, HessianKind::Newton, &t, &jac, s, &mut hn);
+        am.hessian(Wrt::Current, HessianKind::GaussNewton, &t, &jac, s, &mut hg);
+        let c: Vec<f32> = t.iter().map(|&v| v + rng.range(-40.0, 40.0) as f32).collect();
+        am.hessian(Wrt::Current, HessianKind::AfterConvergence, &c, &jac, s, &mut ha);
+        let scale = hn[..s * s].iter().fold(0f64, |m, v| m.max(v.abs()));
+        for i in 0..s * s {
+            assert!((hn[i] - hg[i]).abs() <= 1e-4 * scale, "{}: Newton vs GN at convergence", e.name);
+            assert!((hn[i] - ha[i]).abs() <= 1e-4 * scale, "{}: Newton vs after-convergence", e.name);
+        }
+        // Gauss-Newton away from convergence: -H is positive semi-definite (x^T H x <= 0).
+        am.hessian(Wrt::Current, HessianKind::GaussNewton, &c, &jac, s, &mut hg);
+        for _ in 0..20 {
+            let x: Vec<f64> = (0..s).map(|_| rng.normal()).collect();
+            let q: f64 = (0..s).map(|i| (0..s).map(|j| x[i] * hg[i * s + j] * x[j]).sum::<f64>()).sum();
+            assert!(q <= 1e-9 * scale, "{}: GN Hessian not negative semi-definite", e.name);
+        }
+    }
+}
+
+#[test]
+fn correlation_models_are_invariant_to_gain_and_zncc_to_bias() {
+    let mut rng = Rng::new(1);
+    let t = patch(&mut rng, 100);
+    let gain: Vec<f32> = t.iter().map(|&v| 1.7 * v).collect();
+    let bias: Vec<f32> = t.iter().map(|&v| v + 30.0).collect();
+    let mut zncc = build("zncc").unwrap();
+    zncc.set_template(&t);
+    assert!(zncc.similarity(&gain).abs() < 1e-3 && zncc.similarity(&bias).abs() < 1e-3);
+    let mut ncc = build("ncc").unwrap();
+    ncc.set_template(&t);
+    assert!((ncc.similarity(&gain) - 1.0).abs() < 1e-6);
+    assert!(ncc.similarity(&bias) < 1.0 - 1e-4);
+    let mut ssd = build("ssd").unwrap();
+    ssd.set_template(&t);
+    assert_eq!(ssd.similarity(&t), 0.0);
+    assert!(ssd.similarity(&gain) < -1000.0);
+}

@@ -1,0 +1,64 @@
+//! The library's error type. Every message names what it is about: the file and line of a
+//! malformed ground-truth entry, the path of a missing frame, the list of methods that exist.
+
+use std::path::PathBuf;
+
+/// Result with the library's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong in the library (tracking loss is not an error: it is a
+/// [`crate::tracker::TrackStatus`]).
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A method name that no registry entry has.
+    #[error("unknown {kind} '{name}'; available: {available}")]
+    UnknownMethod {
+        kind: &'static str,
+        name: String,
+        available: String,
+    },
+    /// Methods that exist but cannot work together.
+    #[error("incompatible combination: {0}")]
+    Incompatible(String),
+    /// A parameter value out of its range.
+    #[error("invalid parameter: {0}")]
+    InvalidParameter(String),
+    /// A malformed line in a text file.
+    #[error("{}:{line}: {message}", path.display())]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    /// A file that should exist but does not.
+    #[error("missing file: {}", path.display())]
+    Missing { path: PathBuf },
+    /// An image that could not be decoded or encoded.
+    #[error("cannot decode or encode image {}: {message}", path.display())]
+    Image { path: PathBuf, message: String },
+    /// Any other I/O failure, with the path it concerns.
+    #[error("I/O error on {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// An initial region a tracker cannot start from (degenerate quad, outside the frame...).
+    #[error("invalid region: {0}")]
+    InvalidRegion(String),
+    /// A sequence or dataset that does not hold what it should.
+    #[error("invalid sequence {}: {message}", path.display())]
+    Sequence { path: PathBuf, message: String },
+}
+
+impl Error {
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        let path = path.into();
+        if source.kind() == std::io::ErrorKind::NotFound {
+            Error::Missing { path }
+        } else {
+            Error::Io { path, source }
+        }
+    }
+}

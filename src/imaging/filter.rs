@@ -1,0 +1,225 @@
+//! Separable Gaussian smoothing (of a whole image or only a region), half-size downsampling and
+//! Gaussian pyramids.
+
+use super::{GrayF32, Image, ImageView, Pixel};
+
+/// A normalised 1-D Gaussian kernel (odd size). A size of 1 or a zero sigma means no smoothing.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GaussianKernel {
+    weights: Vec<f32>,
+}
+
+impl GaussianKernel {
+    /// The taps of the kernel.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+    /// Half the size: how many pixels the kernel reads on each side.
+    pub fn radius(&self) -> usize {
+        self.weights.len() / 2
+    }
+    /// Whether this kernel changes nothing.
+    pub fn is_identity(&self) -> bool {
+        self.weights.len() <= 1
+    }
+}
+
+/// A normalised Gaussian kernel of `size` taps (made odd) and standard deviation `sigma` (px).
+/// `size <= 1` or `sigma <= 0` gives the identity.
+pub fn gaussian_kernel(size: usize, sigma: f32) -> GaussianKernel {
+    if size <= 1 || sigma <= 0.0 || !sigma.is_finite() {
+        return GaussianKernel { weights: vec![1.0] };
+    }
+    let size = size | 1;
+    let r = (size / 2) as i32;
+    let mut w: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let s: f32 = w.iter().sum();
+    w.iter_mut().for_each(|v| *v /= s);
+    GaussianKernel { weights: w }
+}
+
+/// Smooths the region `[x0, x1) x [y0, y1)` of `src` (already clipped to it) into `out`
+/// (row-major, `x1 - x0` wide), replicating the image border. `tmp` and `line` are scratch
+/// buffers that keep their allocation between calls.
+#[allow(clippy::too_many_arguments)]
+fn blur_region<T: Pixel>(
+    src: &Image<T>,
+    kernel: &GaussianKernel,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    out: &mut Vec<f32>,
+    tmp: &mut Vec<f32>,
+    line: &mut Vec<f32>,
+) {
+    let w = x1 - x0;
+    let h = y1 - y0;
+    out.clear();
+    out.resize(w * h, 0.0);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let k = kernel.weights();
+    let r = kernel.radius();
+    if r == 0 {
+        for y in 0..h {
+            let row = &src.row(y0 + y)[x0..x1];
+            for (o, &v) in out[y * w..(y + 1) * w].iter_mut().zip(row) {
+                *o = v.to_f32();
+            }
+        }
+        return;
+    }
+    let rows = h + 2 * r;
+    tmp.clear();
+    tmp.resize(rows * w, 0.0);
+    line.clear();
+    line.resize(w + 2 * r, 0.0);
+    let last_x = src.width as isize - 1;
+    let last_y = src.height as isize - 1;
+    for j in 0..rows {
+        let sy = (y0 as isize + j as isize - r as isize).clamp(0, last_y) as usize;
+        let srow = src.row(sy);
+        // The row segment with replicated borders.
+        let start = x0 as isize - r as isize;
+        for (i, l) in line.iter_mut().enumerate() {
+            let sx = (start + i as isize).clamp(0, last_x) as usize;
+            *l = srow[sx].to_f32();
+        }
+        let trow = &mut tmp[j * w..(j + 1) * w];
+        for (t, &kt) in k.iter().enumerate() {
+            for (o, &v) in trow.iter_mut().zip(&line[t..t + w]) {
+                *o += kt * v;
+            }
+        }
+    }
+    for y in 0..h {
+        let orow = &mut out[y * w..(y + 1) * w];
+        for (t, &kt) in k.iter().enumerate() {
+            let trow = &tmp[(y + t) * w..(y + t + 1) * w];
+            for (o, &v) in orow.iter_mut().zip(trow) {
+                *o += kt * v;
+            }
+        }
+    }
+}
+
+/// Smooths a whole image with a separable Gaussian kernel (border replicated).
+pub fn gaussian_blur<T: Pixel>(src: &Image<T>, kernel: &GaussianKernel) -> GrayF32 {
+    let mut out = Vec::new();
+    let (mut tmp, mut line) = (Vec::new(), Vec::new());
+    blur_region(
+        src,
+        kernel,
+        (0, 0, src.width, src.height),
+        &mut out,
+        &mut tmp,
+        &mut line,
+    );
+    Image {
+        width: src.width,
+        height: src.height,
+        data: out,
+    }
+}
+
+/// Halves an image: binomial (1 4 6 4 1)/16 smoothing, then every other pixel.
+pub fn downsample_half(src: &GrayF32) -> GrayF32 {
+    let binomial = GaussianKernel {
+        weights: vec![1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0],
+    };
+    let smooth = gaussian_blur(src, &binomial);
+    let w = src.width.div_ceil(2).max(1);
+    let h = src.height.div_ceil(2).max(1);
+    let mut out = Image::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            out.set(
+                x,
+                y,
+                smooth.get((2 * x).min(src.width - 1), (2 * y).min(src.height - 1)),
+            );
+        }
+    }
+    out
+}
+
+/// A Gaussian pyramid of `levels` levels (level 0 is `src`), each half the size of the previous.
+/// Stops early when a level would be smaller than 8 pixels on a side.
+pub fn pyramid(src: &GrayF32, levels: usize) -> Vec<GrayF32> {
+    let mut out = vec![src.clone()];
+    while out.len() < levels.max(1) {
+        let prev = &out[out.len() - 1];
+        if prev.width < 16 || prev.height < 16 {
+            break;
+        }
+        out.push(downsample_half(prev));
+    }
+    out
+}
+
+/// Pre-processes only the region a tracker reads: converts it to float and smooths it (border
+/// replicated at the image edges), into buffers it keeps between frames, so the hot path does
+/// not allocate once they have grown to the region's size.
+#[derive(Clone, Debug)]
+pub struct Preprocessor {
+    kernel: GaussianKernel,
+    out: Vec<f32>,
+    tmp: Vec<f32>,
+    line: Vec<f32>,
+    region: (usize, usize, usize, usize),
+}
+
+impl Preprocessor {
+    /// A pre-processor with the given smoothing kernel.
+    pub fn new(kernel: GaussianKernel) -> Self {
+        Preprocessor {
+            kernel,
+            out: Vec::new(),
+            tmp: Vec::new(),
+            line: Vec::new(),
+            region: (0, 0, 0, 0),
+        }
+    }
+
+    /// The smoothing kernel.
+    pub fn kernel(&self) -> &GaussianKernel {
+        &self.kernel
+    }
+
+    /// Smooths the region `[x0, x1) x [y0, y1)` (real coordinates, clipped to the image and
+    /// rounded outwards) of `src`.
+    pub fn process<T: Pixel>(&mut self, src: &Image<T>, x0: f64, y0: f64, x1: f64, y1: f64) {
+        let clip = |v: f64, hi: usize| -> usize {
+            if v.is_nan() {
+                0
+            } else {
+                v.clamp(0.0, hi as f64) as usize
+            }
+        };
+        let rx0 = clip(x0.floor(), src.width);
+        let ry0 = clip(y0.floor(), src.height);
+        let rx1 = clip(x1.ceil(), src.width).max(rx0);
+        let ry1 = clip(y1.ceil(), src.height).max(ry0);
+        self.region = (rx0, ry0, rx1, ry1);
+        blur_region(
+            src,
+            &self.kernel,
+            self.region,
+            &mut self.out,
+            &mut self.tmp,
+            &mut self.line,
+        );
+    }
+
+    /// The region last processed, `(x0, y0, x1, y1)` in pixels (end exclusive).
+    pub fn region(&self) -> (usize, usize, usize, usize) {
+        self.region
+    }
+
+    /// A view of the region last processed, in frame coordinates.
+    pub fn view(&self) -> ImageView<'_> {
+        let (x0, y0, x1, y1) = self.region;
+        ImageView::new(&self.out, x1 - x0, y1 - y0, x0 as i64, y0 as i64)
+    }
+}

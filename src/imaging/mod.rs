@@ -1,0 +1,158 @@
+//! Image operations as free functions over a plain image type ([`Image`]): conversion from 8-bit
+//! input, Gaussian smoothing of a region, pyramids, and bilinear sampling of values and gradients
+//! at sub-pixel points with a [`Border`] policy.
+//!
+//! Pixel `(i, j)` has its centre at the real coordinates `(i, j)`.
+
+mod filter;
+mod sample;
+
+pub use filter::{
+    downsample_half, gaussian_blur, gaussian_kernel, pyramid, GaussianKernel, Preprocessor,
+};
+pub use sample::{sample_value, sample_values, sample_values_gradients, Border, ImageView};
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// A single-channel image stored row by row without padding.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Image<T> {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<T>,
+}
+
+/// 8-bit grayscale image (the live input of a tracker).
+pub type GrayU8 = Image<u8>;
+/// 32-bit float grayscale image, intensities in 0..255.
+pub type GrayF32 = Image<f32>;
+
+impl<T: Copy + Default> Image<T> {
+    /// An image filled with the default value.
+    pub fn new(width: usize, height: usize) -> Self {
+        Image {
+            width,
+            height,
+            data: vec![T::default(); width * height],
+        }
+    }
+
+    /// Wraps a buffer; `None` if its length is not `width * height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Option<Self> {
+        (data.len() == width * height).then_some(Image {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// The pixel at column `x`, row `y`.
+    #[inline]
+    pub fn get(&self, x: usize, y: usize) -> T {
+        self.data[y * self.width + x]
+    }
+
+    /// Sets the pixel at column `x`, row `y`.
+    #[inline]
+    pub fn set(&mut self, x: usize, y: usize, v: T) {
+        self.data[y * self.width + x] = v;
+    }
+
+    /// One row.
+    #[inline]
+    pub fn row(&self, y: usize) -> &[T] {
+        &self.data[y * self.width..(y + 1) * self.width]
+    }
+
+    /// Resizes the buffer (keeping its allocation when it is large enough).
+    pub fn resize(&mut self, width: usize, height: usize) {
+        self.width = width;
+        self.height = height;
+        self.data.resize(width * height, T::default());
+    }
+}
+
+/// A pixel type the filters can read.
+pub trait Pixel: Copy + Default + Send + Sync + 'static {
+    fn to_f32(self) -> f32;
+}
+impl Pixel for u8 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+}
+impl Pixel for f32 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+}
+
+impl GrayU8 {
+    /// Converts to float intensities (0..255).
+    pub fn to_f32(&self) -> GrayF32 {
+        Image {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| v as f32).collect(),
+        }
+    }
+}
+
+impl GrayF32 {
+    /// A view of the whole image for sampling.
+    pub fn view(&self) -> ImageView<'_> {
+        ImageView::new(&self.data, self.width, self.height, 0, 0)
+    }
+}
+
+/// Luma of an sRGB pixel, as 8-bit (ITU-R BT.601 weights, as most trackers use).
+#[inline]
+pub fn luma(r: u8, g: u8, b: u8) -> u8 {
+    ((299 * r as u32 + 587 * g as u32 + 114 * b as u32 + 500) / 1000) as u8
+}
+
+/// Grayscale version of a decoded image.
+pub fn gray_from_dynamic(img: &image::DynamicImage) -> GrayU8 {
+    match img {
+        image::DynamicImage::ImageLuma8(g) => Image {
+            width: g.width() as usize,
+            height: g.height() as usize,
+            data: g.as_raw().clone(),
+        },
+        other => {
+            let rgb = other.to_rgb8();
+            let data = rgb.pixels().map(|p| luma(p[0], p[1], p[2])).collect();
+            Image {
+                width: rgb.width() as usize,
+                height: rgb.height() as usize,
+                data,
+            }
+        }
+    }
+}
+
+/// Reads an image file (png, jpeg, pgm/ppm) as 8-bit grayscale; the error names the path.
+pub fn load_gray(path: &Path) -> Result<GrayU8> {
+    let img = load_dynamic(path)?;
+    Ok(gray_from_dynamic(&img))
+}
+
+/// Reads an image file as decoded by the `image` crate; the error names the path.
+pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
+    if !path.exists() {
+        return Err(Error::Missing {
+            path: path.to_path_buf(),
+        });
+    }
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    reader.decode().map_err(|e| Error::Image {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}

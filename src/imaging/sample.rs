@@ -1,0 +1,194 @@
+//! Bilinear sampling of values and gradients at sub-pixel points.
+//!
+//! Gradients are central differences of the bilinearly interpolated image with a one-pixel step,
+//! `gx = (I(x+1, y) - I(x-1, y)) / 2`: the same as interpolating the central-difference gradient
+//! images, without computing them over the whole region.
+
+/// What a sample outside the image reads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Border {
+    /// The nearest pixel of the image (edge replicated).
+    #[default]
+    Replicate,
+    /// Zero.
+    Zero,
+}
+
+/// A read-only window of a float image placed at `(x0, y0)` in frame coordinates: points are
+/// given in frame coordinates and sampled from the window.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageView<'a> {
+    data: &'a [f32],
+    width: usize,
+    height: usize,
+    x0: i64,
+    y0: i64,
+    border: Border,
+}
+
+impl<'a> ImageView<'a> {
+    /// A window of `width x height` pixels whose first pixel is at `(x0, y0)` in the frame.
+    ///
+    /// # Panics
+    /// If `data` is shorter than `width * height` (a programming error).
+    pub fn new(data: &'a [f32], width: usize, height: usize, x0: i64, y0: i64) -> Self {
+        assert!(data.len() >= width * height, "image view larger than its data");
+        ImageView {
+            data,
+            width,
+            height,
+            x0,
+            y0,
+            border: Border::Replicate,
+        }
+    }
+
+    /// The same view with another border policy.
+    pub fn with_border(mut self, border: Border) -> Self {
+        self.border = border;
+        self
+    }
+
+    /// Width of the window in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    /// Height of the window in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    /// Frame coordinates of the window's first pixel.
+    pub fn origin(&self) -> (i64, i64) {
+        (self.x0, self.y0)
+    }
+    /// Whether the window holds no pixel.
+    pub fn is_empty(&self) -> bool {
+        self.width == 0 || self.height == 0
+    }
+
+    #[inline(always)]
+    fn pixel(&self, ix: i64, iy: i64) -> f32 {
+        let (w, h) = (self.width as i64, self.height as i64);
+        match self.border {
+            Border::Replicate => {
+                let x = ix.clamp(0, w - 1) as usize;
+                let y = iy.clamp(0, h - 1) as usize;
+                self.data[y * self.width + x]
+            }
+            Border::Zero => {
+                if ix < 0 || iy < 0 || ix >= w || iy >= h {
+                    0.0
+                } else {
+                    self.data[iy as usize * self.width + ix as usize]
+                }
+            }
+        }
+    }
+
+    /// Bilinear value at window coordinates (general path, any border).
+    #[inline(always)]
+    fn bilinear_local(&self, x: f32, y: f32) -> f32 {
+        let fx0 = x.floor();
+        let fy0 = y.floor();
+        let (ix, iy) = (fx0 as i64, fy0 as i64);
+        let (ax, ay) = (x - fx0, y - fy0);
+        let p00 = self.pixel(ix, iy);
+        let p10 = self.pixel(ix + 1, iy);
+        let p01 = self.pixel(ix, iy + 1);
+        let p11 = self.pixel(ix + 1, iy + 1);
+        let top = p00 + ax * (p10 - p00);
+        let bot = p01 + ax * (p11 - p01);
+        top + ay * (bot - top)
+    }
+
+    /// Value and gradient at window coordinates.
+    #[inline(always)]
+    fn value_gradient_local(&self, x: f32, y: f32) -> (f32, f32, f32) {
+        let fx0 = x.floor();
+        let fy0 = y.floor();
+        let (ix, iy) = (fx0 as i64, fy0 as i64);
+        if ix >= 1 && iy >= 1 && ix + 2 < self.width as i64 && iy + 2 < self.height as i64 {
+            // The 4x4 neighbourhood is inside: read it once.
+            let (ax, ay) = (x - fx0, y - fy0);
+            let w = self.width;
+            let base = (iy as usize - 1) * w + ix as usize - 1;
+            let r0 = &self.data[base..base + 4];
+            let r1 = &self.data[base + w..base + w + 4];
+            let r2 = &self.data[base + 2 * w..base + 2 * w + 4];
+            let r3 = &self.data[base + 3 * w..base + 3 * w + 4];
+            let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
+            // Horizontal interpolation at the row pairs, for columns c and c+1.
+            let h = |r: &[f32], c: usize| lerp(r[c], r[c + 1], ax);
+            let v = lerp(h(r1, 1), h(r2, 1), ay);
+            let right = lerp(h(r1, 2), h(r2, 2), ay);
+            let left = lerp(h(r1, 0), h(r2, 0), ay);
+            let down = lerp(h(r2, 1), h(r3, 1), ay);
+            let up = lerp(h(r0, 1), h(r1, 1), ay);
+            (v, 0.5 * (right - left), 0.5 * (down - up))
+        } else {
+            let v = self.bilinear_local(x, y);
+            let gx = 0.5 * (self.bilinear_local(x + 1.0, y) - self.bilinear_local(x - 1.0, y));
+            let gy = 0.5 * (self.bilinear_local(x, y + 1.0) - self.bilinear_local(x, y - 1.0));
+            (v, gx, gy)
+        }
+    }
+
+    #[inline(always)]
+    fn to_local(&self, x: f32, y: f32) -> (f32, f32) {
+        (x - self.x0 as f32, y - self.y0 as f32)
+    }
+}
+
+/// The bilinearly interpolated value at frame point `(x, y)`. A non-finite coordinate reads 0.
+#[inline]
+pub fn sample_value(img: &ImageView, x: f32, y: f32) -> f32 {
+    if img.is_empty() || !x.is_finite() || !y.is_finite() {
+        return 0.0;
+    }
+    let (lx, ly) = img.to_local(x, y);
+    let (lx, ly) = clamp_far(lx, ly, img);
+    img.bilinear_local(lx, ly)
+}
+
+/// Keeps far-away coordinates in a range where integer conversion is exact; the border policy
+/// gives the same value anywhere that far outside.
+#[inline(always)]
+fn clamp_far(x: f32, y: f32, img: &ImageView) -> (f32, f32) {
+    let (w, h) = (img.width as f32, img.height as f32);
+    (x.clamp(-4.0, w + 4.0), y.clamp(-4.0, h + 4.0))
+}
+
+/// Samples the values at frame points `(xs[i], ys[i])` into `out`.
+pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
+    debug_assert!(xs.len() == ys.len() && out.len() == xs.len());
+    for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
+        *o = sample_value(img, x, y);
+    }
+}
+
+/// Samples values and gradients (in frame pixels) at frame points `(xs[i], ys[i])`.
+pub fn sample_values_gradients(
+    img: &ImageView,
+    xs: &[f32],
+    ys: &[f32],
+    values: &mut [f32],
+    gx: &mut [f32],
+    gy: &mut [f32],
+) {
+    debug_assert!(xs.len() == ys.len() && values.len() == xs.len());
+    debug_assert!(gx.len() == xs.len() && gy.len() == xs.len());
+    for i in 0..xs.len() {
+        let (x, y) = (xs[i], ys[i]);
+        let (v, dx, dy) = if img.is_empty() || !x.is_finite() || !y.is_finite() {
+            (0.0, 0.0, 0.0)
+        } else {
+            let (lx, ly) = img.to_local(x, y);
+            let (lx, ly) = clamp_far(lx, ly, img);
+            img.value_gradient_local(lx, ly)
+        };
+        values[i] = v;
+        gx[i] = dx;
+        gy[i] = dy;
+    }
+}

@@ -1,0 +1,226 @@
+//! Small dense linear algebra on stack arrays: the `S x S` (S <= 8) Newton systems of the search
+//! methods, and the matrix exponential and logarithm used by the SL3 state space model.
+
+use nalgebra::{Matrix3, SMatrix};
+
+/// The largest number of warp parameters.
+pub const MAX_DOF: usize = 8;
+
+/// Solves `H x = -g` for the Newton step of a maximisation, with `H` (row-major, `n x n`) the
+/// Hessian, normally negative definite. Tries a Cholesky factorisation of `-H`, then LU with
+/// partial pivoting; `None` when the system is singular or the result is not finite.
+pub fn newton_step(h: &[f64; MAX_DOF * MAX_DOF], g: &[f64; MAX_DOF], n: usize) -> Option<[f64; MAX_DOF]> {
+    let mut a = [0.0f64; MAX_DOF * MAX_DOF];
+    let mut b = [0.0f64; MAX_DOF];
+    for i in 0..n {
+        for j in 0..n {
+            a[i * MAX_DOF + j] = -h[i * n + j];
+        }
+        b[i] = g[i];
+    }
+    let x = cholesky_solve(&a, &b, n).or_else(|| lu_solve(&a, &b, n))?;
+    x[..n].iter().all(|v| v.is_finite()).then_some(x)
+}
+
+fn cholesky_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
+    let mut l = [0.0f64; 64];
+    let scale = (0..n).map(|i| a[i * 8 + i].abs()).fold(0.0, f64::max);
+    if !(scale > 0.0) {
+        return None;
+    }
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[i * 8 + j];
+            for k in 0..j {
+                s -= l[i * 8 + k] * l[j * 8 + k];
+            }
+            if i == j {
+                if s <= scale * 1e-13 {
+                    return None;
+                }
+                l[i * 8 + i] = s.sqrt();
+            } else {
+                l[i * 8 + j] = s / l[j * 8 + j];
+            }
+        }
+    }
+    let mut y = [0.0f64; 8];
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= l[i * 8 + k] * y[k];
+        }
+        y[i] = s / l[i * 8 + i];
+    }
+    let mut x = [0.0f64; 8];
+    for i in (0..n).rev() {
+        let mut s = y[i];
+        for k in i + 1..n {
+            s -= l[k * 8 + i] * x[k];
+        }
+        x[i] = s / l[i * 8 + i];
+    }
+    Some(x)
+}
+
+fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
+    let mut m = *a;
+    let mut x = *b;
+    let scale = m.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    if !(scale > 0.0) {
+        return None;
+    }
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| m[i * 8 + c].abs().total_cmp(&m[j * 8 + c].abs()))?;
+        if m[p * 8 + c].abs() <= scale * 1e-14 {
+            return None;
+        }
+        if p != c {
+            for k in 0..n {
+                m.swap(p * 8 + k, c * 8 + k);
+            }
+            x.swap(p, c);
+        }
+        for r in c + 1..n {
+            let f = m[r * 8 + c] / m[c * 8 + c];
+            for k in c..n {
+                m[r * 8 + k] -= f * m[c * 8 + k];
+            }
+            x[r] -= f * x[c];
+        }
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for k in i + 1..n {
+            s -= m[i * 8 + k] * x[k];
+        }
+        x[i] = s / m[i * 8 + i];
+    }
+    Some(x)
+}
+
+/// Matrix exponential by scaling and squaring with a Taylor series.
+pub fn expm<const D: usize>(a: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
+    let norm = a.iter().fold(0.0f64, |s, v| s + v.abs());
+    let mut k = 0;
+    let mut scaled = *a;
+    if norm > 0.25 {
+        k = (norm / 0.25).log2().ceil() as i32;
+        scaled = a / 2f64.powi(k);
+    }
+    let mut term = SMatrix::<f64, D, D>::identity();
+    let mut sum = term;
+    for i in 1..=14 {
+        term = term * scaled / i as f64;
+        sum += term;
+    }
+    for _ in 0..k {
+        sum = sum * sum;
+    }
+    sum
+}
+
+/// Principal matrix logarithm of a 3x3 matrix by inverse scaling and squaring (Denman-Beavers
+/// square roots, then the Mercator series). `None` when it does not converge (an eigenvalue on
+/// the closed negative real axis).
+pub fn logm3(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let id = Matrix3::identity();
+    let mut x = *m;
+    let mut k = 0;
+    while (x - id).norm() > 0.2 {
+        // Denman-Beavers iteration for sqrt(x).
+        let mut y = x;
+        let mut z = id;
+        for _ in 0..60 {
+            let yi = y.try_inverse()?;
+            let zi = z.try_inverse()?;
+            let y2 = 0.5 * (y + zi);
+            let z2 = 0.5 * (z + yi);
+            let done = (y2 - y).norm() <= 1e-15 * y2.norm();
+            y = y2;
+            z = z2;
+            if done {
+                break;
+            }
+        }
+        x = y;
+        k += 1;
+        if k > 40 || !x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+    }
+    let e = x - id;
+    let mut term = e;
+    let mut sum = Matrix3::zeros();
+    for i in 1..=40 {
+        let t = term / i as f64;
+        if i % 2 == 1 {
+            sum += t;
+        } else {
+            sum -= t;
+        }
+        term *= e;
+        if t.norm() < 1e-18 {
+            break;
+        }
+    }
+    let out = sum * 2f64.powi(k);
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
+/// The Fréchet derivative of the exponential at `a` in direction `e`: `d/dt exp(a + t e)` at 0,
+/// from the exponential of the block matrix `[[a, e], [0, a]]`.
+pub fn expm3_frechet(a: &Matrix3<f64>, e: &Matrix3<f64>) -> Matrix3<f64> {
+    let mut big = SMatrix::<f64, 6, 6>::zeros();
+    big.fixed_view_mut::<3, 3>(0, 0).copy_from(a);
+    big.fixed_view_mut::<3, 3>(3, 3).copy_from(a);
+    big.fixed_view_mut::<3, 3>(0, 3).copy_from(e);
+    let ex = expm(&big);
+    ex.fixed_view::<3, 3>(0, 3).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn newton_step_solves_negative_definite_and_indefinite_systems() {
+        // H = -[[4,1],[1,3]], g = [1,2]: x = [[4,1],[1,3]]^-1 [1,2] = [1/11, 7/11].
+        let mut h = [0.0; 64];
+        h[..4].copy_from_slice(&[-4.0, -1.0, -1.0, -3.0]);
+        let mut g = [0.0; 8];
+        g[0] = 1.0;
+        g[1] = 2.0;
+        let x = newton_step(&h, &g, 2).unwrap();
+        assert!((x[0] - 1.0 / 11.0).abs() < 1e-12 && (x[1] - 7.0 / 11.0).abs() < 1e-12);
+        // Indefinite: falls back to LU.
+        h[..4].copy_from_slice(&[1.0, 0.0, 0.0, -1.0]);
+        let x = newton_step(&h, &g, 2).unwrap();
+        assert!((x[0] + 1.0).abs() < 1e-12 && (x[1] - 2.0).abs() < 1e-12);
+        // Singular.
+        h[..4].copy_from_slice(&[1.0, 1.0, 1.0, 1.0]);
+        assert!(newton_step(&h, &g, 2).is_none());
+    }
+
+    #[test]
+    fn exp_and_log_are_inverse() {
+        let a = Matrix3::new(0.3, -0.7, 0.2, 0.5, 0.1, -0.4, 0.05, 0.02, -0.4);
+        let e = expm(&a);
+        let l = logm3(&e).unwrap();
+        assert!((l - a).norm() < 1e-10, "{l} vs {a}");
+        // Rotation by 2 rad: far from the identity.
+        let (c, s) = (2f64.cos(), 2f64.sin());
+        let r = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let l = logm3(&r).unwrap();
+        assert!((l[(1, 0)] - 2.0).abs() < 1e-10 && (expm(&l) - r).norm() < 1e-10);
+    }
+
+    #[test]
+    fn frechet_derivative_matches_finite_differences() {
+        let a = Matrix3::new(0.3, -0.2, 0.1, 0.4, -0.1, 0.2, 0.05, -0.03, -0.2);
+        let e = Matrix3::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0);
+        let h = 1e-6;
+        let fd = (expm(&(a + e * h)) - expm(&(a - e * h))) / (2.0 * h);
+        assert!((fd - expm3_frechet(&a, &e)).norm() < 1e-7);
+    }
+}

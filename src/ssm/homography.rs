@@ -1,0 +1,46 @@
+//! Homography with the matrix entries as parameters: 8 DOF,
+//! `H = [[1+p0, p1, p2], [p3, 1+p4, p5], [p6, p7, 1]]`.
+
+use super::{entries, homography_point_jacobian, normalise_h33, Params, Ssm, SsmBuilder};
+use crate::geometry::{homography_from_points, Point};
+use crate::registry::Entry;
+use nalgebra::Matrix3;
+
+pub const ENTRY: Entry<SsmBuilder> = Entry {
+    name: "homography",
+    aliases: &["8", "hom", "lie_hom"],
+    description: "8 DOF homography parameterised by its matrix entries",
+    build: || Box::new(Homography),
+};
+
+#[derive(Debug, Clone, Copy)]
+pub struct Homography;
+
+impl Ssm for Homography {
+    fn name(&self) -> &'static str {
+        ENTRY.name
+    }
+    fn dof(&self) -> usize {
+        8
+    }
+    fn matrix(&self, p: &Params) -> Matrix3<f64> {
+        Matrix3::new(1.0 + p[0], p[1], p[2], p[3], 1.0 + p[4], p[5], p[6], p[7], 1.0)
+    }
+    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+        let e = entries(&normalise_h33(m)?);
+        Some([e[0] - 1.0, e[1], e[2], e[3], e[4] - 1.0, e[5], e[6], e[7]])
+    }
+    fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
+        let h = entries(&self.matrix(p));
+        for ((j, &x), &y) in out.chunks_exact_mut(16).zip(xs).zip(ys) {
+            let (jx, jy) = homography_point_jacobian(&h, x as f64, y as f64);
+            for k in 0..8 {
+                j[k] = jx[k] as f32;
+                j[8 + k] = jy[k] as f32;
+            }
+        }
+    }
+    fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
+        self.from_matrix(&homography_from_points(src, dst)?)
+    }
+}

@@ -1,0 +1,52 @@
+//! Similitude (similarity): 4 DOF, `w(x) = [[1+a, -b], [b, 1+a]] x + t`, parameters
+//! `(tx, ty, a, b)`.
+
+use super::{fit_similarity, normalise_h33, Params, Ssm, SsmBuilder};
+use crate::geometry::Point;
+use crate::registry::Entry;
+use nalgebra::Matrix3;
+
+pub const ENTRY: Entry<SsmBuilder> = Entry {
+    name: "similitude",
+    aliases: &["4", "sim", "similarity"],
+    description: "4 DOF rotation, uniform scale and translation (tx, ty, a, b)",
+    build: || Box::new(Similitude),
+};
+
+#[derive(Debug, Clone, Copy)]
+pub struct Similitude;
+
+impl Ssm for Similitude {
+    fn name(&self) -> &'static str {
+        ENTRY.name
+    }
+    fn dof(&self) -> usize {
+        4
+    }
+    fn matrix(&self, p: &Params) -> Matrix3<f64> {
+        Matrix3::new(1.0 + p[2], -p[3], p[0], p[3], 1.0 + p[2], p[1], 0.0, 0.0, 1.0)
+    }
+    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+        let m = normalise_h33(m)?;
+        let mut p = [0.0; 8];
+        p[0] = m[(0, 2)];
+        p[1] = m[(1, 2)];
+        p[2] = 0.5 * (m[(0, 0)] + m[(1, 1)]) - 1.0;
+        p[3] = 0.5 * (m[(1, 0)] - m[(0, 1)]);
+        Some(p)
+    }
+    fn jacobian(&self, _p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
+        for ((j, &x), &y) in out.chunks_exact_mut(8).zip(xs).zip(ys) {
+            j.copy_from_slice(&[1.0, 0.0, x, -y, 0.0, 1.0, y, x]);
+        }
+    }
+    fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
+        let (a, b, tx, ty) = fit_similarity(src, dst, false)?;
+        let mut p = [0.0; 8];
+        p[0] = tx;
+        p[1] = ty;
+        p[2] = a - 1.0;
+        p[3] = b;
+        Some(p)
+    }
+}

@@ -1,0 +1,109 @@
+//! Finite-difference checks of every SSM's Jacobian, and compose / invert / fit round trips.
+
+use super::*;
+use proptest::prelude::*;
+
+fn params(ssm: &dyn Ssm, raw: &[f64; 8], scale: f64) -> Params {
+    let mut p = [0.0; 8];
+    for k in 0..ssm.dof() {
+        p[k] = raw[k] * scale;
+    }
+    p
+}
+
+fn warp(ssm: &dyn Ssm, p: &Params, x: f64, y: f64) -> Point {
+    apply_homography(&ssm.matrix(p), Point::new(x, y))
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, rng_seed: proptest::test_runner::RngSeed::Fixed(11), ..ProptestConfig::default() })]
+
+    #[test]
+    fn jacobians_match_finite_differences(raw in prop::array::uniform8(-1.0f64..1.0), x in -0.7f64..0.7, y in -0.7f64..0.7) {
+        for e in REGISTRY {
+            let ssm = (e.build)();
+            let s = ssm.dof();
+            // Moderate warps: the projective terms smaller so the point stays far from infinity.
+            let mut p = params(&*ssm, &raw, 0.15);
+            if s == 8 && ssm.name() != "corner" { p[6] *= 0.3; p[7] *= 0.3; }
+            let mut jac = vec![0f32; 2 * s];
+            ssm.jacobian(&p, &[x as f32], &[y as f32], &mut jac);
+            let h = 1e-6;
+            for k in 0..s {
+                let (mut pp, mut pm) = (p, p);
+                pp[k] += h;
+                pm[k] -= h;
+                let (a, b) = (warp(&*ssm, &pp, x, y), warp(&*ssm, &pm, x, y));
+                let (fx, fy) = ((a.x - b.x) / (2.0 * h), (a.y - b.y) / (2.0 * h));
+                prop_assert!(close(jac[k] as f64, fx, 1e-4), "{} dx/dp{}: {} vs {}", ssm.name(), k, jac[k], fx);
+                prop_assert!(close(jac[s + k] as f64, fy, 1e-4), "{} dy/dp{}: {} vs {}", ssm.name(), k, jac[s + k], fy);
+            }
+        }
+    }
+
+    #[test]
+    fn compose_invert_and_fit_round_trip(a in prop::array::uniform8(-1.0f64..1.0), b in prop::array::uniform8(-1.0f64..1.0)) {
+        let base = Quad::unit_square();
+        for e in REGISTRY {
+            let ssm = (e.build)();
+            let p = params(&*ssm, &a, 0.1);
+            let q = params(&*ssm, &b, 0.1);
+            // compose matches the matrix product (up to scale).
+            let c = ssm.compose(&p, &q).unwrap();
+            let lhs = warp_quad(&*ssm, &c, &base);
+            let rhs = warp_quad(&*ssm, &p, &warp_quad(&*ssm, &q, &base));
+            prop_assert!(lhs.change_norm(&rhs) < 1e-9, "{} compose", ssm.name());
+            // p o p^-1 = identity.
+            let inv = ssm.invert(&p).unwrap();
+            let id = ssm.compose(&p, &inv).unwrap();
+            prop_assert!(warp_quad(&*ssm, &id, &base).change_norm(&base) < 1e-9, "{} invert", ssm.name());
+            // from_matrix(matrix(p)) = p.
+            let back = ssm.from_matrix(&ssm.matrix(&p)).unwrap();
+            for k in 0..ssm.dof() { prop_assert!((back[k] - p[k]).abs() < 1e-9, "{} from_matrix", ssm.name()); }
+            // Fitting the warped corners gives the warp back.
+            let target = warp_quad(&*ssm, &p, &base);
+            let fit = ssm.fit(&base.0, &target.0).unwrap();
+            prop_assert!(warp_quad(&*ssm, &fit, &base).change_norm(&target) < 1e-9, "{} fit", ssm.name());
+        }
+    }
+}
+
+#[test]
+fn fit_is_the_least_squares_projection() {
+    // A perspective quad projected onto each SSM: no small change of the fitted parameters may
+    // lower the corner error (the fit is the least-squares optimum).
+    let src = Quad::from_rect(-0.5, -0.5, 1.0, 1.0);
+    let dst = Quad::from_array([-0.45, -0.6, 0.52, -0.41, 0.61, 0.55, -0.58, 0.47]);
+    for e in REGISTRY {
+        let ssm = (e.build)();
+        let p = ssm.fit(&src.0, &dst.0).unwrap();
+        let err = |p: &Params| {
+            let q = warp_quad(&*ssm, p, &src);
+            q.0.iter().zip(&dst.0).map(|(a, b)| (a.x - b.x).powi(2) + (a.y - b.y).powi(2)).sum::<f64>()
+        };
+        let e0 = err(&p);
+        for k in 0..ssm.dof() {
+            for d in [1e-4, -1e-4] {
+                let mut q = p;
+                q[k] += d;
+                assert!(err(&q) >= e0 - 1e-12, "{}: p{} {} lowers the error", ssm.name(), k, d);
+            }
+        }
+        if ssm.dof() == 8 {
+            assert!(e0 < 1e-18, "{} must fit four corners exactly", ssm.name());
+        }
+    }
+}
+
+#[test]
+fn registry_resolves_mtf_aliases() {
+    for (alias, name) in [("2", "translation"), ("3", "isometry"), ("4", "similitude"), ("6", "affine"), ("8", "homography"), ("sl3", "sl3"), ("c8", "corner")] {
+        assert_eq!(build(alias).unwrap().name(), name);
+    }
+    let err = build("bogus").unwrap_err().to_string();
+    assert!(err.contains("bogus") && err.contains("homography") && err.contains("translation"), "{err}");
+}

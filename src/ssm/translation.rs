@@ -1,0 +1,47 @@
+//! Translation: 2 DOF, `w(x) = x + t`.
+
+use super::{normalise_h33, Params, Ssm, SsmBuilder};
+use crate::geometry::{Point, Quad};
+use crate::registry::Entry;
+use nalgebra::Matrix3;
+
+pub const ENTRY: Entry<SsmBuilder> = Entry {
+    name: "translation",
+    aliases: &["2", "trans"],
+    description: "2 DOF translation (tx, ty)",
+    build: || Box::new(Translation),
+};
+
+#[derive(Debug, Clone, Copy)]
+pub struct Translation;
+
+impl Ssm for Translation {
+    fn name(&self) -> &'static str {
+        ENTRY.name
+    }
+    fn dof(&self) -> usize {
+        2
+    }
+    fn matrix(&self, p: &Params) -> Matrix3<f64> {
+        Matrix3::new(1.0, 0.0, p[0], 0.0, 1.0, p[1], 0.0, 0.0, 1.0)
+    }
+    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+        let m = normalise_h33(m)?;
+        let mut p = [0.0; 8];
+        p[0] = m[(0, 2)];
+        p[1] = m[(1, 2)];
+        Some(p)
+    }
+    fn jacobian(&self, _p: &Params, xs: &[f32], _ys: &[f32], out: &mut [f32]) {
+        for j in out[..xs.len() * 4].chunks_exact_mut(4) {
+            j.copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
+        }
+    }
+    fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
+        let (cs, cd) = (Quad(*src).centroid(), Quad(*dst).centroid());
+        let mut p = [0.0; 8];
+        p[0] = cd.x - cs.x;
+        p[1] = cd.y - cs.y;
+        p.iter().all(|v| v.is_finite()).then_some(p)
+    }
+}

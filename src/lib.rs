@@ -44,13 +44,13 @@ pub mod error;
 pub mod geometry;
 pub mod imaging;
 pub mod linalg;
-//pub mod observe;
+pub mod observe;
 pub mod registry;
 pub mod rng;
-//pub mod sm;
+pub mod sm;
 pub mod ssm;
-//pub mod tracker;
+pub mod tracker;
 
 pub use error::{Error, Result};
 pub use geometry::{Point, Quad};
-//pub use tracker::{Tracker, TrackerSpec};
+pub use tracker::{Tracker, TrackerSpec};

@@ -117,7 +117,7 @@ pub(crate) fn minus_jtj(jac: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_D
 
 /// Adds `J^T J` (upper triangle, then mirrored) into `acc` (stride [`MAX_DOF`]); accumulates in
 /// f32 per block of pixels and in f64 across blocks.
-pub(crate) fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
+pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
     macro_rules! body {
         ($s:expr) => {{
             const S: usize = $s;
@@ -163,7 +163,7 @@ pub(crate) fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * 
 }
 
 /// `out[k] = sum_i J[i * dof + k] * v[i]`.
-pub(crate) fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
+pub fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
     macro_rules! body {
         ($s:expr) => {{
             const S: usize = $s;

@@ -1,0 +1,103 @@
+//! The per-iteration observer: the tracker's driver reports every iteration to it. The
+//! inspector's convergence plot and step-through view are built on [`Recorder`]; benchmarks use
+//! [`NoObserver`].
+
+use crate::geometry::Quad;
+use crate::tracker::FrameOutcome;
+use serde::{Deserialize, Serialize};
+use std::time::Duration;
+
+/// One iteration of a search method on one frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Iteration<'a> {
+    /// Frame index (0 is the initialisation frame).
+    pub frame: usize,
+    /// Iteration index within the frame, from 0.
+    pub iteration: usize,
+    /// The SSM parameters after the iteration (normalised frame; `dof` entries).
+    pub params: &'a [f64],
+    /// The corners after the iteration (image coordinates).
+    pub corners: Quad,
+    /// The similarity `f` before the iteration's step.
+    pub similarity: f64,
+    /// The L2 norm of the change of the corners made by this iteration (pixels).
+    pub step: f64,
+    /// Time since the frame's update started.
+    pub elapsed: Duration,
+}
+
+/// Sees every iteration.
+pub trait Observer {
+    /// A frame starts from `corners`.
+    fn frame_started(&mut self, _frame: usize, _corners: &Quad) {}
+    /// An iteration finished.
+    fn iteration(&mut self, it: &Iteration<'_>);
+    /// The frame finished.
+    fn frame_finished(&mut self, _frame: usize, _outcome: &FrameOutcome) {}
+}
+
+/// Ignores everything (for benchmarks and batch runs).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoObserver;
+
+impl Observer for NoObserver {
+    #[inline]
+    fn iteration(&mut self, _it: &Iteration<'_>) {}
+}
+
+/// An owned copy of an [`Iteration`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    pub frame: usize,
+    pub iteration: usize,
+    pub params: Vec<f64>,
+    pub corners: Quad,
+    pub similarity: f64,
+    pub step: f64,
+    pub elapsed_us: f64,
+}
+
+/// Keeps the iterations of the last frame (and the frame's starting corners), for the
+/// convergence plot and the step-through view.
+#[derive(Clone, Debug, Default)]
+pub struct Recorder {
+    pub frame: usize,
+    pub start: Option<Quad>,
+    pub iterations: Vec<IterationRecord>,
+}
+
+impl Observer for Recorder {
+    fn frame_started(&mut self, frame: usize, corners: &Quad) {
+        self.frame = frame;
+        self.start = Some(*corners);
+        self.iterations.clear();
+    }
+    fn iteration(&mut self, it: &Iteration<'_>) {
+        self.iterations.push(IterationRecord {
+            frame: it.frame,
+            iteration: it.iteration,
+            params: it.params.to_vec(),
+            corners: it.corners,
+            similarity: it.similarity,
+            step: it.step,
+            elapsed_us: it.elapsed.as_secs_f64() * 1e6,
+        });
+    }
+}
+
+/// Counts iterations (for benchmarks: iterations per frame without recording them).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct IterationCounter {
+    pub iterations: u64,
+    pub frames: u64,
+}
+
+impl Observer for IterationCounter {
+    fn frame_started(&mut self, _frame: usize, _corners: &Quad) {
+        self.frames += 1;
+    }
+    #[inline]
+    fn iteration(&mut self, _it: &Iteration<'_>) {
+        self.iterations += 1;
+    }
+}

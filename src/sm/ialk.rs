@@ -1,0 +1,62 @@
+//! Inverse additive Lucas-Kanade (IALK, Hager and Belhumeur): the frame gradient at the warped
+//! point is replaced by the template gradient mapped through the inverse point Jacobian,
+//! `grad I_t(w(x, p)) ~ grad I*(x) (dw/dx)^-1`, so only the template is differentiated;
+//! `p <- p + dp`.
+
+use super::{Context, SearchMethod, SmBuilder, Update};
+use crate::am::Wrt;
+use crate::imaging::ImageView;
+use crate::registry::Entry;
+
+pub const ENTRY: Entry<SmBuilder> = Entry {
+    name: "ialk",
+    aliases: &["ia"],
+    description: "inverse additive Lucas-Kanade (Hager-Belhumeur)",
+    build: |_| Box::new(Ialk),
+};
+
+#[derive(Debug, Clone, Copy)]
+pub struct Ialk;
+
+impl SearchMethod for Ialk {
+    fn name(&self) -> &'static str {
+        ENTRY.name
+    }
+    fn initialize(&mut self, _ctx: &mut Context) -> Result<(), super::LossReason> {
+        Ok(())
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, super::LossReason> {
+        let p = ctx.params;
+        ctx.warp_grid(&p);
+        ctx.sample(img, false);
+        // Template gradient times the inverse of the warp's point Jacobian (normalised frame).
+        let m = ctx.ssm.matrix(&p).cast::<f32>();
+        for i in 0..ctx.len() {
+            let (x, y) = (ctx.grid_x[i], ctx.grid_y[i]);
+            let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
+            let u = (m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)]) * iw;
+            let v = (m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)]) * iw;
+            let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
+            let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
+            let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
+            let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
+            let det = a00 * a11 - a01 * a10;
+            let (tx, ty) = (ctx.template_gx[i], ctx.template_gy[i]);
+            // (tx, ty) A^-1 with A^-1 = [[a11, -a01], [-a10, a00]] / det.
+            ctx.gx[i] = (tx * a11 - ty * a10) / det;
+            ctx.gy[i] = (-tx * a01 + ty * a00) / det;
+        }
+        let mut dwdp = std::mem::take(&mut ctx.dwdp);
+        ctx.ssm.jacobian(&p, &ctx.grid_x, &ctx.grid_y, &mut dwdp);
+        let mut jac = std::mem::take(&mut ctx.jac);
+        Context::project(&ctx.gx, &ctx.gy, &dwdp, ctx.dof, &mut jac);
+        ctx.dwdp = dwdp;
+        let f = ctx.am.gradient(Wrt::Current, &ctx.values, &mut ctx.grad);
+        let mut h = [0.0; 64];
+        ctx.am
+            .hessian(Wrt::Current, ctx.hessian, &ctx.values, &jac, ctx.dof, &mut h);
+        let r = ctx.step(&jac, &h, Update::Additive);
+        ctx.jac = jac;
+        r.map(|_| f)
+    }
+}

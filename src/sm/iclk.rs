@@ -1,0 +1,76 @@
+//! Inverse compositional Lucas-Kanade (ICLK, Baker and Matthews): the step warps the template,
+//! `I*(w(x, dp))`, so the Jacobian `grad I*(x) dw/dp(x, 0)` and (for every Hessian kind but
+//! Newton) the Hessian are computed once per template; `p <- p o dp^-1`.
+
+use super::{Context, LossReason, SearchMethod, SmBuilder, Update};
+use crate::am::{HessianKind, Wrt};
+use crate::imaging::ImageView;
+use crate::linalg::MAX_DOF;
+use crate::registry::Entry;
+
+pub const ENTRY: Entry<SmBuilder> = Entry {
+    name: "iclk",
+    aliases: &["ic"],
+    description: "inverse compositional Lucas-Kanade (Baker-Matthews)",
+    build: |_| Box::new(Iclk::default()),
+};
+
+#[derive(Debug, Clone)]
+pub struct Iclk {
+    /// Template Jacobian `N x S`.
+    jac: Vec<f32>,
+    /// Constant Hessian (unless the Newton kind is asked for).
+    hessian: [f64; MAX_DOF * MAX_DOF],
+}
+
+impl Default for Iclk {
+    fn default() -> Self {
+        Iclk {
+            jac: Vec::new(),
+            hessian: [0.0; MAX_DOF * MAX_DOF],
+        }
+    }
+}
+
+impl SearchMethod for Iclk {
+    fn name(&self) -> &'static str {
+        ENTRY.name
+    }
+    fn initialize(&mut self, ctx: &mut Context) -> Result<(), LossReason> {
+        self.jac.resize(ctx.len() * ctx.dof, 0.0);
+        Context::project(
+            &ctx.template_gx,
+            &ctx.template_gy,
+            &ctx.dwdp0,
+            ctx.dof,
+            &mut self.jac,
+        );
+        // At the template the current patch equals it: the constant Hessian.
+        let kind = match ctx.hessian {
+            HessianKind::Newton => HessianKind::AfterConvergence,
+            k => k,
+        };
+        let template = ctx.template.clone();
+        ctx.am
+            .hessian(Wrt::Template, kind, &template, &self.jac, ctx.dof, &mut self.hessian);
+        Ok(())
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason> {
+        let p = ctx.params;
+        ctx.warp_grid(&p);
+        ctx.sample(img, false);
+        let f = ctx.am.gradient(Wrt::Template, &ctx.values, &mut ctx.grad);
+        if ctx.hessian == HessianKind::Newton {
+            ctx.am.hessian(
+                Wrt::Template,
+                HessianKind::Newton,
+                &ctx.values,
+                &self.jac,
+                ctx.dof,
+                &mut self.hessian,
+            );
+        }
+        ctx.step(&self.jac, &self.hessian, Update::ComposeInverse)?;
+        Ok(f)
+    }
+}

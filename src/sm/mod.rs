@@ -1,0 +1,353 @@
+//! Search methods: the `argmax` of `f(I*, I_t(w(x, p)))`.
+//!
+//! A search method combines the AM and the SSM by the chain rule,
+//! `df/dp = df/dI . dI/dx . dw/dp`, and updates the parameters. It implements one iteration
+//! ([`SearchMethod::iterate`]); the driver in [`crate::tracker::Tracker`] owns the loop, the stop
+//! test, the loss-of-track checks and the observer. The shared state and buffers of one tracker
+//! are in [`Context`] (allocated once, when the tracker is initialised).
+//!
+//! Each method is one file and one line in [`REGISTRY`].
+
+mod esm;
+mod falk;
+mod ialk;
+mod iclk;
+mod fclk;
+
+use crate::am::{jt_times, Am, Capabilities, HessianKind};
+use crate::geometry::{Normaliser, Point, Quad};
+use crate::imaging::{sample_values, sample_values_gradients, ImageView};
+use crate::linalg::{newton_step, MAX_DOF};
+use crate::registry::{self, Entry};
+use crate::ssm::{Params, Ssm};
+use crate::tracker::TrackerParams;
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+/// Why a tracker lost the target.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossReason {
+    /// A parameter, a corner or the similarity became NaN or infinite.
+    NonFinite,
+    /// The Newton system could not be solved (flat patch, degenerate Jacobian).
+    Singular,
+    /// The quad folded over, or its area changed by more than a factor of 100.
+    Degenerate,
+    /// The quad's centre left the frame by more than half a frame.
+    OutOfFrame,
+}
+
+impl std::fmt::Display for LossReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LossReason::NonFinite => "non-finite values",
+            LossReason::Singular => "singular system",
+            LossReason::Degenerate => "degenerate quad",
+            LossReason::OutOfFrame => "out of frame",
+        })
+    }
+}
+
+/// One search method. Object-safe; its per-pixel loops are concrete.
+pub trait SearchMethod: Send + std::fmt::Debug {
+    /// The registry name.
+    fn name(&self) -> &'static str;
+    /// AM capabilities the method needs.
+    fn requires(&self) -> Capabilities {
+        Capabilities {
+            derivatives: true,
+            distance: false,
+        }
+    }
+    /// Called once the template is set in `ctx` (values and gradients sampled).
+    fn initialize(&mut self, ctx: &mut Context) -> Result<(), LossReason>;
+    /// One iteration on `img`: updates `ctx.params` and returns the similarity before the step.
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason>;
+}
+
+/// Builds an SM from the tracker's parameters.
+pub type SmBuilder = fn(&TrackerParams) -> Box<dyn SearchMethod>;
+
+/// Every search method.
+pub const REGISTRY: &[Entry<SmBuilder>] = &[
+    falk::ENTRY,
+    ialk::ENTRY,
+    fclk::ENTRY,
+    iclk::ENTRY,
+    esm::ENTRY,
+];
+
+/// The SM called `name` (or one of its aliases).
+pub fn build(name: &str, params: &TrackerParams) -> crate::Result<Box<dyn SearchMethod>> {
+    Ok((registry::lookup(REGISTRY, "search method", name)?.build)(params))
+}
+
+/// How a step `dp` changes the parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Update {
+    /// `p + dp`.
+    Additive,
+    /// `w(w(x, dp), p)`: `p` after `dp`.
+    Compose,
+    /// `w(w(x, dp)^-1, p)`: `p` after the inverse of `dp`.
+    ComposeInverse,
+}
+
+/// The state of one tracker shared by its search method and the driver: the models, the sampling
+/// grid and template, the parameters, and every per-iteration buffer.
+#[derive(Debug)]
+pub struct Context {
+    pub ssm: Box<dyn Ssm>,
+    pub am: Box<dyn Am>,
+    /// The Hessian kind to use (resolved: never [`HessianKind::Default`]).
+    pub hessian: HessianKind,
+    pub dof: usize,
+    /// Image <-> normalised frame.
+    pub norm: Normaliser,
+    /// The sampling grid: the unit square's `res x res` points mapped onto the initial quad, in
+    /// normalised coordinates.
+    pub grid_x: Vec<f32>,
+    pub grid_y: Vec<f32>,
+    /// The initial quad in normalised coordinates.
+    pub template_corners: Quad,
+    /// Current parameters.
+    pub params: Params,
+    /// Template intensities `I*` and their gradient in normalised coordinates.
+    pub template: Vec<f32>,
+    pub template_gx: Vec<f32>,
+    pub template_gy: Vec<f32>,
+    /// `dw/dp` at the identity on the grid (`N x 2 x S`).
+    pub dwdp0: Vec<f32>,
+    /// Scratch: `dw/dp` at the current parameters.
+    pub dwdp: Vec<f32>,
+    /// Warped grid in frame pixels.
+    pub px: Vec<f32>,
+    pub py: Vec<f32>,
+    /// Sampled current intensities and gradients.
+    pub values: Vec<f32>,
+    pub gx: Vec<f32>,
+    pub gy: Vec<f32>,
+    /// AM gradient with respect to pixels.
+    pub grad: Vec<f32>,
+    /// Pixel Jacobian `dI/dp` (`N x S`).
+    pub jac: Vec<f32>,
+}
+
+impl Context {
+    /// A context for the given models with an `res x res` grid (buffers allocated here).
+    pub fn new(ssm: Box<dyn Ssm>, am: Box<dyn Am>, hessian: HessianKind, res: usize) -> Self {
+        let dof = ssm.dof();
+        let hessian = match hessian {
+            HessianKind::Default => am.default_hessian(),
+            k => k,
+        };
+        let n = res * res;
+        let z = |len: usize| vec![0.0f32; len];
+        Context {
+            ssm,
+            am,
+            hessian,
+            dof,
+            norm: Normaliser {
+                cx: 0.0,
+                cy: 0.0,
+                scale: 1.0,
+            },
+            grid_x: z(n),
+            grid_y: z(n),
+            template_corners: Quad::unit_square(),
+            params: [0.0; MAX_DOF],
+            template: z(n),
+            template_gx: z(n),
+            template_gy: z(n),
+            dwdp0: z(2 * n * dof),
+            dwdp: z(2 * n * dof),
+            px: z(n),
+            py: z(n),
+            values: z(n),
+            gx: z(n),
+            gy: z(n),
+            grad: z(n),
+            jac: z(n * dof),
+        }
+    }
+
+    /// Number of sampled points.
+    pub fn len(&self) -> usize {
+        self.grid_x.len()
+    }
+
+    /// Whether the grid is empty.
+    pub fn is_empty(&self) -> bool {
+        self.grid_x.is_empty()
+    }
+
+    /// The matrix taking normalised template points to frame pixels under `p`.
+    pub fn pixel_matrix(&self, p: &Params) -> Matrix3<f64> {
+        self.norm.to_image_matrix() * self.ssm.matrix(p)
+    }
+
+    /// The corners under `p`, in frame pixels.
+    pub fn corners(&self, p: &Params) -> Quad {
+        let m = self.pixel_matrix(p);
+        self.template_corners.map(|c| crate::geometry::apply_homography(&m, c))
+    }
+
+    /// Warps the grid by `p` into frame pixels (`px`, `py`).
+    pub fn warp_grid(&mut self, p: &Params) {
+        let m = self.pixel_matrix(p).cast::<f32>();
+        let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+        let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+        let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+        for i in 0..self.grid_x.len() {
+            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+            let w = 1.0 / (m20 * x + m21 * y + m22);
+            self.px[i] = (m00 * x + m01 * y + m02) * w;
+            self.py[i] = (m10 * x + m11 * y + m12) * w;
+        }
+    }
+
+    /// Samples the frame at the warped grid: values, and gradients (frame pixels) if asked.
+    pub fn sample(&mut self, img: &ImageView, gradients: bool) {
+        if gradients {
+            sample_values_gradients(
+                img,
+                &self.px,
+                &self.py,
+                &mut self.values,
+                &mut self.gx,
+                &mut self.gy,
+            );
+        } else {
+            sample_values(img, &self.px, &self.py, &mut self.values);
+        }
+    }
+
+    /// Turns the sampled frame gradients into the gradient of the warped frame
+    /// `I_t(pixel(w(x, p)))` with respect to the normalised template point `x` (chain rule
+    /// through the warp's point Jacobian), in place in `gx`, `gy`.
+    pub fn warped_gradient(&mut self, p: &Params) {
+        let m = self.pixel_matrix(p).cast::<f32>();
+        for i in 0..self.grid_x.len() {
+            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+            let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
+            let (u, v) = (self.px[i], self.py[i]);
+            let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
+            let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
+            let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
+            let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
+            let (gx, gy) = (self.gx[i], self.gy[i]);
+            self.gx[i] = gx * a00 + gy * a10;
+            self.gy[i] = gx * a01 + gy * a11;
+        }
+    }
+
+    /// `jac[i, k] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k` with `dw/dp` given per point
+    /// (`N x 2 x S`).
+    pub fn project(gx: &[f32], gy: &[f32], dwdp: &[f32], dof: usize, jac: &mut [f32]) {
+        macro_rules! body {
+            ($s:expr) => {{
+                const S: usize = $s;
+                for (((j, d), &a), &b) in jac
+                    .chunks_exact_mut(S)
+                    .zip(dwdp.chunks_exact(2 * S))
+                    .zip(gx)
+                    .zip(gy)
+                {
+                    for k in 0..S {
+                        j[k] = a * d[k] + b * d[S + k];
+                    }
+                }
+            }};
+        }
+        match dof {
+            2 => body!(2),
+            3 => body!(3),
+            4 => body!(4),
+            6 => body!(6),
+            8 => body!(8),
+            s => {
+                for (((j, d), &a), &b) in jac
+                    .chunks_exact_mut(s)
+                    .zip(dwdp.chunks_exact(2 * s))
+                    .zip(gx)
+                    .zip(gy)
+                {
+                    for k in 0..s {
+                        j[k] = a * d[k] + b * d[s + k];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.grad`) and
+    /// applies the step to the parameters.
+    pub fn step(
+        &mut self,
+        jac: &[f32],
+        h: &[f64; MAX_DOF * MAX_DOF],
+        update: Update,
+    ) -> Result<(), LossReason> {
+        let mut g = [0.0f64; MAX_DOF];
+        jt_times(jac, &self.grad, self.dof, &mut g);
+        let dp = newton_step(h, &g, self.dof).ok_or(LossReason::Singular)?;
+        let p = self.params;
+        let next = match update {
+            Update::Additive => Some(self.ssm.additive_update(&p, &dp)),
+            Update::Compose => self.ssm.compose(&p, &dp),
+            Update::ComposeInverse => self
+                .ssm
+                .invert(&dp)
+                .and_then(|inv| self.ssm.compose(&p, &inv)),
+        }
+        .ok_or(LossReason::Singular)?;
+        if !next.iter().all(|v| v.is_finite()) {
+            return Err(LossReason::NonFinite);
+        }
+        self.params = next;
+        Ok(())
+    }
+
+    /// Sets up the grid and the normaliser for the initial quad `q` (image coordinates), and
+    /// resets the parameters to the identity.
+    pub fn set_region(&mut self, q: &Quad, res: usize) -> crate::Result<()> {
+        q.validate()?;
+        self.norm = Normaliser::of_quad(q);
+        let nq = q.map(|p| self.norm.to_norm(p));
+        let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
+            .ok_or_else(|| crate::Error::InvalidRegion(format!("{q} has no homography")))?;
+        let step = if res > 1 { 1.0 / (res - 1) as f64 } else { 0.0 };
+        for r in 0..res {
+            for c in 0..res {
+                let u = Point::new(-0.5 + c as f64 * step, -0.5 + r as f64 * step);
+                let p = crate::geometry::apply_homography(&h, u);
+                self.grid_x[r * res + c] = p.x as f32;
+                self.grid_y[r * res + c] = p.y as f32;
+            }
+        }
+        self.template_corners = nq;
+        self.params = self.ssm.identity();
+        let (gx, gy) = (self.grid_x.clone(), self.grid_y.clone());
+        self.ssm
+            .jacobian(&self.params, &gx, &gy, &mut self.dwdp0);
+        Ok(())
+    }
+
+    /// Samples the template (values and normalised gradients) from `img` at the grid under the
+    /// current parameters and gives it to the AM.
+    pub fn sample_template(&mut self, img: &ImageView) {
+        let p = self.params;
+        self.warp_grid(&p);
+        self.sample(img, true);
+        self.warped_gradient(&p);
+        self.template.copy_from_slice(&self.values);
+        self.template_gx.copy_from_slice(&self.gx);
+        self.template_gy.copy_from_slice(&self.gy);
+        self.am.set_template(&self.template);
+    }
+}
+
+#[cfg(test)]
+mod tests;

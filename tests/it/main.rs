@@ -1,0 +1,4 @@
+//! Integration tests (one binary links faster).
+
+mod common;
+mod recovery;

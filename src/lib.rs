@@ -22,25 +22,28 @@
 //! measures alignment error, success rates and speed.
 //!
 //! ```no_run
-//! use regtrack::{dataset, tracker::{Tracker, TrackerSpec}, observe::NoObserver};
+//! use regtrack::{dataset, tracker::{FrameInput, Tracker, TrackerSpec}, observe::NoObserver};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let seq = dataset::Sequence::open(std::path::Path::new("data/seq.txt"))?;
 //! let spec = TrackerSpec::from_names("esm", "ssd", "homography")?;
 //! let mut tracker = Tracker::new(&spec)?;
 //! let first = seq.load_gray(0)?;
-//! tracker.initialize(&first.view(), &seq.ground_truth(0).ok_or("no ground truth")?)?;
+//! tracker.initialize(FrameInput::Gray8(&first), &seq.ground_truth(0).ok_or("no ground truth")?)?;
 //! for i in 1..seq.len() {
 //!     let frame = seq.load_gray(i)?;
-//!     let outcome = tracker.update(&frame.view(), &mut NoObserver);
+//!     let outcome = tracker.update(FrameInput::Gray8(&frame), &mut NoObserver);
 //!     println!("{i}: {:?} {:?}", outcome.status, outcome.corners);
 //! }
 //! # Ok(()) }
 //! ```
 
+#![allow(clippy::needless_range_loop)]
+
 pub mod am;
-//pub mod dataset;
+pub mod bench;
+pub mod dataset;
 pub mod error;
-//pub mod eval;
+pub mod eval;
 pub mod geometry;
 pub mod imaging;
 pub mod linalg;

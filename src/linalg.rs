@@ -9,7 +9,11 @@ pub const MAX_DOF: usize = 8;
 /// Solves `H x = -g` for the Newton step of a maximisation, with `H` (row-major, `n x n`) the
 /// Hessian, normally negative definite. Tries a Cholesky factorisation of `-H`, then LU with
 /// partial pivoting; `None` when the system is singular or the result is not finite.
-pub fn newton_step(h: &[f64; MAX_DOF * MAX_DOF], g: &[f64; MAX_DOF], n: usize) -> Option<[f64; MAX_DOF]> {
+pub fn newton_step(
+    h: &[f64; MAX_DOF * MAX_DOF],
+    g: &[f64; MAX_DOF],
+    n: usize,
+) -> Option<[f64; MAX_DOF]> {
     let mut a = [0.0f64; MAX_DOF * MAX_DOF];
     let mut b = [0.0f64; MAX_DOF];
     for i in 0..n {
@@ -25,7 +29,7 @@ pub fn newton_step(h: &[f64; MAX_DOF * MAX_DOF], g: &[f64; MAX_DOF], n: usize) -
 fn cholesky_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
     let mut l = [0.0f64; 64];
     let scale = (0..n).map(|i| a[i * 8 + i].abs()).fold(0.0, f64::max);
-    if !(scale > 0.0) {
+    if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     for i in 0..n {
@@ -67,7 +71,7 @@ fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
     let mut m = *a;
     let mut x = *b;
     let scale = m.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-    if !(scale > 0.0) {
+    if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     for c in 0..n {

@@ -1,1 +1,613 @@
-fn main() {}
+//! The `regtrack` command: parses the command line and starts the library's work.
+
+use anyhow::{Context as _, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use regtrack::dataset::{self, Sequence, demo, synth};
+use regtrack::eval::{self, EvalOptions, Summary};
+use regtrack::geometry::Quad;
+use regtrack::observe::NoObserver;
+use regtrack::tracker::{TrackerParams, TrackerSpec};
+use regtrack::{am, bench, sm, ssm};
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(
+    name = "regtrack",
+    version,
+    about = "Modular registration-based visual trackers (AM x SSM x SM)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render the bundled demo sequence (once) and compare ICLK, FCLK and ESM with SSD and ZNCC.
+    Demo {
+        /// Where the demo sequence is rendered (default: the user cache folder).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+    },
+    /// Track one sequence and write the corners in the MTF format.
+    Track {
+        /// A ground-truth file (MTF `<seq>.txt`, POT `_gt_points.txt`) or a folder of images.
+        #[arg(long)]
+        seq: PathBuf,
+        #[command(flatten)]
+        tracker: TrackerArgs,
+        /// Initial corners `ulx,uly,urx,ury,lrx,lry,llx,lly` (default: the first ground truth).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            num_args = 8,
+            allow_negative_numbers = true
+        )]
+        init: Option<Vec<f64>>,
+        /// Output corners file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Evaluate every (sequence, SM, AM, SSM) of a dataset in the MTF layout.
+    Eval {
+        /// Dataset root: `<root>/<seq>.txt` with frames in `<root>/<seq>/`.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Sequences (default: all).
+        #[arg(long, value_delimiter = ',')]
+        seqs: Option<Vec<String>>,
+        /// Search methods.
+        #[arg(long, value_delimiter = ',', default_value = "esm")]
+        sm: Vec<String>,
+        /// Appearance models.
+        #[arg(long, value_delimiter = ',', default_value = "ssd")]
+        am: Vec<String>,
+        /// State space models.
+        #[arg(long, value_delimiter = ',', default_value = "homography")]
+        ssm: Vec<String>,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Parallel runs (0 = all cores; 1 for clean timings).
+        #[arg(long, default_value_t = 0)]
+        jobs: usize,
+        /// Only the runs `k, k + n, k + 2n, ...` of the product, as `k/n` (for Slurm arrays or
+        /// GNU parallel: one shard per task, each with its own --out).
+        #[arg(long)]
+        shard: Option<String>,
+        /// Re-initialise from the ground truth 5 frames after a failure.
+        #[arg(long)]
+        reinit: bool,
+    },
+    /// List every appearance model, state space model and search method with its aliases.
+    List,
+    /// Render a synthetic sequence with exact ground truth (MTF layout).
+    Synth(SynthArgs),
+    /// Speed per tracker on the demo sequence (or --seq): iterations per frame, us per iteration,
+    /// tracker-only and live-path FPS (medians over repeats).
+    Bench {
+        /// Sequence (default: the demo).
+        #[arg(long)]
+        seq: Option<PathBuf>,
+        #[arg(long, value_delimiter = ',', default_value = "iclk,fclk,esm")]
+        sm: Vec<String>,
+        #[arg(long, value_delimiter = ',', default_value = "ssd,zncc")]
+        am: Vec<String>,
+        #[arg(long, value_delimiter = ',', default_value = "homography")]
+        ssm: Vec<String>,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Repeats (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
+        /// Use only the first frames.
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+}
+
+#[derive(Args)]
+struct TrackerArgs {
+    #[arg(long, default_value = "esm")]
+    sm: String,
+    #[arg(long, default_value = "ssd")]
+    am: String,
+    #[arg(long, default_value = "homography")]
+    ssm: String,
+    #[command(flatten)]
+    params: ParamArgs,
+}
+
+#[derive(Args, Clone)]
+struct ParamArgs {
+    /// Sampling resolution (res x res points).
+    #[arg(long, default_value_t = 50)]
+    res: usize,
+    /// Maximum iterations per frame.
+    #[arg(long, default_value_t = 30)]
+    max_iters: usize,
+    /// Stop when the corners move less than this (L2 norm, px).
+    #[arg(long, default_value_t = 0.001)]
+    eps: f64,
+    /// Gaussian pre-smoothing standard deviation (px; 0 = none).
+    #[arg(long, default_value_t = 3.0)]
+    sigma: f32,
+    /// Gaussian pre-smoothing kernel size.
+    #[arg(long, default_value_t = 5)]
+    blur: usize,
+}
+
+impl ParamArgs {
+    fn params(&self) -> TrackerParams {
+        TrackerParams {
+            res: self.res,
+            max_iters: self.max_iters,
+            eps: self.eps,
+            blur_size: self.blur,
+            blur_sigma: self.sigma,
+            ..TrackerParams::default()
+        }
+    }
+}
+
+#[derive(Args)]
+struct SynthArgs {
+    /// Texture rendered into the target quad.
+    #[arg(long)]
+    texture: PathBuf,
+    /// Background image (default: mid-gray).
+    #[arg(long)]
+    background: Option<PathBuf>,
+    /// Motion profile (four corners per frame, TMT/MTF format).
+    #[arg(long)]
+    motion: PathBuf,
+    /// Output root: writes `<out>/<name>.txt` and `<out>/<name>/`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Sequence name.
+    #[arg(long)]
+    name: String,
+    /// Frame size `WxH` (default: the smallest common size holding the motion).
+    #[arg(long)]
+    size: Option<String>,
+    /// Use only the first frames.
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Take every k-th frame of the profile (k times faster motion).
+    #[arg(long, default_value_t = 1)]
+    step: usize,
+    /// Supersampling per axis.
+    #[arg(long, default_value_t = 3)]
+    supersample: usize,
+    /// Gaussian noise (gray levels).
+    #[arg(long, default_value_t = 0.0)]
+    noise: f32,
+    /// Global gain drift amplitude (0.2 = +-20%).
+    #[arg(long, default_value_t = 0.0)]
+    gain_drift: f32,
+    /// Global bias drift amplitude (gray levels).
+    #[arg(long, default_value_t = 0.0)]
+    bias_drift: f32,
+    /// Moving local light amplitude (0.5 = +50% at its centre).
+    #[arg(long, default_value_t = 0.0)]
+    local_light: f32,
+    /// Motion blur sub-frames (0 = none).
+    #[arg(long, default_value_t = 0)]
+    motion_blur: usize,
+    /// Occluder size as a fraction of the target (0 = none).
+    #[arg(long, default_value_t = 0.0)]
+    occlusion: f32,
+    /// JPEG quality (0 = PNG frames).
+    #[arg(long, default_value_t = 95)]
+    jpeg_quality: u8,
+    /// Seed of the random nuisances.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Demo { cache } => run_demo(cache.as_deref()),
+        Command::Track {
+            seq,
+            tracker,
+            init,
+            out,
+        } => run_track(&seq, &tracker, init, &out),
+        Command::Eval {
+            dataset,
+            seqs,
+            sm,
+            am,
+            ssm,
+            params,
+            out,
+            jobs,
+            shard,
+            reinit,
+        } => run_eval(
+            &dataset,
+            seqs,
+            &sm,
+            &am,
+            &ssm,
+            &params,
+            &out,
+            jobs,
+            shard.as_deref(),
+            reinit,
+        ),
+        Command::List => {
+            print_list();
+            Ok(())
+        }
+        Command::Synth(args) => run_synth(args),
+        Command::Bench {
+            seq,
+            sm,
+            am,
+            ssm,
+            params,
+            repeats,
+            frames,
+            json,
+        } => run_bench(
+            seq.as_deref(),
+            &sm,
+            &am,
+            &ssm,
+            &params,
+            repeats,
+            frames,
+            json.as_deref(),
+        ),
+    }
+}
+
+fn bar(len: usize, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed_precise}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn load_demo(cache: Option<&Path>) -> Result<Sequence> {
+    let pb = bar(0, "rendering the demo sequence");
+    let seq = demo::ensure_demo(cache, &|d, t| {
+        pb.set_length(t as u64);
+        pb.set_position(d as u64);
+    })
+    .context("cannot prepare the demo sequence")?;
+    pb.finish_and_clear();
+    Ok(seq)
+}
+
+fn specs(
+    sms: &[String],
+    ams: &[String],
+    ssms: &[String],
+    params: &ParamArgs,
+) -> Result<Vec<TrackerSpec>> {
+    let mut out = Vec::new();
+    for s in sms {
+        for a in ams {
+            for m in ssms {
+                let mut spec = TrackerSpec::from_names(s, a, m)?;
+                spec.params = params.params();
+                regtrack::Tracker::new(&spec)?;
+                out.push(spec);
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn print_table(rows: &[Summary]) {
+    println!(
+        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9}",
+        "sequence",
+        "tracker",
+        "frames",
+        "SR@5",
+        "SR@20",
+        "mean err",
+        "fail",
+        "it/fr",
+        "tracker FPS",
+        "live FPS"
+    );
+    for r in rows {
+        println!(
+            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0}",
+            r.sequence,
+            format!("{}_{}_{}", r.sm, r.am, r.ssm),
+            r.frames,
+            r.sr5,
+            r.sr20,
+            r.mean_error,
+            r.failures,
+            r.iterations_per_frame,
+            r.tracker_fps,
+            r.live_fps
+        );
+    }
+}
+
+fn run_demo(cache: Option<&Path>) -> Result<()> {
+    let seq = load_demo(cache)?;
+    println!(
+        "demo sequence: {} frames ({})",
+        seq.len(),
+        seq.gt_path.as_deref().unwrap_or(Path::new("")).display()
+    );
+    let specs = specs(
+        &["iclk".into(), "fclk".into(), "esm".into()],
+        &["ssd".into(), "zncc".into()],
+        &["homography".into()],
+        &ParamArgs {
+            res: 50,
+            max_iters: 30,
+            eps: 0.001,
+            sigma: 3.0,
+            blur: 5,
+        },
+    )?;
+    let pb = bar(specs.len(), "tracking");
+    let results = eval::run_batch(
+        std::slice::from_ref(&seq),
+        &specs,
+        &EvalOptions::default(),
+        1,
+        &|d, _| pb.set_position(d as u64),
+    )?;
+    pb.finish_and_clear();
+    let rows = results
+        .into_iter()
+        .map(|r| r.map(|r| r.summary()))
+        .collect::<Result<Vec<_>, _>>()?;
+    print_table(&rows);
+    Ok(())
+}
+
+fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) -> Result<()> {
+    let seq = Sequence::open(seq)?;
+    let mut spec = TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?;
+    spec.params = t.params.params();
+    let init = match init {
+        Some(v) => {
+            let arr: [f64; 8] = v
+                .try_into()
+                .map_err(|_| anyhow::anyhow!("--init needs 8 numbers"))?;
+            Some(Quad::from_array(arr))
+        }
+        None => None,
+    };
+    let run = eval::run_sequence(&seq, &spec, &EvalOptions::default(), init, &mut NoObserver)?;
+    let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
+    dataset::write_corners(out, &corners, "jpg")?;
+    let lost = run.frames.iter().filter(|f| f.corners.is_none()).count();
+    println!(
+        "wrote {} ({} frames, {} lost)",
+        out.display(),
+        run.frames.len(),
+        lost
+    );
+    if !seq.ground_truth.is_empty() {
+        print_table(&[run.summary()]);
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_eval(
+    root: &Path,
+    seqs: Option<Vec<String>>,
+    sms: &[String],
+    ams: &[String],
+    ssms: &[String],
+    params: &ParamArgs,
+    out: &Path,
+    jobs: usize,
+    shard: Option<&str>,
+    reinit: bool,
+) -> Result<()> {
+    let specs = specs(sms, ams, ssms, params)?;
+    let sequences = dataset::discover(root, seqs.as_deref())?;
+    let opts = EvalOptions {
+        reinit,
+        ..EvalOptions::default()
+    };
+    let pairs: Vec<(usize, usize)> = (0..sequences.len())
+        .flat_map(|s| (0..specs.len()).map(move |p| (s, p)))
+        .collect();
+    let selected: Vec<(usize, usize)> = match shard {
+        None => pairs,
+        Some(s) => {
+            let (k, n) = s.split_once('/').context("--shard must be k/n, e.g. 0/4")?;
+            let (k, n): (usize, usize) = (k.trim().parse()?, n.trim().parse()?);
+            if n == 0 || k >= n {
+                bail!("--shard {s}: need 0 <= k < n");
+            }
+            pairs
+                .into_iter()
+                .enumerate()
+                .filter(|(i, _)| i % n == k)
+                .map(|(_, p)| p)
+                .collect()
+        }
+    };
+    let pb = bar(selected.len(), "evaluating");
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build()?;
+    let runs: Vec<_> = pool.install(|| {
+        use rayon::prelude::*;
+        selected
+            .par_iter()
+            .map(|&(s, p)| {
+                let r = eval::run_sequence(&sequences[s], &specs[p], &opts, None, &mut NoObserver);
+                pb.set_position(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) as u64 + 1);
+                r.with_context(|| format!("{} on {}", specs[p].label(), sequences[s].name))
+            })
+            .collect()
+    });
+    pb.finish_and_clear();
+    let runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    let mut rows = Vec::new();
+    for r in &runs {
+        eval::write_run_files(out, r)?;
+        rows.push(r.summary());
+    }
+    // Pooled over all sequences of this output, per tracker.
+    for spec in &specs {
+        let mine: Vec<_> = runs
+            .iter()
+            .filter(|r| r.spec.label() == spec.label())
+            .collect();
+        if mine.len() > 1 {
+            rows.push(eval::summarize("ALL", &mine));
+        }
+    }
+    eval::write_summaries(out, &rows)?;
+    print_table(&rows);
+    println!("wrote {}", out.join("summary.csv").display());
+    Ok(())
+}
+
+fn print_list() {
+    println!("appearance models (--am):");
+    for e in am::REGISTRY {
+        println!(
+            "  {:<12} {:<28} {}",
+            e.name,
+            aliases(e.aliases),
+            e.description
+        );
+    }
+    println!("state space models (--ssm):");
+    for e in ssm::REGISTRY {
+        println!(
+            "  {:<12} {:<28} {}",
+            e.name,
+            aliases(e.aliases),
+            e.description
+        );
+    }
+    println!("search methods (--sm):");
+    for e in sm::REGISTRY {
+        println!(
+            "  {:<12} {:<28} {}",
+            e.name,
+            aliases(e.aliases),
+            e.description
+        );
+    }
+}
+
+fn aliases(a: &[&str]) -> String {
+    if a.is_empty() {
+        String::new()
+    } else {
+        format!("[{}]", a.join(", "))
+    }
+}
+
+fn run_synth(a: SynthArgs) -> Result<()> {
+    let size = match a.size {
+        Some(s) => {
+            let (w, h) = s
+                .split_once(['x', 'X'])
+                .context("--size must be WxH, e.g. 640x480")?;
+            Some((w.trim().parse()?, h.trim().parse()?))
+        }
+        None => None,
+    };
+    let cfg = synth::SynthConfig {
+        texture: a.texture,
+        background: a.background,
+        motion: a.motion,
+        size,
+        max_frames: a.frames,
+        step: a.step,
+        supersample: a.supersample,
+        noise: a.noise,
+        gain_drift: a.gain_drift,
+        bias_drift: a.bias_drift,
+        local_light: a.local_light,
+        motion_blur: a.motion_blur,
+        occlusion: a.occlusion,
+        jpeg_quality: a.jpeg_quality,
+        seed: a.seed,
+    };
+    let pb = bar(0, "rendering");
+    let seq = synth::render_sequence(&cfg, &a.out, &a.name, &|d, t| {
+        pb.set_length(t as u64);
+        pb.set_position(d as u64);
+    })?;
+    pb.finish_and_clear();
+    println!(
+        "wrote {} frames: {}",
+        seq.len(),
+        seq.gt_path.as_deref().unwrap_or(Path::new("")).display()
+    );
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_bench(
+    seq: Option<&Path>,
+    sms: &[String],
+    ams: &[String],
+    ssms: &[String],
+    params: &ParamArgs,
+    repeats: usize,
+    frames: Option<usize>,
+    json: Option<&Path>,
+) -> Result<()> {
+    let seq = match seq {
+        Some(p) => Sequence::open(p)?,
+        None => load_demo(None)?,
+    };
+    let loaded = bench::load_frames(&seq, frames)?;
+    println!(
+        "{} frames of {}, {} repeats (medians); tracker-only = search on pre-smoothed frames, live = from 8-bit frames",
+        loaded.gray.len(),
+        seq.name,
+        repeats
+    );
+    println!(
+        "{:<26} {:>7} {:>8} {:>8} {:>12} {:>10}",
+        "tracker", "frames", "it/frame", "us/iter", "tracker FPS", "live FPS"
+    );
+    let mut rows = Vec::new();
+    for spec in specs(sms, ams, ssms, params)? {
+        let r = bench::bench_tracker(&spec, &loaded, repeats)?;
+        println!(
+            "{:<26} {:>7} {:>8.2} {:>8.1} {:>12.0} {:>10.0}{}",
+            r.tracker,
+            r.frames,
+            r.iterations_per_frame,
+            r.us_per_iteration,
+            r.tracker_fps,
+            r.live_fps,
+            r.lost_at
+                .map(|f| format!("  (lost at frame {f})"))
+                .unwrap_or_default()
+        );
+        rows.push(r);
+    }
+    if let Some(p) = json {
+        dataset::write_atomic(p, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+    }
+    Ok(())
+}

@@ -20,28 +20,36 @@ pub struct Entry<B> {
 impl<B> Entry<B> {
     /// Whether `name` (case-insensitive) is this entry's name or one of its aliases.
     pub fn matches(&self, name: &str) -> bool {
-        self.name.eq_ignore_ascii_case(name) || self.aliases.iter().any(|a| a.eq_ignore_ascii_case(name))
+        self.name.eq_ignore_ascii_case(name)
+            || self.aliases.iter().any(|a| a.eq_ignore_ascii_case(name))
     }
 }
 
 /// Finds the entry called `name` in `entries`, or an error listing what exists.
-pub fn lookup<'a, B>(entries: &'a [Entry<B>], kind: &'static str, name: &str) -> Result<&'a Entry<B>> {
+pub fn lookup<'a, B>(
+    entries: &'a [Entry<B>],
+    kind: &'static str,
+    name: &str,
+) -> Result<&'a Entry<B>> {
     let name = name.trim();
-    entries.iter().find(|e| e.matches(name)).ok_or_else(|| Error::UnknownMethod {
-        kind,
-        name: name.to_string(),
-        available: entries
-            .iter()
-            .map(|e| {
-                if e.aliases.is_empty() {
-                    e.name.to_string()
-                } else {
-                    format!("{} ({})", e.name, e.aliases.join(", "))
-                }
-            })
-            .collect::<Vec<_>>()
-            .join(", "),
-    })
+    entries
+        .iter()
+        .find(|e| e.matches(name))
+        .ok_or_else(|| Error::UnknownMethod {
+            kind,
+            name: name.to_string(),
+            available: entries
+                .iter()
+                .map(|e| {
+                    if e.aliases.is_empty() {
+                        e.name.to_string()
+                    } else {
+                        format!("{} ({})", e.name, e.aliases.join(", "))
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
 }
 
 /// The canonical names of a registry.

@@ -72,9 +72,16 @@ mod tests {
         let mut b = super::Rng::new(7);
         let n = 20000;
         let v: Vec<f64> = (0..n).map(|_| a.normal()).collect();
-        assert!(v.iter().zip((0..n).map(|_| b.normal())).all(|(x, y)| *x == y));
+        assert!(
+            v.iter()
+                .zip((0..n).map(|_| b.normal()))
+                .all(|(x, y)| *x == y)
+        );
         let mean = v.iter().sum::<f64>() / n as f64;
         let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
-        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.05, "{mean} {var}");
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.05,
+            "{mean} {var}"
+        );
     }
 }

@@ -5,7 +5,7 @@
 use crate::am::{self, HessianKind};
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
-use crate::imaging::{gaussian_kernel, GrayF32, GrayU8, ImageView, Preprocessor};
+use crate::imaging::{GrayF32, GrayU8, ImageView, Preprocessor, gaussian_kernel};
 use crate::observe::{Iteration, Observer};
 use crate::registry;
 use crate::sm::{self, Context, LossReason, SearchMethod};
@@ -55,19 +55,31 @@ impl TrackerParams {
             return bad(format!("res must be in 2..=1000, got {}", self.res));
         }
         if !(1..=10_000).contains(&self.max_iters) {
-            return bad(format!("max_iters must be in 1..=10000, got {}", self.max_iters));
+            return bad(format!(
+                "max_iters must be in 1..=10000, got {}",
+                self.max_iters
+            ));
         }
         if !(self.eps >= 0.0 && self.eps.is_finite()) {
-            return bad(format!("eps must be a finite number >= 0, got {}", self.eps));
+            return bad(format!(
+                "eps must be a finite number >= 0, got {}",
+                self.eps
+            ));
         }
         if self.blur_size > 31 {
-            return bad(format!("blur_size must be at most 31, got {}", self.blur_size));
+            return bad(format!(
+                "blur_size must be at most 31, got {}",
+                self.blur_size
+            ));
         }
         if !(self.blur_sigma >= 0.0 && self.blur_sigma.is_finite()) {
             return bad(format!("blur_sigma must be >= 0, got {}", self.blur_sigma));
         }
         if !(0.0..=10.0).contains(&self.roi_margin) {
-            return bad(format!("roi_margin must be in 0..=10, got {}", self.roi_margin));
+            return bad(format!(
+                "roi_margin must be in 0..=10, got {}",
+                self.roi_margin
+            ));
         }
         Ok(())
     }
@@ -88,8 +100,12 @@ impl TrackerSpec {
     /// Fails with the list of what exists on an unknown name or an impossible combination.
     pub fn from_names(sm: &str, am: &str, ssm: &str) -> Result<Self> {
         let spec = TrackerSpec {
-            sm: registry::lookup(sm::REGISTRY, "search method", sm)?.name.to_string(),
-            am: registry::lookup(am::REGISTRY, "appearance model", am)?.name.to_string(),
+            sm: registry::lookup(sm::REGISTRY, "search method", sm)?
+                .name
+                .to_string(),
+            am: registry::lookup(am::REGISTRY, "appearance model", am)?
+                .name
+                .to_string(),
             ssm: registry::lookup(ssm::REGISTRY, "state space model", ssm)?
                 .name
                 .to_string(),
@@ -158,6 +174,17 @@ pub struct FrameOutcome {
     pub converged: bool,
     /// The similarity before the last iteration's step.
     pub similarity: f64,
+    /// Time spent pre-processing (smoothing the region read) and searching.
+    pub timing: FrameTiming,
+}
+
+/// Where the time of one update went.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTiming {
+    /// Conversion and smoothing of the region the tracker reads (zero for smoothed input).
+    pub preprocess: std::time::Duration,
+    /// The search method's iterations (what MTF reports as the tracker's speed).
+    pub search: std::time::Duration,
 }
 
 /// A registration tracker: SSM + AM + SM, built from a [`TrackerSpec`].
@@ -186,7 +213,11 @@ impl Tracker {
                 "search method '{}' needs {} which appearance model '{}' does not provide; \
                  appearance models that do: {}",
                 sm.name(),
-                if need.derivatives && !have.derivatives { "analytic derivatives" } else { "a patch distance" },
+                if need.derivatives && !have.derivatives {
+                    "analytic derivatives"
+                } else {
+                    "a patch distance"
+                },
                 am.name(),
                 am::REGISTRY
                     .iter()
@@ -241,7 +272,11 @@ impl Tracker {
 
     /// Prepares the view the search method samples: the pre-processed region around `q`, or the
     /// whole frame when it is already smoothed. Returns whether the region covers the frame.
-    fn prepare<'a>(pre: &'a mut Preprocessor, input: FrameInput<'a>, region: (f64, f64, f64, f64)) -> ImageView<'a> {
+    fn prepare<'a>(
+        pre: &'a mut Preprocessor,
+        input: FrameInput<'a>,
+        region: (f64, f64, f64, f64),
+    ) -> ImageView<'a> {
         let (x0, y0, x1, y1) = region;
         match input {
             FrameInput::Gray8(img) => {
@@ -269,6 +304,21 @@ impl Tracker {
         let region = self.region_around(quad);
         let view = Self::prepare(&mut self.pre, input, region);
         self.ctx.sample_template(&view);
+        let energy: f64 = self
+            .ctx
+            .template_gx
+            .iter()
+            .zip(&self.ctx.template_gy)
+            .map(|(&a, &b)| (a * a + b * b) as f64)
+            .sum();
+        if energy.partial_cmp(&(1e-6 * self.ctx.len() as f64)) != Some(std::cmp::Ordering::Greater)
+        {
+            self.status = TrackStatus::Uninitialized;
+            return Err(Error::InvalidRegion(format!(
+                "cannot track {quad}: the template is flat (no image gradient): {}",
+                LossReason::Singular
+            )));
+        }
         self.sm
             .initialize(&mut self.ctx)
             .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
@@ -283,7 +333,9 @@ impl Tracker {
     /// quad), and resumes tracking if it was lost.
     pub fn set_corners(&mut self, quad: &Quad) -> Result<()> {
         if self.status == TrackStatus::Uninitialized {
-            return Err(Error::InvalidRegion("the tracker is not initialised".into()));
+            return Err(Error::InvalidRegion(
+                "the tracker is not initialised".into(),
+            ));
         }
         quad.validate()?;
         let target = quad.map(|p| self.ctx.norm.to_norm(p));
@@ -291,7 +343,9 @@ impl Tracker {
             .ctx
             .ssm
             .fit(&self.ctx.template_corners.0, &target.0)
-            .ok_or_else(|| Error::InvalidRegion(format!("cannot fit {} to {quad}", self.spec.ssm)))?;
+            .ok_or_else(|| {
+                Error::InvalidRegion(format!("cannot fit {} to {quad}", self.spec.ssm))
+            })?;
         self.ctx.params = p;
         self.corners = self.ctx.corners(&p);
         self.status = TrackStatus::Tracking;
@@ -309,9 +363,11 @@ impl Tracker {
                 iterations: 0,
                 converged: false,
                 similarity: f64::NAN,
+                timing: FrameTiming::default(),
             };
         }
         self.frame += 1;
+        let mut timing = FrameTiming::default();
         let start_params = self.ctx.params;
         let start_corners = self.corners;
         let (fw, fh) = input.size();
@@ -321,9 +377,11 @@ impl Tracker {
         for attempt in 0..2 {
             self.ctx.params = start_params;
             observer.frame_started(self.frame, &start_corners);
-            result = self.iterate_frame(input, region, observer, started);
+            result = self.iterate_frame(input, region, observer, started, &mut timing);
             // The search left the pre-processed region: redo the frame on a larger one once.
-            if let (Ok(out), 0, FrameInput::Gray8(_) | FrameInput::Gray32(_)) = (&result, attempt, input) {
+            if let (Ok(out), 0, FrameInput::Gray8(_) | FrameInput::Gray32(_)) =
+                (&result, attempt, input)
+            {
                 let (rx0, ry0, rx1, ry1) = {
                     let (a, b, c, d) = self.pre.region();
                     (a as f64, b as f64, c as f64, d as f64)
@@ -358,6 +416,7 @@ impl Tracker {
                     iterations,
                     converged,
                     similarity,
+                    timing,
                 }
             }
             Err(reason) => {
@@ -370,6 +429,7 @@ impl Tracker {
                     iterations: 0,
                     converged: false,
                     similarity: f64::NAN,
+                    timing,
                 }
             }
         };
@@ -384,13 +444,40 @@ impl Tracker {
         region: (f64, f64, f64, f64),
         observer: &mut dyn Observer,
         started: Instant,
+        timing: &mut FrameTiming,
     ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let t0 = Instant::now();
         let view = Self::prepare(&mut self.pre, input, region);
-        let mut prev = self.ctx.corners(&self.ctx.params);
+        let t1 = Instant::now();
+        timing.preprocess += t1 - t0;
+        let result = Self::search(
+            &mut self.ctx,
+            &mut *self.sm,
+            &self.spec.params,
+            self.frame,
+            &view,
+            observer,
+            started,
+        );
+        timing.search += t1.elapsed();
+        result
+    }
+
+    /// The iteration loop proper.
+    fn search(
+        ctx: &mut Context,
+        sm: &mut dyn SearchMethod,
+        params: &TrackerParams,
+        frame: usize,
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        started: Instant,
+    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let mut prev = ctx.corners(&ctx.params);
         let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
-        for it in 0..self.spec.params.max_iters {
-            let f = self.sm.iterate(&mut self.ctx, &view)?;
-            let corners = self.ctx.corners(&self.ctx.params);
+        for it in 0..params.max_iters {
+            let f = sm.iterate(ctx, view)?;
+            let corners = ctx.corners(&ctx.params);
             if !corners.is_finite() || f.is_nan() {
                 return Err(LossReason::NonFinite);
             }
@@ -399,15 +486,15 @@ impl Tracker {
             iterations = it + 1;
             similarity = f;
             observer.iteration(&Iteration {
-                frame: self.frame,
+                frame,
                 iteration: it,
-                params: &self.ctx.params[..self.ctx.dof],
+                params: &ctx.params[..ctx.dof],
                 corners,
                 similarity: f,
                 step,
                 elapsed: started.elapsed(),
             });
-            if step < self.spec.params.eps {
+            if step < params.eps {
                 converged = true;
                 break;
             }

@@ -9,7 +9,7 @@
 //! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
-use super::{accumulate_jtj, jt_times, HessianKind, Wrt};
+use super::{HessianKind, Wrt, accumulate_jtj, jt_times};
 use crate::linalg::MAX_DOF;
 
 #[derive(Debug, Clone, Default)]
@@ -28,7 +28,11 @@ pub(crate) struct Correlation {
 fn unit(x: &[f32], centered: bool, out: &mut Vec<f32>) -> f64 {
     out.clear();
     let mean = mean(x, centered);
-    let norm = x.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>().sqrt();
+    let norm = x
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum::<f64>()
+        .sqrt();
     out.extend(x.iter().map(|&v| (v as f64 - mean) as f32));
     if norm > 1e-9 {
         let inv = (1.0 / norm) as f32;
@@ -76,7 +80,8 @@ impl Correlation {
         self.t_norm = unit(template, self.centered, &mut self.t_unit);
         let mean = mean(template, self.centered);
         self.t_centered.clear();
-        self.t_centered.extend(template.iter().map(|&v| v as f64 - mean));
+        self.t_centered
+            .extend(template.iter().map(|&v| v as f64 - mean));
     }
 
     pub fn template(&self) -> &[f32] {
@@ -87,8 +92,17 @@ impl Correlation {
     fn current(&mut self, current: &[f32]) -> (f64, f64) {
         let n = unit(current, self.centered, &mut self.c_unit);
         let mc = mean(current, self.centered);
-        let num: f64 = self.t_centered.iter().zip(current).map(|(&t, &c)| t * (c as f64 - mc)).sum();
-        let rho = if n > 0.0 && self.t_norm > 0.0 { num / (n * self.t_norm) } else { 0.0 };
+        let num: f64 = self
+            .t_centered
+            .iter()
+            .zip(current)
+            .map(|(&t, &c)| t * (c as f64 - mc))
+            .sum();
+        let rho = if n > 0.0 && self.t_norm > 0.0 {
+            num / (n * self.t_norm)
+        } else {
+            0.0
+        };
         (n, rho)
     }
 

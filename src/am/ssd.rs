@@ -1,6 +1,6 @@
 //! Sum of squared differences: `f = -1/2 sum_i (I*_i - I_i)^2`.
 
-use super::{minus_jtj, Am, AmBuilder, HessianKind, Wrt};
+use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
 

@@ -31,24 +31,41 @@ fn gradients_match_finite_differences() {
         let mut am = (e.build)();
         for trial in 0..5 {
             let t = patch(&mut rng, n);
-            let c: Vec<f32> = t.iter().map(|&v| 0.8 * v + 10.0 + rng.range(-25.0, 25.0) as f32).collect();
+            let c: Vec<f32> = t
+                .iter()
+                .map(|&v| 0.8 * v + 10.0 + rng.range(-25.0, 25.0) as f32)
+                .collect();
             for wrt in [Wrt::Current, Wrt::Template] {
                 am.set_template(&t);
                 let mut g = vec![0f32; n];
                 let f = am.gradient(wrt, &c, &mut g);
-                assert!((f - am.similarity(&c)).abs() <= 1e-6 * (1.0 + f.abs()), "{} value", e.name);
-                let x0 = if wrt == Wrt::Current { c.clone() } else { t.clone() };
+                assert!(
+                    (f - am.similarity(&c)).abs() <= 1e-6 * (1.0 + f.abs()),
+                    "{} value",
+                    e.name
+                );
+                let x0 = if wrt == Wrt::Current {
+                    c.clone()
+                } else {
+                    t.clone()
+                };
                 let scale = g.iter().fold(0f32, |m, v| m.max(v.abs())) as f64;
                 for i in 0..n {
                     let h = 1.0;
                     let (mut xp, mut xm) = (x0.clone(), x0.clone());
                     xp[i] += h;
                     xm[i] -= h;
-                    let fd = (f_at(&mut *am, wrt, &t, &c, &xp) - f_at(&mut *am, wrt, &t, &c, &xm)) / (2.0 * h as f64);
+                    let fd = (f_at(&mut *am, wrt, &t, &c, &xp) - f_at(&mut *am, wrt, &t, &c, &xm))
+                        / (2.0 * h as f64);
                     assert!(
                         (fd - g[i] as f64).abs() <= 2e-3 * scale + 1e-9,
                         "{} {:?} trial {} pixel {}: analytic {} vs fd {}",
-                        e.name, wrt, trial, i, g[i], fd
+                        e.name,
+                        wrt,
+                        trial,
+                        i,
+                        g[i],
+                        fd
                     );
                 }
             }
@@ -64,7 +81,10 @@ fn hessians_match_finite_differences() {
     for e in REGISTRY {
         let mut am = (e.build)();
         let t = patch(&mut rng, n);
-        let c: Vec<f32> = t.iter().map(|&v| 1.1 * v - 5.0 + rng.range(-30.0, 30.0) as f32).collect();
+        let c: Vec<f32> = t
+            .iter()
+            .map(|&v| 1.1 * v - 5.0 + rng.range(-30.0, 30.0) as f32)
+            .collect();
         let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
         for wrt in [Wrt::Current, Wrt::Template] {
             am.set_template(&t);
@@ -72,7 +92,12 @@ fn hessians_match_finite_differences() {
             am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut h);
             let jtg = |am: &mut dyn Am, d: &[f64]| -> [f64; 8] {
                 let moved = |x: &[f32]| -> Vec<f32> {
-                    x.iter().enumerate().map(|(i, &v)| v + (0..s).map(|k| jac[i * s + k] as f64 * d[k]).sum::<f64>() as f32).collect()
+                    x.iter()
+                        .enumerate()
+                        .map(|(i, &v)| {
+                            v + (0..s).map(|k| jac[i * s + k] as f64 * d[k]).sum::<f64>() as f32
+                        })
+                        .collect()
                 };
                 let mut g = vec![0f32; n];
                 match wrt {
@@ -102,7 +127,12 @@ fn hessians_match_finite_differences() {
                     assert!(
                         (fd - h[i * s + k]).abs() <= 5e-3 * scale,
                         "{} {:?} H[{},{}]: analytic {} vs fd {}",
-                        e.name, wrt, i, k, h[i * s + k], fd
+                        e.name,
+                        wrt,
+                        i,
+                        k,
+                        h[i * s + k],
+                        fd
                     );
                 }
             }
@@ -124,19 +154,43 @@ fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
         let mut ha = [0.0; 64];
         am.hessian(Wrt::Current, HessianKind::Newton, &t, &jac, s, &mut hn);
         am.hessian(Wrt::Current, HessianKind::GaussNewton, &t, &jac, s, &mut hg);
-        let c: Vec<f32> = t.iter().map(|&v| v + rng.range(-40.0, 40.0) as f32).collect();
-        am.hessian(Wrt::Current, HessianKind::AfterConvergence, &c, &jac, s, &mut ha);
+        let c: Vec<f32> = t
+            .iter()
+            .map(|&v| v + rng.range(-40.0, 40.0) as f32)
+            .collect();
+        am.hessian(
+            Wrt::Current,
+            HessianKind::AfterConvergence,
+            &c,
+            &jac,
+            s,
+            &mut ha,
+        );
         let scale = hn[..s * s].iter().fold(0f64, |m, v| m.max(v.abs()));
         for i in 0..s * s {
-            assert!((hn[i] - hg[i]).abs() <= 1e-4 * scale, "{}: Newton vs GN at convergence", e.name);
-            assert!((hn[i] - ha[i]).abs() <= 1e-4 * scale, "{}: Newton vs after-convergence", e.name);
+            assert!(
+                (hn[i] - hg[i]).abs() <= 1e-4 * scale,
+                "{}: Newton vs GN at convergence",
+                e.name
+            );
+            assert!(
+                (hn[i] - ha[i]).abs() <= 1e-4 * scale,
+                "{}: Newton vs after-convergence",
+                e.name
+            );
         }
         // Gauss-Newton away from convergence: -H is positive semi-definite (x^T H x <= 0).
         am.hessian(Wrt::Current, HessianKind::GaussNewton, &c, &jac, s, &mut hg);
         for _ in 0..20 {
             let x: Vec<f64> = (0..s).map(|_| rng.normal()).collect();
-            let q: f64 = (0..s).map(|i| (0..s).map(|j| x[i] * hg[i * s + j] * x[j]).sum::<f64>()).sum();
-            assert!(q <= 1e-9 * scale, "{}: GN Hessian not negative semi-definite", e.name);
+            let q: f64 = (0..s)
+                .map(|i| (0..s).map(|j| x[i] * hg[i * s + j] * x[j]).sum::<f64>())
+                .sum();
+            assert!(
+                q <= 1e-9 * scale,
+                "{}: GN Hessian not negative semi-definite",
+                e.name
+            );
         }
     }
 }

@@ -85,13 +85,18 @@ pub fn iou(a: &Quad, b: &Quad) -> f64 {
         let (ba, bb) = (a.bbox(), b.bbox());
         let w = (ba.2.min(bb.2) - ba.0.max(bb.0)).max(0.0);
         let h = (ba.3.min(bb.3) - ba.1.max(bb.1)).max(0.0);
-        let (aa, ab) = (
-            (ba.2 - ba.0) * (ba.3 - ba.1),
-            (bb.2 - bb.0) * (bb.3 - bb.1),
-        );
+        let (aa, ab) = ((ba.2 - ba.0) * (ba.3 - ba.1), (bb.2 - bb.0) * (bb.3 - bb.1));
         let i = w * h;
-        return if aa + ab - i > 0.0 { i / (aa + ab - i) } else { 0.0 };
+        return if aa + ab - i > 0.0 {
+            i / (aa + ab - i)
+        } else {
+            0.0
+        };
     };
     let union = area_a + area_b - inter;
-    if union > 0.0 { (inter / union).clamp(0.0, 1.0) } else { 0.0 }
+    if union > 0.0 {
+        (inter / union).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
 }

@@ -66,7 +66,10 @@ impl Quad {
     }
     /// Mean of the corners.
     pub fn centroid(&self) -> Point {
-        let (sx, sy) = self.0.iter().fold((0.0, 0.0), |a, p| (a.0 + p.x, a.1 + p.y));
+        let (sx, sy) = self
+            .0
+            .iter()
+            .fold((0.0, 0.0), |a, p| (a.0 + p.x, a.1 + p.y));
         Point::new(sx / 4.0, sy / 4.0)
     }
     /// Signed area (shoelace formula); positive for clockwise corners in image coordinates
@@ -99,13 +102,21 @@ impl Quad {
     /// `(min x, min y, max x, max y)`.
     pub fn bbox(&self) -> (f64, f64, f64, f64) {
         self.0.iter().fold(
-            (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY),
+            (
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ),
             |b, p| (b.0.min(p.x), b.1.min(p.y), b.2.max(p.x), b.3.max(p.y)),
         )
     }
     /// Mean length of the four sides.
     pub fn mean_side(&self) -> f64 {
-        (0..4).map(|i| self.0[i].dist(self.0[(i + 1) % 4])).sum::<f64>() / 4.0
+        (0..4)
+            .map(|i| self.0[i].dist(self.0[(i + 1) % 4]))
+            .sum::<f64>()
+            / 4.0
     }
     /// The quad with every corner mapped by `f`.
     pub fn map(&self, f: impl Fn(Point) -> Point) -> Quad {
@@ -186,7 +197,9 @@ pub fn homography_from_points(src: &[Point; 4], dst: &[Point; 4]) -> Option<Matr
     if !h.iter().all(|v| v.is_finite()) {
         return None;
     }
-    Some(Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0))
+    Some(Matrix3::new(
+        h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0,
+    ))
 }
 
 /// The homography mapping quad `a` onto quad `b`.

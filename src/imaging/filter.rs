@@ -80,11 +80,22 @@ fn blur_region<T: Pixel>(
     for j in 0..rows {
         let sy = (y0 as isize + j as isize - r as isize).clamp(0, last_y) as usize;
         let srow = src.row(sy);
-        // The row segment with replicated borders.
+        // The row segment with replicated borders: the part inside the image copied, the
+        // rest clamped.
         let start = x0 as isize - r as isize;
-        for (i, l) in line.iter_mut().enumerate() {
-            let sx = (start + i as isize).clamp(0, last_x) as usize;
-            *l = srow[sx].to_f32();
+        let lo = (-start).clamp(0, line.len() as isize) as usize;
+        let hi = ((last_x + 1 - start).clamp(lo as isize, line.len() as isize)) as usize;
+        for (l, &v) in line[lo..hi]
+            .iter_mut()
+            .zip(&srow[(start + lo as isize) as usize..])
+        {
+            *l = v.to_f32();
+        }
+        for (i, l) in line.iter_mut().enumerate().take(lo) {
+            *l = srow[(start + i as isize).clamp(0, last_x) as usize].to_f32();
+        }
+        for (i, l) in line.iter_mut().enumerate().skip(hi) {
+            *l = srow[(start + i as isize).clamp(0, last_x) as usize].to_f32();
         }
         let trow = &mut tmp[j * w..(j + 1) * w];
         for (t, &kt) in k.iter().enumerate() {

@@ -8,9 +8,9 @@ mod filter;
 mod sample;
 
 pub use filter::{
-    downsample_half, gaussian_blur, gaussian_kernel, pyramid, GaussianKernel, Preprocessor,
+    GaussianKernel, Preprocessor, downsample_half, gaussian_blur, gaussian_kernel, pyramid,
 };
-pub use sample::{sample_value, sample_values, sample_values_gradients, Border, ImageView};
+pub use sample::{Border, ImageView, sample_value, sample_values, sample_values_gradients};
 
 use crate::error::{Error, Result};
 use std::path::Path;

@@ -33,7 +33,10 @@ impl<'a> ImageView<'a> {
     /// # Panics
     /// If `data` is shorter than `width * height` (a programming error).
     pub fn new(data: &'a [f32], width: usize, height: usize, x0: i64, y0: i64) -> Self {
-        assert!(data.len() >= width * height, "image view larger than its data");
+        assert!(
+            data.len() >= width * height,
+            "image view larger than its data"
+        );
         ImageView {
             data,
             width,
@@ -86,6 +89,24 @@ impl<'a> ImageView<'a> {
         }
     }
 
+    /// Bilinear value at window coordinates with the border replicated (at least 2x2 pixels):
+    /// the coordinates are clamped into the window (NaN goes to 0), so every read is in bounds.
+    #[inline(always)]
+    fn bilinear_replicate(&self, x: f32, y: f32) -> f32 {
+        let (wm, hm) = ((self.width - 1) as f32, (self.height - 1) as f32);
+        let xc = x.max(0.0).min(wm);
+        let yc = y.max(0.0).min(hm);
+        let ix = (xc as usize).min(self.width - 2);
+        let iy = (yc as usize).min(self.height - 2);
+        let (ax, ay) = (xc - ix as f32, yc - iy as f32);
+        let i = iy * self.width + ix;
+        let d = &self.data[i..i + self.width + 2];
+        let (p00, p10, p01, p11) = (d[0], d[1], d[self.width], d[self.width + 1]);
+        let top = p00 + ax * (p10 - p00);
+        let bot = p01 + ax * (p11 - p01);
+        top + ay * (bot - top)
+    }
+
     /// Bilinear value at window coordinates (general path, any border).
     #[inline(always)]
     fn bilinear_local(&self, x: f32, y: f32) -> f32 {
@@ -105,12 +126,11 @@ impl<'a> ImageView<'a> {
     /// Value and gradient at window coordinates.
     #[inline(always)]
     fn value_gradient_local(&self, x: f32, y: f32) -> (f32, f32, f32) {
-        let fx0 = x.floor();
-        let fy0 = y.floor();
-        let (ix, iy) = (fx0 as i64, fy0 as i64);
-        if ix >= 1 && iy >= 1 && ix + 2 < self.width as i64 && iy + 2 < self.height as i64 {
+        // Truncation is the floor for the coordinates that take the fast path (x, y >= 1).
+        let (ix, iy) = (x as i64, y as i64);
+        if x >= 1.0 && y >= 1.0 && ix + 2 < self.width as i64 && iy + 2 < self.height as i64 {
             // The 4x4 neighbourhood is inside: read it once.
-            let (ax, ay) = (x - fx0, y - fy0);
+            let (ax, ay) = (x - ix as f32, y - iy as f32);
             let w = self.width;
             let base = (iy as usize - 1) * w + ix as usize - 1;
             let r0 = &self.data[base..base + 4];
@@ -135,35 +155,45 @@ impl<'a> ImageView<'a> {
     }
 
     #[inline(always)]
-    fn to_local(&self, x: f32, y: f32) -> (f32, f32) {
+    fn local(&self, x: f32, y: f32) -> (f32, f32) {
         (x - self.x0 as f32, y - self.y0 as f32)
     }
 }
 
-/// The bilinearly interpolated value at frame point `(x, y)`. A non-finite coordinate reads 0.
+/// The bilinearly interpolated value at frame point `(x, y)`. A NaN coordinate reads like 0.
 #[inline]
 pub fn sample_value(img: &ImageView, x: f32, y: f32) -> f32 {
-    if img.is_empty() || !x.is_finite() || !y.is_finite() {
+    if img.is_empty() {
         return 0.0;
     }
-    let (lx, ly) = img.to_local(x, y);
+    let (lx, ly) = img.local(x, y);
+    if img.border == Border::Replicate && img.width >= 2 && img.height >= 2 {
+        return img.bilinear_replicate(lx, ly);
+    }
     let (lx, ly) = clamp_far(lx, ly, img);
     img.bilinear_local(lx, ly)
 }
 
-/// Keeps far-away coordinates in a range where integer conversion is exact; the border policy
-/// gives the same value anywhere that far outside.
+/// Keeps far-away coordinates in a range where integer conversion is exact (NaN becomes the
+/// lower bound); the border policy gives the same value anywhere that far outside.
 #[inline(always)]
 fn clamp_far(x: f32, y: f32, img: &ImageView) -> (f32, f32) {
     let (w, h) = (img.width as f32, img.height as f32);
-    (x.clamp(-4.0, w + 4.0), y.clamp(-4.0, h + 4.0))
+    (x.max(-4.0).min(w + 4.0), y.max(-4.0).min(h + 4.0))
 }
 
 /// Samples the values at frame points `(xs[i], ys[i])` into `out`.
 pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     debug_assert!(xs.len() == ys.len() && out.len() == xs.len());
-    for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
-        *o = sample_value(img, x, y);
+    if img.border == Border::Replicate && img.width >= 2 && img.height >= 2 {
+        let (ox, oy) = (img.x0 as f32, img.y0 as f32);
+        for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
+            *o = img.bilinear_replicate(x - ox, y - oy);
+        }
+    } else {
+        for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
+            *o = sample_value(img, x, y);
+        }
     }
 }
 
@@ -180,10 +210,10 @@ pub fn sample_values_gradients(
     debug_assert!(gx.len() == xs.len() && gy.len() == xs.len());
     for i in 0..xs.len() {
         let (x, y) = (xs[i], ys[i]);
-        let (v, dx, dy) = if img.is_empty() || !x.is_finite() || !y.is_finite() {
+        let (v, dx, dy) = if img.is_empty() {
             (0.0, 0.0, 0.0)
         } else {
-            let (lx, ly) = img.to_local(x, y);
+            let (lx, ly) = img.local(x, y);
             let (lx, ly) = clamp_far(lx, ly, img);
             img.value_gradient_local(lx, ly)
         };

@@ -37,8 +37,14 @@ impl SearchMethod for Esm {
         Context::project(&ctx.gx, &ctx.gy, &ctx.dwdp0, ctx.dof, &mut jac);
         let f = ctx.am.gradient(Wrt::Current, &ctx.values, &mut ctx.grad);
         let mut h = [0.0; 64];
-        ctx.am
-            .hessian(Wrt::Current, ctx.hessian, &ctx.values, &jac, ctx.dof, &mut h);
+        ctx.am.hessian(
+            Wrt::Current,
+            ctx.hessian,
+            &ctx.values,
+            &jac,
+            ctx.dof,
+            &mut h,
+        );
         let r = ctx.step(&jac, &h, Update::Compose);
         ctx.jac = jac;
         r.map(|_| f)

@@ -29,7 +29,10 @@ impl SearchMethod for Falk {
         ctx.sample(img, true);
         // d pixel / d (normalised point) is the scale of the normaliser.
         let s = ctx.norm.scale as f32;
-        ctx.gx.iter_mut().chain(ctx.gy.iter_mut()).for_each(|g| *g *= s);
+        ctx.gx
+            .iter_mut()
+            .chain(ctx.gy.iter_mut())
+            .for_each(|g| *g *= s);
         let mut dwdp = std::mem::take(&mut ctx.dwdp);
         ctx.ssm.jacobian(&p, &ctx.grid_x, &ctx.grid_y, &mut dwdp);
         let mut jac = std::mem::take(&mut ctx.jac);
@@ -37,8 +40,14 @@ impl SearchMethod for Falk {
         ctx.dwdp = dwdp;
         let f = ctx.am.gradient(Wrt::Current, &ctx.values, &mut ctx.grad);
         let mut h = [0.0; 64];
-        ctx.am
-            .hessian(Wrt::Current, ctx.hessian, &ctx.values, &jac, ctx.dof, &mut h);
+        ctx.am.hessian(
+            Wrt::Current,
+            ctx.hessian,
+            &ctx.values,
+            &jac,
+            ctx.dof,
+            &mut h,
+        );
         let r = ctx.step(&jac, &h, Update::Additive);
         ctx.jac = jac;
         r.map(|_| f)

@@ -53,8 +53,14 @@ impl SearchMethod for Ialk {
         ctx.dwdp = dwdp;
         let f = ctx.am.gradient(Wrt::Current, &ctx.values, &mut ctx.grad);
         let mut h = [0.0; 64];
-        ctx.am
-            .hessian(Wrt::Current, ctx.hessian, &ctx.values, &jac, ctx.dof, &mut h);
+        ctx.am.hessian(
+            Wrt::Current,
+            ctx.hessian,
+            &ctx.values,
+            &jac,
+            ctx.dof,
+            &mut h,
+        );
         let r = ctx.step(&jac, &h, Update::Additive);
         ctx.jac = jac;
         r.map(|_| f)

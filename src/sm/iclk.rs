@@ -51,8 +51,14 @@ impl SearchMethod for Iclk {
             k => k,
         };
         let template = ctx.template.clone();
-        ctx.am
-            .hessian(Wrt::Template, kind, &template, &self.jac, ctx.dof, &mut self.hessian);
+        ctx.am.hessian(
+            Wrt::Template,
+            kind,
+            &template,
+            &self.jac,
+            ctx.dof,
+            &mut self.hessian,
+        );
         Ok(())
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason> {

@@ -10,14 +10,14 @@
 
 mod esm;
 mod falk;
+mod fclk;
 mod ialk;
 mod iclk;
-mod fclk;
 
-use crate::am::{jt_times, Am, Capabilities, HessianKind};
+use crate::am::{Am, Capabilities, HessianKind, jt_times};
 use crate::geometry::{Normaliser, Point, Quad};
-use crate::imaging::{sample_values, sample_values_gradients, ImageView};
-use crate::linalg::{newton_step, MAX_DOF};
+use crate::imaging::{ImageView, sample_values, sample_values_gradients};
+use crate::linalg::{MAX_DOF, newton_step};
 use crate::registry::{self, Entry};
 use crate::ssm::{Params, Ssm};
 use crate::tracker::TrackerParams;
@@ -80,7 +80,9 @@ pub const REGISTRY: &[Entry<SmBuilder>] = &[
 
 /// The SM called `name` (or one of its aliases).
 pub fn build(name: &str, params: &TrackerParams) -> crate::Result<Box<dyn SearchMethod>> {
-    Ok((registry::lookup(REGISTRY, "search method", name)?.build)(params))
+    Ok((registry::lookup(REGISTRY, "search method", name)?.build)(
+        params,
+    ))
 }
 
 /// How a step `dp` changes the parameters.
@@ -191,7 +193,8 @@ impl Context {
     /// The corners under `p`, in frame pixels.
     pub fn corners(&self, p: &Params) -> Quad {
         let m = self.pixel_matrix(p);
-        self.template_corners.map(|c| crate::geometry::apply_homography(&m, c))
+        self.template_corners
+            .map(|c| crate::geometry::apply_homography(&m, c))
     }
 
     /// Warps the grid by `p` into frame pixels (`px`, `py`).
@@ -318,10 +321,13 @@ impl Context {
         let nq = q.map(|p| self.norm.to_norm(p));
         let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
             .ok_or_else(|| crate::Error::InvalidRegion(format!("{q} has no homography")))?;
-        let step = if res > 1 { 1.0 / (res - 1) as f64 } else { 0.0 };
+        let step = 1.0 / res as f64;
         for r in 0..res {
             for c in 0..res {
-                let u = Point::new(-0.5 + c as f64 * step, -0.5 + r as f64 * step);
+                let u = Point::new(
+                    -0.5 + (c as f64 + 0.5) * step,
+                    -0.5 + (r as f64 + 0.5) * step,
+                );
                 let p = crate::geometry::apply_homography(&h, u);
                 self.grid_x[r * res + c] = p.x as f32;
                 self.grid_y[r * res + c] = p.y as f32;
@@ -330,8 +336,7 @@ impl Context {
         self.template_corners = nq;
         self.params = self.ssm.identity();
         let (gx, gy) = (self.grid_x.clone(), self.grid_y.clone());
-        self.ssm
-            .jacobian(&self.params, &gx, &gy, &mut self.dwdp0);
+        self.ssm.jacobian(&self.params, &gx, &gy, &mut self.dwdp0);
         Ok(())
     }
 

@@ -2,8 +2,8 @@
 //! `(dx0, dy0, ..., dx3, dy3)` of the corners of the canonical square `[-0.5, 0.5]^2` (the
 //! normalised initial region's size) under the warp.
 
-use super::{entries, homography_point_jacobian, Params, Ssm, SsmBuilder};
-use crate::geometry::{apply_homography, homography_from_points, Point, Quad};
+use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian};
+use crate::geometry::{Point, Quad, apply_homography, homography_from_points};
 use crate::registry::Entry;
 use nalgebra::{Matrix3, SMatrix};
 
@@ -59,9 +59,10 @@ impl Ssm for CornerHomography {
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         // A degenerate corner configuration has no homography: report it as non-finite so that
         // the search method sees the loss.
-        homography_from_points(&base(), &targets(p)).unwrap_or_else(|| Matrix3::from_element(f64::NAN))
+        homography_from_points(&base(), &targets(p))
+            .unwrap_or_else(|| Matrix3::from_element(f64::NAN))
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let b = base();
         let mut p = [0.0; 8];
         for k in 0..4 {
@@ -104,6 +105,6 @@ impl Ssm for CornerHomography {
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
-        self.from_matrix(&homography_from_points(src, dst)?)
+        self.params_from_matrix(&homography_from_points(src, dst)?)
     }
 }

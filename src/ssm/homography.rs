@@ -1,8 +1,8 @@
 //! Homography with the matrix entries as parameters: 8 DOF,
 //! `H = [[1+p0, p1, p2], [p3, 1+p4, p5], [p6, p7, 1]]`.
 
-use super::{entries, homography_point_jacobian, normalise_h33, Params, Ssm, SsmBuilder};
-use crate::geometry::{homography_from_points, Point};
+use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian, normalise_h33};
+use crate::geometry::{Point, homography_from_points};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
 
@@ -24,9 +24,19 @@ impl Ssm for Homography {
         8
     }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
-        Matrix3::new(1.0 + p[0], p[1], p[2], p[3], 1.0 + p[4], p[5], p[6], p[7], 1.0)
+        Matrix3::new(
+            1.0 + p[0],
+            p[1],
+            p[2],
+            p[3],
+            1.0 + p[4],
+            p[5],
+            p[6],
+            p[7],
+            1.0,
+        )
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let e = entries(&normalise_h33(m)?);
         Some([e[0] - 1.0, e[1], e[2], e[3], e[4] - 1.0, e[5], e[6], e[7]])
     }
@@ -41,6 +51,6 @@ impl Ssm for Homography {
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
-        self.from_matrix(&homography_from_points(src, dst)?)
+        self.params_from_matrix(&homography_from_points(src, dst)?)
     }
 }

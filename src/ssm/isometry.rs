@@ -1,6 +1,6 @@
 //! Isometry (Euclidean): 3 DOF, `w(x) = R(theta) x + t`, parameters `(tx, ty, theta)`.
 
-use super::{fit_similarity, normalise_h33, Params, Ssm, SsmBuilder};
+use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -26,7 +26,7 @@ impl Ssm for Isometry {
         let (s, c) = p[2].sin_cos();
         Matrix3::new(c, -s, p[0], s, c, p[1], 0.0, 0.0, 1.0)
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
         let mut p = [0.0; 8];
         p[0] = m[(0, 2)];

@@ -19,7 +19,7 @@ pub use corner::CornerHomography;
 pub use homography::Homography;
 pub use sl3::Sl3;
 
-use crate::geometry::{apply_homography, Point, Quad};
+use crate::geometry::{Point, Quad, apply_homography};
 use crate::linalg::MAX_DOF;
 use crate::registry::{self, Entry};
 use crate::rng::Rng;
@@ -44,7 +44,7 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     /// The parameters of a matrix of this model's group (defined up to scale). `None` when the
     /// matrix is degenerate. For a matrix outside the group the result is unspecified: use
     /// [`Ssm::fit`] to project a general warp onto the model.
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params>;
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params>;
     /// Jacobian of the warped points with respect to the parameters at `p`:
     /// `out[(2 i) * S + k] = d w_x(x_i, p) / d p_k`, `out[(2 i + 1) * S + k] = d w_y / d p_k`.
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]);
@@ -53,11 +53,11 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
 
     /// The composition `w(w(x, q), p)`: `p` after `q`.
     fn compose(&self, p: &Params, q: &Params) -> Option<Params> {
-        self.from_matrix(&(self.matrix(p) * self.matrix(q)))
+        self.params_from_matrix(&(self.matrix(p) * self.matrix(q)))
     }
     /// The inverse warp.
     fn invert(&self, p: &Params) -> Option<Params> {
-        self.from_matrix(&self.matrix(p).try_inverse()?)
+        self.params_from_matrix(&self.matrix(p).try_inverse()?)
     }
     /// The additive update `p + dp`.
     fn additive_update(&self, p: &Params, dp: &Params) -> Params {
@@ -117,7 +117,11 @@ pub fn random_warp(ssm: &dyn Ssm, base: &Quad, sigma: f64, rng: &mut Rng) -> Opt
 
 /// Linear least squares for the similitude family `x' = a x - b y + tx, y' = b x + a y + ty`
 /// (with `rotation_only`, `a^2 + b^2 = 1`: the Procrustes solution). Returns `(a, b, tx, ty)`.
-pub(crate) fn fit_similarity(src: &[Point; 4], dst: &[Point; 4], rotation_only: bool) -> Option<(f64, f64, f64, f64)> {
+pub(crate) fn fit_similarity(
+    src: &[Point; 4],
+    dst: &[Point; 4],
+    rotation_only: bool,
+) -> Option<(f64, f64, f64, f64)> {
     let cs = Quad(*src).centroid();
     let cd = Quad(*dst).centroid();
     let (mut dot, mut cross, mut ss) = (0.0, 0.0, 0.0);
@@ -139,7 +143,10 @@ pub(crate) fn fit_similarity(src: &[Point; 4], dst: &[Point; 4], rotation_only: 
     };
     let tx = cd.x - (a * cs.x - b * cs.y);
     let ty = cd.y - (b * cs.x + a * cs.y);
-    [a, b, tx, ty].iter().all(|v| v.is_finite()).then_some((a, b, tx, ty))
+    [a, b, tx, ty]
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some((a, b, tx, ty))
 }
 
 /// Homography Jacobian at one point with respect to the 8 entries `h` of
@@ -151,8 +158,26 @@ pub(crate) fn homography_point_jacobian(h: &[f64; 9], x: f64, y: f64) -> ([f64; 
     let wx = (h[0] * x + h[1] * y + h[2]) * iw;
     let wy = (h[3] * x + h[4] * y + h[5]) * iw;
     (
-        [x * iw, y * iw, iw, 0.0, 0.0, 0.0, -wx * x * iw, -wx * y * iw],
-        [0.0, 0.0, 0.0, x * iw, y * iw, iw, -wy * x * iw, -wy * y * iw],
+        [
+            x * iw,
+            y * iw,
+            iw,
+            0.0,
+            0.0,
+            0.0,
+            -wx * x * iw,
+            -wx * y * iw,
+        ],
+        [
+            0.0,
+            0.0,
+            0.0,
+            x * iw,
+            y * iw,
+            iw,
+            -wy * x * iw,
+            -wy * y * iw,
+        ],
     )
 }
 

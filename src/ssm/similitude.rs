@@ -1,7 +1,7 @@
 //! Similitude (similarity): 4 DOF, `w(x) = [[1+a, -b], [b, 1+a]] x + t`, parameters
 //! `(tx, ty, a, b)`.
 
-use super::{fit_similarity, normalise_h33, Params, Ssm, SsmBuilder};
+use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -24,9 +24,19 @@ impl Ssm for Similitude {
         4
     }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
-        Matrix3::new(1.0 + p[2], -p[3], p[0], p[3], 1.0 + p[2], p[1], 0.0, 0.0, 1.0)
+        Matrix3::new(
+            1.0 + p[2],
+            -p[3],
+            p[0],
+            p[3],
+            1.0 + p[2],
+            p[1],
+            0.0,
+            0.0,
+            1.0,
+        )
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
         let mut p = [0.0; 8];
         p[0] = m[(0, 2)];

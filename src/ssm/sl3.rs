@@ -3,7 +3,7 @@
 //! G4 = E11 - E22, G5 = E22 - E33, G6 = E31, G7 = E32` (1-based matrix units).
 
 use super::{Params, Ssm, SsmBuilder};
-use crate::geometry::{homography_from_points, Point};
+use crate::geometry::{Point, homography_from_points};
 use crate::linalg::{expm, expm3_frechet, logm3};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -41,17 +41,7 @@ fn generator(k: usize) -> Matrix3<f64> {
 }
 
 fn algebra(p: &Params) -> Matrix3<f64> {
-    Matrix3::new(
-        p[4],
-        p[3],
-        p[0],
-        p[2],
-        p[5] - p[4],
-        p[1],
-        p[6],
-        p[7],
-        -p[5],
-    )
+    Matrix3::new(p[4], p[3], p[0], p[2], p[5] - p[4], p[1], p[6], p[7], -p[5])
 }
 
 impl Ssm for Sl3 {
@@ -64,7 +54,7 @@ impl Ssm for Sl3 {
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         expm(&algebra(p))
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let det = m.determinant();
         if !det.is_finite() || det.abs() < 1e-300 {
             return None;
@@ -113,6 +103,6 @@ impl Ssm for Sl3 {
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
-        self.from_matrix(&homography_from_points(src, dst)?)
+        self.params_from_matrix(&homography_from_points(src, dst)?)
     }
 }

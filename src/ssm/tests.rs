@@ -61,9 +61,9 @@ proptest! {
             let inv = ssm.invert(&p).unwrap();
             let id = ssm.compose(&p, &inv).unwrap();
             prop_assert!(warp_quad(&*ssm, &id, &base).change_norm(&base) < 1e-9, "{} invert", ssm.name());
-            // from_matrix(matrix(p)) = p.
-            let back = ssm.from_matrix(&ssm.matrix(&p)).unwrap();
-            for k in 0..ssm.dof() { prop_assert!((back[k] - p[k]).abs() < 1e-9, "{} from_matrix", ssm.name()); }
+            // params_from_matrix(matrix(p)) = p.
+            let back = ssm.params_from_matrix(&ssm.matrix(&p)).unwrap();
+            for k in 0..ssm.dof() { prop_assert!((back[k] - p[k]).abs() < 1e-9, "{} params_from_matrix", ssm.name()); }
             // Fitting the warped corners gives the warp back.
             let target = warp_quad(&*ssm, &p, &base);
             let fit = ssm.fit(&base.0, &target.0).unwrap();
@@ -83,14 +83,23 @@ fn fit_is_the_least_squares_projection() {
         let p = ssm.fit(&src.0, &dst.0).unwrap();
         let err = |p: &Params| {
             let q = warp_quad(&*ssm, p, &src);
-            q.0.iter().zip(&dst.0).map(|(a, b)| (a.x - b.x).powi(2) + (a.y - b.y).powi(2)).sum::<f64>()
+            q.0.iter()
+                .zip(&dst.0)
+                .map(|(a, b)| (a.x - b.x).powi(2) + (a.y - b.y).powi(2))
+                .sum::<f64>()
         };
         let e0 = err(&p);
         for k in 0..ssm.dof() {
             for d in [1e-4, -1e-4] {
                 let mut q = p;
                 q[k] += d;
-                assert!(err(&q) >= e0 - 1e-12, "{}: p{} {} lowers the error", ssm.name(), k, d);
+                assert!(
+                    err(&q) >= e0 - 1e-12,
+                    "{}: p{} {} lowers the error",
+                    ssm.name(),
+                    k,
+                    d
+                );
             }
         }
         if ssm.dof() == 8 {
@@ -101,9 +110,20 @@ fn fit_is_the_least_squares_projection() {
 
 #[test]
 fn registry_resolves_mtf_aliases() {
-    for (alias, name) in [("2", "translation"), ("3", "isometry"), ("4", "similitude"), ("6", "affine"), ("8", "homography"), ("sl3", "sl3"), ("c8", "corner")] {
+    for (alias, name) in [
+        ("2", "translation"),
+        ("3", "isometry"),
+        ("4", "similitude"),
+        ("6", "affine"),
+        ("8", "homography"),
+        ("sl3", "sl3"),
+        ("c8", "corner"),
+    ] {
         assert_eq!(build(alias).unwrap().name(), name);
     }
     let err = build("bogus").unwrap_err().to_string();
-    assert!(err.contains("bogus") && err.contains("homography") && err.contains("translation"), "{err}");
+    assert!(
+        err.contains("bogus") && err.contains("homography") && err.contains("translation"),
+        "{err}"
+    );
 }

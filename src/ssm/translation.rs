@@ -1,6 +1,6 @@
 //! Translation: 2 DOF, `w(x) = x + t`.
 
-use super::{normalise_h33, Params, Ssm, SsmBuilder};
+use super::{Params, Ssm, SsmBuilder, normalise_h33};
 use crate::geometry::{Point, Quad};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -25,7 +25,7 @@ impl Ssm for Translation {
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         Matrix3::new(1.0, 0.0, p[0], 0.0, 1.0, p[1], 0.0, 0.0, 1.0)
     }
-    fn from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
+    fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
         let mut p = [0.0; 8];
         p[0] = m[(0, 2)];

@@ -1,6 +1,6 @@
 //! Helpers shared by the integration tests.
 
-use regtrack::imaging::{load_gray, GrayU8};
+use regtrack::imaging::{GrayU8, load_gray};
 use std::path::PathBuf;
 
 /// The crate's root folder.
@@ -11,4 +11,39 @@ pub fn root() -> PathBuf {
 /// A bundled texture, in grayscale.
 pub fn texture(name: &str) -> GrayU8 {
     load_gray(&root().join("assets/textures").join(name)).expect("bundled texture")
+}
+
+/// A fresh empty folder under the system's temporary folder, removed when dropped.
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    pub fn new(tag: &str) -> TempDir {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let p = std::env::temp_dir().join(format!(
+            "regtrack-test-{tag}-{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).expect("temp dir");
+        TempDir(p)
+    }
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Writes a small gray PNG.
+pub fn write_png(path: &std::path::Path, w: u32, h: u32, seed: u8) {
+    let img = image::GrayImage::from_fn(w, h, |x, y| {
+        image::Luma([(x * 7 + y * 13 + seed as u32) as u8])
+    });
+    img.save(path).expect("png");
 }

@@ -1,4 +1,7 @@
 //! Integration tests (one binary links faster).
 
+mod cli;
 mod common;
+mod dataset;
+mod evaluation;
 mod recovery;

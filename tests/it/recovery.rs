@@ -3,7 +3,7 @@
 
 use crate::common::texture;
 use rayon::prelude::*;
-use regtrack::geometry::{alignment_error, Quad};
+use regtrack::geometry::{Quad, alignment_error};
 use regtrack::observe::NoObserver;
 use regtrack::rng::Rng;
 use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};

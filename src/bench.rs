@@ -1,0 +1,125 @@
+//! The speed benchmark behind `regtrack bench`: per tracker, iterations per frame, microseconds
+//! per iteration, tracker-only FPS (the search on pre-smoothed frames) and live-path FPS (from
+//! 8-bit frames in memory, pre-processing of the region included). Frames are decoded before
+//! timing starts; every figure is the median over repeats.
+
+use crate::dataset::Sequence;
+use crate::error::{Error, Result};
+use crate::imaging::{GrayF32, GrayU8, gaussian_blur, gaussian_kernel};
+use crate::observe::IterationCounter;
+use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// One benchmark row.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchRow {
+    pub tracker: String,
+    /// Frames tracked per repeat (the target may be lost before the end).
+    pub frames: usize,
+    pub iterations_per_frame: f64,
+    pub us_per_iteration: f64,
+    pub tracker_fps: f64,
+    pub live_fps: f64,
+    /// Frames lost (in the live-path run).
+    pub lost_at: Option<usize>,
+}
+
+/// Frames of a sequence loaded in memory.
+pub struct LoadedFrames {
+    pub gray: Vec<GrayU8>,
+    pub init: crate::geometry::Quad,
+}
+
+/// Loads up to `max_frames` frames.
+pub fn load_frames(seq: &Sequence, max_frames: Option<usize>) -> Result<LoadedFrames> {
+    let n = max_frames.unwrap_or(usize::MAX).min(seq.len());
+    let init = seq.ground_truth(0).ok_or_else(|| Error::Sequence {
+        path: seq.frames[0].clone(),
+        message: "the benchmark needs ground truth for the first frame".into(),
+    })?;
+    let gray = (0..n)
+        .map(|i| seq.load_gray(i))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(LoadedFrames { gray, init })
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// Benchmarks one tracker on loaded frames, `repeats` times.
+pub fn bench_tracker(
+    spec: &TrackerSpec,
+    frames: &LoadedFrames,
+    repeats: usize,
+) -> Result<BenchRow> {
+    let kernel = gaussian_kernel(spec.params.blur_size, spec.params.blur_sigma);
+    let smoothed: Vec<GrayF32> = frames
+        .gray
+        .iter()
+        .map(|g| gaussian_blur(g, &kernel))
+        .collect();
+    let (mut fps_t, mut fps_l, mut ipf, mut upi) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut tracked = 0;
+    let mut lost_at = None;
+    for _ in 0..repeats.max(1) {
+        // Tracker only: pre-smoothed whole frames, the search alone is timed.
+        let mut t = Tracker::new(spec)?;
+        t.initialize(FrameInput::Smoothed(&smoothed[0]), &frames.init)?;
+        let mut counter = IterationCounter::default();
+        let mut n = 0usize;
+        let start = Instant::now();
+        for img in &smoothed[1..] {
+            let out = t.update(FrameInput::Smoothed(img), &mut counter);
+            if out.status != TrackStatus::Tracking {
+                break;
+            }
+            n += 1;
+        }
+        let secs = start.elapsed().as_secs_f64();
+        if n > 0 && secs > 0.0 {
+            fps_t.push(n as f64 / secs);
+            ipf.push(counter.iterations as f64 / counter.frames.max(1) as f64);
+            upi.push(secs * 1e6 / counter.iterations.max(1) as f64);
+        }
+        tracked = n;
+        // Live path: 8-bit frames, the tracker smooths the region it reads.
+        let mut t = Tracker::new(spec)?;
+        t.initialize(FrameInput::Gray8(&frames.gray[0]), &frames.init)?;
+        let mut counter = IterationCounter::default();
+        let mut n = 0usize;
+        let start = Instant::now();
+        lost_at = None;
+        for (i, img) in frames.gray[1..].iter().enumerate() {
+            let out = t.update(FrameInput::Gray8(img), &mut counter);
+            if out.status != TrackStatus::Tracking {
+                lost_at = Some(i + 1);
+                break;
+            }
+            n += 1;
+        }
+        let secs = start.elapsed().as_secs_f64();
+        if n > 0 && secs > 0.0 {
+            fps_l.push(n as f64 / secs);
+        }
+    }
+    Ok(BenchRow {
+        tracker: spec.label(),
+        frames: tracked,
+        iterations_per_frame: median(ipf),
+        us_per_iteration: median(upi),
+        tracker_fps: median(fps_t),
+        live_fps: median(fps_l),
+        lost_at,
+    })
+}

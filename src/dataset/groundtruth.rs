@@ -1,0 +1,139 @@
+//! Ground-truth and result files: four corners per frame.
+//!
+//! Accepted lines (blank lines and lines starting with `#` are skipped, separators are white
+//! space or commas):
+//! - `frame00001.jpg ulx uly urx ury lrx lry llx lly` (TMT/MTF, after a header line `frame ...`);
+//! - `ulx uly urx ury lrx lry llx lly` (8 numbers: folders of images, POT `_gt_points.txt`);
+//! - `frame00012.jpg lost` (a frame without corners: tracking results of a lost tracker).
+
+use crate::error::{Error, Result};
+use crate::geometry::Quad;
+use std::io::Write;
+use std::path::Path;
+
+/// One line of a ground-truth file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GtEntry {
+    /// The frame file name, when the line names one.
+    pub frame: Option<String>,
+    /// The corners (`None` for a frame marked lost or unannotated).
+    pub quad: Option<Quad>,
+}
+
+/// Words that mark a frame without corners.
+const NO_CORNERS: &[&str] = &["lost", "invalid", "invalid_tracker_state", "none", "nan"];
+
+/// Parses ground-truth text; errors name `path` and the 1-based line.
+pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
+    let mut out = Vec::new();
+    let mut first_content = true;
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let tokens: Vec<&str> = line
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|t| !t.is_empty())
+            .collect();
+        let err = |message: String| Error::Parse {
+            path: path.to_path_buf(),
+            line: line_no,
+            message,
+        };
+        let is_header = first_content
+            && tokens[0].parse::<f64>().is_err()
+            && tokens.iter().skip(1).all(|t| t.parse::<f64>().is_err());
+        first_content = false;
+        if is_header {
+            continue;
+        }
+        let (frame, nums) = if tokens[0].parse::<f64>().is_err() {
+            (Some(tokens[0].to_string()), &tokens[1..])
+        } else {
+            (None, &tokens[..])
+        };
+        if nums.len() == 1 && NO_CORNERS.contains(&nums[0].to_ascii_lowercase().as_str()) {
+            out.push(GtEntry { frame, quad: None });
+            continue;
+        }
+        if nums.len() != 8 {
+            return Err(err(format!(
+                "expected 8 numbers (ulx uly urx ury lrx lry llx lly){}, found {}",
+                if frame.is_some() {
+                    " after the frame name"
+                } else {
+                    ""
+                },
+                nums.len()
+            )));
+        }
+        let mut v = [0.0f64; 8];
+        for (k, t) in nums.iter().enumerate() {
+            v[k] = t
+                .parse::<f64>()
+                .map_err(|_| err(format!("'{t}' is not a number (value {} of 8)", k + 1)))?;
+            if !v[k].is_finite() {
+                return Err(err(format!(
+                    "'{t}' is not a finite number (value {} of 8)",
+                    k + 1
+                )));
+            }
+        }
+        out.push(GtEntry {
+            frame,
+            quad: Some(Quad::from_array(v)),
+        });
+    }
+    Ok(out)
+}
+
+/// Reads and parses a ground-truth file.
+pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_ground_truth(path, &text)
+}
+
+/// Writes corners in the TMT/MTF format (`frame ulx uly ...` header, `frame%05d.<ext>` names,
+/// `lost` for frames without corners), atomically: to a temporary file renamed over `path`.
+pub fn write_corners(path: &Path, corners: &[Option<Quad>], ext: &str) -> Result<()> {
+    let mut text = String::from("frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n");
+    for (i, q) in corners.iter().enumerate() {
+        text.push_str(&format!("frame{:05}.{ext}", i + 1));
+        match q {
+            Some(q) => {
+                for v in q.to_array() {
+                    text.push_str(&format!(" {v:.4}"));
+                }
+            }
+            None => text.push_str(" lost"),
+        }
+        text.push('\n');
+    }
+    write_atomic(path, text.as_bytes())
+}
+
+/// Writes a file atomically: a temporary file in the same folder, synced, then renamed.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}

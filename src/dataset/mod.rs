@@ -1,0 +1,278 @@
+//! Sequences and ground truth: discovery of the supported layouts, frame loading, ground-truth
+//! files, datasets of several sequences, and synthetic sequences with exact ground truth.
+//!
+//! Layouts:
+//! - **MTF/TMT**: `<root>/<seq>.txt` (header line, then `frame00001.jpg ulx uly urx ury lrx lry
+//!   llx lly`), frames in `<root>/<seq>/frame%05d.jpg`;
+//! - **folder of images** (png, jpg, pgm/ppm, sorted by name) with an optional ground-truth file of
+//!   8 numbers per line (`groundtruth.txt`, `gt.txt` or `<folder>.txt` inside it, or given);
+//! - **POT**: `<seq>_gt_points.txt` with 8 numbers per annotated frame, frames in `<seq>/`,
+//!   `<seq>/img/` or beside the file. When the file has half as many lines as there are frames,
+//!   every other frame (the first, third, ...) is annotated.
+
+pub mod demo;
+mod groundtruth;
+pub mod synth;
+
+pub use groundtruth::{
+    GtEntry, parse_ground_truth, read_ground_truth, write_atomic, write_corners,
+};
+
+use crate::error::{Error, Result};
+use crate::geometry::Quad;
+use crate::imaging::{self, GrayU8};
+use std::path::{Path, PathBuf};
+
+/// Image file extensions a sequence may hold.
+pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "pgm", "ppm", "pnm"];
+
+/// A sequence of frames with optional ground truth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sequence {
+    /// Name (the MTF sequence name or the folder's name).
+    pub name: String,
+    /// Frame files in order.
+    pub frames: Vec<PathBuf>,
+    /// Ground truth per frame (`None` where a frame is not annotated); empty without a file.
+    pub ground_truth: Vec<Option<Quad>>,
+    /// The ground-truth file, if any.
+    pub gt_path: Option<PathBuf>,
+}
+
+fn is_image(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// The image files of a folder, sorted by name.
+pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut v: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && is_image(p))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+impl Sequence {
+    /// Opens a sequence from a ground-truth file (MTF `<seq>.txt` or POT `_gt_points.txt`) or a
+    /// folder of images, finding the other half as described in the module documentation.
+    pub fn open(path: &Path) -> Result<Self> {
+        if path.is_dir() {
+            let dir = path;
+            let name = file_name(dir);
+            // MTF layout with the folder given: <root>/<seq>.txt beside it.
+            let sibling = dir.with_extension("txt");
+            if sibling.is_file() {
+                return Self::open_gt_file(&sibling);
+            }
+            let gt = [
+                "groundtruth.txt",
+                "gt.txt",
+                &format!("{name}.txt"),
+                &format!("{name}_gt_points.txt"),
+            ]
+            .iter()
+            .map(|f| dir.join(f))
+            .find(|p| p.is_file());
+            let frames_dir = if dir.join("img").is_dir() {
+                dir.join("img")
+            } else {
+                dir.to_path_buf()
+            };
+            Self::from_parts(&name, &frames_dir, gt.as_deref())
+        } else if path.is_file() {
+            Self::open_gt_file(path)
+        } else {
+            Err(Error::Missing {
+                path: path.to_path_buf(),
+            })
+        }
+    }
+
+    fn open_gt_file(gt: &Path) -> Result<Self> {
+        let stem = gt
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let name = stem.strip_suffix("_gt_points").unwrap_or(&stem).to_string();
+        let parent = gt.parent().unwrap_or(Path::new("."));
+        let candidates = [
+            parent.join(&name).join("img"),
+            parent.join(&name),
+            parent.to_path_buf(),
+        ];
+        let frames_dir = candidates
+            .iter()
+            .find(|d| d.is_dir() && list_images(d).map(|v| !v.is_empty()).unwrap_or(false))
+            .cloned()
+            .ok_or_else(|| Error::Sequence {
+                path: gt.to_path_buf(),
+                message: format!(
+                    "no frames found for sequence '{name}' (looked in {})",
+                    candidates
+                        .iter()
+                        .map(|c| c.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })?;
+        Self::from_parts(&name, &frames_dir, Some(gt))
+    }
+
+    /// A sequence from a folder of frames and an optional ground-truth file.
+    pub fn from_parts(name: &str, frames_dir: &Path, gt: Option<&Path>) -> Result<Self> {
+        let listed = list_images(frames_dir)?;
+        let Some(gt) = gt else {
+            if listed.is_empty() {
+                return Err(Error::Sequence {
+                    path: frames_dir.to_path_buf(),
+                    message: "the folder holds no png, jpg or pgm image".into(),
+                });
+            }
+            return Ok(Sequence {
+                name: name.to_string(),
+                frames: listed,
+                ground_truth: Vec::new(),
+                gt_path: None,
+            });
+        };
+        let entries = read_ground_truth(gt)?;
+        let named = entries.iter().all(|e| e.frame.is_some()) && !entries.is_empty();
+        let (frames, ground_truth) = if named {
+            // MTF: every named frame must exist.
+            let mut frames = Vec::with_capacity(entries.len());
+            for e in &entries {
+                let p = frames_dir.join(e.frame.as_deref().unwrap_or_default());
+                if !p.is_file() {
+                    return Err(Error::Missing { path: p });
+                }
+                frames.push(p);
+            }
+            (frames, entries.iter().map(|e| e.quad).collect())
+        } else {
+            let n = listed.len();
+            let m = entries.len();
+            let quads: Vec<Option<Quad>> = entries.iter().map(|e| e.quad).collect();
+            if m == 0 {
+                (listed, Vec::new())
+            } else if is_pot(gt) && m <= n && (2 * m == n || 2 * m == n + 1) && m > 1 {
+                // Every other frame annotated (POT).
+                let mut gtv = vec![None; n];
+                for (k, q) in quads.into_iter().enumerate() {
+                    gtv[2 * k] = q;
+                }
+                (listed, gtv)
+            } else if m <= n {
+                let mut gtv = quads;
+                gtv.resize(n, None);
+                (listed, gtv)
+            } else {
+                return Err(Error::Sequence {
+                    path: gt.to_path_buf(),
+                    message: format!(
+                        "{m} ground-truth lines but only {n} frames in {}",
+                        frames_dir.display()
+                    ),
+                });
+            }
+        };
+        if frames.is_empty() {
+            return Err(Error::Sequence {
+                path: gt.to_path_buf(),
+                message: "the sequence has no frames".into(),
+            });
+        }
+        Ok(Sequence {
+            name: name.to_string(),
+            frames,
+            ground_truth,
+            gt_path: Some(gt.to_path_buf()),
+        })
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+    /// Whether the sequence has no frames.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+    /// The ground truth of frame `i`, if annotated.
+    pub fn ground_truth(&self, i: usize) -> Option<Quad> {
+        self.ground_truth.get(i).copied().flatten()
+    }
+    /// Frame `i` as 8-bit grayscale; the error names the file.
+    pub fn load_gray(&self, i: usize) -> Result<GrayU8> {
+        let p = self.frames.get(i).ok_or_else(|| Error::Sequence {
+            path: self.gt_path.clone().unwrap_or_default(),
+            message: format!("frame index {i} out of range (0..{})", self.len()),
+        })?;
+        imaging::load_gray(p)
+    }
+}
+
+/// Whether a ground-truth file is in the POT naming (`<seq>_gt_points.txt`).
+fn is_pot(gt: &Path) -> bool {
+    gt.file_name()
+        .is_some_and(|n| n.to_string_lossy().ends_with("_gt_points.txt"))
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "sequence".into())
+}
+
+/// The sequences of a dataset root in the MTF layout: every `<root>/<seq>.txt` with a folder
+/// `<root>/<seq>/` beside it, sorted by name; with `names`, only those (in that order; an unknown
+/// name is an error listing what exists).
+pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
+    let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
+    let mut found: Vec<(String, PathBuf)> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "txt") && p.with_extension("").is_dir())
+        .map(|p| {
+            (
+                p.file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                p,
+            )
+        })
+        .collect();
+    found.sort();
+    let chosen: Vec<&(String, PathBuf)> = match names {
+        None => found.iter().collect(),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                found
+                    .iter()
+                    .find(|(s, _)| s == n)
+                    .ok_or_else(|| Error::Sequence {
+                        path: root.to_path_buf(),
+                        message: format!(
+                            "no sequence '{n}'; available: {}",
+                            found
+                                .iter()
+                                .map(|(s, _)| s.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    })
+            })
+            .collect::<Result<_>>()?,
+    };
+    if chosen.is_empty() {
+        return Err(Error::Sequence {
+            path: root.to_path_buf(),
+            message: "no sequence found (expected <root>/<seq>.txt with frames in <root>/<seq>/)"
+                .into(),
+        });
+    }
+    chosen.iter().map(|(_, p)| Sequence::open(p)).collect()
+}

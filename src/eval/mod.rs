@@ -1,0 +1,325 @@
+//! Evaluation: per-frame errors (alignment error E_AL, centre location error, 1 - IoU), success
+//! rates SR(t) for t = 0..20 px in steps of 0.1 px (the initialisation frame excluded), per
+//! sequence and pooled over a dataset, and speed two ways: tracker-only (the search) and live
+//! path (from an 8-bit frame in memory, pre-processing included). Batches of runs go in parallel.
+
+mod files;
+
+pub use files::{write_run_files, write_summaries};
+
+use crate::dataset::Sequence;
+use crate::error::{Error, Result};
+use crate::geometry::{Quad, alignment_error, center_error, iou};
+use crate::observe::Observer;
+use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Largest threshold of the success curve (px).
+pub const SR_MAX: f64 = 20.0;
+/// Step of the success curve's thresholds (px).
+pub const SR_STEP: f64 = 0.1;
+
+/// The thresholds `0, 0.1, ..., 20` px.
+pub fn thresholds() -> Vec<f64> {
+    let n = (SR_MAX / SR_STEP).round() as usize;
+    (0..=n).map(|i| i as f64 * SR_STEP).collect()
+}
+
+/// SR(t): the fraction of `errors` that are at most `t` (non-finite errors never count).
+pub fn success_rate(errors: &[f64], t: f64) -> f64 {
+    if errors.is_empty() {
+        return 0.0;
+    }
+    errors.iter().filter(|&&e| e <= t).count() as f64 / errors.len() as f64
+}
+
+/// The success curve `(t, SR(t))` over [`thresholds`].
+pub fn success_curve(errors: &[f64]) -> Vec<(f64, f64)> {
+    let mut sorted: Vec<f64> = errors.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len().max(1) as f64;
+    thresholds()
+        .into_iter()
+        .map(|t| (t, sorted.partition_point(|&e| e <= t) as f64 / n))
+        .collect()
+}
+
+/// Mean of SR(t) over the thresholds (the area under the curve over 20 px).
+pub fn mean_success_rate(errors: &[f64]) -> f64 {
+    let c = success_curve(errors);
+    c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64
+}
+
+/// How a batch run treats failures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct EvalOptions {
+    /// Re-initialise from the ground truth after a failure (MTF's `reinit`).
+    pub reinit: bool,
+    /// A frame fails when the tracker is lost or its E_AL exceeds this (px).
+    pub failure_threshold: f64,
+    /// With `reinit`: frames skipped after a failure before re-initialising.
+    pub reinit_skip: usize,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            reinit: false,
+            failure_threshold: SR_MAX,
+            reinit_skip: 5,
+        }
+    }
+}
+
+/// One frame of a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    pub frame: usize,
+    /// The tracker's corners (`None` when lost, skipped or not tracked).
+    pub corners: Option<Quad>,
+    pub ground_truth: Option<Quad>,
+    /// E_AL, centre error and 1 - IoU (infinite / 1 when there are no corners).
+    pub alignment_error: f64,
+    pub center_error: f64,
+    pub iou_error: f64,
+    pub status: TrackStatus,
+    pub iterations: usize,
+    /// Microseconds in the search and in the whole update (pre-processing included).
+    pub search_us: f64,
+    pub update_us: f64,
+    /// Whether this frame (re-)initialised the tracker (excluded from the success rates).
+    pub init: bool,
+}
+
+/// A tracker run over one sequence.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunResult {
+    pub sequence: String,
+    pub spec: TrackerSpec,
+    pub frames: Vec<FrameRecord>,
+}
+
+/// One row of `summary.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    pub sequence: String,
+    pub sm: String,
+    pub am: String,
+    pub ssm: String,
+    /// Frames evaluated (initialisation frames excluded).
+    pub frames: usize,
+    pub sr5: f64,
+    pub sr10: f64,
+    pub sr20: f64,
+    pub mean_sr: f64,
+    /// Mean E_AL over the frames with corners.
+    pub mean_error: f64,
+    /// Failure events (the tracker lost, or E_AL above the failure threshold).
+    pub failures: usize,
+    pub iterations_per_frame: f64,
+    /// Frames per second of the search alone, and of the whole update.
+    pub tracker_fps: f64,
+    pub live_fps: f64,
+}
+
+impl RunResult {
+    /// Alignment errors of the evaluated frames (lost frames count as infinite).
+    pub fn errors(&self) -> Vec<f64> {
+        self.frames
+            .iter()
+            .filter(|f| !f.init && f.ground_truth.is_some())
+            .map(|f| f.alignment_error)
+            .collect()
+    }
+
+    /// The summary row.
+    pub fn summary(&self) -> Summary {
+        summarize(&self.sequence, &[self])
+    }
+}
+
+/// The summary of one or several runs of the same tracker (pooled over all their frames).
+pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
+    let errors: Vec<f64> = runs.iter().flat_map(|r| r.errors()).collect();
+    let tracked: Vec<&FrameRecord> = runs
+        .iter()
+        .flat_map(|r| r.frames.iter())
+        .filter(|f| !f.init && f.status == TrackStatus::Tracking && f.corners.is_some())
+        .collect();
+    let finite: Vec<f64> = errors.iter().copied().filter(|e| e.is_finite()).collect();
+    let search: f64 = tracked.iter().map(|f| f.search_us).sum();
+    let update: f64 = tracked.iter().map(|f| f.update_us).sum();
+    let n = tracked.len() as f64;
+    let fps = |us: f64| if us > 0.0 { n / (us * 1e-6) } else { 0.0 };
+    let failures = runs.iter().map(|r| count_failures(r)).sum();
+    let spec = runs.first().map(|r| r.spec.clone());
+    Summary {
+        sequence: name.to_string(),
+        sm: spec.as_ref().map(|s| s.sm.clone()).unwrap_or_default(),
+        am: spec.as_ref().map(|s| s.am.clone()).unwrap_or_default(),
+        ssm: spec.as_ref().map(|s| s.ssm.clone()).unwrap_or_default(),
+        frames: errors.len(),
+        sr5: success_rate(&errors, 5.0),
+        sr10: success_rate(&errors, 10.0),
+        sr20: success_rate(&errors, 20.0),
+        mean_sr: mean_success_rate(&errors),
+        mean_error: if finite.is_empty() {
+            f64::NAN
+        } else {
+            finite.iter().sum::<f64>() / finite.len() as f64
+        },
+        failures,
+        iterations_per_frame: if n > 0.0 {
+            tracked.iter().map(|f| f.iterations as f64).sum::<f64>() / n
+        } else {
+            0.0
+        },
+        tracker_fps: fps(search),
+        live_fps: fps(update),
+    }
+}
+
+/// Failure events: transitions into a failed frame (lost, skipped, or E_AL above [`SR_MAX`]).
+fn count_failures(r: &RunResult) -> usize {
+    let mut count = 0;
+    let mut failed = false;
+    for f in &r.frames {
+        if f.init {
+            failed = false;
+            continue;
+        }
+        let now = f.corners.is_none() || f.alignment_error > SR_MAX;
+        if now && !failed {
+            count += 1;
+        }
+        failed = now;
+    }
+    count
+}
+
+/// Tracks a whole sequence: initialises on frame 0 from `init` or the ground truth, then
+/// updates on every frame, feeding 8-bit frames (the live path). The observer sees every
+/// iteration.
+pub fn run_sequence(
+    seq: &Sequence,
+    spec: &TrackerSpec,
+    opts: &EvalOptions,
+    init: Option<Quad>,
+    observer: &mut dyn Observer,
+) -> Result<RunResult> {
+    let first = init
+        .or_else(|| seq.ground_truth(0))
+        .ok_or_else(|| Error::Sequence {
+            path: seq.gt_path.clone().unwrap_or_else(|| seq.frames[0].clone()),
+            message: "no ground truth for the first frame: give the initial corners".into(),
+        })?;
+    let mut tracker = Tracker::new(spec)?;
+    let mut frames = Vec::with_capacity(seq.len());
+    let mut skip_until: Option<usize> = None;
+    let record =
+        |i: usize, corners: Option<Quad>, status, iterations, search_us, update_us, init| {
+            let gt = seq.ground_truth(i);
+            let (e, c, o) = match (corners, gt) {
+                (Some(q), Some(g)) => (
+                    alignment_error(&q, &g),
+                    center_error(&q, &g),
+                    1.0 - iou(&q, &g),
+                ),
+                _ => (f64::INFINITY, f64::INFINITY, 1.0),
+            };
+            FrameRecord {
+                frame: i,
+                corners,
+                ground_truth: gt,
+                alignment_error: e,
+                center_error: c,
+                iou_error: o,
+                status,
+                iterations,
+                search_us,
+                update_us,
+                init,
+            }
+        };
+    for i in 0..seq.len() {
+        let img = seq.load_gray(i)?;
+        let reinit_here = match skip_until {
+            Some(k) if i >= k => seq.ground_truth(i).is_some(),
+            _ => false,
+        };
+        if i == 0 || reinit_here {
+            let q = if i == 0 {
+                first
+            } else {
+                seq.ground_truth(i).unwrap_or(first)
+            };
+            tracker.initialize(FrameInput::Gray8(&img), &q)?;
+            skip_until = None;
+            frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
+            continue;
+        }
+        if skip_until.is_some() {
+            // Skipped after a failure, before re-initialisation: counts as failed.
+            frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
+            continue;
+        }
+        let out = tracker.update(FrameInput::Gray8(&img), observer);
+        let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
+        let search = out.timing.search.as_secs_f64() * 1e6;
+        let update = search + out.timing.preprocess.as_secs_f64() * 1e6;
+        let rec = record(
+            i,
+            corners,
+            out.status,
+            out.iterations,
+            search,
+            update,
+            false,
+        );
+        let failed =
+            rec.status != TrackStatus::Tracking || rec.alignment_error > opts.failure_threshold;
+        frames.push(rec);
+        if opts.reinit && failed {
+            skip_until = Some(i + 1 + opts.reinit_skip);
+        }
+    }
+    Ok(RunResult {
+        sequence: seq.name.clone(),
+        spec: tracker.spec().clone(),
+        frames,
+    })
+}
+
+/// Runs every (sequence, spec) pair on `jobs` threads (`0`: all cores), calling
+/// `progress(done, total)` after each run. Results come back in input order.
+pub fn run_batch(
+    seqs: &[Sequence],
+    specs: &[TrackerSpec],
+    opts: &EvalOptions,
+    jobs: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Vec<Result<RunResult>>> {
+    let pairs: Vec<(&Sequence, &TrackerSpec)> = seqs
+        .iter()
+        .flat_map(|s| specs.iter().map(move |p| (s, p)))
+        .collect();
+    let total = pairs.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .build()
+        .map_err(|e| Error::InvalidParameter(format!("cannot start {jobs} worker threads: {e}")))?;
+    Ok(pool.install(|| {
+        pairs
+            .par_iter()
+            .map(|(s, p)| {
+                let r = run_sequence(s, p, opts, None, &mut crate::observe::NoObserver);
+                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(d, total);
+                r
+            })
+            .collect()
+    }))
+}

@@ -1,0 +1,157 @@
+//! The command line: list, synth, track and eval end to end, and clear errors.
+
+use crate::common::{TempDir, root};
+use std::process::Command;
+
+fn regtrack(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_regtrack"))
+        .args(args)
+        .output()
+        .expect("run regtrack")
+}
+
+#[test]
+fn list_shows_every_method_with_aliases() {
+    let out = regtrack(&["list"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for e in regtrack::am::REGISTRY
+        .iter()
+        .map(|e| e.name)
+        .chain(regtrack::ssm::REGISTRY.iter().map(|e| e.name))
+        .chain(regtrack::sm::REGISTRY.iter().map(|e| e.name))
+    {
+        assert!(
+            text.lines().any(|l| l.trim_start().starts_with(e)),
+            "{e} missing from:\n{text}"
+        );
+    }
+    assert!(text.contains("[ic]") && text.contains("[c8"), "{text}");
+}
+
+#[test]
+fn synth_track_and_eval_end_to_end() {
+    let d = TempDir::new("cli");
+    let data = d.path().join("data");
+    let tex = root().join("assets/textures/skimage_coffee.png");
+    let motion = root().join("assets/motion/ucsb_bricks_rt.txt");
+    let out = regtrack(&[
+        "synth",
+        "--texture",
+        tex.to_str().unwrap(),
+        "--motion",
+        motion.to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+        "--name",
+        "rt",
+        "--frames",
+        "12",
+        "--noise",
+        "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(data.join("rt/frame00012.jpg").is_file());
+
+    let corners = d.path().join("rt_corners.txt");
+    let out = regtrack(&[
+        "track",
+        "--seq",
+        data.join("rt.txt").to_str().unwrap(),
+        "--sm",
+        "ic",
+        "--am",
+        "zncc",
+        "--ssm",
+        "8",
+        "--out",
+        corners.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&corners).unwrap();
+    assert_eq!(text.lines().count(), 13, "header + 12 frames");
+
+    let res = d.path().join("res");
+    let out = regtrack(&[
+        "eval",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--sm",
+        "esm,fclk",
+        "--am",
+        "ssd",
+        "--ssm",
+        "homography,affine",
+        "--out",
+        res.to_str().unwrap(),
+        "--jobs",
+        "2",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(res.join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 5, "{csv}");
+    assert!(
+        res.join("tracking_data/rt/fclk_ssd_affine_errors.txt")
+            .is_file()
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 4);
+
+    // A shard runs only its share.
+    let shard = d.path().join("shard");
+    let out = regtrack(&[
+        "eval",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--sm",
+        "esm,fclk",
+        "--am",
+        "ssd",
+        "--out",
+        shard.to_str().unwrap(),
+        "--shard",
+        "1/2",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(shard.join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 2, "{csv}");
+    assert!(csv.contains(",fclk,"));
+}
+
+#[test]
+fn errors_are_clear() {
+    let out = regtrack(&[
+        "track",
+        "--seq",
+        "/nonexistent/seq.txt",
+        "--out",
+        "/tmp/x.txt",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/nonexistent/seq.txt"), "{err}");
+    let out = regtrack(&["eval", "--dataset", "/tmp", "--sm", "nn", "--out", "/tmp/x"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("unknown search method 'nn'") && err.contains("esm"),
+        "{err}"
+    );
+}

@@ -1,0 +1,166 @@
+//! Sequence layouts and ground-truth parsing: good input opens, bad input gives an error that
+//! names the file and line (or the missing path), never a panic.
+
+use crate::common::{TempDir, write_png};
+use regtrack::Error;
+use regtrack::dataset::{Sequence, parse_ground_truth, read_ground_truth, write_corners};
+use regtrack::geometry::Quad;
+use std::path::Path;
+
+const HEADER: &str = "frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n";
+
+fn mtf_layout(dir: &Path, n: usize) -> std::path::PathBuf {
+    let seq = dir.join("seq");
+    std::fs::create_dir_all(&seq).unwrap();
+    let mut gt = HEADER.to_string();
+    for i in 1..=n {
+        write_png(&seq.join(format!("frame{i:05}.png")), 32, 24, i as u8);
+        gt.push_str(&format!("frame{i:05}.png 1 2 21 2 21 16 1 16\n"));
+    }
+    let p = dir.join("seq.txt");
+    std::fs::write(&p, gt).unwrap();
+    p
+}
+
+#[test]
+fn mtf_layout_opens_from_the_file_or_the_folder() {
+    let d = TempDir::new("mtf");
+    let gt = mtf_layout(d.path(), 3);
+    for p in [gt.clone(), d.path().join("seq")] {
+        let s = Sequence::open(&p).unwrap();
+        assert_eq!((s.name.as_str(), s.len()), ("seq", 3));
+        assert_eq!(
+            s.ground_truth(2),
+            Some(Quad::from_array([1., 2., 21., 2., 21., 16., 1., 16.]))
+        );
+        assert_eq!(s.load_gray(1).unwrap().width, 32);
+    }
+    let all = regtrack::dataset::discover(d.path(), None).unwrap();
+    assert_eq!(all.len(), 1);
+    let err = regtrack::dataset::discover(d.path(), Some(&["nope".to_string()]))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nope") && err.contains("seq"), "{err}");
+}
+
+#[test]
+fn a_missing_frame_names_its_path() {
+    let d = TempDir::new("missing");
+    mtf_layout(d.path(), 3);
+    std::fs::remove_file(d.path().join("seq/frame00002.png")).unwrap();
+    match Sequence::open(&d.path().join("seq.txt")) {
+        Err(Error::Missing { path }) => {
+            assert!(path.ends_with("seq/frame00002.png"), "{}", path.display())
+        }
+        other => panic!("expected a missing-frame error, got {other:?}"),
+    }
+}
+
+#[test]
+fn an_undecodable_frame_names_its_path() {
+    let d = TempDir::new("undecodable");
+    let gt = mtf_layout(d.path(), 2);
+    std::fs::write(d.path().join("seq/frame00002.png"), b"not a png").unwrap();
+    let s = Sequence::open(&gt).unwrap();
+    let err = s.load_gray(1).unwrap_err().to_string();
+    assert!(err.contains("frame00002.png"), "{err}");
+}
+
+#[test]
+fn folder_of_images_with_and_without_ground_truth() {
+    let d = TempDir::new("folder");
+    for i in 0..4 {
+        write_png(&d.path().join(format!("img_{i}.png")), 16, 16, i);
+    }
+    let s = Sequence::open(d.path()).unwrap();
+    assert_eq!(s.len(), 4);
+    assert!(s.ground_truth.is_empty() && s.ground_truth(0).is_none());
+    std::fs::write(
+        d.path().join("groundtruth.txt"),
+        "1,1,9,1,9,9,1,9\n2 2 10 2 10 10 2 10\n",
+    )
+    .unwrap();
+    let s = Sequence::open(d.path()).unwrap();
+    assert_eq!(s.ground_truth(1).unwrap().0[0].x, 2.0);
+    assert!(s.ground_truth(2).is_none());
+}
+
+#[test]
+fn pot_ground_truth_every_other_frame() {
+    let d = TempDir::new("pot");
+    let frames = d.path().join("V01/img");
+    std::fs::create_dir_all(&frames).unwrap();
+    for i in 0..6 {
+        write_png(&frames.join(format!("{i:04}.png")), 16, 16, i);
+    }
+    let gt = d.path().join("V01_gt_points.txt");
+    std::fs::write(
+        &gt,
+        "1 1 9 1 9 9 1 9\n2 1 10 1 10 9 2 9\n3 1 11 1 11 9 3 9\n",
+    )
+    .unwrap();
+    let s = Sequence::open(&gt).unwrap();
+    assert_eq!((s.name.as_str(), s.len()), ("V01", 6));
+    assert_eq!(s.ground_truth(2).unwrap().0[0].x, 2.0);
+    assert!(s.ground_truth(1).is_none() && s.ground_truth(4).is_some());
+}
+
+#[test]
+fn malformed_ground_truth_names_file_and_line() {
+    let p = Path::new("data/seq.txt");
+    let cases = [
+        (
+            format!("{HEADER}frame00001.jpg 1 2 3 4 5 6 7 8\nframe00002.jpg 1 2 3 4 5\n"),
+            3,
+            "found 5",
+        ),
+        (
+            format!("{HEADER}frame00001.jpg 1 2 3 4 5 6 7 x8\n"),
+            2,
+            "'x8' is not a number",
+        ),
+        (
+            "1 2 3 4 5 6 7 8\n\n1 2 3 4 5 6 7 8 9\n".to_string(),
+            3,
+            "found 9",
+        ),
+        ("1 2 3 4 5 6 7 inf\n".to_string(), 1, "not a finite number"),
+    ];
+    for (text, line, msg) in cases {
+        match parse_ground_truth(p, &text) {
+            Err(e @ Error::Parse { .. }) => {
+                let s = e.to_string();
+                assert!(
+                    s.starts_with(&format!("data/seq.txt:{line}:")) && s.contains(msg),
+                    "{s}"
+                );
+            }
+            other => panic!("{text:?}: expected a parse error, got {other:?}"),
+        }
+    }
+    // Empty input, comments and a lone header are fine.
+    assert!(parse_ground_truth(p, "").unwrap().is_empty());
+    assert!(
+        parse_ground_truth(p, "# comment\nframe ulx uly urx ury lrx lry llx lly\n")
+            .unwrap()
+            .is_empty()
+    );
+    // A missing file is named.
+    let err = read_ground_truth(Path::new("/nonexistent/gt.txt"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("/nonexistent/gt.txt"), "{err}");
+}
+
+#[test]
+fn corners_round_trip_with_lost_frames() {
+    let d = TempDir::new("corners");
+    let p = d.path().join("out/run.txt");
+    let q = Quad::from_array([1.5, 2.25, 30.0, 2.0, 31.0, 40.0, 0.5, 41.0]);
+    write_corners(&p, &[Some(q), None, Some(q)], "jpg").unwrap();
+    let back = read_ground_truth(&p).unwrap();
+    assert_eq!(back.len(), 3);
+    assert_eq!(back[0].quad, Some(q));
+    assert_eq!(back[1].quad, None);
+    assert_eq!(back[2].frame.as_deref(), Some("frame00003.jpg"));
+}

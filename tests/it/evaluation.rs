@@ -1,0 +1,182 @@
+//! Evaluation on a rendered sequence, success-rate arithmetic, synthetic rendering and loss of
+//! track.
+
+use crate::common::{TempDir, texture};
+use regtrack::dataset::demo::{assets_dir, demo_config};
+use regtrack::dataset::synth::{
+    SynthConfig, canonical_corner_order, read_motion_profile, render_sequence,
+};
+use regtrack::eval::{self, EvalOptions};
+use regtrack::geometry::{Quad, alignment_error, iou};
+use regtrack::imaging::GrayU8;
+use regtrack::observe::{NoObserver, Recorder};
+use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
+
+#[test]
+fn esm_ssd_homography_tracks_the_rendered_tmt_sequence() {
+    let d = TempDir::new("tmt");
+    let cfg = SynthConfig {
+        jpeg_quality: 0,
+        ..demo_config()
+    };
+    let seq = render_sequence(&cfg, d.path(), "tmt_book", &|_, _| {}).unwrap();
+    assert_eq!(seq.len(), 381);
+    let spec = TrackerSpec::from_names("esm", "ssd", "homography").unwrap();
+    let mut rec = Recorder::default();
+    let run = eval::run_sequence(&seq, &spec, &EvalOptions::default(), None, &mut rec).unwrap();
+    let s = run.summary();
+    eprintln!("{s:?}");
+    assert_eq!(s.frames, 380, "the initialisation frame is excluded");
+    assert!(s.sr5 >= 0.95, "SR@5 = {}", s.sr5);
+    assert!(s.mean_error < 1.0, "mean error {}", s.mean_error);
+    // The observer saw the last frame's iterations, each with finite corners.
+    assert!(!rec.iterations.is_empty() && rec.iterations.iter().all(|r| r.corners.is_finite()));
+    // Result files.
+    eval::write_run_files(d.path(), &run).unwrap();
+    eval::write_summaries(d.path(), &[s]).unwrap();
+    let sr = std::fs::read_to_string(
+        d.path()
+            .join("tracking_data/tmt_book/esm_ssd_homography_sr.txt"),
+    )
+    .unwrap();
+    assert_eq!(sr.lines().count(), 202);
+    let csv = std::fs::read_to_string(d.path().join("summary.csv")).unwrap();
+    assert!(
+        csv.lines()
+            .nth(1)
+            .unwrap()
+            .starts_with("tmt_book,esm,ssd,homography,380,")
+    );
+}
+
+#[test]
+fn success_rates_and_error_measures() {
+    let errors = [0.0, 1.0, 4.99, 5.0, 7.0, 25.0, f64::INFINITY, 3.0];
+    assert_eq!(eval::success_rate(&errors, 5.0), 5.0 / 8.0);
+    assert_eq!(eval::success_rate(&errors, 20.0), 6.0 / 8.0);
+    let curve = eval::success_curve(&errors);
+    assert_eq!(curve.len(), 201);
+    assert!((curve[50].0 - 5.0).abs() < 1e-9 && curve[50].1 == 5.0 / 8.0);
+    assert!(curve.windows(2).all(|w| w[0].1 <= w[1].1), "monotone");
+    let a = Quad::from_rect(0.0, 0.0, 10.0, 10.0);
+    let b = Quad::from_rect(5.0, 0.0, 10.0, 10.0);
+    assert!((iou(&a, &b) - 1.0 / 3.0).abs() < 1e-12);
+    assert!((iou(&a, &a) - 1.0).abs() < 1e-12);
+    assert_eq!(iou(&a, &Quad::from_rect(50.0, 50.0, 1.0, 1.0)), 0.0);
+    assert!((alignment_error(&a, &b) - 5.0).abs() < 1e-12);
+}
+
+#[test]
+fn synthetic_rendering_is_deterministic_and_keeps_the_profile() {
+    let d = TempDir::new("synth");
+    let a = assets_dir();
+    let cfg = SynthConfig {
+        texture: a.join("textures/skimage_brick.png"),
+        background: Some(a.join("textures/skimage_grass.png")),
+        motion: a.join("motion/ucsb_bricks_m1.txt"),
+        max_frames: Some(4),
+        noise: 3.0,
+        gain_drift: 0.2,
+        local_light: 0.3,
+        motion_blur: 3,
+        occlusion: 0.4,
+        jpeg_quality: 0,
+        ..SynthConfig::default()
+    };
+    let s1 = render_sequence(&cfg, &d.path().join("a"), "m1", &|_, _| {}).unwrap();
+    let s2 = render_sequence(&cfg, &d.path().join("b"), "m1", &|_, _| {}).unwrap();
+    assert_eq!(s1.len(), 4);
+    for i in 0..4 {
+        assert_eq!(
+            std::fs::read(&s1.frames[i]).unwrap(),
+            std::fs::read(&s2.frames[i]).unwrap()
+        );
+    }
+    assert_eq!(s1.load_gray(0).unwrap().width, 640);
+    // Ground truth is the profile, with the corners starting at the upper left.
+    let mut profile = read_motion_profile(&cfg.motion).unwrap();
+    canonical_corner_order(&mut profile);
+    assert_eq!(s1.ground_truth(3), Some(profile[3]));
+    let q = s1.ground_truth(0).unwrap();
+    let (ul, lr) = (q.0[0], q.0[2]);
+    assert!(ul.x < lr.x && ul.y < lr.y, "{q}");
+    // Another seed changes the noise.
+    let s3 = render_sequence(
+        &SynthConfig { seed: 9, ..cfg },
+        &d.path().join("c"),
+        "m1",
+        &|_, _| {},
+    )
+    .unwrap();
+    assert_ne!(
+        std::fs::read(&s1.frames[0]).unwrap(),
+        std::fs::read(&s3.frames[0]).unwrap()
+    );
+}
+
+#[test]
+fn loss_of_track_is_a_status_never_nan_corners() {
+    let img = texture("skimage_coffee.png");
+    let start = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    let flat = GrayU8 {
+        width: img.width,
+        height: img.height,
+        data: vec![128; img.data.len()],
+    };
+    for sm in ["falk", "ialk", "fclk", "iclk", "esm"] {
+        for am in ["ssd", "zncc", "ncc"] {
+            let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+            let mut t = Tracker::new(&spec).unwrap();
+            t.initialize(FrameInput::Gray8(&img), &start).unwrap();
+            // A frame of pure noise, then a flat frame: the tracker may diverge; it must say so.
+            let mut rng = regtrack::rng::Rng::new(4);
+            let noise = GrayU8 {
+                width: img.width,
+                height: img.height,
+                data: (0..img.data.len())
+                    .map(|_| (rng.uniform() * 255.0) as u8)
+                    .collect(),
+            };
+            for frame in [&noise, &flat, &flat] {
+                let out = t.update(FrameInput::Gray8(frame), &mut NoObserver);
+                assert!(out.corners.is_finite(), "{sm} {am}: {:?}", out.corners);
+                if let TrackStatus::Lost(_) = out.status {
+                    assert_eq!(out.iterations, 0);
+                }
+            }
+        }
+    }
+    // A flat template has no gradient: initialising on it fails with a clear error.
+    let mut t =
+        Tracker::new(&TrackerSpec::from_names("iclk", "ssd", "homography").unwrap()).unwrap();
+    let err = t
+        .initialize(FrameInput::Gray8(&flat), &start)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("singular"), "{err}");
+    // Uninitialised trackers report it; degenerate initial quads are refused.
+    let mut t = Tracker::new(&TrackerSpec::from_names("esm", "ssd", "affine").unwrap()).unwrap();
+    assert_eq!(
+        t.update(FrameInput::Gray8(&img), &mut NoObserver).status,
+        TrackStatus::Uninitialized
+    );
+    let bowtie = Quad::from_array([0.0, 0.0, 50.0, 50.0, 50.0, 0.0, 0.0, 50.0]);
+    assert!(t.initialize(FrameInput::Gray8(&img), &bowtie).is_err());
+}
+
+#[test]
+fn unknown_names_list_what_exists() {
+    let err = TrackerSpec::from_names("esm", "ssd", "warp9")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("warp9") && err.contains("sl3") && err.contains("corner (c8"),
+        "{err}"
+    );
+    let err = TrackerSpec::from_names("gd", "ssd", "8")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("iclk (ic)") && err.contains("esm"), "{err}");
+    let spec = TrackerSpec::from_names("ic", "ZNCC", "c8").unwrap();
+    assert_eq!(spec.label(), "iclk_zncc_corner");
+}

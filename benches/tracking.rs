@@ -31,6 +31,56 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    // The stages of one iteration, on the context of a built tracker.
+    let spec = TrackerSpec::from_names("fclk", "ssd", "homography").expect("spec");
+    let mut t = Tracker::new(&spec).expect("tracker");
+    t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+        .expect("init");
+    let mut ctx = t.into_context();
+    let view = smoothed.view();
+    let p = ctx.params;
+    let mut g = c.benchmark_group("stage");
+    g.bench_function("warp_grid", |b| b.iter(|| ctx.warp_grid(black_box(&p))));
+    g.bench_function("sample values", |b| {
+        b.iter(|| ctx.sample(black_box(&view), false))
+    });
+    g.bench_function("sample values+gradients", |b| {
+        b.iter(|| ctx.sample(black_box(&view), true))
+    });
+    g.bench_function("warped_gradient", |b| {
+        b.iter(|| {
+            ctx.sample(&view, true);
+            ctx.warped_gradient(black_box(&p))
+        })
+    });
+    // Fresh, finite gradients for the next stages (the loop above applied them once more).
+    ctx.sample(&view, true);
+    ctx.warped_gradient(&p);
+    let mut jac = vec![0f32; ctx.len() * 8];
+    g.bench_function("project", |b| {
+        b.iter(|| {
+            regtrack::sm::Context::project(&ctx.gx, &ctx.gy, &ctx.dwdp0, 8, black_box(&mut jac))
+        })
+    });
+    let mut h = [0.0; 64];
+    g.bench_function("J^T J", |b| {
+        b.iter(|| {
+            ctx.am.hessian(
+                regtrack::am::Wrt::Current,
+                regtrack::am::HessianKind::GaussNewton,
+                &ctx.values,
+                black_box(&jac),
+                8,
+                &mut h,
+            )
+        })
+    });
+    let mut jg = [0.0; 8];
+    g.bench_function("J^T g", |b| {
+        b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.grad, 8, &mut jg))
+    });
+    g.finish();
+
     let mut pre = Preprocessor::new(gaussian_kernel(5, 3.0));
     c.bench_function("preprocess 150x150 region (5x5 Gaussian)", |b| {
         b.iter(|| pre.process(black_box(&img), 225.0, 125.0, 375.0, 275.0))

@@ -265,6 +265,11 @@ impl Tracker {
     pub fn params(&self) -> &[f64] {
         &self.ctx.params[..self.ctx.dof]
     }
+    /// The models and buffers, taken out of the tracker (for benchmarks of single stages).
+    pub fn into_context(self) -> Context {
+        self.ctx
+    }
+
     /// The models and buffers (template, last sampled patch...), read-only.
     pub fn context(&self) -> &Context {
         &self.ctx

@@ -162,11 +162,10 @@ impl Correlation {
         jt_times(jac, other, dof, &mut u);
         jt_times(jac, var, dof, &mut v);
         if self.centered {
-            // w = J^T 1: the column sums of J.
-            for row in jac.chunks_exact(dof) {
-                for k in 0..dof {
-                    w[k] += row[k] as f64;
-                }
+            // w = J^T 1: the sums of J's columns.
+            let n = jac.len() / dof.max(1);
+            for k in 0..dof {
+                w[k] = jac[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum();
             }
         }
         let s = beta / (n * n);

@@ -115,44 +115,32 @@ pub(crate) fn minus_jtj(jac: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_D
     }
 }
 
-/// Adds `J^T J` (upper triangle, then mirrored) into `acc` (stride [`MAX_DOF`]); accumulates in
-/// f32 per block of pixels and in f64 across blocks.
-pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
-    macro_rules! body {
-        ($s:expr) => {{
-            const S: usize = $s;
-            for block in jac.chunks(S * 256) {
-                let mut part = [[0.0f32; S]; S];
-                for row in block.chunks_exact(S) {
-                    for i in 0..S {
-                        let ri = row[i];
-                        for j in i..S {
-                            part[i][j] += ri * row[j];
-                        }
-                    }
-                }
-                for i in 0..S {
-                    for j in i..S {
-                        acc[i * MAX_DOF + j] += part[i][j] as f64;
-                    }
-                }
+/// The dot product of two patches: f32 lanes over blocks of 256 pixels, f64 across blocks.
+pub fn dot(a: &[f32], b: &[f32]) -> f64 {
+    let mut total = 0.0f64;
+    for (ca, cb) in a.chunks(256).zip(b.chunks(256)) {
+        let mut lanes = [0.0f32; 8];
+        let (ea, eb) = (ca.chunks_exact(8), cb.chunks_exact(8));
+        let (ra, rb) = (ea.remainder(), eb.remainder());
+        for (x, y) in ea.zip(eb) {
+            for l in 0..8 {
+                lanes[l] += x[l] * y[l];
             }
-        }};
+        }
+        let tail: f32 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+        total += (lanes.iter().sum::<f32>() + tail) as f64;
     }
-    match dof {
-        2 => body!(2),
-        3 => body!(3),
-        4 => body!(4),
-        6 => body!(6),
-        8 => body!(8),
-        _ => {
-            for row in jac.chunks_exact(dof) {
-                for i in 0..dof {
-                    for j in i..dof {
-                        acc[i * MAX_DOF + j] += (row[i] * row[j]) as f64;
-                    }
-                }
-            }
+    total
+}
+
+/// Adds `J^T J` into `acc` (stride [`MAX_DOF`]). `J` is stored by parameter: column `k` is
+/// `jac[k N..(k + 1) N]` (the layout of [`crate::ssm::Ssm::jacobian`]'s projection).
+pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
+    let n = jac.len() / dof.max(1);
+    for a in 0..dof {
+        let ja = &jac[a * n..(a + 1) * n];
+        for b in a..dof {
+            acc[a * MAX_DOF + b] += dot(ja, &jac[b * n..(b + 1) * n]);
         }
     }
     for i in 0..dof {
@@ -162,38 +150,12 @@ pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF
     }
 }
 
-/// `out[k] = sum_i J[i * dof + k] * v[i]`.
+/// `out[k] = sum_i J[k N + i] v[i]` (`J` stored by parameter).
 pub fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
-    macro_rules! body {
-        ($s:expr) => {{
-            const S: usize = $s;
-            for (jb, vb) in jac.chunks(S * 256).zip(v.chunks(256)) {
-                let mut part = [0.0f32; S];
-                for (row, &e) in jb.chunks_exact(S).zip(vb) {
-                    for k in 0..S {
-                        part[k] += row[k] * e;
-                    }
-                }
-                for k in 0..S {
-                    out[k] += part[k] as f64;
-                }
-            }
-        }};
-    }
+    let n = jac.len() / dof.max(1);
     out.fill(0.0);
-    match dof {
-        2 => body!(2),
-        3 => body!(3),
-        4 => body!(4),
-        6 => body!(6),
-        8 => body!(8),
-        _ => {
-            for (row, &e) in jac.chunks_exact(dof).zip(v) {
-                for k in 0..dof {
-                    out[k] += (row[k] * e) as f64;
-                }
-            }
-        }
+    for k in 0..dof {
+        out[k] = dot(&jac[k * n..(k + 1) * n], v);
     }
 }
 

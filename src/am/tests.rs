@@ -95,7 +95,7 @@ fn hessians_match_finite_differences() {
                     x.iter()
                         .enumerate()
                         .map(|(i, &v)| {
-                            v + (0..s).map(|k| jac[i * s + k] as f64 * d[k]).sum::<f64>() as f32
+                            v + (0..s).map(|k| jac[k * n + i] as f64 * d[k]).sum::<f64>() as f32
                         })
                         .collect()
                 };

@@ -96,8 +96,8 @@ impl<'a> ImageView<'a> {
         let (wm, hm) = ((self.width - 1) as f32, (self.height - 1) as f32);
         let xc = x.max(0.0).min(wm);
         let yc = y.max(0.0).min(hm);
-        let ix = (xc as usize).min(self.width - 2);
-        let iy = (yc as usize).min(self.height - 2);
+        let ix = (xc as i32 as usize).min(self.width - 2);
+        let iy = (yc as i32 as usize).min(self.height - 2);
         let (ax, ay) = (xc - ix as f32, yc - iy as f32);
         let i = iy * self.width + ix;
         let d = &self.data[i..i + self.width + 2];
@@ -123,35 +123,13 @@ impl<'a> ImageView<'a> {
         top + ay * (bot - top)
     }
 
-    /// Value and gradient at window coordinates.
+    /// Value and gradient at window coordinates (general path, any border).
     #[inline(always)]
     fn value_gradient_local(&self, x: f32, y: f32) -> (f32, f32, f32) {
-        // Truncation is the floor for the coordinates that take the fast path (x, y >= 1).
-        let (ix, iy) = (x as i64, y as i64);
-        if x >= 1.0 && y >= 1.0 && ix + 2 < self.width as i64 && iy + 2 < self.height as i64 {
-            // The 4x4 neighbourhood is inside: read it once.
-            let (ax, ay) = (x - ix as f32, y - iy as f32);
-            let w = self.width;
-            let base = (iy as usize - 1) * w + ix as usize - 1;
-            let r0 = &self.data[base..base + 4];
-            let r1 = &self.data[base + w..base + w + 4];
-            let r2 = &self.data[base + 2 * w..base + 2 * w + 4];
-            let r3 = &self.data[base + 3 * w..base + 3 * w + 4];
-            let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
-            // Horizontal interpolation at the row pairs, for columns c and c+1.
-            let h = |r: &[f32], c: usize| lerp(r[c], r[c + 1], ax);
-            let v = lerp(h(r1, 1), h(r2, 1), ay);
-            let right = lerp(h(r1, 2), h(r2, 2), ay);
-            let left = lerp(h(r1, 0), h(r2, 0), ay);
-            let down = lerp(h(r2, 1), h(r3, 1), ay);
-            let up = lerp(h(r0, 1), h(r1, 1), ay);
-            (v, 0.5 * (right - left), 0.5 * (down - up))
-        } else {
-            let v = self.bilinear_local(x, y);
-            let gx = 0.5 * (self.bilinear_local(x + 1.0, y) - self.bilinear_local(x - 1.0, y));
-            let gy = 0.5 * (self.bilinear_local(x, y + 1.0) - self.bilinear_local(x, y - 1.0));
-            (v, gx, gy)
-        }
+        let v = self.bilinear_local(x, y);
+        let gx = 0.5 * (self.bilinear_local(x + 1.0, y) - self.bilinear_local(x - 1.0, y));
+        let gy = 0.5 * (self.bilinear_local(x, y + 1.0) - self.bilinear_local(x, y - 1.0));
+        (v, gx, gy)
     }
 
     #[inline(always)]
@@ -182,17 +160,49 @@ fn clamp_far(x: f32, y: f32, img: &ImageView) -> (f32, f32) {
     (x.max(-4.0).min(w + 4.0), y.max(-4.0).min(h + 4.0))
 }
 
+/// Points are processed in blocks of this many: a first pass computes the indices and weights
+/// of a block (vectorised), a second reads the pixels.
+const BLOCK: usize = 256;
+
 /// Samples the values at frame points `(xs[i], ys[i])` into `out`.
 pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     debug_assert!(xs.len() == ys.len() && out.len() == xs.len());
-    if img.border == Border::Replicate && img.width >= 2 && img.height >= 2 {
-        let (ox, oy) = (img.x0 as f32, img.y0 as f32);
-        for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
-            *o = img.bilinear_replicate(x - ox, y - oy);
-        }
-    } else {
+    if !(img.border == Border::Replicate && img.width >= 2 && img.height >= 2) {
         for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
             *o = sample_value(img, x, y);
+        }
+        return;
+    }
+    let w = img.width;
+    let (ox, oy) = (img.x0 as f32, img.y0 as f32);
+    let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
+    let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
+    let mut idx = [0u32; BLOCK];
+    let mut ax = [0f32; BLOCK];
+    let mut ay = [0f32; BLOCK];
+    for ((xb, yb), ob) in xs
+        .chunks(BLOCK)
+        .zip(ys.chunks(BLOCK))
+        .zip(out.chunks_mut(BLOCK))
+    {
+        let n = xb.len();
+        for i in 0..n {
+            // Clamped into the window (NaN goes to 0): replicate border, every read in bounds.
+            let x = (xb[i] - ox).max(0.0).min(wm);
+            let y = (yb[i] - oy).max(0.0).min(hm);
+            let fx = x.floor().min(wm2);
+            let fy = y.floor().min(hm2);
+            ax[i] = x - fx;
+            ay[i] = y - fy;
+            idx[i] = fy as u32 * w as u32 + fx as u32;
+        }
+        for i in 0..n {
+            let k = idx[i] as usize;
+            let d = &img.data[k..k + w + 2];
+            let (p00, p10, p01, p11) = (d[0], d[1], d[w], d[w + 1]);
+            let top = p00 + ax[i] * (p10 - p00);
+            let bot = p01 + ax[i] * (p11 - p01);
+            ob[i] = top + ay[i] * (bot - top);
         }
     }
 }
@@ -208,17 +218,64 @@ pub fn sample_values_gradients(
 ) {
     debug_assert!(xs.len() == ys.len() && values.len() == xs.len());
     debug_assert!(gx.len() == xs.len() && gy.len() == xs.len());
-    for i in 0..xs.len() {
-        let (x, y) = (xs[i], ys[i]);
-        let (v, dx, dy) = if img.is_empty() {
-            (0.0, 0.0, 0.0)
-        } else {
-            let (lx, ly) = img.local(x, y);
+    if img.is_empty() {
+        values.fill(0.0);
+        gx.fill(0.0);
+        gy.fill(0.0);
+        return;
+    }
+    if img.width < 4 || img.height < 4 {
+        for o in 0..xs.len() {
+            let (lx, ly) = img.local(xs[o], ys[o]);
             let (lx, ly) = clamp_far(lx, ly, img);
-            img.value_gradient_local(lx, ly)
-        };
-        values[i] = v;
-        gx[i] = dx;
-        gy[i] = dy;
+            (values[o], gx[o], gy[o]) = img.value_gradient_local(lx, ly);
+        }
+        return;
+    }
+    let w = img.width;
+    let (ox, oy) = (img.x0 as f32, img.y0 as f32);
+    // The fast path needs the 4x4 neighbourhood inside: 1 <= x < w - 2, 1 <= y < h - 2.
+    let (xmax, ymax) = (img.width as f32 - 2.0, img.height as f32 - 2.0);
+    let mut idx = [0u32; BLOCK];
+    let mut ax = [0f32; BLOCK];
+    let mut ay = [0f32; BLOCK];
+    let mut inside = [false; BLOCK];
+    let mut start = 0;
+    while start < xs.len() {
+        let n = (xs.len() - start).min(BLOCK);
+        for i in 0..n {
+            let (x, y) = (xs[start + i] - ox, ys[start + i] - oy);
+            inside[i] = x >= 1.0 && y >= 1.0 && x < xmax && y < ymax;
+            let xc = x.max(1.0).min(xmax);
+            let yc = y.max(1.0).min(ymax);
+            let (fx, fy) = (xc.floor(), yc.floor());
+            ax[i] = xc - fx;
+            ay[i] = yc - fy;
+            idx[i] = (fy as u32 - 1) * w as u32 + (fx as u32 - 1);
+        }
+        for i in 0..n {
+            let o = start + i;
+            let (v, dx, dy) = if inside[i] {
+                let base = idx[i] as usize;
+                let d = &img.data[base..base + 3 * w + 4];
+                let (ax, ay) = (ax[i], ay[i]);
+                let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
+                let h = |r: usize, c: usize| lerp(d[r * w + c], d[r * w + c + 1], ax);
+                let v = lerp(h(1, 1), h(2, 1), ay);
+                let right = lerp(h(1, 2), h(2, 2), ay);
+                let left = lerp(h(1, 0), h(2, 0), ay);
+                let down = lerp(h(2, 1), h(3, 1), ay);
+                let up = lerp(h(0, 1), h(1, 1), ay);
+                (v, 0.5 * (right - left), 0.5 * (down - up))
+            } else {
+                let (lx, ly) = img.local(xs[o], ys[o]);
+                let (lx, ly) = clamp_far(lx, ly, img);
+                img.value_gradient_local(lx, ly)
+            };
+            values[o] = v;
+            gx[o] = dx;
+            gy[o] = dy;
+        }
+        start += n;
     }
 }

@@ -246,41 +246,16 @@ impl Context {
         }
     }
 
-    /// `jac[i, k] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k` with `dw/dp` given per point
-    /// (`N x 2 x S`).
+    /// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
+    /// [`Ssm::jacobian`].
     pub fn project(gx: &[f32], gy: &[f32], dwdp: &[f32], dof: usize, jac: &mut [f32]) {
-        macro_rules! body {
-            ($s:expr) => {{
-                const S: usize = $s;
-                for (((j, d), &a), &b) in jac
-                    .chunks_exact_mut(S)
-                    .zip(dwdp.chunks_exact(2 * S))
-                    .zip(gx)
-                    .zip(gy)
-                {
-                    for k in 0..S {
-                        j[k] = a * d[k] + b * d[S + k];
-                    }
-                }
-            }};
-        }
-        match dof {
-            2 => body!(2),
-            3 => body!(3),
-            4 => body!(4),
-            6 => body!(6),
-            8 => body!(8),
-            s => {
-                for (((j, d), &a), &b) in jac
-                    .chunks_exact_mut(s)
-                    .zip(dwdp.chunks_exact(2 * s))
-                    .zip(gx)
-                    .zip(gy)
-                {
-                    for k in 0..s {
-                        j[k] = a * d[k] + b * d[s + k];
-                    }
-                }
+        let n = gx.len();
+        for k in 0..dof {
+            let dx = &dwdp[2 * k * n..(2 * k + 1) * n];
+            let dy = &dwdp[(2 * k + 1) * n..(2 * k + 2) * n];
+            let jk = &mut jac[k * n..(k + 1) * n];
+            for ((((j, &a), &b), &u), &v) in jk.iter_mut().zip(gx).zip(gy).zip(dx).zip(dy) {
+                *j = a * u + b * v;
             }
         }
     }

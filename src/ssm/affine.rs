@@ -1,7 +1,7 @@
 //! Affine: 6 DOF, `w(x) = [[1+a11, a12], [a21, 1+a22]] x + t`, parameters
 //! `(tx, ty, a11, a12, a21, a22)`.
 
-use super::{Params, Ssm, SsmBuilder, normalise_h33};
+use super::{Params, Ssm, SsmBuilder, normalise_h33, put};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::{Matrix3, Vector3};
@@ -48,11 +48,14 @@ impl Ssm for Affine {
         Some(p)
     }
     fn jacobian(&self, _p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
-        for ((j, &x), &y) in out.chunks_exact_mut(12).zip(xs).zip(ys) {
-            j.copy_from_slice(&[
-                1.0, 0.0, x, y, 0.0, 0.0, //
-                0.0, 1.0, 0.0, 0.0, x, y,
-            ]);
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
+            put(out, n, i, 0, 1.0, 0.0);
+            put(out, n, i, 1, 0.0, 1.0);
+            put(out, n, i, 2, x, 0.0);
+            put(out, n, i, 3, y, 0.0);
+            put(out, n, i, 4, 0.0, x);
+            put(out, n, i, 5, 0.0, y);
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {

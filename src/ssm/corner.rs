@@ -2,7 +2,7 @@
 //! `(dx0, dy0, ..., dx3, dy3)` of the corners of the canonical square `[-0.5, 0.5]^2` (the
 //! normalised initial region's size) under the warp.
 
-use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian};
+use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian, put};
 use crate::geometry::{Point, Quad, apply_homography, homography_from_points};
 use crate::registry::Entry;
 use nalgebra::{Matrix3, SMatrix};
@@ -91,7 +91,8 @@ impl Ssm for CornerHomography {
         } else {
             dh_dp.fill(f64::NAN);
         }
-        for ((j, &x), &y) in out.chunks_exact_mut(16).zip(xs).zip(ys) {
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
             let (jx, jy) = homography_point_jacobian(&h, x as f64, y as f64);
             for c in 0..8 {
                 let (mut sx, mut sy) = (0.0, 0.0);
@@ -99,8 +100,7 @@ impl Ssm for CornerHomography {
                     sx += jx[i] * dh_dp[(i, c)];
                     sy += jy[i] * dh_dp[(i, c)];
                 }
-                j[c] = sx as f32;
-                j[8 + c] = sy as f32;
+                put(out, n, i, c, sx as f32, sy as f32);
             }
         }
     }

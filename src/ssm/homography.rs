@@ -1,7 +1,7 @@
 //! Homography with the matrix entries as parameters: 8 DOF,
 //! `H = [[1+p0, p1, p2], [p3, 1+p4, p5], [p6, p7, 1]]`.
 
-use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian, normalise_h33};
+use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian, normalise_h33, put};
 use crate::geometry::{Point, homography_from_points};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -42,11 +42,11 @@ impl Ssm for Homography {
     }
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         let h = entries(&self.matrix(p));
-        for ((j, &x), &y) in out.chunks_exact_mut(16).zip(xs).zip(ys) {
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
             let (jx, jy) = homography_point_jacobian(&h, x as f64, y as f64);
             for k in 0..8 {
-                j[k] = jx[k] as f32;
-                j[8 + k] = jy[k] as f32;
+                put(out, n, i, k, jx[k] as f32, jy[k] as f32);
             }
         }
     }

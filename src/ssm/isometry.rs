@@ -1,6 +1,6 @@
 //! Isometry (Euclidean): 3 DOF, `w(x) = R(theta) x + t`, parameters `(tx, ty, theta)`.
 
-use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33};
+use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33, put};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -37,8 +37,11 @@ impl Ssm for Isometry {
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         let (s, c) = p[2].sin_cos();
         let (s, c) = (s as f32, c as f32);
-        for ((j, &x), &y) in out.chunks_exact_mut(6).zip(xs).zip(ys) {
-            j.copy_from_slice(&[1.0, 0.0, -s * x - c * y, 0.0, 1.0, c * x - s * y]);
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
+            put(out, n, i, 0, 1.0, 0.0);
+            put(out, n, i, 1, 0.0, 1.0);
+            put(out, n, i, 2, -s * x - c * y, c * x - s * y);
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {

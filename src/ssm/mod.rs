@@ -45,8 +45,10 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     /// matrix is degenerate. For a matrix outside the group the result is unspecified: use
     /// [`Ssm::fit`] to project a general warp onto the model.
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params>;
-    /// Jacobian of the warped points with respect to the parameters at `p`:
-    /// `out[(2 i) * S + k] = d w_x(x_i, p) / d p_k`, `out[(2 i + 1) * S + k] = d w_y / d p_k`.
+    /// Jacobian of the warped points with respect to the parameters at `p`, stored by parameter
+    /// (structure of arrays, so that the per-pixel loops vectorise): with `N` points,
+    /// `out[2k N + i] = d w_x(x_i, p) / d p_k` and `out[(2k + 1) N + i] = d w_y(x_i, p) / d p_k`
+    /// (see [`put`]).
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]);
     /// Least-squares parameters `p` minimising `sum_k |w(src_k, p) - dst_k|^2` (exact for 8 DOF).
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params>;
@@ -74,6 +76,14 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
             *o = apply_homography(&m, q);
         }
     }
+}
+
+/// Writes the derivatives of point `i` (of `n`) with respect to parameter `k` in the layout of
+/// [`Ssm::jacobian`].
+#[inline(always)]
+pub fn put(out: &mut [f32], n: usize, i: usize, k: usize, dx: f32, dy: f32) {
+    out[2 * k * n + i] = dx;
+    out[(2 * k + 1) * n + i] = dy;
 }
 
 /// Builds an SSM.

@@ -1,7 +1,7 @@
 //! Similitude (similarity): 4 DOF, `w(x) = [[1+a, -b], [b, 1+a]] x + t`, parameters
 //! `(tx, ty, a, b)`.
 
-use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33};
+use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33, put};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -46,8 +46,12 @@ impl Ssm for Similitude {
         Some(p)
     }
     fn jacobian(&self, _p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
-        for ((j, &x), &y) in out.chunks_exact_mut(8).zip(xs).zip(ys) {
-            j.copy_from_slice(&[1.0, 0.0, x, -y, 0.0, 1.0, y, x]);
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
+            put(out, n, i, 0, 1.0, 0.0);
+            put(out, n, i, 1, 0.0, 1.0);
+            put(out, n, i, 2, x, y);
+            put(out, n, i, 3, -y, x);
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {

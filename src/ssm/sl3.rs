@@ -2,7 +2,7 @@
 //! the generators of Benhimane and Malis (ESM): `G0 = E13, G1 = E23, G2 = E21, G3 = E12,
 //! G4 = E11 - E22, G5 = E22 - E33, G6 = E31, G7 = E32` (1-based matrix units).
 
-use super::{Params, Ssm, SsmBuilder};
+use super::{Params, Ssm, SsmBuilder, put};
 use crate::geometry::{Point, homography_from_points};
 use crate::linalg::{expm, expm3_frechet, logm3};
 use crate::registry::Entry;
@@ -88,7 +88,8 @@ impl Ssm for Sl3 {
                 }
             })
             .collect();
-        for ((j, &x), &y) in out.chunks_exact_mut(16).zip(xs).zip(ys) {
+        let n = xs.len();
+        for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
             let (x, y) = (x as f64, y as f64);
             let w = h[(2, 0)] * x + h[(2, 1)] * y + h[(2, 2)];
             let wx = (h[(0, 0)] * x + h[(0, 1)] * y + h[(0, 2)]) / w;
@@ -97,8 +98,14 @@ impl Ssm for Sl3 {
                 let dx = d[(0, 0)] * x + d[(0, 1)] * y + d[(0, 2)];
                 let dy = d[(1, 0)] * x + d[(1, 1)] * y + d[(1, 2)];
                 let dw = d[(2, 0)] * x + d[(2, 1)] * y + d[(2, 2)];
-                j[k] = ((dx - wx * dw) / w) as f32;
-                j[8 + k] = ((dy - wy * dw) / w) as f32;
+                put(
+                    out,
+                    n,
+                    i,
+                    k,
+                    ((dx - wx * dw) / w) as f32,
+                    ((dy - wy * dw) / w) as f32,
+                );
             }
         }
     }

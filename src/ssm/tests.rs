@@ -39,8 +39,9 @@ proptest! {
                 pm[k] -= h;
                 let (a, b) = (warp(&*ssm, &pp, x, y), warp(&*ssm, &pm, x, y));
                 let (fx, fy) = ((a.x - b.x) / (2.0 * h), (a.y - b.y) / (2.0 * h));
-                prop_assert!(close(jac[k] as f64, fx, 1e-4), "{} dx/dp{}: {} vs {}", ssm.name(), k, jac[k], fx);
-                prop_assert!(close(jac[s + k] as f64, fy, 1e-4), "{} dy/dp{}: {} vs {}", ssm.name(), k, jac[s + k], fy);
+                // One point: out[2k] = dx/dp_k, out[2k + 1] = dy/dp_k.
+                prop_assert!(close(jac[2 * k] as f64, fx, 1e-4), "{} dx/dp{}: {} vs {}", ssm.name(), k, jac[2 * k], fx);
+                prop_assert!(close(jac[2 * k + 1] as f64, fy, 1e-4), "{} dy/dp{}: {} vs {}", ssm.name(), k, jac[2 * k + 1], fy);
             }
         }
     }

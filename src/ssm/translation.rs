@@ -33,9 +33,10 @@ impl Ssm for Translation {
         Some(p)
     }
     fn jacobian(&self, _p: &Params, xs: &[f32], _ys: &[f32], out: &mut [f32]) {
-        for j in out[..xs.len() * 4].chunks_exact_mut(4) {
-            j.copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
-        }
+        let n = xs.len();
+        out[..n].fill(1.0);
+        out[n..3 * n].fill(0.0);
+        out[3 * n..4 * n].fill(1.0);
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         let (cs, cd) = (Quad(*src).centroid(), Quad(*dst).centroid());

@@ -9,7 +9,7 @@
 //! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
-use super::{HessianKind, Wrt, accumulate_jtj, jt_times};
+use super::{HessianKind, Wrt, accumulate_jtj, dot, jt_times, sum};
 use crate::linalg::MAX_DOF;
 
 #[derive(Debug, Clone, Default)]
@@ -28,12 +28,9 @@ pub(crate) struct Correlation {
 fn unit(x: &[f32], centered: bool, out: &mut Vec<f32>) -> f64 {
     out.clear();
     let mean = mean(x, centered);
-    let norm = x
-        .iter()
-        .map(|&v| (v as f64 - mean).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    out.extend(x.iter().map(|&v| (v as f64 - mean) as f32));
+    let m = mean as f32;
+    out.extend(x.iter().map(|&v| v - m));
+    let norm = dot(out, out).sqrt();
     if norm > 1e-9 {
         let inv = (1.0 / norm) as f32;
         out.iter_mut().for_each(|v| *v *= inv);
@@ -47,10 +44,28 @@ fn unit(x: &[f32], centered: bool, out: &mut Vec<f32>) -> f64 {
 /// The mean of a patch (0 when not centring).
 fn mean(x: &[f32], centered: bool) -> f64 {
     if centered {
-        x.iter().map(|&v| v as f64).sum::<f64>() / x.len().max(1) as f64
+        sum(x) / x.len().max(1) as f64
     } else {
         0.0
     }
+}
+
+/// `sum_i a_i (b_i - mb)` in double precision, four lanes at a time.
+fn dot_f64(a: &[f64], b: &[f32], mb: f64) -> f64 {
+    let mut lanes = [0.0f64; 8];
+    let (ea, eb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ea
+        .remainder()
+        .iter()
+        .zip(eb.remainder())
+        .map(|(&x, &y)| x * (y as f64 - mb))
+        .sum();
+    for (x, y) in ea.zip(eb) {
+        for l in 0..8 {
+            lanes[l] += x[l] * (y[l] as f64 - mb);
+        }
+    }
+    lanes.iter().sum::<f64>() + tail
 }
 
 impl Correlation {
@@ -92,12 +107,7 @@ impl Correlation {
     fn current(&mut self, current: &[f32]) -> (f64, f64) {
         let n = unit(current, self.centered, &mut self.c_unit);
         let mc = mean(current, self.centered);
-        let num: f64 = self
-            .t_centered
-            .iter()
-            .zip(current)
-            .map(|(&t, &c)| t * (c as f64 - mc))
-            .sum();
+        let num = dot_f64(&self.t_centered, current, mc);
         let rho = if n > 0.0 && self.t_norm > 0.0 {
             num / (n * self.t_norm)
         } else {
@@ -165,7 +175,7 @@ impl Correlation {
             // w = J^T 1: the sums of J's columns.
             let n = jac.len() / dof.max(1);
             for k in 0..dof {
-                w[k] = jac[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum();
+                w[k] = sum(&jac[k * n..(k + 1) * n]);
             }
         }
         let s = beta / (n * n);

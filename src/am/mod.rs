@@ -115,19 +115,37 @@ pub(crate) fn minus_jtj(jac: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_D
     }
 }
 
-/// The dot product of two patches: f32 lanes over blocks of 256 pixels, f64 across blocks.
+/// The dot product of two patches: 32 f32 lanes (four independent vector accumulators) over
+/// blocks of 256 pixels, f64 across blocks.
 pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     let mut total = 0.0f64;
     for (ca, cb) in a.chunks(256).zip(b.chunks(256)) {
-        let mut lanes = [0.0f32; 8];
-        let (ea, eb) = (ca.chunks_exact(8), cb.chunks_exact(8));
+        let mut lanes = [0.0f32; 32];
+        let (ea, eb) = (ca.chunks_exact(32), cb.chunks_exact(32));
         let (ra, rb) = (ea.remainder(), eb.remainder());
         for (x, y) in ea.zip(eb) {
-            for l in 0..8 {
+            for l in 0..32 {
                 lanes[l] += x[l] * y[l];
             }
         }
         let tail: f32 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+        total += (lanes.iter().sum::<f32>() + tail) as f64;
+    }
+    total
+}
+
+/// The sum of a patch (vectorised like [`dot`]).
+pub fn sum(a: &[f32]) -> f64 {
+    let mut total = 0.0f64;
+    for ca in a.chunks(256) {
+        let mut lanes = [0.0f32; 32];
+        let ea = ca.chunks_exact(32);
+        let tail: f32 = ea.remainder().iter().sum();
+        for x in ea {
+            for l in 0..32 {
+                lanes[l] += x[l];
+            }
+        }
         total += (lanes.iter().sum::<f32>() + tail) as f64;
     }
     total

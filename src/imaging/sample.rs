@@ -177,6 +177,12 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     let (ox, oy) = (img.x0 as f32, img.y0 as f32);
     let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
     let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
+    // Whole groups of eight points with AVX2 gathers, the rest below.
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    let done = avx2::values(img, xs, ys, out);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    let done = 0;
+    let (xs, ys, out) = (&xs[done..], &ys[done..], &mut out[done..]);
     let mut idx = [0u32; BLOCK];
     let mut ax = [0f32; BLOCK];
     let mut ay = [0f32; BLOCK];
@@ -232,6 +238,13 @@ pub fn sample_values_gradients(
         }
         return;
     }
+    // Whole groups of eight points with AVX2 gathers, the rest below.
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    let done = avx2::values_gradients(img, xs, ys, values, gx, gy);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    let done = 0;
+    let (xs, ys) = (&xs[done..], &ys[done..]);
+    let (values, gx, gy) = (&mut values[done..], &mut gx[done..], &mut gy[done..]);
     let w = img.width;
     let (ox, oy) = (img.x0 as f32, img.y0 as f32);
     // The fast path needs the 4x4 neighbourhood inside: 1 <= x < w - 2, 1 <= y < h - 2.
@@ -277,5 +290,233 @@ pub fn sample_values_gradients(
             gy[o] = dy;
         }
         start += n;
+    }
+}
+
+/// AVX2 versions of the sampling loops: eight points at a time with gathers.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+mod avx2 {
+    use super::ImageView;
+    use std::arch::x86_64::*;
+
+    /// Bilinear values (border replicated) of the first `8 * (len / 8)` points; returns how many
+    /// were done. The view is at least 2x2 and uses [`super::Border::Replicate`].
+    pub(super) fn values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) -> usize {
+        let n = xs.len().min(ys.len()).min(out.len()) / 8 * 8;
+        let (w, h) = (img.width, img.height);
+        // Every index below is at most (h - 2) w + (w - 2) and reads up to index + w + 1, so
+        // inside `data` as long as it holds the window and the window fits i32 indices.
+        if w < 2 || h < 2 || img.data.len() < w * h || w * h >= i32::MAX as usize {
+            return 0;
+        }
+        // SAFETY: AVX2 is enabled at compile time (cfg above); the loads and stores stay within
+        // `xs`, `ys` and `out` (i + 8 <= n); the gathers read `data` at the clamped indices
+        // bounded as explained above.
+        unsafe {
+            let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
+            let zero = _mm256_setzero_ps();
+            let (wm, hm) = (
+                _mm256_set1_ps((w - 1) as f32),
+                _mm256_set1_ps((h - 1) as f32),
+            );
+            let (wm2, hm2) = (
+                _mm256_set1_ps((w - 2) as f32),
+                _mm256_set1_ps((h - 2) as f32),
+            );
+            let vw = _mm256_set1_epi32(w as i32);
+            let base = img.data.as_ptr();
+            let mut i = 0;
+            while i < n {
+                // max(NaN, 0) is 0: a NaN coordinate reads the first pixel.
+                let x = _mm256_min_ps(
+                    _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox), zero),
+                    wm,
+                );
+                let y = _mm256_min_ps(
+                    _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy), zero),
+                    hm,
+                );
+                let fx = _mm256_min_ps(_mm256_floor_ps(x), wm2);
+                let fy = _mm256_min_ps(_mm256_floor_ps(y), hm2);
+                let (ax, ay) = (_mm256_sub_ps(x, fx), _mm256_sub_ps(y, fy));
+                let idx = _mm256_add_epi32(
+                    _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), vw),
+                    _mm256_cvttps_epi32(fx),
+                );
+                let p00 = _mm256_i32gather_ps::<4>(base, idx);
+                let p10 = _mm256_i32gather_ps::<4>(base.add(1), idx);
+                let p01 = _mm256_i32gather_ps::<4>(base.add(w), idx);
+                let p11 = _mm256_i32gather_ps::<4>(base.add(w + 1), idx);
+                let top = _mm256_fmadd_ps(ax, _mm256_sub_ps(p10, p00), p00);
+                let bot = _mm256_fmadd_ps(ax, _mm256_sub_ps(p11, p01), p01);
+                let v = _mm256_fmadd_ps(ay, _mm256_sub_ps(bot, top), top);
+                _mm256_storeu_ps(out.as_mut_ptr().add(i), v);
+                i += 8;
+            }
+        }
+        n
+    }
+
+    /// Values and gradients of the first `8 * (len / 8)` points; returns how many were done.
+    /// A group of eight with a point near the window's edge is done by the general path.
+    pub(super) fn values_gradients(
+        img: &ImageView,
+        xs: &[f32],
+        ys: &[f32],
+        values: &mut [f32],
+        gx: &mut [f32],
+        gy: &mut [f32],
+    ) -> usize {
+        let n = xs
+            .len()
+            .min(ys.len())
+            .min(values.len())
+            .min(gx.len())
+            .min(gy.len())
+            / 8
+            * 8;
+        let (w, h) = (img.width, img.height);
+        // Inside points have 1 <= x < w - 2 and 1 <= y < h - 2: the 4x4 neighbourhood from
+        // index (y - 1) w + x - 1 to (y + 2) w + x + 2 < w h lies in `data`.
+        if w < 4 || h < 4 || img.data.len() < w * h || w * h >= i32::MAX as usize {
+            return 0;
+        }
+        // SAFETY: AVX2 is enabled at compile time; loads and stores stay within the slices
+        // (i + 8 <= n); a group is gathered only when all its points are inside, so every
+        // gathered index is within `data` as explained above.
+        unsafe {
+            let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
+            let one = _mm256_set1_ps(1.0);
+            let half = _mm256_set1_ps(0.5);
+            let (xmax, ymax) = (
+                _mm256_set1_ps(w as f32 - 2.0),
+                _mm256_set1_ps(h as f32 - 2.0),
+            );
+            let vw = _mm256_set1_epi32(w as i32);
+            let mut i = 0;
+            while i < n {
+                let x = _mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox);
+                let y = _mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy);
+                let inside = _mm256_and_ps(
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(x, one),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(y, one),
+                    ),
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(x, xmax),
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(y, ymax),
+                    ),
+                );
+                if _mm256_movemask_ps(inside) != 0xFF {
+                    for k in i..i + 8 {
+                        let (lx, ly) = img.local(xs[k], ys[k]);
+                        let (lx, ly) = super::clamp_far(lx, ly, img);
+                        (values[k], gx[k], gy[k]) = img.value_gradient_local(lx, ly);
+                    }
+                    i += 8;
+                    continue;
+                }
+                let (fx, fy) = (_mm256_floor_ps(x), _mm256_floor_ps(y));
+                let (ax, ay) = (_mm256_sub_ps(x, fx), _mm256_sub_ps(y, fy));
+                let idx = _mm256_add_epi32(
+                    _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_sub_ps(fy, one)), vw),
+                    _mm256_cvttps_epi32(_mm256_sub_ps(fx, one)),
+                );
+                let g = |r: usize, c: usize| {
+                    _mm256_i32gather_ps::<4>(img.data.as_ptr().add(r * w + c), idx)
+                };
+                let lerp =
+                    |a: __m256, b: __m256, t: __m256| _mm256_fmadd_ps(t, _mm256_sub_ps(b, a), a);
+                let hz = |r: usize, c: usize| lerp(g(r, c), g(r, c + 1), ax);
+                let (h01, h10, h11, h12) = (hz(0, 1), hz(1, 0), hz(1, 1), hz(1, 2));
+                let (h20, h21, h22, h31) = (hz(2, 0), hz(2, 1), hz(2, 2), hz(3, 1));
+                let v = lerp(h11, h21, ay);
+                let right = lerp(h12, h22, ay);
+                let left = lerp(h10, h20, ay);
+                let down = lerp(h21, h31, ay);
+                let up = lerp(h01, h11, ay);
+                _mm256_storeu_ps(values.as_mut_ptr().add(i), v);
+                _mm256_storeu_ps(
+                    gx.as_mut_ptr().add(i),
+                    _mm256_mul_ps(half, _mm256_sub_ps(right, left)),
+                );
+                _mm256_storeu_ps(
+                    gy.as_mut_ptr().add(i),
+                    _mm256_mul_ps(half, _mm256_sub_ps(down, up)),
+                );
+                i += 8;
+            }
+        }
+        n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// The reference: bilinear interpolation and central differences written the plain way.
+    fn reference(data: &[f32], w: usize, h: usize, x: f32, y: f32) -> (f32, f32, f32) {
+        let px = |ix: i64, iy: i64| {
+            data[iy.clamp(0, h as i64 - 1) as usize * w + ix.clamp(0, w as i64 - 1) as usize]
+        };
+        let bil = |x: f32, y: f32| {
+            let x = x.clamp(-4.0, w as f32 + 4.0);
+            let y = y.clamp(-4.0, h as f32 + 4.0);
+            let (fx, fy) = (x.floor(), y.floor());
+            let (ix, iy) = (fx as i64, fy as i64);
+            let (ax, ay) = (x - fx, y - fy);
+            let top = px(ix, iy) * (1.0 - ax) + px(ix + 1, iy) * ax;
+            let bot = px(ix, iy + 1) * (1.0 - ax) + px(ix + 1, iy + 1) * ax;
+            top * (1.0 - ay) + bot * ay
+        };
+        (
+            bil(x, y),
+            0.5 * (bil(x + 1.0, y) - bil(x - 1.0, y)),
+            0.5 * (bil(x, y + 1.0) - bil(x, y - 1.0)),
+        )
+    }
+
+    #[test]
+    fn sampling_matches_the_reference_inside_at_the_border_and_outside() {
+        let mut rng = Rng::new(17);
+        let (w, h) = (37usize, 23usize);
+        let data: Vec<f32> = (0..w * h).map(|_| rng.range(0.0, 255.0) as f32).collect();
+        // The view sits at (5, 7) in the frame.
+        let view = ImageView::new(&data, w, h, 5, 7);
+        let n = 1001;
+        let xs: Vec<f32> = (0..n).map(|_| rng.range(0.0, 50.0) as f32).collect();
+        let ys: Vec<f32> = (0..n).map(|_| rng.range(0.0, 38.0) as f32).collect();
+        let mut v = vec![0f32; n];
+        let (mut gx, mut gy, mut v2) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        sample_values(&view, &xs, &ys, &mut v);
+        sample_values_gradients(&view, &xs, &ys, &mut v2, &mut gx, &mut gy);
+        for i in 0..n {
+            let (rv, rgx, rgy) = reference(&data, w, h, xs[i] - 5.0, ys[i] - 7.0);
+            assert!(
+                (v[i] - rv).abs() < 1e-3,
+                "value {i} at ({}, {}): {} vs {rv}",
+                xs[i],
+                ys[i],
+                v[i]
+            );
+            assert!(
+                (v2[i] - rv).abs() < 1e-3,
+                "value+grad {i}: {} vs {rv}",
+                v2[i]
+            );
+            assert!(
+                (gx[i] - rgx).abs() < 1e-3 && (gy[i] - rgy).abs() < 1e-3,
+                "gradient {i}"
+            );
+            assert!((sample_value(&view, xs[i], ys[i]) - rv).abs() < 1e-3);
+        }
+        // NaN coordinates read finite values; a zero border reads 0 far outside.
+        let nan = [f32::NAN; 9];
+        sample_values(&view, &nan, &nan, &mut v[..9]);
+        assert!(v[..9].iter().all(|x| x.is_finite()));
+        let zero = view.with_border(Border::Zero);
+        assert_eq!(sample_value(&zero, -100.0, -100.0), 0.0);
     }
 }

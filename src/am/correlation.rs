@@ -9,7 +9,7 @@
 //! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
-use super::{HessianKind, Wrt, accumulate_jtj, dot, jt_times, sum};
+use super::{HessianKind, Wrt, accumulate_jtj, jt_times, sum};
 use crate::linalg::MAX_DOF;
 
 #[derive(Debug, Clone, Default)]
@@ -30,7 +30,21 @@ fn unit(x: &[f32], centered: bool, out: &mut Vec<f32>) -> f64 {
     let mean = mean(x, centered);
     let m = mean as f32;
     out.extend(x.iter().map(|&v| v - m));
-    let norm = dot(out, out).sqrt();
+    // The norm in double precision: NCC's gradient is tiny near a match.
+    let mut lanes = [0.0f64; 8];
+    let chunks = x.chunks_exact(8);
+    let tail: f64 = chunks
+        .remainder()
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum();
+    for c in chunks {
+        for l in 0..8 {
+            let d = c[l] as f64 - mean;
+            lanes[l] += d * d;
+        }
+    }
+    let norm = (lanes.iter().sum::<f64>() + tail).sqrt();
     if norm > 1e-9 {
         let inv = (1.0 / norm) as f32;
         out.iter_mut().for_each(|v| *v *= inv);

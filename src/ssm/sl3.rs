@@ -79,15 +79,13 @@ impl Ssm for Sl3 {
         let at_identity = p.iter().all(|&v| v == 0.0);
         // dH/dp_k, as the 8 matrix entries' derivatives (the (2,2) entry is kept too: H is not
         // normalised to h33 = 1 here).
-        let dh: Vec<Matrix3<f64>> = (0..8)
-            .map(|k| {
-                if at_identity {
-                    generator(k)
-                } else {
-                    expm3_frechet(&a, &generator(k))
-                }
-            })
-            .collect();
+        let dh: [Matrix3<f64>; 8] = std::array::from_fn(|k| {
+            if at_identity {
+                generator(k)
+            } else {
+                expm3_frechet(&a, &generator(k))
+            }
+        });
         let n = xs.len();
         for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
             let (x, y) = (x as f64, y as f64);

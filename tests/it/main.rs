@@ -1,7 +1,11 @@
 //! Integration tests (one binary links faster).
 
+mod alloc;
 mod cli;
 mod common;
 mod dataset;
 mod evaluation;
 mod recovery;
+
+#[global_allocator]
+static ALLOCATOR: alloc::Counting = alloc::Counting;

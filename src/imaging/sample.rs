@@ -123,6 +123,14 @@ impl<'a> ImageView<'a> {
         top + ay * (bot - top)
     }
 
+    /// Value and gradient at frame point `(x, y)` by the general path (any border, any point).
+    #[inline]
+    fn value_gradient_general(&self, x: f32, y: f32) -> (f32, f32, f32) {
+        let (lx, ly) = self.local(x, y);
+        let (lx, ly) = clamp_far(lx, ly, self);
+        self.value_gradient_local(lx, ly)
+    }
+
     /// Value and gradient at window coordinates (general path, any border).
     #[inline(always)]
     fn value_gradient_local(&self, x: f32, y: f32) -> (f32, f32, f32) {
@@ -232,9 +240,7 @@ pub fn sample_values_gradients(
     }
     if img.width < 4 || img.height < 4 {
         for o in 0..xs.len() {
-            let (lx, ly) = img.local(xs[o], ys[o]);
-            let (lx, ly) = clamp_far(lx, ly, img);
-            (values[o], gx[o], gy[o]) = img.value_gradient_local(lx, ly);
+            (values[o], gx[o], gy[o]) = img.value_gradient_general(xs[o], ys[o]);
         }
         return;
     }
@@ -281,9 +287,7 @@ pub fn sample_values_gradients(
                 let up = lerp(h(0, 1), h(1, 1), ay);
                 (v, 0.5 * (right - left), 0.5 * (down - up))
             } else {
-                let (lx, ly) = img.local(xs[o], ys[o]);
-                let (lx, ly) = clamp_far(lx, ly, img);
-                img.value_gradient_local(lx, ly)
+                img.value_gradient_general(xs[o], ys[o])
             };
             values[o] = v;
             gx[o] = dx;
@@ -409,9 +413,7 @@ mod avx2 {
                 );
                 if _mm256_movemask_ps(inside) != 0xFF {
                     for k in i..i + 8 {
-                        let (lx, ly) = img.local(xs[k], ys[k]);
-                        let (lx, ly) = super::clamp_far(lx, ly, img);
-                        (values[k], gx[k], gy[k]) = img.value_gradient_local(lx, ly);
+                        (values[k], gx[k], gy[k]) = img.value_gradient_general(xs[k], ys[k]);
                     }
                     i += 8;
                     continue;

@@ -4,7 +4,6 @@
 //! `p <- p + dp`.
 
 use super::{Context, SearchMethod, SmBuilder, Update};
-use crate::am::Wrt;
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
@@ -21,9 +20,6 @@ pub struct Ialk;
 impl SearchMethod for Ialk {
     fn name(&self) -> &'static str {
         ENTRY.name
-    }
-    fn initialize(&mut self, _ctx: &mut Context) -> Result<(), super::LossReason> {
-        Ok(())
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, super::LossReason> {
         let p = ctx.params;
@@ -46,23 +42,7 @@ impl SearchMethod for Ialk {
             ctx.gx[i] = (tx * a11 - ty * a10) / det;
             ctx.gy[i] = (-tx * a01 + ty * a00) / det;
         }
-        let mut dwdp = std::mem::take(&mut ctx.dwdp);
-        ctx.ssm.jacobian(&p, &ctx.grid_x, &ctx.grid_y, &mut dwdp);
-        let mut jac = std::mem::take(&mut ctx.jac);
-        Context::project(&ctx.gx, &ctx.gy, &dwdp, ctx.dof, &mut jac);
-        ctx.dwdp = dwdp;
-        let f = ctx.am.gradient(Wrt::Current, &ctx.values, &mut ctx.grad);
-        let mut h = [0.0; 64];
-        ctx.am.hessian(
-            Wrt::Current,
-            ctx.hessian,
-            &ctx.values,
-            &jac,
-            ctx.dof,
-            &mut h,
-        );
-        let r = ctx.step(&jac, &h, Update::Additive);
-        ctx.jac = jac;
-        r.map(|_| f)
+        ctx.project_gradients(Some(&p));
+        ctx.forward_step(Update::Additive)
     }
 }

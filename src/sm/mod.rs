@@ -14,7 +14,7 @@ mod fclk;
 mod ialk;
 mod iclk;
 
-use crate::am::{Am, Capabilities, HessianKind, jt_times};
+use crate::am::{Am, Capabilities, HessianKind, Wrt, jt_times};
 use crate::geometry::{Normaliser, Point, Quad};
 use crate::imaging::{ImageView, sample_values, sample_values_gradients};
 use crate::linalg::{MAX_DOF, newton_step};
@@ -61,7 +61,9 @@ pub trait SearchMethod: Send + std::fmt::Debug {
         }
     }
     /// Called once the template is set in `ctx` (values and gradients sampled).
-    fn initialize(&mut self, ctx: &mut Context) -> Result<(), LossReason>;
+    fn initialize(&mut self, _ctx: &mut Context) -> Result<(), LossReason> {
+        Ok(())
+    }
     /// One iteration on `img`: updates `ctx.params` and returns the similarity before the step.
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason>;
 }
@@ -107,8 +109,8 @@ pub struct Context {
     pub dof: usize,
     /// Image <-> normalised frame.
     pub norm: Normaliser,
-    /// The sampling grid: the unit square's `res x res` points mapped onto the initial quad, in
-    /// normalised coordinates.
+    /// The sampling grid: the centres of a `res x res` tiling of the unit square mapped onto the
+    /// initial quad, in normalised coordinates.
     pub grid_x: Vec<f32>,
     pub grid_y: Vec<f32>,
     /// The initial quad in normalised coordinates.
@@ -119,7 +121,7 @@ pub struct Context {
     pub template: Vec<f32>,
     pub template_gx: Vec<f32>,
     pub template_gy: Vec<f32>,
-    /// `dw/dp` at the identity on the grid (`N x 2 x S`).
+    /// `dw/dp` at the identity on the grid (layout of [`Ssm::jacobian`]).
     pub dwdp0: Vec<f32>,
     /// Scratch: `dw/dp` at the current parameters.
     pub dwdp: Vec<f32>,
@@ -132,7 +134,7 @@ pub struct Context {
     pub gy: Vec<f32>,
     /// AM gradient with respect to pixels.
     pub grad: Vec<f32>,
-    /// Pixel Jacobian `dI/dp` (`N x S`).
+    /// Pixel Jacobian `dI/dp` (`N x S`, stored by parameter).
     pub jac: Vec<f32>,
 }
 
@@ -260,6 +262,41 @@ impl Context {
         }
     }
 
+    /// Projects the gradients in `gx`, `gy` (with respect to the normalised template point) on
+    /// `dw/dp` into the pixel Jacobian `jac`: `dw/dp` at the identity (compositional methods)
+    /// or, given `p`, at `p` (additive methods).
+    pub fn project_gradients(&mut self, at: Option<&Params>) {
+        let dwdp = match at {
+            Some(p) => {
+                self.ssm
+                    .jacobian(p, &self.grid_x, &self.grid_y, &mut self.dwdp);
+                &self.dwdp
+            }
+            None => &self.dwdp0,
+        };
+        Self::project(&self.gx, &self.gy, dwdp, self.dof, &mut self.jac);
+    }
+
+    /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
+    /// current pixels `values`, through the pixel Jacobian `jac`; returns the similarity before
+    /// the step.
+    pub fn forward_step(&mut self, update: Update) -> Result<f64, LossReason> {
+        let f = self.am.gradient(Wrt::Current, &self.values, &mut self.grad);
+        let mut h = [0.0; MAX_DOF * MAX_DOF];
+        self.am.hessian(
+            Wrt::Current,
+            self.hessian,
+            &self.values,
+            &self.jac,
+            self.dof,
+            &mut h,
+        );
+        let jac = std::mem::take(&mut self.jac);
+        let r = self.step(&jac, &h, update);
+        self.jac = jac;
+        r.map(|_| f)
+    }
+
     /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.grad`) and
     /// applies the step to the parameters.
     pub fn step(
@@ -328,6 +365,3 @@ impl Context {
         self.am.set_template(&self.template);
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -40,6 +40,8 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod am;
+#[cfg(feature = "gui")]
+pub mod app;
 pub mod bench;
 pub mod dataset;
 pub mod error;

@@ -18,12 +18,28 @@ use std::path::{Path, PathBuf};
     about = "Modular registration-based visual trackers (AM x SSM x SM)"
 )]
 struct Cli {
+    /// Without a subcommand: the inspector on the bundled demo.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// The interactive inspector (the default).
+    Inspect {
+        /// A saved session (sessions/*.toml).
+        #[arg(long)]
+        session: Option<PathBuf>,
+        /// A sequence to open instead of the session's.
+        #[arg(long)]
+        seq: Option<PathBuf>,
+        /// With --screenshot: frames to track first.
+        #[arg(long, default_value_t = 30)]
+        frames: usize,
+        /// Track, save a screenshot of the whole window to this PNG, and exit.
+        #[arg(long)]
+        screenshot: Option<PathBuf>,
+    },
     /// Render the bundled demo sequence (once) and compare ICLK, FCLK and ESM with SSD and ZNCC.
     Demo {
         /// Where the demo sequence is rendered (default: the user cache folder).
@@ -213,7 +229,19 @@ struct SynthArgs {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
-    match cli.command {
+    let command = cli.command.unwrap_or(Command::Inspect {
+        session: None,
+        seq: None,
+        frames: 30,
+        screenshot: None,
+    });
+    match command {
+        Command::Inspect {
+            session,
+            seq,
+            frames,
+            screenshot,
+        } => run_inspector(session, seq, frames, screenshot),
         Command::Demo { cache } => run_demo(cache.as_deref()),
         Command::Track {
             seq,
@@ -269,6 +297,36 @@ fn main() -> Result<()> {
             json.as_deref(),
         ),
     }
+}
+
+#[cfg(feature = "gui")]
+fn run_inspector(
+    session: Option<PathBuf>,
+    seq: Option<PathBuf>,
+    frames: usize,
+    screenshot: Option<PathBuf>,
+) -> Result<()> {
+    let shot = screenshot.clone();
+    regtrack::app::run(regtrack::app::RunOptions {
+        session,
+        sequence: seq,
+        screenshot: screenshot.map(|p| (frames, p)),
+    })
+    .map_err(|e| anyhow::anyhow!("inspector: {e}"))?;
+    if let Some(p) = shot {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "gui"))]
+fn run_inspector(
+    _: Option<PathBuf>,
+    _: Option<PathBuf>,
+    _: usize,
+    _: Option<PathBuf>,
+) -> Result<()> {
+    bail!("this regtrack was built without the inspector (feature `gui`); see `regtrack --help`")
 }
 
 fn bar(len: usize, what: &str) -> ProgressBar {

@@ -1,0 +1,230 @@
+//! Commands: the panels never change the model; they push [`Command`]s that [`InspectorApp::apply`]
+//! carries out, in one place, after the frame's UI is built.
+
+use super::state::{InitSource, PALETTE, SequenceSource, State, TrackerEntry};
+use super::worker::Job;
+use super::{InspectorApp, Tool};
+use crate::geometry::{Point, Quad};
+use crate::ssm;
+use std::path::PathBuf;
+
+/// Everything the user can do.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    OpenSequence(SequenceSource),
+    AddTracker,
+    RemoveTracker(usize),
+    /// Replace a tracker's settings (methods, parameters, colour, enabled).
+    SetTracker(usize, TrackerEntry),
+    Play,
+    Pause,
+    /// Track one more frame.
+    Step,
+    /// Show a frame.
+    Seek(usize),
+    SetPlaybackFps(f32),
+    /// Re-initialise every enabled tracker on a frame and track from there.
+    RerunFrom(usize),
+    /// Initialise one tracker from the given source on the current frame (and re-run).
+    InitTracker(usize, InitSource),
+    SelectTracker(usize),
+    SelectIteration(Option<usize>),
+    SetTool(Tool),
+    SetView(super::state::View),
+    /// Move a corner of the ground truth shown on a frame (image coordinates).
+    MoveGtCorner {
+        frame: usize,
+        corner: usize,
+        to: Point,
+    },
+    /// Show (and correct) the ground truth projected on this SSM.
+    SetGtSsm(String),
+    SaveGroundTruth,
+    SaveSession(PathBuf),
+    LoadSession(PathBuf),
+    DismissError(usize),
+    /// Show an error message.
+    ReportError(String),
+}
+
+impl InspectorApp {
+    /// Applies the queued commands.
+    pub fn apply_pending(&mut self) {
+        let cmds = std::mem::take(&mut self.rt.commands);
+        for c in cmds {
+            self.apply(c);
+        }
+    }
+
+    /// The one handler of every command.
+    pub fn apply(&mut self, cmd: Command) {
+        match cmd {
+            Command::OpenSequence(src) => self.open(src),
+            Command::AddTracker => {
+                let n = self.state.trackers.len();
+                let mut entry = self
+                    .state
+                    .trackers
+                    .last()
+                    .cloned()
+                    .unwrap_or_else(|| State::default().trackers[0].clone());
+                entry.color = PALETTE[n % PALETTE.len()];
+                entry.init = InitSource::GroundTruth;
+                self.state.trackers.push(entry);
+                self.rt.results.push(Vec::new());
+                self.restart(self.state.frame);
+            }
+            Command::RemoveTracker(i) => {
+                if i < self.state.trackers.len() {
+                    self.state.trackers.remove(i);
+                    if i < self.rt.results.len() {
+                        self.rt.results.remove(i);
+                    }
+                    self.state.selected_tracker = self
+                        .state
+                        .selected_tracker
+                        .min(self.state.trackers.len().saturating_sub(1));
+                    self.restart(self.state.start_frame);
+                }
+            }
+            Command::SetTracker(i, entry) => {
+                if let Some(t) = self.state.trackers.get_mut(i) {
+                    let rerun = t.spec != entry.spec || t.enabled != entry.enabled;
+                    *t = entry;
+                    if rerun {
+                        if let Err(e) = crate::tracker::Tracker::new(&t.spec) {
+                            self.error(format!("tracker {}: {e}", i + 1));
+                        }
+                        self.restart(self.state.start_frame);
+                    }
+                }
+            }
+            Command::Play => {
+                if self.rt.sequence.is_some() {
+                    self.rt.playing = true;
+                    self.rt.worker.send(Job::Advance {
+                        generation: self.rt.generation,
+                        frames: None,
+                        fps: self.state.playback_fps,
+                    });
+                }
+            }
+            Command::Pause => {
+                self.rt.playing = false;
+                self.rt.worker.stop();
+            }
+            Command::Step => {
+                self.rt.worker.send(Job::Advance {
+                    generation: self.rt.generation,
+                    frames: Some(1),
+                    fps: 0.0,
+                });
+            }
+            Command::Seek(i) => {
+                let n = self.frame_count();
+                if n > 0 {
+                    self.state.frame = i.min(n - 1);
+                    self.rt.selected_iteration = None;
+                    self.rt.worker.send(Job::Show(self.state.frame));
+                }
+            }
+            Command::SetPlaybackFps(f) => self.state.playback_fps = f.max(0.0),
+            Command::RerunFrom(f) => self.restart(f),
+            Command::InitTracker(i, init) => {
+                if let Some(t) = self.state.trackers.get_mut(i) {
+                    t.init = init;
+                    self.restart(self.state.frame);
+                }
+            }
+            Command::SelectTracker(i) => self.state.selected_tracker = i,
+            Command::SelectIteration(it) => self.rt.selected_iteration = it,
+            Command::SetTool(t) => self.rt.tool = t,
+            Command::SetView(v) => self.state.view = v,
+            Command::MoveGtCorner { frame, corner, to } => {
+                if let Some(q) = self.ground_truth(frame) {
+                    let mut moved = q;
+                    moved.0[corner.min(3)] = to;
+                    // Keep the correction in the shown SSM: project the moved quad onto it.
+                    let fixed = self.project_gt(&moved).unwrap_or(moved);
+                    self.rt
+                        .gt_edits
+                        .insert((self.state.gt_ssm.clone(), frame), fixed);
+                    self.rt.gt_dirty = true;
+                }
+            }
+            Command::SetGtSsm(name) => match ssm::build(&name) {
+                Ok(m) => self.state.gt_ssm = m.name().to_string(),
+                Err(e) => self.error(e.to_string()),
+            },
+            Command::SaveGroundTruth => match self.save_ground_truth() {
+                Ok(p) => self.rt.status = format!("saved the ground truth to {}", p.display()),
+                Err(e) => self.error(format!("cannot save the ground truth: {e}")),
+            },
+            Command::SaveSession(p) => match self.state.save(&p) {
+                Ok(()) => {
+                    self.rt.status = format!("saved session {}", p.display());
+                    self.rt.session_path = p.display().to_string();
+                }
+                Err(e) => self.error(format!("cannot save the session: {e}")),
+            },
+            Command::LoadSession(p) => match State::load(&p) {
+                Ok(s) => {
+                    self.rt.session_path = p.display().to_string();
+                    self.load_state(s);
+                }
+                Err(e) => self.error(format!("cannot load the session: {e}")),
+            },
+            Command::ReportError(e) => self.error(e),
+            Command::DismissError(i) => {
+                if i < self.rt.errors.len() {
+                    self.rt.errors.remove(i);
+                }
+            }
+        }
+    }
+
+    /// Ground truth of a frame as shown: corrected, else projected on the chosen SSM.
+    pub fn ground_truth(&self, frame: usize) -> Option<Quad> {
+        if let Some(q) = self.rt.gt_edits.get(&(self.state.gt_ssm.clone(), frame)) {
+            return Some(*q);
+        }
+        let q = self.rt.sequence.as_ref()?.ground_truth(frame)?;
+        Some(self.project_gt(&q).unwrap_or(q))
+    }
+
+    /// A quad projected on the ground-truth SSM: the least-squares warp of the start frame's
+    /// ground truth (or of the quad itself for 8 DOF).
+    fn project_gt(&self, q: &Quad) -> Option<Quad> {
+        let m = ssm::build(&self.state.gt_ssm).ok()?;
+        if m.dof() == 8 {
+            return Some(*q);
+        }
+        let seq = self.rt.sequence.as_ref()?;
+        let base = (0..seq.len()).find_map(|i| seq.ground_truth(i))?;
+        let p = m.fit(&base.0, &q.0)?;
+        Some(ssm::warp_quad(&*m, &p, &base))
+    }
+
+    fn save_ground_truth(&mut self) -> crate::Result<PathBuf> {
+        let seq = self
+            .rt
+            .sequence
+            .clone()
+            .ok_or_else(|| crate::Error::InvalidRegion("no sequence is open".into()))?;
+        let gt: Vec<Option<Quad>> = (0..seq.len()).map(|i| self.ground_truth(i)).collect();
+        let dir = seq
+            .gt_path
+            .as_ref()
+            .and_then(|p| p.parent().map(|d| d.to_path_buf()))
+            .or_else(|| {
+                seq.frames
+                    .first()
+                    .and_then(|f| f.parent().map(|d| d.to_path_buf()))
+            })
+            .unwrap_or_else(|| PathBuf::from("."));
+        let path = dir.join(format!("{}_gt_{}.txt", seq.name, self.state.gt_ssm));
+        crate::dataset::write_corners(&path, &gt, "jpg")?;
+        self.rt.gt_dirty = false;
+        Ok(path)
+    }
+}

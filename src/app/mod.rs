@@ -1,0 +1,510 @@
+//! The inspector: an interactive desktop application (eframe/egui) to load a sequence, pick
+//! trackers (AM, SSM, SM) from the registries, watch them track against the ground truth, read
+//! live success-rate and error plots, step through the iterations of a frame, and correct the
+//! ground truth by hand.
+//!
+//! Layout of the code (as in rerun): [`state::State`] is what a session saves; the panels read it
+//! and push [`command::Command`]s that [`InspectorApp::apply`] carries out; tracking runs on the
+//! [`worker`] thread, polled every frame.
+
+use eframe::egui;
+pub mod command;
+mod panels;
+pub mod state;
+pub mod worker;
+
+use crate::dataset::Sequence;
+use crate::eval;
+use crate::geometry::{Point, Quad, alignment_error};
+use crate::tracker::TrackStatus;
+use command::Command;
+use state::{InitSource, SequenceSource, State};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use worker::{FrameImage, Job, Reply, TrackerFrame, Worker};
+
+/// What a pointer drag in the frame view does.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Tool {
+    /// Drag pans, scroll zooms.
+    #[default]
+    Navigate,
+    /// Four clicks give a tracker's initial quad (the corners clicked so far).
+    DrawQuad { tracker: usize, corners: Vec<Point> },
+    /// A drag gives a tracker's initial box.
+    DrawBox {
+        tracker: usize,
+        start: Option<Point>,
+    },
+    /// Drag the ground-truth corners of the shown frame.
+    EditGroundTruth,
+}
+
+/// Take a screenshot once enough frames are tracked, then close.
+#[derive(Debug)]
+pub struct ScreenshotPlan {
+    pub frames: usize,
+    pub path: PathBuf,
+    started: bool,
+    requested: bool,
+    pub result: Arc<Mutex<Option<Result<(), String>>>>,
+}
+
+/// Runtime fields: never saved.
+pub struct Runtime {
+    worker: Worker,
+    sequence: Option<Arc<Sequence>>,
+    generation: u64,
+    /// Per tracker, per frame.
+    results: Vec<Vec<Option<TrackerFrame>>>,
+    texture: Option<egui::TextureHandle>,
+    texture_frame: Option<usize>,
+    image_size: [usize; 2],
+    pending_image: Option<FrameImage>,
+    playing: bool,
+    /// The last frame the trackers reached.
+    tracked_until: Option<usize>,
+    status: String,
+    errors: Vec<String>,
+    progress: Option<(String, usize, usize)>,
+    tool: Tool,
+    selected_iteration: Option<usize>,
+    gt_edits: BTreeMap<(String, usize), Quad>,
+    gt_dirty: bool,
+    /// Typed-path fallbacks for the file dialogs.
+    path_input: String,
+    session_path: String,
+    recent: Vec<PathBuf>,
+    commands: Vec<Command>,
+    patches: BTreeMap<usize, [egui::TextureHandle; 3]>,
+    screenshot: Option<ScreenshotPlan>,
+}
+
+/// The application.
+pub struct InspectorApp {
+    pub state: State,
+    rt: Runtime,
+}
+
+impl InspectorApp {
+    /// A new inspector on `state`; `wake` requests a repaint (from the worker thread).
+    pub fn new(state: State, wake: impl Fn() + Send + Sync + 'static) -> Self {
+        let rt = Runtime {
+            worker: Worker::spawn(wake),
+            sequence: None,
+            generation: 0,
+            results: Vec::new(),
+            texture: None,
+            texture_frame: None,
+            image_size: [0, 0],
+            pending_image: None,
+            playing: false,
+            tracked_until: None,
+            status: String::new(),
+            errors: Vec::new(),
+            progress: None,
+            tool: Tool::Navigate,
+            selected_iteration: None,
+            gt_edits: BTreeMap::new(),
+            gt_dirty: false,
+            path_input: String::new(),
+            session_path: String::from("sessions/my_session.toml"),
+            recent: Vec::new(),
+            commands: Vec::new(),
+            patches: BTreeMap::new(),
+            screenshot: None,
+        };
+        let mut app = InspectorApp {
+            state: State::default(),
+            rt,
+        };
+        app.load_state(state);
+        app
+    }
+
+    /// Plans a screenshot after `frames` tracked frames (the inspector then plays and closes).
+    pub fn screenshot_after(
+        &mut self,
+        frames: usize,
+        path: PathBuf,
+    ) -> Arc<Mutex<Option<Result<(), String>>>> {
+        let plan = ScreenshotPlan {
+            frames,
+            path,
+            started: false,
+            requested: false,
+            result: Arc::new(Mutex::new(None)),
+        };
+        let r = plan.result.clone();
+        self.rt.screenshot = Some(plan);
+        r
+    }
+
+    /// Replaces the session.
+    fn load_state(&mut self, state: State) {
+        let src = state.sequence.clone();
+        self.state = state;
+        self.rt.results = vec![Vec::new(); self.state.trackers.len()];
+        self.rt.gt_edits.clear();
+        self.open(src);
+    }
+
+    /// Queues a command (what panels do).
+    pub fn send(&mut self, c: Command) {
+        self.rt.commands.push(c);
+    }
+
+    fn error(&mut self, e: String) {
+        self.rt.errors.push(e);
+        if self.rt.errors.len() > 5 {
+            self.rt.errors.remove(0);
+        }
+    }
+
+    fn open(&mut self, src: SequenceSource) {
+        self.rt.playing = false;
+        self.rt.progress = Some(("opening the sequence".into(), 0, 0));
+        if let SequenceSource::Path(p) = &src {
+            self.rt.recent.retain(|r| r != p);
+            self.rt.recent.insert(0, p.clone());
+            self.rt.recent.truncate(8);
+        }
+        self.state.sequence = src.clone();
+        self.rt.worker.send(Job::Open(src));
+    }
+
+    /// Frames in the open sequence.
+    pub fn frame_count(&self) -> usize {
+        self.rt.sequence.as_ref().map_or(0, |s| s.len())
+    }
+
+    /// Whether the trackers are playing.
+    pub fn is_playing(&self) -> bool {
+        self.rt.playing
+    }
+
+    /// The open sequence.
+    pub fn sequence(&self) -> Option<&Arc<Sequence>> {
+        self.rt.sequence.as_ref()
+    }
+
+    /// Re-initialises every enabled tracker on `frame` and shows it.
+    fn restart(&mut self, frame: usize) {
+        let Some(seq) = self.rt.sequence.clone() else {
+            return;
+        };
+        let frame = frame.min(seq.len().saturating_sub(1));
+        self.rt.generation += 1;
+        self.rt.playing = false;
+        self.rt.tracked_until = None;
+        self.rt.selected_iteration = None;
+        self.state.start_frame = frame;
+        self.state.frame = frame;
+        self.rt
+            .results
+            .resize(self.state.trackers.len(), Vec::new());
+        for r in &mut self.rt.results {
+            r.clear();
+        }
+        let mut specs = Vec::new();
+        let mut missing = Vec::new();
+        for (i, t) in self
+            .state
+            .trackers
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.enabled)
+        {
+            let quad = match &t.init {
+                InitSource::Quad(q) => Some(*q),
+                InitSource::GroundTruth => self.ground_truth(frame),
+            };
+            match quad {
+                Some(q) => specs.push((i, t.spec.clone(), q)),
+                None => missing.push(i + 1),
+            }
+        }
+        if !missing.is_empty() {
+            self.error(format!(
+                "no ground truth on frame {}: draw a quad or a box for tracker(s) {:?}",
+                frame + 1,
+                missing
+            ));
+        }
+        self.rt.worker.send(Job::Start {
+            generation: self.rt.generation,
+            frame,
+            trackers: specs,
+        });
+    }
+
+    /// Handles the worker's replies.
+    fn poll_worker(&mut self) {
+        for r in self.rt.worker.poll() {
+            match r {
+                Reply::Progress(what, d, t) => self.rt.progress = Some((what, d, t)),
+                Reply::Opened(seq) => {
+                    self.rt.progress = None;
+                    self.rt.status = format!("{}: {} frames", seq.name, seq.len());
+                    let start = self.state.start_frame.min(seq.len() - 1);
+                    self.rt.sequence = Some(seq);
+                    self.rt.texture_frame = None;
+                    self.restart(start);
+                }
+                Reply::Image(img) => {
+                    if img.index == self.state.frame {
+                        self.rt.pending_image = Some(img);
+                    }
+                }
+                Reply::Frame {
+                    generation,
+                    frame,
+                    results,
+                    image,
+                } => {
+                    if generation != self.rt.generation {
+                        continue;
+                    }
+                    for r in results {
+                        if let Some(v) = self.rt.results.get_mut(r.tracker) {
+                            if v.len() <= frame {
+                                v.resize(frame + 1, None);
+                            }
+                            v[frame] = Some(r);
+                        }
+                    }
+                    self.rt.tracked_until = Some(frame);
+                    // Follow the trackers while they run.
+                    self.state.frame = frame;
+                    if let Some(img) = image {
+                        self.rt.pending_image = Some(img);
+                    }
+                }
+                Reply::Stopped { generation, .. } => {
+                    if generation == self.rt.generation {
+                        self.rt.playing = false;
+                    }
+                }
+                Reply::Error(e) => {
+                    self.rt.progress = None;
+                    self.error(e);
+                }
+            }
+        }
+    }
+
+    /// Uploads the newest decoded frame as the view's texture.
+    fn upload(&mut self, ctx: &egui::Context) {
+        if let Some(img) = self.rt.pending_image.take() {
+            let color =
+                egui::ColorImage::from_rgba_unmultiplied([img.width, img.height], &img.rgba);
+            match &mut self.rt.texture {
+                Some(t) => t.set(color, egui::TextureOptions::LINEAR),
+                None => {
+                    self.rt.texture =
+                        Some(ctx.load_texture("frame", color, egui::TextureOptions::LINEAR))
+                }
+            }
+            self.rt.image_size = [img.width, img.height];
+            self.rt.texture_frame = Some(img.index);
+        }
+        if self.rt.texture_frame != Some(self.state.frame)
+            && self.rt.sequence.is_some()
+            && !self.rt.playing
+        {
+            self.rt.texture_frame = Some(self.state.frame);
+            self.rt.worker.send(Job::Show(self.state.frame));
+        }
+    }
+
+    /// The result of tracker `t` on `frame`.
+    pub fn result(&self, t: usize, frame: usize) -> Option<&TrackerFrame> {
+        self.rt.results.get(t)?.get(frame)?.as_ref()
+    }
+
+    /// Alignment errors of tracker `t` on the frames tracked after the start frame (lost frames
+    /// are infinite), against the ground truth shown.
+    pub fn errors(&self, t: usize) -> Vec<(usize, f64)> {
+        let Some(v) = self.rt.results.get(t) else {
+            return Vec::new();
+        };
+        v.iter()
+            .enumerate()
+            .filter(|(f, r)| *f > self.state.start_frame && r.is_some())
+            .filter_map(|(f, r)| {
+                let r = r.as_ref()?;
+                let gt = self.ground_truth(f)?;
+                let e = if r.status == TrackStatus::Tracking {
+                    alignment_error(&r.corners, &gt)
+                } else {
+                    f64::INFINITY
+                };
+                Some((f, e))
+            })
+            .collect()
+    }
+
+    /// The success curve of tracker `t` (from [`eval::success_curve`]).
+    pub fn success_curve(&self, t: usize) -> Vec<(f64, f64)> {
+        let e: Vec<f64> = self.errors(t).into_iter().map(|(_, e)| e).collect();
+        if e.is_empty() {
+            return Vec::new();
+        }
+        eval::success_curve(&e)
+    }
+
+    /// Draws the whole window into `ui` (used by eframe and by the UI tests).
+    pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let ctx = ui.ctx().clone();
+        self.poll_worker();
+        self.upload(&ctx);
+        self.handle_dropped_files(&ctx);
+        panels::top_bar(self, ui);
+        panels::playback_bar(self, ui);
+        panels::sidebar(self, ui);
+        panels::plots_panel(self, ui);
+        egui::CentralPanel::default().show(ui, |ui| panels::frame_view(self, ui));
+        self.apply_pending();
+        self.screenshot(&ctx);
+        if self.rt.playing || self.rt.progress.is_some() {
+            ctx.request_repaint();
+        }
+    }
+
+    fn handle_dropped_files(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
+        if let Some(p) = dropped.into_iter().next() {
+            self.send(Command::OpenSequence(SequenceSource::Path(p)));
+        }
+    }
+
+    /// Drives a planned screenshot: track the planned frames, wait for the frame to be shown,
+    /// then capture the window and close it.
+    fn screenshot(&mut self, ctx: &egui::Context) {
+        let (n, start, generation) = (
+            self.frame_count(),
+            self.state.start_frame,
+            self.rt.generation,
+        );
+        let Some(plan) = self.rt.screenshot.as_mut() else {
+            return;
+        };
+        if plan.requested || n == 0 {
+            return;
+        }
+        ctx.request_repaint();
+        let target = (start + plan.frames).min(n - 1);
+        let Some(reached) = self.rt.tracked_until else {
+            return;
+        };
+        if reached < target {
+            if !plan.started {
+                plan.started = true;
+                self.rt.playing = true;
+                self.rt.worker.send(Job::Advance {
+                    generation,
+                    frames: Some(target - reached),
+                    fps: 0.0,
+                });
+            }
+            return;
+        }
+        if self.rt.playing
+            || self.rt.texture_frame != Some(reached)
+            || self.rt.pending_image.is_some()
+        {
+            return;
+        }
+        plan.requested = true;
+        let path = plan.path.clone();
+        let result = plan.result.clone();
+        let ctx2 = ctx.clone();
+        ctx.request_screenshot(move |img| {
+            let saved = save_png(&path, &img);
+            if let Ok(mut r) = result.lock() {
+                *r = Some(saved);
+            }
+            ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+            ctx2.request_repaint();
+        });
+    }
+}
+
+fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), String> {
+    let [w, h] = img.size;
+    let raw: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
+    let buf = image::RgbaImage::from_raw(w as u32, h as u32, raw)
+        .ok_or("screenshot of the wrong size")?;
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+    }
+    buf.save(path)
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+impl eframe::App for InspectorApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        InspectorApp::ui(self, ui);
+    }
+}
+
+/// How to start the inspector.
+#[derive(Debug, Default)]
+pub struct RunOptions {
+    pub session: Option<PathBuf>,
+    pub sequence: Option<PathBuf>,
+    pub screenshot: Option<(usize, PathBuf)>,
+}
+
+/// Opens the inspector window (blocks until it closes).
+pub fn run(opts: RunOptions) -> Result<(), String> {
+    let mut state = match &opts.session {
+        Some(p) => State::load(p).map_err(|e| e.to_string())?,
+        None => State::default(),
+    };
+    if let Some(p) = &opts.sequence {
+        state.sequence = SequenceSource::Path(p.clone());
+    }
+    let native = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("regtrack inspector")
+            .with_inner_size([1400.0, 860.0]),
+        ..Default::default()
+    };
+    let shot = opts.screenshot;
+    let result_slot: Arc<Mutex<Option<Arc<Mutex<Option<Result<(), String>>>>>>> =
+        Arc::new(Mutex::new(None));
+    let slot2 = result_slot.clone();
+    eframe::run_native(
+        "regtrack inspector",
+        native,
+        Box::new(move |cc| {
+            let ctx = cc.egui_ctx.clone();
+            let mut app = InspectorApp::new(state, move || ctx.request_repaint());
+            if let Some((frames, path)) = shot {
+                let r = app.screenshot_after(frames, path);
+                if let Ok(mut s) = slot2.lock() {
+                    *s = Some(r);
+                }
+            }
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| e.to_string())?;
+    let outcome = result_slot.lock().ok().and_then(|s| s.clone());
+    match outcome {
+        Some(r) => match r.lock().ok().and_then(|v| v.clone()) {
+            Some(res) => res,
+            None => Err("the window closed before the screenshot was taken".into()),
+        },
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,174 @@
+//! The top bar (sequence, session, messages) and the playback bar.
+
+use crate::app::InspectorApp;
+use crate::app::command::Command;
+use crate::app::state::SequenceSource;
+use eframe::egui;
+use std::path::PathBuf;
+
+/// Opening sequences and sessions, status and errors.
+pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    egui::Panel::top("top_bar").show(ui, |ui| {
+        ui.horizontal_wrapped(|ui| {
+            ui.strong("regtrack");
+            ui.separator();
+            if ui
+                .button("Open folder…")
+                .on_hover_text("A folder of frames or an MTF dataset sequence folder")
+                .clicked()
+            {
+                if let Some(p) = rfd::FileDialog::new().pick_folder() {
+                    app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                }
+            }
+            if ui
+                .button("Open ground truth…")
+                .on_hover_text("An MTF <seq>.txt or a POT _gt_points.txt file")
+                .clicked()
+            {
+                if let Some(p) = rfd::FileDialog::new()
+                    .add_filter("ground truth", &["txt"])
+                    .pick_file()
+                {
+                    app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                }
+            }
+            // Typed path: works without a desktop portal.
+            let edit = ui.add(
+                egui::TextEdit::singleline(&mut app.rt.path_input)
+                    .hint_text("or type a path and press Enter")
+                    .desired_width(260.0),
+            );
+            let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("Open path").clicked() || enter) && !app.rt.path_input.trim().is_empty() {
+                let p = PathBuf::from(app.rt.path_input.trim());
+                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+            }
+            if ui
+                .button("Demo")
+                .on_hover_text("The bundled demo sequence")
+                .clicked()
+            {
+                app.send(Command::OpenSequence(SequenceSource::Demo));
+            }
+            if !app.rt.recent.is_empty() {
+                egui::ComboBox::from_id_salt("recent")
+                    .selected_text("Recent")
+                    .show_ui(ui, |ui| {
+                        for p in app.rt.recent.clone() {
+                            if ui
+                                .selectable_label(false, p.display().to_string())
+                                .clicked()
+                            {
+                                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                            }
+                        }
+                    });
+            }
+            ui.separator();
+            ui.label("Session:");
+            ui.add(egui::TextEdit::singleline(&mut app.rt.session_path).desired_width(200.0));
+            if ui.button("Save session").clicked() {
+                app.send(Command::SaveSession(PathBuf::from(
+                    app.rt.session_path.trim(),
+                )));
+            }
+            if ui.button("Load session").clicked() {
+                app.send(Command::LoadSession(PathBuf::from(
+                    app.rt.session_path.trim(),
+                )));
+            }
+        });
+        ui.horizontal(|ui| {
+            if let Some((what, d, t)) = &app.rt.progress {
+                ui.spinner();
+                if *t > 0 {
+                    ui.add(
+                        egui::ProgressBar::new(*d as f32 / *t as f32)
+                            .text(format!("{what}: {d}/{t}"))
+                            .desired_width(300.0),
+                    );
+                } else {
+                    ui.label(what.as_str());
+                }
+            }
+            ui.label(app.rt.status.as_str());
+        });
+        let mut dismiss = None;
+        for (i, e) in app.rt.errors.iter().enumerate() {
+            ui.horizontal(|ui| {
+                ui.colored_label(
+                    egui::Color32::from_rgb(255, 110, 110),
+                    format!("Error: {e}"),
+                );
+                if ui.small_button("dismiss").clicked() {
+                    dismiss = Some(i);
+                }
+            });
+        }
+        if let Some(i) = dismiss {
+            app.send(Command::DismissError(i));
+        }
+    });
+}
+
+/// Play, pause, step, seek, speed, re-run.
+pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    egui::Panel::bottom("playback").show(ui, |ui| {
+        ui.horizontal(|ui| {
+            let n = app.frame_count();
+            if ui
+                .button("|< Start")
+                .on_hover_text("Show the start frame")
+                .clicked()
+            {
+                app.send(Command::Seek(app.state.start_frame));
+            }
+            if app.is_playing() {
+                if ui.button("Pause").clicked() {
+                    app.send(Command::Pause);
+                }
+            } else if ui.add_enabled(n > 0, egui::Button::new("Play")).clicked() {
+                app.send(Command::Play);
+            }
+            if ui
+                .add_enabled(n > 0 && !app.is_playing(), egui::Button::new("Step"))
+                .on_hover_text("Track one more frame")
+                .clicked()
+            {
+                app.send(Command::Step);
+            }
+            let mut frame = app.state.frame + 1;
+            let slider = ui.add_enabled(
+                n > 0,
+                egui::Slider::new(&mut frame, 1..=n.max(1)).text(format!("of {n}")),
+            );
+            if slider.changed() {
+                app.send(Command::Seek(frame.saturating_sub(1)));
+            }
+            if ui
+                .add_enabled(n > 0, egui::Button::new("Re-run from here"))
+                .on_hover_text("Re-initialise the trackers on this frame")
+                .clicked()
+            {
+                app.send(Command::RerunFrom(app.state.frame));
+            }
+            let mut fps = app.state.playback_fps;
+            ui.label("speed");
+            if ui
+                .add(
+                    egui::DragValue::new(&mut fps)
+                        .range(0.0..=1000.0)
+                        .suffix(" fps"),
+                )
+                .on_hover_text("0 = as fast as the trackers go")
+                .changed()
+            {
+                app.send(Command::SetPlaybackFps(fps));
+            }
+            if let Some(f) = app.rt.tracked_until {
+                ui.label(format!("tracked to frame {}", f + 1));
+            }
+        });
+    });
+}

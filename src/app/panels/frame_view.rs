@@ -1,0 +1,297 @@
+//! The frame with the tracked and ground-truth quads; zoom and pan; drawing a tracker's initial
+//! quad or box; dragging ground-truth corners. One place maps image to screen coordinates.
+
+use super::{GT_COLOR, color};
+use crate::app::command::Command;
+use crate::app::state::{InitSource, View};
+use crate::app::{InspectorApp, Tool};
+use crate::geometry::{Point, Quad};
+use crate::tracker::TrackStatus;
+use eframe::egui;
+use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
+
+/// Image <-> screen mapping of the view.
+#[derive(Clone, Copy, Debug)]
+pub struct Transform {
+    rect: Rect,
+    scale: f32,
+    center: [f32; 2],
+}
+
+impl Transform {
+    fn new(rect: Rect, image: [usize; 2], view: &View) -> Self {
+        let (w, h) = (image[0].max(1) as f32, image[1].max(1) as f32);
+        if view.zoom <= 0.0 {
+            Transform {
+                rect,
+                scale: (rect.width() / w).min(rect.height() / h),
+                center: [w / 2.0 - 0.5, h / 2.0 - 0.5],
+            }
+        } else {
+            Transform {
+                rect,
+                scale: view.zoom,
+                center: view.center,
+            }
+        }
+    }
+    /// Image point to screen.
+    pub fn to_screen(&self, p: Point) -> Pos2 {
+        self.rect.center()
+            + Vec2::new(
+                (p.x as f32 - self.center[0]) * self.scale,
+                (p.y as f32 - self.center[1]) * self.scale,
+            )
+    }
+    /// Screen to image point.
+    pub fn to_image(&self, s: Pos2) -> Point {
+        let d = s - self.rect.center();
+        Point::new(
+            (d.x / self.scale + self.center[0]) as f64,
+            (d.y / self.scale + self.center[1]) as f64,
+        )
+    }
+}
+
+fn quad_points(t: &Transform, q: &Quad) -> Vec<Pos2> {
+    q.0.iter().map(|p| t.to_screen(*p)).collect()
+}
+
+fn draw_quad(
+    painter: &egui::Painter,
+    t: &Transform,
+    q: &Quad,
+    c: Color32,
+    dashed: bool,
+    numbers: bool,
+) {
+    let pts = quad_points(t, q);
+    if dashed {
+        let mut closed = pts.clone();
+        closed.push(pts[0]);
+        painter.extend(Shape::dashed_line(&closed, Stroke::new(2.0, c), 7.0, 4.0));
+    } else {
+        painter.add(Shape::closed_line(pts.clone(), Stroke::new(2.0, c)));
+    }
+    for (k, p) in pts.iter().enumerate() {
+        painter.circle_filled(*p, 3.5, c);
+        if numbers {
+            painter.text(
+                *p + Vec2::new(5.0, -5.0),
+                egui::Align2::LEFT_BOTTOM,
+                (k + 1).to_string(),
+                egui::FontId::monospace(12.0),
+                c,
+            );
+        }
+    }
+}
+
+pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let rect = ui.available_rect_before_wrap();
+    let response = ui.allocate_rect(rect, Sense::click_and_drag());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 0.0, Color32::from_gray(24));
+    let Some(texture) = app.rt.texture.clone() else {
+        painter.text(
+            rect.center(),
+            egui::Align2::CENTER_CENTER,
+            "open a sequence (or drop a folder here)",
+            egui::FontId::proportional(18.0),
+            Color32::GRAY,
+        );
+        return;
+    };
+    let t = Transform::new(rect, app.rt.image_size, &app.state.view);
+    let [w, h] = app.rt.image_size;
+    let img_rect = Rect::from_min_max(
+        t.to_screen(Point::new(-0.5, -0.5)),
+        t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
+    );
+    painter.image(
+        texture.id(),
+        img_rect,
+        Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+        Color32::WHITE,
+    );
+
+    let frame = app.state.frame;
+    let numbers = app.state.view.show_corner_numbers;
+    if app.state.view.show_ground_truth {
+        if let Some(gt) = app.ground_truth(frame) {
+            draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
+        }
+    }
+    for (i, entry) in app.state.trackers.iter().enumerate() {
+        if let Some(r) = app.result(i, frame) {
+            let c = color(entry.color);
+            draw_quad(&painter, &t, &r.corners, c, false, numbers);
+            let label = match r.status {
+                TrackStatus::Lost(reason) => format!("{} lost: {reason}", i + 1),
+                _ => format!("{}", i + 1),
+            };
+            painter.text(
+                t.to_screen(r.corners.centroid()),
+                egui::Align2::CENTER_CENTER,
+                label,
+                egui::FontId::proportional(14.0),
+                c,
+            );
+        }
+    }
+    // The selected iteration of the inspected tracker.
+    if let (Some(it), Some(r)) = (
+        app.rt.selected_iteration,
+        app.result(app.state.selected_tracker, frame),
+    ) {
+        if let Some(rec) = r.iterations.get(it) {
+            draw_quad(&painter, &t, &rec.corners, Color32::YELLOW, true, false);
+        }
+    }
+    interact(app, ui, &response, &t, &painter);
+}
+
+fn interact(
+    app: &mut InspectorApp,
+    ui: &egui::Ui,
+    response: &egui::Response,
+    t: &Transform,
+    painter: &egui::Painter,
+) {
+    let hover = response.hover_pos();
+    // Zoom around the pointer.
+    if let Some(pos) = hover {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            let anchor = t.to_image(pos);
+            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
+            let d = pos - t.rect.center();
+            let mut view = app.state.view.clone();
+            view.zoom = scale;
+            view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
+            app.send(Command::SetView(view));
+        }
+    }
+    if response.double_clicked() && app.rt.tool == Tool::Navigate {
+        let mut view = app.state.view.clone();
+        view.zoom = 0.0;
+        app.send(Command::SetView(view));
+    }
+    match app.rt.tool.clone() {
+        Tool::Navigate => {
+            if response.dragged() {
+                let d = response.drag_delta();
+                let mut view = app.state.view.clone();
+                view.zoom = t.scale;
+                view.center = [t.center[0] - d.x / t.scale, t.center[1] - d.y / t.scale];
+                app.send(Command::SetView(view));
+            }
+        }
+        Tool::DrawQuad {
+            tracker,
+            mut corners,
+        } => {
+            for (k, p) in corners.iter().enumerate() {
+                painter.circle_filled(t.to_screen(*p), 4.0, Color32::YELLOW);
+                painter.text(
+                    t.to_screen(*p) + Vec2::new(5.0, -5.0),
+                    egui::Align2::LEFT_BOTTOM,
+                    (k + 1).to_string(),
+                    egui::FontId::monospace(12.0),
+                    Color32::YELLOW,
+                );
+            }
+            painter.text(
+                t.rect.left_top() + Vec2::new(8.0, 8.0),
+                egui::Align2::LEFT_TOP,
+                format!(
+                    "tracker {}: click corner {} of 4 (upper-left first, clockwise)",
+                    tracker + 1,
+                    corners.len() + 1
+                ),
+                egui::FontId::proportional(15.0),
+                Color32::YELLOW,
+            );
+            if let (true, Some(pos)) = (response.clicked(), response.interact_pointer_pos()) {
+                corners.push(t.to_image(pos));
+                if corners.len() == 4 {
+                    let q = Quad([corners[0], corners[1], corners[2], corners[3]]);
+                    finish_drawing(app, tracker, q);
+                } else {
+                    app.send(Command::SetTool(Tool::DrawQuad { tracker, corners }));
+                }
+            }
+        }
+        Tool::DrawBox { tracker, start } => {
+            painter.text(
+                t.rect.left_top() + Vec2::new(8.0, 8.0),
+                egui::Align2::LEFT_TOP,
+                format!("tracker {}: drag a box", tracker + 1),
+                egui::FontId::proportional(15.0),
+                Color32::YELLOW,
+            );
+            if response.drag_started() {
+                if let Some(pos) = response.interact_pointer_pos() {
+                    app.send(Command::SetTool(Tool::DrawBox {
+                        tracker,
+                        start: Some(t.to_image(pos)),
+                    }));
+                }
+            }
+            if let (Some(a), Some(pos)) = (start, response.interact_pointer_pos().or(hover)) {
+                let b = t.to_image(pos);
+                let q = Quad::from_rect(
+                    a.x.min(b.x),
+                    a.y.min(b.y),
+                    (a.x - b.x).abs(),
+                    (a.y - b.y).abs(),
+                );
+                draw_quad(painter, t, &q, Color32::YELLOW, true, false);
+                if response.drag_stopped() {
+                    finish_drawing(app, tracker, q);
+                }
+            }
+        }
+        Tool::EditGroundTruth => {
+            let frame = app.state.frame;
+            let Some(gt) = app.ground_truth(frame) else {
+                return;
+            };
+            let id = response.id.with("gt_corner");
+            if response.drag_started() {
+                if let Some(pos) = response.interact_pointer_pos() {
+                    let nearest = (0..4)
+                        .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                        .filter(|(_, d)| *d < 15.0)
+                        .map(|(k, _)| k);
+                    ui.data_mut(|d| d.insert_temp(id, nearest));
+                }
+            }
+            let grabbed: Option<usize> = ui.data(|d| d.get_temp(id)).flatten();
+            if let (Some(k), true, Some(pos)) =
+                (grabbed, response.dragged(), response.interact_pointer_pos())
+            {
+                app.send(Command::MoveGtCorner {
+                    frame,
+                    corner: k,
+                    to: t.to_image(pos),
+                });
+            }
+            if response.drag_stopped() {
+                ui.data_mut(|d| d.remove::<Option<usize>>(id));
+            }
+            for p in gt.0 {
+                painter.circle_stroke(t.to_screen(p), 8.0, Stroke::new(1.5, GT_COLOR));
+            }
+        }
+    }
+}
+
+fn finish_drawing(app: &mut InspectorApp, tracker: usize, q: Quad) {
+    app.send(Command::SetTool(Tool::Navigate));
+    match q.validate() {
+        Ok(()) => app.send(Command::InitTracker(tracker, InitSource::Quad(q))),
+        Err(e) => app.send(Command::ReportError(format!("not a usable quad: {e}"))),
+    }
+}

@@ -1,0 +1,229 @@
+//! Live plots (success rate, error per frame, speed) and the convergence of the current frame:
+//! similarity and corner change per iteration, an iteration slider whose quad the frame view
+//! draws, and the template, warped patch and error images.
+
+use super::color;
+use crate::app::InspectorApp;
+use crate::app::command::Command;
+use eframe::egui;
+use egui_plot::{Legend, Line, Plot, PlotPoints};
+
+pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    egui::Panel::right("plots")
+        .resizable(true)
+        .default_size(430.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                ui.heading("Success rate");
+                Plot::new("sr_plot")
+                    .height(190.0)
+                    .legend(Legend::default())
+                    .include_x(0.0)
+                    .include_x(20.0)
+                    .include_y(0.0)
+                    .include_y(1.0)
+                    .x_axis_label("threshold t (px)")
+                    .allow_scroll(false)
+                    .show(ui, |p| {
+                        for (i, t) in app.state.trackers.iter().enumerate() {
+                            let curve = app.success_curve(i);
+                            if !curve.is_empty() {
+                                let pts: Vec<[f64; 2]> =
+                                    curve.iter().map(|(x, y)| [*x, *y]).collect();
+                                p.line(
+                                    Line::new(
+                                        format!("{} {}", i + 1, t.spec.label()),
+                                        PlotPoints::from(pts),
+                                    )
+                                    .color(color(t.color)),
+                                );
+                            }
+                        }
+                    });
+                ui.heading("Alignment error per frame");
+                Plot::new("error_plot")
+                    .height(150.0)
+                    .include_y(0.0)
+                    .x_axis_label("frame")
+                    .allow_scroll(false)
+                    .show(ui, |p| {
+                        for (i, t) in app.state.trackers.iter().enumerate() {
+                            let pts: Vec<[f64; 2]> = app
+                                .errors(i)
+                                .into_iter()
+                                .filter(|(_, e)| e.is_finite())
+                                .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
+                                .collect();
+                            if !pts.is_empty() {
+                                p.line(
+                                    Line::new(format!("{}", i + 1), PlotPoints::from(pts))
+                                        .color(color(t.color)),
+                                );
+                            }
+                        }
+                    });
+                speed_table(app, ui);
+                ui.separator();
+                convergence(app, ui);
+            });
+        });
+}
+
+fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
+    ui.heading("Speed");
+    egui::Grid::new("speed").striped(true).show(ui, |ui| {
+        ui.label("tracker");
+        ui.label("tracker FPS");
+        ui.label("live FPS");
+        ui.label("it/frame");
+        ui.end_row();
+        for (i, t) in app.state.trackers.iter().enumerate() {
+            let (mut s, mut u, mut it, mut n) = (0.0, 0.0, 0usize, 0usize);
+            for (f, _) in app.errors(i) {
+                if let Some(r) = app.result(i, f) {
+                    s += r.search_us;
+                    u += r.update_us;
+                    it += r.iterations.len();
+                    n += 1;
+                }
+            }
+            ui.colored_label(color(t.color), format!("{} {}", i + 1, t.spec.label()));
+            let fps = |us: f64| {
+                if us > 0.0 {
+                    format!("{:.0}", n as f64 / (us * 1e-6))
+                } else {
+                    "-".into()
+                }
+            };
+            ui.label(fps(s));
+            ui.label(fps(u));
+            ui.label(if n > 0 {
+                format!("{:.2}", it as f64 / n as f64)
+            } else {
+                "-".into()
+            });
+            ui.end_row();
+        }
+    });
+}
+
+fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let i = app.state.selected_tracker;
+    let frame = app.state.frame;
+    ui.heading(format!(
+        "Convergence: tracker {}, frame {}",
+        i + 1,
+        frame + 1
+    ));
+    let Some(r) = app.result(i, frame).cloned() else {
+        ui.label("not tracked on this frame");
+        return;
+    };
+    let c = app
+        .state
+        .trackers
+        .get(i)
+        .map_or(egui::Color32::WHITE, |t| color(t.color));
+    let n = r.iterations.len();
+    ui.label(format!(
+        "{n} iterations · {:?} · {:.0} µs",
+        r.status, r.search_us
+    ));
+    if n > 0 {
+        let cost: Vec<[f64; 2]> = r
+            .iterations
+            .iter()
+            .map(|it| [it.iteration as f64 + 1.0, it.similarity])
+            .collect();
+        let step: Vec<[f64; 2]> = r
+            .iterations
+            .iter()
+            .map(|it| [it.iteration as f64 + 1.0, it.step.max(1e-6).log10()])
+            .collect();
+        ui.columns(2, |cols| {
+            cols[0].label("similarity f");
+            Plot::new("cost_plot")
+                .height(120.0)
+                .allow_scroll(false)
+                .show(&mut cols[0], |p| {
+                    p.line(Line::new("f", PlotPoints::from(cost)).color(c));
+                });
+            cols[1].label("log10 corner change (px)");
+            Plot::new("step_plot")
+                .height(120.0)
+                .allow_scroll(false)
+                .show(&mut cols[1], |p| {
+                    p.line(Line::new("step", PlotPoints::from(step)).color(c));
+                });
+        });
+        let mut sel = app.rt.selected_iteration.map_or(0, |s| s + 1);
+        let changed = ui
+            .add(egui::Slider::new(&mut sel, 0..=n).text("iteration (0 = none)"))
+            .on_hover_text("The frame view draws the quad after this iteration, dashed")
+            .changed();
+        if changed {
+            app.send(Command::SelectIteration(sel.checked_sub(1)));
+        }
+    }
+    patches(app, ui, i, &r);
+}
+
+fn patches(
+    app: &mut InspectorApp,
+    ui: &mut egui::Ui,
+    i: usize,
+    r: &crate::app::worker::TrackerFrame,
+) {
+    let n = r.res * r.res;
+    if r.template.len() != n || r.patch.len() != n || n == 0 {
+        return;
+    }
+    let (lo, hi) = r
+        .template
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let span = (hi - lo).max(1e-3);
+    let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
+    let template: Vec<u8> = r.template.iter().map(|&v| to8(v)).collect();
+    let patch: Vec<u8> = r.patch.iter().map(|&v| to8(v)).collect();
+    let error: Vec<u8> = r
+        .template
+        .iter()
+        .zip(&r.patch)
+        .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
+        .collect();
+    let ctx = ui.ctx().clone();
+    let size = [r.res, r.res];
+    let images = [template, patch, error].map(|g| egui::ColorImage::from_gray(size, &g));
+    let handles = match app.rt.patches.get_mut(&i) {
+        Some(h) => {
+            for (h, img) in h.iter_mut().zip(images) {
+                h.set(img, egui::TextureOptions::NEAREST);
+            }
+            h.clone()
+        }
+        None => {
+            let [a, b, c] = images;
+            let h = [
+                ctx.load_texture(format!("template{i}"), a, egui::TextureOptions::NEAREST),
+                ctx.load_texture(format!("patch{i}"), b, egui::TextureOptions::NEAREST),
+                ctx.load_texture(format!("error{i}"), c, egui::TextureOptions::NEAREST),
+            ];
+            app.rt.patches.insert(i, h.clone());
+            h
+        }
+    };
+    ui.horizontal(|ui| {
+        for (h, label) in handles
+            .iter()
+            .zip(["template", "warped patch", "|error| x4"])
+        {
+            ui.vertical(|ui| {
+                ui.label(label);
+                ui.image((h.id(), egui::Vec2::splat(120.0)));
+            });
+        }
+    });
+}

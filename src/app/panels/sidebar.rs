@@ -1,0 +1,163 @@
+//! Trackers (methods from the registries, parameters, colour, initialisation) and the ground
+//! truth's settings.
+
+use super::color;
+use crate::am::HessianKind;
+use crate::app::command::Command;
+use crate::app::state::InitSource;
+use crate::app::{InspectorApp, Tool};
+use crate::registry::Entry;
+use crate::{am, sm, ssm};
+use eframe::egui;
+
+/// A dropdown of a registry; returns the chosen name when it changed.
+fn method_combo<B>(
+    ui: &mut egui::Ui,
+    label: String,
+    current: &str,
+    entries: &[Entry<B>],
+) -> Option<String> {
+    let mut chosen = current.to_string();
+    egui::ComboBox::from_label(label)
+        .selected_text(current)
+        .show_ui(ui, |ui| {
+            for e in entries {
+                ui.selectable_value(&mut chosen, e.name.to_string(), e.name)
+                    .on_hover_text(e.description);
+            }
+        });
+    (chosen != current).then_some(chosen)
+}
+
+pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    egui::Panel::left("trackers").resizable(true).default_size(300.0).show(ui, |ui| {
+        egui::ScrollArea::vertical().show(ui, |ui| {
+            ui.heading("Trackers");
+            let n = app.state.trackers.len();
+            for i in 0..n {
+                let entry = app.state.trackers[i].clone();
+                let mut next = entry.clone();
+                let stats = tracker_stats(app, i);
+                egui::Frame::group(ui.style()).show(ui, |ui| {
+                    ui.horizontal(|ui| {
+                        ui.color_edit_button_srgb(&mut next.color);
+                        ui.checkbox(&mut next.enabled, format!("Tracker {}", i + 1));
+                        if ui.radio(app.state.selected_tracker == i, "inspect").on_hover_text("Show its iterations").clicked() {
+                            app.send(Command::SelectTracker(i));
+                        }
+                    });
+                    if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &entry.spec.sm, sm::REGISTRY) {
+                        next.spec.sm = v;
+                    }
+                    if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &entry.spec.am, am::REGISTRY) {
+                        next.spec.am = v;
+                    }
+                    if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &entry.spec.ssm, ssm::REGISTRY) {
+                        next.spec.ssm = v;
+                    }
+                    ui.collapsing(format!("Parameters {}", i + 1), |ui| {
+                        let p = &mut next.spec.params;
+                        egui::Grid::new(("params", i)).num_columns(2).show(ui, |ui| {
+                            ui.label("sampling");
+                            ui.add(egui::DragValue::new(&mut p.res).range(2..=400).suffix(" px²"));
+                            ui.end_row();
+                            ui.label("max iterations");
+                            ui.add(egui::DragValue::new(&mut p.max_iters).range(1..=500));
+                            ui.end_row();
+                            ui.label("epsilon");
+                            ui.add(egui::DragValue::new(&mut p.eps).range(0.0..=10.0).speed(0.0005).suffix(" px"));
+                            ui.end_row();
+                            ui.label("blur σ");
+                            ui.add(egui::DragValue::new(&mut p.blur_sigma).range(0.0..=20.0).speed(0.05));
+                            ui.end_row();
+                            ui.label("blur size");
+                            ui.add(egui::DragValue::new(&mut p.blur_size).range(1..=31));
+                            ui.end_row();
+                            ui.label("region margin");
+                            ui.add(egui::DragValue::new(&mut p.roi_margin).range(0.0..=10.0).speed(0.01));
+                            ui.end_row();
+                            ui.label("Hessian");
+                            egui::ComboBox::from_id_salt(("hessian", i)).selected_text(format!("{:?}", p.hessian)).show_ui(ui, |ui| {
+                                for k in [HessianKind::Default, HessianKind::GaussNewton, HessianKind::Newton, HessianKind::AfterConvergence] {
+                                    ui.selectable_value(&mut p.hessian, k, format!("{k:?}"));
+                                }
+                            });
+                            ui.end_row();
+                        });
+                    });
+                    ui.horizontal_wrapped(|ui| {
+                        if ui.button("Init from GT").on_hover_text("Start from the ground truth of this frame").clicked() {
+                            app.send(Command::InitTracker(i, InitSource::GroundTruth));
+                        }
+                        if ui.button("Draw quad").on_hover_text("Click the four corners on the frame").clicked() {
+                            app.send(Command::SetTool(Tool::DrawQuad { tracker: i, corners: Vec::new() }));
+                        }
+                        if ui.button("Draw box").on_hover_text("Drag a box on the frame").clicked() {
+                            app.send(Command::SetTool(Tool::DrawBox { tracker: i, start: None }));
+                        }
+                        if ui.button("Remove").clicked() {
+                            app.send(Command::RemoveTracker(i));
+                        }
+                    });
+                    ui.label(egui::RichText::new(stats).small().color(color(entry.color)));
+                });
+                if next != entry {
+                    app.send(Command::SetTracker(i, next));
+                }
+            }
+            if ui.button("Add tracker").clicked() {
+                app.send(Command::AddTracker);
+            }
+            ui.separator();
+            ui.heading("Ground truth");
+            let mut view = app.state.view.clone();
+            ui.checkbox(&mut view.show_ground_truth, "show ground truth");
+            ui.checkbox(&mut view.show_corner_numbers, "number the corners");
+            if view != app.state.view {
+                app.send(Command::SetView(view));
+            }
+            if let Some(v) = method_combo(ui, "GT SSM".into(), &app.state.gt_ssm, ssm::REGISTRY) {
+                app.send(Command::SetGtSsm(v));
+            }
+            ui.label(egui::RichText::new("Trackers are scored against the ground truth projected on this SSM (low-DOF ground truth).").small());
+            let editing = app.rt.tool == Tool::EditGroundTruth;
+            if ui.selectable_label(editing, "Edit ground-truth corners").clicked() {
+                app.send(Command::SetTool(if editing { Tool::Navigate } else { Tool::EditGroundTruth }));
+            }
+            let label = if app.rt.gt_dirty { "Save ground truth*" } else { "Save ground truth" };
+            if ui.add_enabled(!app.rt.gt_edits.is_empty(), egui::Button::new(label)).clicked() {
+                app.send(Command::SaveGroundTruth);
+            }
+        });
+    });
+}
+
+/// One line of figures for a tracker: frames, SR@5, mean error, speed.
+fn tracker_stats(app: &InspectorApp, i: usize) -> String {
+    let errors = app.errors(i);
+    if errors.is_empty() {
+        return "not tracked yet".into();
+    }
+    let e: Vec<f64> = errors.iter().map(|(_, e)| *e).collect();
+    let finite: Vec<f64> = e.iter().copied().filter(|v| v.is_finite()).collect();
+    let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
+    let (mut us, mut n) = (0.0, 0usize);
+    for (f, _) in &errors {
+        if let Some(r) = app.result(i, *f) {
+            us += r.search_us;
+            n += 1;
+        }
+    }
+    let fps = if us > 0.0 {
+        n as f64 / (us * 1e-6)
+    } else {
+        0.0
+    };
+    format!(
+        "{} frames · SR@5 {:.3} · mean error {:.2} px · {:.0} FPS",
+        e.len(),
+        crate::eval::success_rate(&e, 5.0),
+        mean,
+        fps
+    )
+}

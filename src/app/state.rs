@@ -1,0 +1,158 @@
+//! The saved state of the inspector (a session): the sequence, the trackers and their parameters,
+//! the current frame and the view. Everything else (textures, worker, results) is runtime state.
+
+use crate::error::{Error, Result};
+use crate::geometry::Quad;
+use crate::tracker::TrackerSpec;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Where the sequence comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind", content = "path")]
+pub enum SequenceSource {
+    /// The bundled demo (rendered on first use).
+    Demo,
+    /// A ground-truth file or a folder of frames (any layout the core reads).
+    Path(PathBuf),
+}
+
+/// How a tracker starts.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind", content = "corners")]
+pub enum InitSource {
+    /// From the ground truth of the start frame.
+    GroundTruth,
+    /// From corners the user drew.
+    Quad(Quad),
+}
+
+/// One tracker of the session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrackerEntry {
+    pub spec: TrackerSpec,
+    /// Drawing colour (RGB).
+    pub color: [u8; 3],
+    /// Whether it runs.
+    pub enabled: bool,
+    pub init: InitSource,
+}
+
+/// The frame view's zoom and pan.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct View {
+    /// Screen pixels per image pixel; 0 = fit the frame to the panel.
+    pub zoom: f32,
+    /// Image point at the centre of the panel (when zoomed).
+    pub center: [f32; 2],
+    pub show_ground_truth: bool,
+    pub show_corner_numbers: bool,
+}
+
+impl Default for View {
+    fn default() -> Self {
+        View {
+            zoom: 0.0,
+            center: [0.0, 0.0],
+            show_ground_truth: true,
+            show_corner_numbers: true,
+        }
+    }
+}
+
+/// A session, saved as `sessions/*.toml`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct State {
+    pub sequence: SequenceSource,
+    pub trackers: Vec<TrackerEntry>,
+    /// The frame trackers start from.
+    pub start_frame: usize,
+    /// The frame shown.
+    pub frame: usize,
+    /// Playback speed in frames per second (0 = as fast as the trackers go).
+    pub playback_fps: f32,
+    pub view: View,
+    /// The tracker whose iterations the convergence panel shows.
+    pub selected_tracker: usize,
+    /// The SSM the ground truth is shown and corrected in (`homography` = full 8 DOF).
+    pub gt_ssm: String,
+}
+
+/// Distinct colours for trackers.
+pub const PALETTE: [[u8; 3]; 8] = [
+    [255, 80, 80],
+    [80, 160, 255],
+    [255, 200, 40],
+    [200, 90, 255],
+    [40, 220, 220],
+    [255, 130, 40],
+    [150, 255, 90],
+    [255, 100, 200],
+];
+
+impl Default for State {
+    fn default() -> Self {
+        let entry = |sm: &str, am: &str, color| TrackerEntry {
+            spec: TrackerSpec {
+                sm: sm.into(),
+                am: am.into(),
+                ssm: "homography".into(),
+                params: Default::default(),
+            },
+            color,
+            enabled: true,
+            init: InitSource::GroundTruth,
+        };
+        State {
+            sequence: SequenceSource::Demo,
+            trackers: vec![
+                entry("esm", "ssd", PALETTE[0]),
+                entry("iclk", "zncc", PALETTE[1]),
+            ],
+            start_frame: 0,
+            frame: 0,
+            playback_fps: 0.0,
+            view: View::default(),
+            selected_tracker: 0,
+            gt_ssm: "homography".into(),
+        }
+    }
+}
+
+impl State {
+    /// Reads a session file; relative sequence paths are taken relative to the session's folder.
+    pub fn load(path: &Path) -> Result<State> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let mut state: State = toml::from_str(&text).map_err(|e| Error::Parse {
+            path: path.to_path_buf(),
+            line: e
+                .span()
+                .map(|s| text[..s.start].lines().count().max(1))
+                .unwrap_or(0),
+            message: e.message().to_string(),
+        })?;
+        if let SequenceSource::Path(p) = &state.sequence {
+            if p.is_relative() {
+                let base = path.parent().unwrap_or(Path::new("."));
+                state.sequence = SequenceSource::Path(base.join(p));
+            }
+        }
+        for t in &state.trackers {
+            crate::tracker::Tracker::new(&t.spec).map_err(|e| Error::Parse {
+                path: path.to_path_buf(),
+                line: 0,
+                message: format!("tracker {}: {e}", t.spec.label()),
+            })?;
+        }
+        Ok(state)
+    }
+
+    /// Writes the session atomically.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let text =
+            toml::to_string_pretty(self).map_err(|e| Error::InvalidParameter(e.to_string()))?;
+        crate::dataset::write_atomic(path, text.as_bytes())
+    }
+}

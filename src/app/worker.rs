@@ -1,0 +1,357 @@
+//! The tracking thread. The UI sends [`Job`]s and polls [`Reply`]s each frame; slow work
+//! (opening or rendering a sequence, decoding frames, tracking) never runs on the UI thread.
+//! Results of an older generation (before a re-initialisation) are dropped by the UI.
+
+use super::state::SequenceSource;
+use crate::dataset::{Sequence, demo};
+use crate::geometry::Quad;
+use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
+use crate::observe::{IterationRecord, Recorder};
+use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::time::{Duration, Instant};
+
+/// A decoded frame for display (RGBA, 8 bits per channel).
+#[derive(Clone, Debug)]
+pub struct FrameImage {
+    pub index: usize,
+    pub width: usize,
+    pub height: usize,
+    pub rgba: Vec<u8>,
+}
+
+/// One tracker's result on one frame.
+#[derive(Clone, Debug)]
+pub struct TrackerFrame {
+    /// Index of the tracker in the session.
+    pub tracker: usize,
+    pub status: TrackStatus,
+    pub corners: Quad,
+    pub iterations: Vec<IterationRecord>,
+    /// Corners before the first iteration.
+    pub start: Option<Quad>,
+    pub search_us: f64,
+    pub update_us: f64,
+    /// Template, last sampled patch (res x res).
+    pub res: usize,
+    pub template: Arc<Vec<f32>>,
+    pub patch: Vec<f32>,
+}
+
+/// Work for the thread.
+#[derive(Debug)]
+pub enum Job {
+    /// Open (or render) a sequence.
+    Open(SequenceSource),
+    /// Decode a frame for display.
+    Show(usize),
+    /// (Re-)initialise trackers `(index, spec, corners)` on `frame`.
+    Start {
+        generation: u64,
+        frame: usize,
+        trackers: Vec<(usize, TrackerSpec, Quad)>,
+    },
+    /// Track the next frames (`None`: to the end) at `fps` frames per second (0 = at once).
+    Advance {
+        generation: u64,
+        frames: Option<usize>,
+        fps: f32,
+    },
+}
+
+/// What the thread reports.
+#[derive(Debug)]
+pub enum Reply {
+    Progress(String, usize, usize),
+    Opened(Arc<Sequence>),
+    Image(FrameImage),
+    /// Results for a frame (initialisation or tracking) of a generation.
+    Frame {
+        generation: u64,
+        frame: usize,
+        results: Vec<TrackerFrame>,
+        image: Option<FrameImage>,
+    },
+    /// An advance ended (end of sequence, asked frames done, or stopped).
+    Stopped {
+        generation: u64,
+        frame: usize,
+    },
+    Error(String),
+}
+
+/// The handle the UI keeps.
+pub struct Worker {
+    jobs: Sender<Job>,
+    replies: Receiver<Reply>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Worker {
+    /// Starts the thread; `wake` is called after every reply (to request a repaint).
+    pub fn spawn(wake: impl Fn() + Send + Sync + 'static) -> Worker {
+        let (jobs, job_rx) = channel::<Job>();
+        let (reply_tx, replies) = channel::<Reply>();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let spawned = std::thread::Builder::new()
+            .name("regtrack-worker".into())
+            .spawn(move || Thread::new(reply_tx, stop2, wake).run(job_rx));
+        if let Err(e) = spawned {
+            // The handle still works: every job then goes nowhere and the UI says why.
+            eprintln!("cannot start the tracking thread: {e}");
+        }
+        Worker {
+            jobs,
+            replies,
+            stop,
+        }
+    }
+
+    /// Queues a job.
+    pub fn send(&self, job: Job) {
+        if matches!(job, Job::Start { .. } | Job::Open(_)) {
+            self.stop.store(true, Ordering::SeqCst);
+        }
+        let _ = self.jobs.send(job);
+    }
+
+    /// Stops a running advance after its current frame.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    /// Replies received so far.
+    pub fn poll(&self) -> Vec<Reply> {
+        self.replies.try_iter().collect()
+    }
+}
+
+struct Thread<W: Fn() + Sync> {
+    out: Sender<Reply>,
+    stop: Arc<AtomicBool>,
+    wake: W,
+    sequence: Option<Arc<Sequence>>,
+    trackers: Vec<(usize, Tracker)>,
+    templates: Vec<Arc<Vec<f32>>>,
+    generation: u64,
+    frame: usize,
+}
+
+impl<W: Fn() + Sync> Thread<W> {
+    fn new(out: Sender<Reply>, stop: Arc<AtomicBool>, wake: W) -> Self {
+        Thread {
+            out,
+            stop,
+            wake,
+            sequence: None,
+            trackers: Vec::new(),
+            templates: Vec::new(),
+            generation: 0,
+            frame: 0,
+        }
+    }
+
+    fn reply(&self, r: Reply) {
+        let _ = self.out.send(r);
+        (self.wake)();
+    }
+
+    fn run(mut self, jobs: Receiver<Job>) {
+        while let Ok(job) = jobs.recv() {
+            match job {
+                Job::Open(src) => self.open(src),
+                Job::Show(i) => match self.decode(i) {
+                    Ok((_, img)) => self.reply(Reply::Image(img)),
+                    Err(e) => self.reply(Reply::Error(e)),
+                },
+                Job::Start {
+                    generation,
+                    frame,
+                    trackers,
+                } => {
+                    self.stop.store(false, Ordering::SeqCst);
+                    self.start(generation, frame, trackers)
+                }
+                Job::Advance {
+                    generation,
+                    frames,
+                    fps,
+                } => {
+                    if generation == self.generation {
+                        self.stop.store(false, Ordering::SeqCst);
+                        self.advance(frames, fps)
+                    }
+                }
+            }
+        }
+    }
+
+    fn open(&mut self, src: SequenceSource) {
+        self.stop.store(false, Ordering::SeqCst);
+        let result = match &src {
+            SequenceSource::Demo => {
+                let out = self.out.clone();
+                let wake = &self.wake;
+                demo::ensure_demo(None, &|d, t| {
+                    let _ = out.send(Reply::Progress("rendering the demo sequence".into(), d, t));
+                    wake();
+                })
+            }
+            SequenceSource::Path(p) => Sequence::open(p),
+        };
+        match result {
+            Ok(seq) => {
+                let seq = Arc::new(seq);
+                self.sequence = Some(seq.clone());
+                self.trackers.clear();
+                self.reply(Reply::Opened(seq));
+            }
+            Err(e) => self.reply(Reply::Error(e.to_string())),
+        }
+    }
+
+    /// Decodes frame `i`: grayscale for the trackers, RGBA for display.
+    fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage), String> {
+        let seq = self.sequence.as_ref().ok_or("no sequence is open")?;
+        let path = seq
+            .frames
+            .get(i)
+            .ok_or_else(|| format!("frame {} is out of range (1..{})", i + 1, seq.len()))?;
+        let img = load_dynamic(path).map_err(|e| e.to_string())?;
+        let gray = gray_from_dynamic(&img);
+        let rgba = img.to_rgba8();
+        Ok((
+            gray,
+            FrameImage {
+                index: i,
+                width: rgba.width() as usize,
+                height: rgba.height() as usize,
+                rgba: rgba.into_raw(),
+            },
+        ))
+    }
+
+    fn snapshot(
+        &self,
+        k: usize,
+        t: &Tracker,
+        rec: &Recorder,
+        out: &crate::tracker::FrameOutcome,
+    ) -> TrackerFrame {
+        let ctx = t.context();
+        TrackerFrame {
+            tracker: self.trackers[k].0,
+            status: out.status,
+            corners: out.corners,
+            iterations: rec.iterations.clone(),
+            start: rec.start,
+            search_us: out.timing.search.as_secs_f64() * 1e6,
+            update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
+            res: t.spec().params.res,
+            template: self.templates[k].clone(),
+            patch: ctx.values.clone(),
+        }
+    }
+
+    fn start(&mut self, generation: u64, frame: usize, specs: Vec<(usize, TrackerSpec, Quad)>) {
+        self.generation = generation;
+        self.frame = frame;
+        self.trackers.clear();
+        self.templates.clear();
+        let (gray, image) = match self.decode(frame) {
+            Ok(v) => v,
+            Err(e) => return self.reply(Reply::Error(e)),
+        };
+        let mut results = Vec::new();
+        for (idx, spec, quad) in specs {
+            let made = Tracker::new(&spec).and_then(|mut t| {
+                t.initialize(FrameInput::Gray8(&gray), &quad)?;
+                Ok(t)
+            });
+            match made {
+                Ok(t) => {
+                    self.templates.push(Arc::new(t.context().template.clone()));
+                    self.trackers.push((idx, t));
+                    let k = self.trackers.len() - 1;
+                    let t = &self.trackers[k].1;
+                    let out = crate::tracker::FrameOutcome {
+                        frame: 0,
+                        status: t.status(),
+                        corners: t.corners(),
+                        iterations: 0,
+                        converged: true,
+                        similarity: f64::NAN,
+                        timing: Default::default(),
+                    };
+                    let mut snap = self.snapshot(k, t, &Recorder::default(), &out);
+                    snap.patch = snap.template.to_vec();
+                    results.push(snap);
+                }
+                Err(e) => self.reply(Reply::Error(format!("{}: {e}", spec.label()))),
+            }
+        }
+        self.reply(Reply::Frame {
+            generation,
+            frame,
+            results,
+            image: Some(image),
+        });
+    }
+
+    fn advance(&mut self, frames: Option<usize>, fps: f32) {
+        let Some(seq) = self.sequence.clone() else {
+            return self.reply(Reply::Error("no sequence is open".into()));
+        };
+        let last = match frames {
+            Some(n) => (self.frame + n).min(seq.len() - 1),
+            None => seq.len() - 1,
+        };
+        let mut last_image = Instant::now() - Duration::from_secs(1);
+        let started = Instant::now();
+        let first = self.frame + 1;
+        while self.frame < last && !self.stop.load(Ordering::SeqCst) {
+            let i = self.frame + 1;
+            let (gray, image) = match self.decode(i) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.reply(Reply::Error(e));
+                    break;
+                }
+            };
+            let mut results = Vec::with_capacity(self.trackers.len());
+            for k in 0..self.trackers.len() {
+                let mut rec = Recorder::default();
+                let out = self.trackers[k]
+                    .1
+                    .update(FrameInput::Gray8(&gray), &mut rec);
+                results.push(self.snapshot(k, &self.trackers[k].1, &rec, &out));
+            }
+            self.frame = i;
+            // Images at display rate (and always the last one): the UI shows only the newest.
+            let send_image =
+                i == last || last_image.elapsed() >= Duration::from_millis(15) || fps > 0.0;
+            if send_image {
+                last_image = Instant::now();
+            }
+            self.reply(Reply::Frame {
+                generation: self.generation,
+                frame: i,
+                results,
+                image: send_image.then_some(image),
+            });
+            if fps > 0.0 {
+                let due = started + Duration::from_secs_f32((i + 1 - first) as f32 / fps);
+                if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                    std::thread::sleep(wait);
+                }
+            }
+        }
+        self.reply(Reply::Stopped {
+            generation: self.generation,
+            frame: self.frame,
+        });
+    }
+}

@@ -41,6 +41,9 @@ pub enum Tool {
     EditGroundTruth,
 }
 
+/// Where a screenshot's outcome is reported (`None` until it is taken).
+pub type ShotResult = Arc<Mutex<Option<Result<(), String>>>>;
+
 /// Take a screenshot once enough frames are tracked, then close.
 #[derive(Debug)]
 pub struct ScreenshotPlan {
@@ -48,7 +51,7 @@ pub struct ScreenshotPlan {
     pub path: PathBuf,
     started: bool,
     requested: bool,
-    pub result: Arc<Mutex<Option<Result<(), String>>>>,
+    pub result: ShotResult,
 }
 
 /// Runtime fields: never saved.
@@ -79,6 +82,8 @@ pub struct Runtime {
     commands: Vec<Command>,
     patches: BTreeMap<usize, [egui::TextureHandle; 3]>,
     screenshot: Option<ScreenshotPlan>,
+    /// The frame view's image-to-screen mapping, as last drawn.
+    transform: Option<panels::Transform>,
 }
 
 /// The application.
@@ -114,6 +119,7 @@ impl InspectorApp {
             commands: Vec::new(),
             patches: BTreeMap::new(),
             screenshot: None,
+            transform: None,
         };
         let mut app = InspectorApp {
             state: State::default(),
@@ -123,22 +129,16 @@ impl InspectorApp {
         app
     }
 
-    /// Plans a screenshot after `frames` tracked frames (the inspector then plays and closes).
-    pub fn screenshot_after(
-        &mut self,
-        frames: usize,
-        path: PathBuf,
-    ) -> Arc<Mutex<Option<Result<(), String>>>> {
-        let plan = ScreenshotPlan {
+    /// Plans a screenshot after `frames` tracked frames (the inspector then plays, captures the
+    /// window to `path`, reports in `result` and closes).
+    pub fn screenshot_after(&mut self, frames: usize, path: PathBuf, result: ShotResult) {
+        self.rt.screenshot = Some(ScreenshotPlan {
             frames,
             path,
             started: false,
             requested: false,
-            result: Arc::new(Mutex::new(None)),
-        };
-        let r = plan.result.clone();
-        self.rt.screenshot = Some(plan);
-        r
+            result,
+        });
     }
 
     /// Replaces the session.
@@ -182,6 +182,26 @@ impl InspectorApp {
     /// Whether the trackers are playing.
     pub fn is_playing(&self) -> bool {
         self.rt.playing
+    }
+
+    /// The last frame the trackers reached.
+    pub fn tracked_until(&self) -> Option<usize> {
+        self.rt.tracked_until
+    }
+
+    /// Where an image point was drawn on screen in the last frame view.
+    pub fn screen_pos(&self, p: Point) -> Option<egui::Pos2> {
+        self.rt.transform.map(|t| t.to_screen(p))
+    }
+
+    /// Error messages shown.
+    pub fn errors_shown(&self) -> &[String] {
+        &self.rt.errors
+    }
+
+    /// Whether a ground-truth correction awaits saving.
+    pub fn ground_truth_edited(&self) -> bool {
+        self.rt.gt_dirty
     }
 
     /// The open sequence.
@@ -479,10 +499,9 @@ pub fn run(opts: RunOptions) -> Result<(), String> {
             .with_inner_size([1400.0, 860.0]),
         ..Default::default()
     };
-    let shot = opts.screenshot;
-    let result_slot: Arc<Mutex<Option<Arc<Mutex<Option<Result<(), String>>>>>>> =
-        Arc::new(Mutex::new(None));
-    let slot2 = result_slot.clone();
+    let shot = opts.screenshot.clone();
+    let result: ShotResult = Arc::new(Mutex::new(None));
+    let result2 = result.clone();
     eframe::run_native(
         "regtrack inspector",
         native,
@@ -490,21 +509,15 @@ pub fn run(opts: RunOptions) -> Result<(), String> {
             let ctx = cc.egui_ctx.clone();
             let mut app = InspectorApp::new(state, move || ctx.request_repaint());
             if let Some((frames, path)) = shot {
-                let r = app.screenshot_after(frames, path);
-                if let Ok(mut s) = slot2.lock() {
-                    *s = Some(r);
-                }
+                app.screenshot_after(frames, path, result2);
             }
             Ok(Box::new(app))
         }),
     )
     .map_err(|e| e.to_string())?;
-    let outcome = result_slot.lock().ok().and_then(|s| s.clone());
-    match outcome {
-        Some(r) => match r.lock().ok().and_then(|v| v.clone()) {
-            Some(res) => res,
-            None => Err("the window closed before the screenshot was taken".into()),
-        },
-        None => Ok(()),
+    if opts.screenshot.is_none() {
+        return Ok(());
     }
+    let outcome = result.lock().ok().and_then(|r| r.clone());
+    outcome.unwrap_or_else(|| Err("the window closed before the screenshot was taken".into()))
 }

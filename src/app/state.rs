@@ -133,11 +133,11 @@ impl State {
                 .unwrap_or(0),
             message: e.message().to_string(),
         })?;
-        if let SequenceSource::Path(p) = &state.sequence {
-            if p.is_relative() {
-                let base = path.parent().unwrap_or(Path::new("."));
-                state.sequence = SequenceSource::Path(base.join(p));
-            }
+        if let SequenceSource::Path(p) = &state.sequence
+            && p.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            state.sequence = SequenceSource::Path(base.join(p));
         }
         for t in &state.trackers {
             crate::tracker::Tracker::new(&t.spec).map_err(|e| Error::Parse {

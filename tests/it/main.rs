@@ -5,6 +5,8 @@ mod cli;
 mod common;
 mod dataset;
 mod evaluation;
+#[cfg(feature = "gui")]
+mod gui;
 mod recovery;
 
 #[global_allocator]

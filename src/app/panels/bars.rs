@@ -16,22 +16,19 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .button("Open folder…")
                 .on_hover_text("A folder of frames or an MTF dataset sequence folder")
                 .clicked()
+                && let Some(p) = rfd::FileDialog::new().pick_folder()
             {
-                if let Some(p) = rfd::FileDialog::new().pick_folder() {
-                    app.send(Command::OpenSequence(SequenceSource::Path(p)));
-                }
+                app.send(Command::OpenSequence(SequenceSource::Path(p)));
             }
             if ui
                 .button("Open ground truth…")
                 .on_hover_text("An MTF <seq>.txt or a POT _gt_points.txt file")
                 .clicked()
-            {
-                if let Some(p) = rfd::FileDialog::new()
+                && let Some(p) = rfd::FileDialog::new()
                     .add_filter("ground truth", &["txt"])
                     .pick_file()
-                {
-                    app.send(Command::OpenSequence(SequenceSource::Path(p)));
-                }
+            {
+                app.send(Command::OpenSequence(SequenceSource::Path(p)));
             }
             // Typed path: works without a desktop portal.
             let edit = ui.add(
@@ -52,7 +49,7 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 app.send(Command::OpenSequence(SequenceSource::Demo));
             }
             if !app.rt.recent.is_empty() {
-                egui::ComboBox::from_id_salt("recent")
+                egui::ComboBox::from_label("recent")
                     .selected_text("Recent")
                     .show_ui(ui, |ui| {
                         for p in app.rt.recent.clone() {
@@ -66,8 +63,9 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                     });
             }
             ui.separator();
-            ui.label("Session:");
-            ui.add(egui::TextEdit::singleline(&mut app.rt.session_path).desired_width(200.0));
+            let label = ui.label("Session:");
+            ui.add(egui::TextEdit::singleline(&mut app.rt.session_path).desired_width(200.0))
+                .labelled_by(label.id);
             if ui.button("Save session").clicked() {
                 app.send(Command::SaveSession(PathBuf::from(
                     app.rt.session_path.trim(),

@@ -36,7 +36,7 @@ impl Transform {
         }
     }
     /// Image point to screen.
-    pub fn to_screen(&self, p: Point) -> Pos2 {
+    pub fn to_screen(self, p: Point) -> Pos2 {
         self.rect.center()
             + Vec2::new(
                 (p.x as f32 - self.center[0]) * self.scale,
@@ -44,7 +44,7 @@ impl Transform {
             )
     }
     /// Screen to image point.
-    pub fn to_image(&self, s: Pos2) -> Point {
+    pub fn to_image(self, s: Pos2) -> Point {
         let d = s - self.rect.center();
         Point::new(
             (d.x / self.scale + self.center[0]) as f64,
@@ -103,6 +103,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
         return;
     };
     let t = Transform::new(rect, app.rt.image_size, &app.state.view);
+    app.rt.transform = Some(t);
     let [w, h] = app.rt.image_size;
     let img_rect = Rect::from_min_max(
         t.to_screen(Point::new(-0.5, -0.5)),
@@ -117,10 +118,10 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
 
     let frame = app.state.frame;
     let numbers = app.state.view.show_corner_numbers;
-    if app.state.view.show_ground_truth {
-        if let Some(gt) = app.ground_truth(frame) {
-            draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
-        }
+    if app.state.view.show_ground_truth
+        && let Some(gt) = app.ground_truth(frame)
+    {
+        draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
     }
     for (i, entry) in app.state.trackers.iter().enumerate() {
         if let Some(r) = app.result(i, frame) {
@@ -143,10 +144,9 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     if let (Some(it), Some(r)) = (
         app.rt.selected_iteration,
         app.result(app.state.selected_tracker, frame),
-    ) {
-        if let Some(rec) = r.iterations.get(it) {
-            draw_quad(&painter, &t, &rec.corners, Color32::YELLOW, true, false);
-        }
+    ) && let Some(rec) = r.iterations.get(it)
+    {
+        draw_quad(&painter, &t, &rec.corners, Color32::YELLOW, true, false);
     }
     interact(app, ui, &response, &t, &painter);
 }
@@ -230,13 +230,13 @@ fn interact(
                 egui::FontId::proportional(15.0),
                 Color32::YELLOW,
             );
-            if response.drag_started() {
-                if let Some(pos) = response.interact_pointer_pos() {
-                    app.send(Command::SetTool(Tool::DrawBox {
-                        tracker,
-                        start: Some(t.to_image(pos)),
-                    }));
-                }
+            if response.drag_started()
+                && let Some(pos) = response.interact_pointer_pos()
+            {
+                app.send(Command::SetTool(Tool::DrawBox {
+                    tracker,
+                    start: Some(t.to_image(pos)),
+                }));
             }
             if let (Some(a), Some(pos)) = (start, response.interact_pointer_pos().or(hover)) {
                 let b = t.to_image(pos);
@@ -258,15 +258,15 @@ fn interact(
                 return;
             };
             let id = response.id.with("gt_corner");
-            if response.drag_started() {
-                if let Some(pos) = response.interact_pointer_pos() {
-                    let nearest = (0..4)
-                        .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                        .filter(|(_, d)| *d < 15.0)
-                        .map(|(k, _)| k);
-                    ui.data_mut(|d| d.insert_temp(id, nearest));
-                }
+            if response.drag_started()
+                && let Some(pos) = response.interact_pointer_pos()
+            {
+                let nearest = (0..4)
+                    .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .filter(|(_, d)| *d < 15.0)
+                    .map(|(k, _)| k);
+                ui.data_mut(|d| d.insert_temp(id, nearest));
             }
             let grabbed: Option<usize> = ui.data(|d| d.get_temp(id)).flatten();
             if let (Some(k), true, Some(pos)) =

@@ -1,0 +1,224 @@
+//! Inspector tests with egui_kittest (no GPU): dropdowns, playback, sessions, a ground-truth
+//! corner drag, and a screenshot smoke test under Xvfb.
+
+use crate::common::{TempDir, root};
+use eframe::egui;
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use regtrack::app::InspectorApp;
+use regtrack::app::command::Command;
+use regtrack::app::state::{SequenceSource, State};
+use regtrack::dataset::synth::{SynthConfig, render_sequence};
+use regtrack::geometry::Point;
+use std::time::{Duration, Instant};
+
+/// A short synthetic sequence (PNG frames) in `dir`.
+fn small_sequence(dir: &std::path::Path, frames: usize) -> std::path::PathBuf {
+    let a = root().join("assets");
+    let cfg = SynthConfig {
+        texture: a.join("textures/skimage_coffee.png"),
+        background: Some(a.join("textures/skimage_grass.png")),
+        motion: a.join("motion/ucsb_bricks_rt.txt"),
+        max_frames: Some(frames),
+        jpeg_quality: 0,
+        ..SynthConfig::default()
+    };
+    render_sequence(&cfg, dir, "rt", &|_, _| {}).unwrap();
+    dir.join("rt.txt")
+}
+
+fn harness(state: State) -> Harness<'static, InspectorApp> {
+    let app = InspectorApp::new(state, || {});
+    Harness::builder()
+        .with_size(egui::Vec2::new(1400.0, 900.0))
+        .with_max_steps(10_000)
+        .build_ui_state(|ui, app: &mut InspectorApp| app.ui(ui), app)
+}
+
+/// Steps the UI until `done` holds (the worker runs on its own thread).
+fn step_until(
+    h: &mut Harness<'static, InspectorApp>,
+    what: &str,
+    done: impl Fn(&InspectorApp) -> bool,
+) {
+    let start = Instant::now();
+    while !done(h.state()) {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "timed out waiting for {what}; errors: {:?}",
+            h.state().errors_shown()
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    h.step();
+}
+
+fn state_on(seq: &std::path::Path) -> State {
+    State {
+        sequence: SequenceSource::Path(seq.to_path_buf()),
+        ..State::default()
+    }
+}
+
+#[test]
+fn pick_an_am_play_and_watch_the_plots_grow() {
+    let d = TempDir::new("gui-play");
+    let seq = small_sequence(d.path(), 12);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    // Pick NCC for tracker 1 from its dropdown, by label.
+    h.get_by_label("AM 1").click();
+    h.run_steps(3);
+    h.get_by_label("ncc").click();
+    h.run_steps(2);
+    step_until(&mut h, "re-initialisation", |a| {
+        a.state.trackers[0].spec.am == "ncc" && a.tracked_until() == Some(0)
+    });
+    let first = h.state().result(0, 0).unwrap().corners;
+    h.get_by_label("Play").click();
+    step_until(&mut h, "the end of the sequence", |a| {
+        a.tracked_until() == Some(11) && !a.is_playing()
+    });
+    let app = h.state();
+    // 11 tracked frames after the start frame: one error per frame, and a success curve.
+    assert_eq!(app.errors(0).len(), 11);
+    assert_eq!(app.success_curve(0).len(), 201);
+    assert!(
+        app.success_curve(0)[50].1 > 0.9,
+        "SR@5 {:?}",
+        app.success_curve(0)[50]
+    );
+    let last = app.result(0, 11).unwrap().corners;
+    assert!(
+        first.change_norm(&last) > 5.0,
+        "the quad moved: {first} -> {last}"
+    );
+    assert!(!app.result(0, 11).unwrap().iterations.is_empty());
+    assert_eq!(app.state.frame, 11);
+}
+
+#[test]
+fn sessions_load_and_every_bundled_session_is_valid() {
+    for entry in std::fs::read_dir(root().join("sessions")).unwrap() {
+        let p = entry.unwrap().path();
+        if p.extension().is_some_and(|e| e == "toml") {
+            let s = State::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            assert!(!s.trackers.is_empty(), "{}", p.display());
+        }
+    }
+    let d = TempDir::new("gui-session");
+    let seq = small_sequence(d.path(), 6);
+    let mut state = state_on(&seq);
+    state.trackers.truncate(1);
+    state.trackers[0].spec.sm = "fclk".into();
+    state.trackers[0].spec.ssm = "affine".into();
+    let session = d.path().join("s.toml");
+    state.save(&session).unwrap();
+    // Start on another session, then load the saved one through the command handler.
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::LoadSession(session.clone()));
+    step_until(&mut h, "the loaded session", |a| {
+        a.state.trackers.len() == 1 && a.tracked_until() == Some(0)
+    });
+    assert_eq!(h.state().state.trackers[0].spec.label(), "fclk_ssd_affine");
+    // A broken session is reported, not a crash.
+    std::fs::write(&session, "trackers = 3\n").unwrap();
+    h.state_mut().send(Command::LoadSession(session));
+    step_until(&mut h, "the error", |a| !a.errors_shown().is_empty());
+    assert!(h.state().errors_shown()[0].contains("s.toml"));
+}
+
+#[test]
+fn dragging_a_ground_truth_corner_corrects_it() {
+    let d = TempDir::new("gui-drag");
+    let seq = small_sequence(d.path(), 4);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    let gt = h.state().ground_truth(0).unwrap();
+    h.get_by_label("Edit ground-truth corners").click();
+    h.step();
+    let from = h.state().screen_pos(gt.0[0]).unwrap();
+    let to = from + egui::Vec2::new(12.0, 9.0);
+    h.hover_at(from);
+    h.step();
+    h.drag_at(from);
+    h.step();
+    for k in 1..=4 {
+        h.hover_at(from + (to - from) * (k as f32 / 4.0));
+        h.step();
+    }
+    h.drop_at(to);
+    h.step();
+    h.step();
+    let moved = h.state().ground_truth(0).unwrap();
+    assert!(
+        moved.0[0].dist(gt.0[0]) > 2.0,
+        "corner 1 moved: {} -> {}",
+        gt,
+        moved
+    );
+    assert_eq!(moved.0[2], gt.0[2], "the other corners stay");
+    assert!(h.state().ground_truth_edited());
+    // Saving writes the corrected ground truth beside the sequence, atomically.
+    h.get_by_label("Save ground truth*").click();
+    h.step();
+    h.step();
+    let saved =
+        regtrack::dataset::read_ground_truth(&d.path().join("rt_gt_homography.txt")).unwrap();
+    assert_eq!(saved.len(), 4);
+    assert!(saved[0].quad.unwrap().0[0].dist(moved.0[0]) < 1e-3);
+}
+
+#[test]
+fn screenshot_under_xvfb_is_not_blank() {
+    let has_xvfb = std::process::Command::new("sh")
+        .args(["-c", "command -v xvfb-run"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_xvfb {
+        // CI installs Xvfb; elsewhere the smoke test needs it too.
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "xvfb-run is missing on CI"
+        );
+        eprintln!("skipped: xvfb-run is not installed");
+        return;
+    }
+    let d = TempDir::new("gui-shot");
+    let seq = small_sequence(d.path(), 8);
+    let shot = d.path().join("shot.png");
+    let runtime = d.path().join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    let out = std::process::Command::new("xvfb-run")
+        .args([
+            "-a",
+            "-s",
+            "-screen 0 1400x900x24",
+            env!("CARGO_BIN_EXE_regtrack"),
+            "inspect",
+            "--seq",
+        ])
+        .arg(&seq)
+        .args(["--frames", "5", "--screenshot"])
+        .arg(&shot)
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&shot).unwrap().to_rgb8();
+    assert!(img.width() >= 800 && img.height() >= 600);
+    // Not blank: many distinct colours, and the frame's content in the middle.
+    let mut colours = std::collections::HashSet::new();
+    for p in img.pixels().step_by(7) {
+        colours.insert(p.0);
+    }
+    assert!(colours.len() > 500, "only {} colours", colours.len());
+}

@@ -167,6 +167,14 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             if let Some(f) = app.rt.tracked_until {
                 ui.label(format!("tracked to frame {}", f + 1));
             }
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                let dt = ui.input(|i| i.stable_dt).max(1e-4);
+                ui.label(
+                    egui::RichText::new(format!("UI {:.0} fps", 1.0 / dt))
+                        .small()
+                        .weak(),
+                );
+            });
         });
     });
 }

@@ -157,6 +157,9 @@ struct ParamArgs {
     /// Gaussian pre-smoothing kernel size.
     #[arg(long, default_value_t = 5)]
     blur: usize,
+    /// Coarse-to-fine pyramid levels (1 = none).
+    #[arg(long, default_value_t = 1)]
+    levels: usize,
 }
 
 impl ParamArgs {
@@ -167,6 +170,7 @@ impl ParamArgs {
             eps: self.eps,
             blur_size: self.blur,
             blur_sigma: self.sigma,
+            pyramid_levels: self.levels,
             ..TrackerParams::default()
         }
     }
@@ -419,6 +423,7 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
             eps: 0.001,
             sigma: 3.0,
             blur: 5,
+            levels: 1,
         },
     )?;
     let pb = bar(specs.len(), "tracking");

@@ -12,7 +12,9 @@ use std::time::Duration;
 pub struct Iteration<'a> {
     /// Frame index (0 is the initialisation frame).
     pub frame: usize,
-    /// Iteration index within the frame, from 0.
+    /// Pyramid level (0 = full resolution).
+    pub level: usize,
+    /// Iteration index within the frame (over all levels), from 0.
     pub iteration: usize,
     /// The SSM parameters after the iteration (normalised frame; `dof` entries).
     pub params: &'a [f64],
@@ -49,6 +51,7 @@ impl Observer for NoObserver {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IterationRecord {
     pub frame: usize,
+    pub level: usize,
     pub iteration: usize,
     pub params: Vec<f64>,
     pub corners: Quad,
@@ -75,6 +78,7 @@ impl Observer for Recorder {
     fn iteration(&mut self, it: &Iteration<'_>) {
         self.iterations.push(IterationRecord {
             frame: it.frame,
+            level: it.level,
             iteration: it.iteration,
             params: it.params.to_vec(),
             corners: it.corners,

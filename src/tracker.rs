@@ -31,6 +31,9 @@ pub struct TrackerParams {
     pub hessian: HessianKind,
     /// Margin of the pre-processed region around the target, as a fraction of its size.
     pub roi_margin: f64,
+    /// Coarse-to-fine search over this many pyramid levels (1 = the frame only), each half the
+    /// size of the previous; each level has its own template.
+    pub pyramid_levels: usize,
 }
 
 impl Default for TrackerParams {
@@ -43,6 +46,7 @@ impl Default for TrackerParams {
             blur_sigma: 3.0,
             hessian: HessianKind::Default,
             roi_margin: 0.25,
+            pyramid_levels: 1,
         }
     }
 }
@@ -74,6 +78,12 @@ impl TrackerParams {
         }
         if !(self.blur_sigma >= 0.0 && self.blur_sigma.is_finite()) {
             return bad(format!("blur_sigma must be >= 0, got {}", self.blur_sigma));
+        }
+        if !(1..=6).contains(&self.pyramid_levels) {
+            return bad(format!(
+                "pyramid_levels must be in 1..=6, got {}",
+                self.pyramid_levels
+            ));
         }
         if !(0.0..=10.0).contains(&self.roi_margin) {
             return bad(format!(
@@ -193,7 +203,11 @@ pub struct Tracker {
     spec: TrackerSpec,
     ctx: Context,
     sm: Box<dyn SearchMethod>,
+    /// Pyramid levels 1, 2, ... (coarser and coarser), each with its own template.
+    coarse: Vec<(Context, Box<dyn SearchMethod>)>,
     pre: Preprocessor,
+    /// Builds the pyramid of already smoothed input.
+    pre_copy: Preprocessor,
     status: TrackStatus,
     frame: usize,
     corners: Quad,
@@ -236,12 +250,24 @@ impl Tracker {
         spec.ssm = ssm.name().to_string();
         let p = &spec.params;
         let ctx = Context::new(ssm, am, p.hessian, p.res);
+        let mut coarse = Vec::new();
+        for _ in 1..p.pyramid_levels {
+            let c = Context::new(
+                ssm::build(&spec.ssm)?,
+                am::build(&spec.am)?,
+                p.hessian,
+                p.res,
+            );
+            coarse.push((c, sm::build(&spec.sm, p)?));
+        }
         let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma));
         Ok(Tracker {
             spec,
             ctx,
             sm,
+            coarse,
             pre,
+            pre_copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
             status: TrackStatus::Uninitialized,
             frame: 0,
             corners: Quad::default(),
@@ -275,24 +301,41 @@ impl Tracker {
         &self.ctx
     }
 
-    /// Prepares the view the search method samples: the pre-processed region around `q`, or the
-    /// whole frame when it is already smoothed. Returns whether the region covers the frame.
-    fn prepare<'a>(
-        pre: &'a mut Preprocessor,
-        input: FrameInput<'a>,
-        region: (f64, f64, f64, f64),
-    ) -> ImageView<'a> {
+    /// Pre-processes the region the trackers read (and its pyramid levels).
+    fn prepare(&mut self, input: FrameInput<'_>, region: (f64, f64, f64, f64)) {
         let (x0, y0, x1, y1) = region;
-        match input {
+        let levels = self.coarse.len();
+        let pre = match input {
             FrameInput::Gray8(img) => {
-                pre.process(img, x0, y0, x1, y1);
-                pre.view()
+                self.pre.process(img, x0, y0, x1, y1);
+                &mut self.pre
             }
             FrameInput::Gray32(img) => {
-                pre.process(img, x0, y0, x1, y1);
-                pre.view()
+                self.pre.process(img, x0, y0, x1, y1);
+                &mut self.pre
             }
-            FrameInput::Smoothed(img) => img.view(),
+            FrameInput::Smoothed(img) => {
+                if levels == 0 {
+                    return;
+                }
+                self.pre_copy.process(img, x0, y0, x1, y1);
+                &mut self.pre_copy
+            }
+        };
+        pre.build_levels(levels);
+    }
+
+    /// The view of pyramid level `level` prepared by [`Tracker::prepare`].
+    fn view<'a>(
+        pre: &'a Preprocessor,
+        pre_copy: &'a Preprocessor,
+        input: FrameInput<'a>,
+        level: usize,
+    ) -> ImageView<'a> {
+        match input {
+            FrameInput::Smoothed(img) if level == 0 => img.view(),
+            FrameInput::Smoothed(_) => pre_copy.level_view(level),
+            _ => pre.level_view(level),
         }
     }
 
@@ -307,7 +350,8 @@ impl Tracker {
     pub fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         self.ctx.set_region(quad, self.spec.params.res)?;
         let region = self.region_around(quad);
-        let view = Self::prepare(&mut self.pre, input, region);
+        self.prepare(input, region);
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
         self.ctx.sample_template(&view);
         let energy: f64 = self
             .ctx
@@ -327,6 +371,16 @@ impl Tracker {
         self.sm
             .initialize(&mut self.ctx)
             .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
+        for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate() {
+            ctx.set_region(quad, self.spec.params.res)?;
+            ctx.sample_template(&Self::view(&self.pre, &self.pre_copy, input, l + 1));
+            sm.initialize(ctx).map_err(|r| {
+                Error::InvalidRegion(format!(
+                    "cannot track {quad} at pyramid level {}: {r}",
+                    l + 1
+                ))
+            })?;
+        }
         self.status = TrackStatus::Tracking;
         self.frame = 0;
         self.corners = self.ctx.corners(&self.ctx.params);
@@ -452,28 +506,58 @@ impl Tracker {
         timing: &mut FrameTiming,
     ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
         let t0 = Instant::now();
-        let view = Self::prepare(&mut self.pre, input, region);
+        self.prepare(input, region);
         let t1 = Instant::now();
         timing.preprocess += t1 - t0;
+        let params = &self.spec.params;
+        let mut p = self.ctx.params;
+        let mut done = 0;
+        // Coarse to fine: each level starts from the parameters the coarser one found (the
+        // parameters live in the normalised frame, the same at every level).
+        for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate().rev() {
+            ctx.params = p;
+            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            let (_, iters, _, _) = Self::search(
+                ctx,
+                &mut **sm,
+                params,
+                self.frame,
+                l + 1,
+                done,
+                &view,
+                observer,
+                started,
+            )?;
+            done += iters;
+            p = ctx.params;
+        }
+        self.ctx.params = p;
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
         let result = Self::search(
             &mut self.ctx,
             &mut *self.sm,
-            &self.spec.params,
+            params,
             self.frame,
+            0,
+            done,
             &view,
             observer,
             started,
-        );
+        )
+        .map(|(q, iters, conv, f)| (q, iters + done, conv, f));
         timing.search += t1.elapsed();
         result
     }
 
     /// The iteration loop proper.
+    #[allow(clippy::too_many_arguments)]
     fn search(
         ctx: &mut Context,
         sm: &mut dyn SearchMethod,
         params: &TrackerParams,
         frame: usize,
+        level: usize,
+        first: usize,
         view: &ImageView,
         observer: &mut dyn Observer,
         started: Instant,
@@ -492,7 +576,8 @@ impl Tracker {
             similarity = f;
             observer.iteration(&Iteration {
                 frame,
-                iteration: it,
+                level,
+                iteration: first + it,
                 params: &ctx.params[..ctx.dof],
                 corners,
                 similarity: f,

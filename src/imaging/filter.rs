@@ -182,24 +182,48 @@ pub fn gaussian_blur<T: Pixel>(src: &Image<T>, kernel: &GaussianKernel) -> GrayF
     }
 }
 
-/// Halves an image: binomial (1 4 6 4 1)/16 smoothing, then every other pixel.
-pub fn downsample_half(src: &GrayF32) -> GrayF32 {
-    let binomial = GaussianKernel {
-        weights: vec![1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0],
-    };
-    let smooth = gaussian_blur(src, &binomial);
-    let w = src.width.div_ceil(2).max(1);
-    let h = src.height.div_ceil(2).max(1);
-    let mut out = Image::new(w, h);
+/// Halves `src` (`w x h`) into `out`: binomial (1 4 6 4 1)/16 smoothing, then every other
+/// pixel (pixel `i` of the result is pixel `2 i` of the source). `scratch` keeps its allocation.
+fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut Vec<f32>) {
+    let (ow, oh) = (w.div_ceil(2).max(1), h.div_ceil(2).max(1));
+    out.resize(ow, oh);
+    if w == 0 || h == 0 {
+        out.data.fill(0.0);
+        return;
+    }
+    let k = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    // Horizontal pass at the kept columns, for every row.
+    scratch.resize(ow * h, 0.0);
     for y in 0..h {
-        for x in 0..w {
-            out.set(
-                x,
-                y,
-                smooth.get((2 * x).min(src.width - 1), (2 * y).min(src.height - 1)),
-            );
+        let row = &src[y * w..(y + 1) * w];
+        for x in 0..ow {
+            let c = 2 * x as isize;
+            let mut acc = 0.0;
+            for (t, &kt) in k.iter().enumerate() {
+                let sx = (c + t as isize - 2).clamp(0, w as isize - 1) as usize;
+                acc += kt * row[sx];
+            }
+            scratch[y * ow + x] = acc;
         }
     }
+    // Vertical pass at the kept rows.
+    for y in 0..oh {
+        let c = 2 * y as isize;
+        for x in 0..ow {
+            let mut acc = 0.0;
+            for (t, &kt) in k.iter().enumerate() {
+                let sy = (c + t as isize - 2).clamp(0, h as isize - 1) as usize;
+                acc += kt * scratch[sy * ow + x];
+            }
+            out.data[y * ow + x] = acc;
+        }
+    }
+}
+
+/// Halves an image: binomial (1 4 6 4 1)/16 smoothing, then every other pixel.
+pub fn downsample_half(src: &GrayF32) -> GrayF32 {
+    let mut out = Image::default();
+    half_into(&src.data, src.width, src.height, &mut out, &mut Vec::new());
     out
 }
 
@@ -227,6 +251,9 @@ pub struct Preprocessor {
     tmp: Vec<f32>,
     line: Vec<f32>,
     region: (usize, usize, usize, usize),
+    /// Coarser levels of the region (level 1, 2, ...), each half the previous.
+    levels: Vec<GrayF32>,
+    scratch: Vec<f32>,
 }
 
 impl Preprocessor {
@@ -238,6 +265,8 @@ impl Preprocessor {
             tmp: Vec::new(),
             line: Vec::new(),
             region: (0, 0, 0, 0),
+            levels: Vec::new(),
+            scratch: Vec::new(),
         }
     }
 
@@ -280,6 +309,35 @@ impl Preprocessor {
     pub fn view(&self) -> ImageView<'_> {
         let (x0, y0, x1, y1) = self.region;
         ImageView::new(&self.out, x1 - x0, y1 - y0, x0 as i64, y0 as i64)
+    }
+
+    /// Builds `count` coarser levels of the region last processed (binomial smoothing and
+    /// decimation by two each), in buffers kept between frames.
+    pub fn build_levels(&mut self, count: usize) {
+        self.levels.truncate(count);
+        while self.levels.len() < count {
+            self.levels.push(Image::default());
+        }
+        let (x0, y0, x1, y1) = self.region;
+        let (mut w, mut h) = (x1 - x0, y1 - y0);
+        for l in 0..count {
+            let (done, rest) = self.levels.split_at_mut(l);
+            let src: &[f32] = if l == 0 { &self.out } else { &done[l - 1].data };
+            half_into(src, w, h, &mut rest[0], &mut self.scratch);
+            w = rest[0].width;
+            h = rest[0].height;
+        }
+    }
+
+    /// Level `l` (0 = the region itself) as a view in frame coordinates.
+    pub fn level_view(&self, l: usize) -> ImageView<'_> {
+        if l == 0 || l > self.levels.len() {
+            return self.view();
+        }
+        let (x0, y0, _, _) = self.region;
+        let img = &self.levels[l - 1];
+        ImageView::new(&img.data, img.width, img.height, x0 as i64, y0 as i64)
+            .with_scale((1u32 << l) as f32)
     }
 }
 

@@ -24,6 +24,8 @@ pub struct ImageView<'a> {
     height: usize,
     x0: i64,
     y0: i64,
+    /// Frame pixels per window pixel (2^l for level l of a pyramid).
+    scale: f32,
     border: Border,
 }
 
@@ -43,8 +45,23 @@ impl<'a> ImageView<'a> {
             height,
             x0,
             y0,
+            scale: 1.0,
             border: Border::Replicate,
         }
+    }
+
+    /// The same view as a pyramid level: each window pixel covers `scale` frame pixels, window
+    /// pixel `i` sits at frame coordinate `x0 + scale * i`. Gradients stay per frame pixel.
+    pub fn with_scale(mut self, scale: f32) -> Self {
+        if scale.is_finite() && scale > 0.0 {
+            self.scale = scale;
+        }
+        self
+    }
+
+    /// Frame pixels per window pixel.
+    pub fn scale(&self) -> f32 {
+        self.scale
     }
 
     /// The same view with another border policy.
@@ -128,7 +145,9 @@ impl<'a> ImageView<'a> {
     fn value_gradient_general(&self, x: f32, y: f32) -> (f32, f32, f32) {
         let (lx, ly) = self.local(x, y);
         let (lx, ly) = clamp_far(lx, ly, self);
-        self.value_gradient_local(lx, ly)
+        let (v, gx, gy) = self.value_gradient_local(lx, ly);
+        let inv = 1.0 / self.scale;
+        (v, gx * inv, gy * inv)
     }
 
     /// Value and gradient at window coordinates (general path, any border).
@@ -142,7 +161,8 @@ impl<'a> ImageView<'a> {
 
     #[inline(always)]
     fn local(&self, x: f32, y: f32) -> (f32, f32) {
-        (x - self.x0 as f32, y - self.y0 as f32)
+        let inv = 1.0 / self.scale;
+        ((x - self.x0 as f32) * inv, (y - self.y0 as f32) * inv)
     }
 }
 
@@ -182,7 +202,7 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         return;
     }
     let w = img.width;
-    let (ox, oy) = (img.x0 as f32, img.y0 as f32);
+    let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
     let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
     let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
     // Whole groups of eight points with AVX2 gathers, the rest below.
@@ -202,8 +222,8 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         let n = xb.len();
         for i in 0..n {
             // Clamped into the window (NaN goes to 0): replicate border, every read in bounds.
-            let x = (xb[i] - ox).max(0.0).min(wm);
-            let y = (yb[i] - oy).max(0.0).min(hm);
+            let x = ((xb[i] - ox) * inv).max(0.0).min(wm);
+            let y = ((yb[i] - oy) * inv).max(0.0).min(hm);
             let fx = x.floor().min(wm2);
             let fy = y.floor().min(hm2);
             ax[i] = x - fx;
@@ -252,7 +272,7 @@ pub fn sample_values_gradients(
     let (xs, ys) = (&xs[done..], &ys[done..]);
     let (values, gx, gy) = (&mut values[done..], &mut gx[done..], &mut gy[done..]);
     let w = img.width;
-    let (ox, oy) = (img.x0 as f32, img.y0 as f32);
+    let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
     // The fast path needs the 4x4 neighbourhood inside: 1 <= x < w - 2, 1 <= y < h - 2.
     let (xmax, ymax) = (img.width as f32 - 2.0, img.height as f32 - 2.0);
     let mut idx = [0u32; BLOCK];
@@ -263,7 +283,7 @@ pub fn sample_values_gradients(
     while start < xs.len() {
         let n = (xs.len() - start).min(BLOCK);
         for i in 0..n {
-            let (x, y) = (xs[start + i] - ox, ys[start + i] - oy);
+            let (x, y) = ((xs[start + i] - ox) * inv, (ys[start + i] - oy) * inv);
             inside[i] = x >= 1.0 && y >= 1.0 && x < xmax && y < ymax;
             let xc = x.max(1.0).min(xmax);
             let yc = y.max(1.0).min(ymax);
@@ -285,7 +305,7 @@ pub fn sample_values_gradients(
                 let left = lerp(h(1, 0), h(2, 0), ay);
                 let down = lerp(h(2, 1), h(3, 1), ay);
                 let up = lerp(h(0, 1), h(1, 1), ay);
-                (v, 0.5 * (right - left), 0.5 * (down - up))
+                (v, 0.5 * inv * (right - left), 0.5 * inv * (down - up))
             } else {
                 img.value_gradient_general(xs[o], ys[o])
             };
@@ -318,6 +338,7 @@ mod avx2 {
         // bounded as explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
+            let inv = _mm256_set1_ps(1.0 / img.scale);
             let zero = _mm256_setzero_ps();
             let (wm, hm) = (
                 _mm256_set1_ps((w - 1) as f32),
@@ -333,11 +354,17 @@ mod avx2 {
             while i < n {
                 // max(NaN, 0) is 0: a NaN coordinate reads the first pixel.
                 let x = _mm256_min_ps(
-                    _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox), zero),
+                    _mm256_max_ps(
+                        _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox), inv),
+                        zero,
+                    ),
                     wm,
                 );
                 let y = _mm256_min_ps(
-                    _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy), zero),
+                    _mm256_max_ps(
+                        _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy), inv),
+                        zero,
+                    ),
                     hm,
                 );
                 let fx = _mm256_min_ps(_mm256_floor_ps(x), wm2);
@@ -390,8 +417,9 @@ mod avx2 {
         // gathered index is within `data` as explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
+            let inv = _mm256_set1_ps(1.0 / img.scale);
             let one = _mm256_set1_ps(1.0);
-            let half = _mm256_set1_ps(0.5);
+            let half = _mm256_set1_ps(0.5 / img.scale);
             let (xmax, ymax) = (
                 _mm256_set1_ps(w as f32 - 2.0),
                 _mm256_set1_ps(h as f32 - 2.0),
@@ -399,8 +427,8 @@ mod avx2 {
             let vw = _mm256_set1_epi32(w as i32);
             let mut i = 0;
             while i < n {
-                let x = _mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox);
-                let y = _mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy);
+                let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(xs.as_ptr().add(i)), ox), inv);
+                let y = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(ys.as_ptr().add(i)), oy), inv);
                 let inside = _mm256_and_ps(
                     _mm256_and_ps(
                         _mm256_cmp_ps::<_CMP_GE_OQ>(x, one),
@@ -513,6 +541,21 @@ mod tests {
                 "gradient {i}"
             );
             assert!((sample_value(&view, xs[i], ys[i]) - rv).abs() < 1e-3);
+        }
+        // A pyramid level: window pixel i at frame coordinate 5 + 2 i; gradients per frame pixel.
+        let level = view.with_scale(2.0);
+        sample_values(&level, &xs, &ys, &mut v);
+        sample_values_gradients(&level, &xs, &ys, &mut v2, &mut gx, &mut gy);
+        for i in 0..n {
+            let (rv, rgx, rgy) = reference(&data, w, h, (xs[i] - 5.0) / 2.0, (ys[i] - 7.0) / 2.0);
+            assert!(
+                (v[i] - rv).abs() < 1e-3 && (v2[i] - rv).abs() < 1e-3,
+                "level value {i}"
+            );
+            assert!(
+                (gx[i] - rgx / 2.0).abs() < 1e-3 && (gy[i] - rgy / 2.0).abs() < 1e-3,
+                "level gradient {i}"
+            );
         }
         // NaN coordinates read finite values; a zero border reads 0 far outside.
         let nan = [f32::NAN; 9];

@@ -54,7 +54,9 @@ fn update_does_not_allocate() {
     for sm in regtrack::sm::REGISTRY {
         for am in regtrack::am::REGISTRY {
             for ssm in ["homography", "sl3", "corner", "affine"] {
-                let spec = TrackerSpec::from_names(sm.name, am.name, ssm).unwrap();
+                let mut spec = TrackerSpec::from_names(sm.name, am.name, ssm).unwrap();
+                // A pyramid too (its levels are kept between frames as well).
+                spec.params.pyramid_levels = if ssm == "affine" { 3 } else { 1 };
                 let mut t = Tracker::new(&spec).unwrap();
                 t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
                 // A first update grows the buffers of the pre-processed region.

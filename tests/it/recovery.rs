@@ -70,3 +70,25 @@ fn baker_matthews_homography_ssd_sigma_4() {
         assert!(far < ok, "{sm}: {far}/100 at sigma 12 px, {ok}/100 at 4 px");
     }
 }
+
+#[test]
+fn a_pyramid_widens_the_basin_of_convergence() {
+    for sm in ["esm", "iclk", "fclk"] {
+        let one = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        let mut three = one.clone();
+        three.params.pyramid_levels = 3;
+        let (a, b) = (
+            converged(&one, 10.0, 60, 0.1, 3),
+            converged(&three, 10.0, 60, 0.1, 3),
+        );
+        eprintln!("sigma 10 px: {sm} 1 level {a}/60, 3 levels {b}/60");
+        assert!(b > a, "{sm}: 3 levels {b}/60 vs 1 level {a}/60");
+    }
+    // And it still recovers small perturbations exactly, in every SSM.
+    for m in ssm::REGISTRY {
+        let mut spec = TrackerSpec::from_names("esm", "zncc", m.name).unwrap();
+        spec.params.pyramid_levels = 2;
+        let ok = converged(&spec, 2.0, 50, 0.1, 5);
+        assert!(ok >= 48, "{}: {ok}/50 with a 2-level pyramid", m.name);
+    }
+}

@@ -73,6 +73,9 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                             ui.label("blur size");
                             ui.add(egui::DragValue::new(&mut p.blur_size).range(1..=31));
                             ui.end_row();
+                            ui.label("pyramid levels");
+                            ui.add(egui::DragValue::new(&mut p.pyramid_levels).range(1..=6));
+                            ui.end_row();
                             ui.label("region margin");
                             ui.add(egui::DragValue::new(&mut p.roi_margin).range(0.0..=10.0).speed(0.01));
                             ui.end_row();

@@ -311,14 +311,14 @@ fn run_inspector(
     screenshot: Option<PathBuf>,
 ) -> Result<()> {
     let shot = screenshot.clone();
-    regtrack::app::run(regtrack::app::RunOptions {
+    let summary = regtrack::app::run(regtrack::app::RunOptions {
         session,
         sequence: seq,
         screenshot: screenshot.map(|p| (frames, p)),
     })
     .map_err(|e| anyhow::anyhow!("inspector: {e}"))?;
-    if let Some(p) = shot {
-        println!("wrote {}", p.display());
+    if let (Some(p), Some(summary)) = (shot, summary) {
+        println!("wrote {} ({summary})", p.display());
     }
     Ok(())
 }

@@ -42,7 +42,8 @@ pub enum Tool {
 }
 
 /// Where a screenshot's outcome is reported (`None` until it is taken).
-pub type ShotResult = Arc<Mutex<Option<Result<(), String>>>>;
+/// On success, a summary of the window's frame rate while the trackers ran.
+pub type ShotResult = Arc<Mutex<Option<Result<String, String>>>>;
 
 /// Take a screenshot once enough frames are tracked, then close.
 #[derive(Debug)]
@@ -84,6 +85,9 @@ pub struct Runtime {
     screenshot: Option<ScreenshotPlan>,
     /// The frame view's image-to-screen mapping, as last drawn.
     transform: Option<panels::Transform>,
+    /// Durations (s) of the window's frames, and of building the UI of each, while the
+    /// trackers ran (the last 10 000).
+    frame_times: Vec<(f32, f32)>,
 }
 
 /// The application.
@@ -120,6 +124,7 @@ impl InspectorApp {
             patches: BTreeMap::new(),
             screenshot: None,
             transform: None,
+            frame_times: Vec::new(),
         };
         let mut app = InspectorApp {
             state: State::default(),
@@ -376,6 +381,7 @@ impl InspectorApp {
 
     /// Draws the whole window into `ui` (used by eframe and by the UI tests).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let built = std::time::Instant::now();
         let ctx = ui.ctx().clone();
         self.poll_worker();
         self.upload(&ctx);
@@ -389,6 +395,15 @@ impl InspectorApp {
         self.screenshot(&ctx);
         if self.rt.playing || self.rt.progress.is_some() {
             ctx.request_repaint();
+        }
+        if self.rt.playing {
+            let dt = ctx.input(|i| i.unstable_dt);
+            if self.rt.frame_times.len() >= 10_000 {
+                self.rt.frame_times.remove(0);
+            }
+            self.rt
+                .frame_times
+                .push((dt, built.elapsed().as_secs_f32()));
         }
     }
 
@@ -447,8 +462,9 @@ impl InspectorApp {
         let path = plan.path.clone();
         let result = plan.result.clone();
         let ctx2 = ctx.clone();
+        let summary = frame_rate_summary(&self.rt.frame_times);
         ctx.request_screenshot(move |img| {
-            let saved = save_png(&path, &img);
+            let saved = save_png(&path, &img).map(|()| summary);
             if let Ok(mut r) = result.lock() {
                 *r = Some(saved);
             }
@@ -456,6 +472,26 @@ impl InspectorApp {
             ctx2.request_repaint();
         });
     }
+}
+
+/// The window's frame rate while the trackers ran, and the time the UI took to build a frame
+/// (what the app itself costs; the rest is rendering).
+fn frame_rate_summary(times: &[(f32, f32)]) -> String {
+    let median = |mut v: Vec<f32>| -> f32 {
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f32::NAN)
+    };
+    let dts: Vec<f32> = times.iter().map(|t| t.0).filter(|v| *v > 0.0).collect();
+    if dts.is_empty() {
+        return "window: no frame while tracking".into();
+    }
+    let n = dts.len();
+    let (frame, build) = (median(dts), median(times.iter().map(|t| t.1).collect()));
+    format!(
+        "window: median {:.0} fps over {n} frames while tracking; building the UI took a median {:.2} ms per frame",
+        1.0 / frame,
+        build * 1e3
+    )
 }
 
 fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), String> {
@@ -485,7 +521,7 @@ pub struct RunOptions {
 }
 
 /// Opens the inspector window (blocks until it closes).
-pub fn run(opts: RunOptions) -> Result<(), String> {
+pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
     let mut state = match &opts.session {
         Some(p) => State::load(p).map_err(|e| e.to_string())?,
         None => State::default(),
@@ -516,8 +552,10 @@ pub fn run(opts: RunOptions) -> Result<(), String> {
     )
     .map_err(|e| e.to_string())?;
     if opts.screenshot.is_none() {
-        return Ok(());
+        return Ok(None);
     }
     let outcome = result.lock().ok().and_then(|r| r.clone());
-    outcome.unwrap_or_else(|| Err("the window closed before the screenshot was taken".into()))
+    outcome
+        .unwrap_or_else(|| Err("the window closed before the screenshot was taken".into()))
+        .map(Some)
 }

@@ -126,7 +126,16 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     for (i, entry) in app.state.trackers.iter().enumerate() {
         if let Some(r) = app.result(i, frame) {
             let c = color(entry.color);
-            draw_quad(&painter, &t, &r.corners, c, false, numbers);
+            // A lost tracker's last corners, dashed and faded.
+            let lost = r.status != TrackStatus::Tracking;
+            draw_quad(
+                &painter,
+                &t,
+                &r.corners,
+                if lost { c.gamma_multiply(0.5) } else { c },
+                lost,
+                numbers && !lost,
+            );
             let label = match r.status {
                 TrackStatus::Lost(reason) => format!("{} lost: {reason}", i + 1),
                 _ => format!("{}", i + 1),

@@ -80,7 +80,11 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
         for (i, t) in app.state.trackers.iter().enumerate() {
             let (mut s, mut u, mut it, mut n) = (0.0, 0.0, 0usize, 0usize);
             for (f, _) in app.errors(i) {
-                if let Some(r) = app.result(i, f) {
+                // Frames after a loss cost nothing: count only the tracked ones.
+                if let Some(r) = app
+                    .result(i, f)
+                    .filter(|r| r.status == crate::tracker::TrackStatus::Tracking)
+                {
                     s += r.search_us;
                     u += r.update_us;
                     it += r.iterations.len();

@@ -146,7 +146,10 @@ fn tracker_stats(app: &InspectorApp, i: usize) -> String {
     let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
     let (mut us, mut n) = (0.0, 0usize);
     for (f, _) in &errors {
-        if let Some(r) = app.result(i, *f) {
+        if let Some(r) = app
+            .result(i, *f)
+            .filter(|r| r.status == crate::tracker::TrackStatus::Tracking)
+        {
             us += r.search_us;
             n += 1;
         }

@@ -447,7 +447,7 @@ impl InspectorApp {
                 self.rt.worker.send(Job::Advance {
                     generation,
                     frames: Some(target - reached),
-                    fps: 0.0,
+                    fps: self.state.playback_fps,
                 });
             }
             return;

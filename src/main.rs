@@ -98,6 +98,16 @@ enum Command {
         #[arg(long)]
         reinit: bool,
     },
+    /// Merge the outputs of `eval --shard` runs into one summary (with `ALL` rows pooled over
+    /// every sequence).
+    Merge {
+        /// Output folder for summary.csv and summary.json.
+        #[arg(long)]
+        out: PathBuf,
+        /// The shards' output folders.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+    },
     /// List every appearance model, state space model and search method with its aliases.
     List,
     /// Render a synthetic sequence with exact ground truth (MTF layout).
@@ -276,6 +286,12 @@ fn main() -> Result<()> {
             shard.as_deref(),
             reinit,
         ),
+        Command::Merge { out, shards } => {
+            let rows = eval::merge_shards(&shards, &out)?;
+            print_table(&rows);
+            println!("wrote {}", out.join("summary.csv").display());
+            Ok(())
+        }
         Command::List => {
             print_list();
             Ok(())

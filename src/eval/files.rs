@@ -1,7 +1,8 @@
 //! Result files: per run the corners (MTF format), per-frame errors and the success curve under
-//! `tracking_data/<sequence>/<sm>_<am>_<ssm>*.txt`; per batch `summary.csv` and `summary.json`.
+//! `tracking_data/<sequence>/<sm>_<am>_<ssm>*.txt` and the whole run as `..._run.json`; per batch
+//! `summary.csv` and `summary.json`. Shards of a batch (one `--out` each) merge into one summary.
 
-use super::{RunResult, Summary, success_curve};
+use super::{RunResult, Summary, success_curve, summarize};
 use crate::dataset::{write_atomic, write_corners};
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -40,7 +41,59 @@ pub fn write_run_files(out: &Path, run: &RunResult) -> Result<PathBuf> {
         sr.push_str(&format!("{t:.1}\t{v:.6}\n"));
     }
     write_atomic(&dir.join(format!("{label}_sr.txt")), sr.as_bytes())?;
+    let json = serde_json::to_string(run).map_err(|e| Error::InvalidParameter(e.to_string()))?;
+    write_atomic(&dir.join(format!("{label}_run.json")), json.as_bytes())?;
     Ok(corners_path)
+}
+
+/// Every run saved under `dir/tracking_data` (sorted by sequence, then tracker).
+pub fn read_runs(dir: &Path) -> Result<Vec<RunResult>> {
+    let data = dir.join("tracking_data");
+    let mut files = Vec::new();
+    for seq in std::fs::read_dir(&data).map_err(|e| Error::io(&data, e))? {
+        let seq = seq.map_err(|e| Error::io(&data, e))?.path();
+        if seq.is_dir() {
+            for f in std::fs::read_dir(&seq).map_err(|e| Error::io(&seq, e))? {
+                let f = f.map_err(|e| Error::io(&seq, e))?.path();
+                if f.to_string_lossy().ends_with("_run.json") {
+                    files.push(f);
+                }
+            }
+        }
+    }
+    files.sort();
+    files
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(f).map_err(|e| Error::io(f, e))?;
+            serde_json::from_str(&text).map_err(|e| Error::Parse {
+                path: f.clone(),
+                line: e.line(),
+                message: e.to_string(),
+            })
+        })
+        .collect()
+}
+
+/// Merges the outputs of several shards of one evaluation: one summary row per run and, per
+/// tracker, one pooled over all sequences (`ALL`), written to `out`. Returns the rows.
+pub fn merge_shards(shards: &[PathBuf], out: &Path) -> Result<Vec<Summary>> {
+    let mut runs = Vec::new();
+    for s in shards {
+        runs.extend(read_runs(s)?);
+    }
+    let mut rows: Vec<Summary> = runs.iter().map(|r| r.summary()).collect();
+    let mut labels: Vec<String> = runs.iter().map(|r| r.spec.label()).collect();
+    labels.sort();
+    labels.dedup();
+    for label in labels {
+        let mine: Vec<&RunResult> = runs.iter().filter(|r| r.spec.label() == label).collect();
+        if mine.len() > 1 {
+            rows.push(summarize("ALL", &mine));
+        }
+    }
+    write_summaries(out, &rows)?;
+    Ok(rows)
 }
 
 fn serde_plain<T: serde::Serialize>(v: &T) -> String {

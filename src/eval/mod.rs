@@ -5,7 +5,24 @@
 
 mod files;
 
-pub use files::{write_run_files, write_summaries};
+pub use files::{merge_shards, read_runs, write_run_files, write_summaries};
+
+/// JSON has no infinity: errors of frames without corners are written as `null`.
+mod infinite_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+    }
+}
 
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
@@ -80,8 +97,11 @@ pub struct FrameRecord {
     /// The tracker's corners (`None` when lost, skipped or not tracked).
     pub corners: Option<Quad>,
     pub ground_truth: Option<Quad>,
-    /// E_AL, centre error and 1 - IoU (infinite / 1 when there are no corners).
+    /// E_AL, centre error and 1 - IoU (infinite / 1 when there are no corners; infinity is
+    /// `null` in JSON).
+    #[serde(with = "infinite_as_null")]
     pub alignment_error: f64,
+    #[serde(with = "infinite_as_null")]
     pub center_error: f64,
     pub iou_error: f64,
     pub status: TrackStatus,

@@ -110,6 +110,94 @@ fn synth_track_and_eval_end_to_end() {
         serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap()).unwrap();
     assert_eq!(json.as_array().unwrap().len(), 4);
 
+    // Shards of a two-sequence evaluation merge into the summary of the whole.
+    let zm = root().join("assets/motion/ucsb_bricks_zm.txt");
+    let out = regtrack(&[
+        "synth",
+        "--texture",
+        tex.to_str().unwrap(),
+        "--motion",
+        zm.to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+        "--name",
+        "zm",
+        "--frames",
+        "10",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let whole = d.path().join("whole");
+    let args = |out: &std::path::Path| -> Vec<String> {
+        [
+            "eval",
+            "--dataset",
+            data.to_str().unwrap(),
+            "--sm",
+            "esm,iclk",
+            "--am",
+            "zncc",
+            "--jobs",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let run = |a: Vec<String>| {
+        let o = Command::new(env!("CARGO_BIN_EXE_regtrack"))
+            .args(&a)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(args(&whole));
+    let mut shards = Vec::new();
+    for k in 0..3 {
+        let dir = d.path().join(format!("part{k}"));
+        let mut a = args(&dir);
+        a.extend(["--shard".to_string(), format!("{k}/3")]);
+        run(a);
+        shards.push(dir);
+    }
+    let merged = d.path().join("merged");
+    let mut a = vec![
+        "merge".to_string(),
+        "--out".to_string(),
+        merged.to_str().unwrap().to_string(),
+    ];
+    a.extend(shards.iter().map(|p| p.to_str().unwrap().to_string()));
+    run(a);
+    let rows = |p: &std::path::Path| -> Vec<(String, String, u64, f64)> {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p.join("summary.json")).unwrap())
+                .unwrap();
+        let mut r: Vec<_> = v
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r["sequence"].as_str().unwrap().to_string(),
+                    r["sm"].as_str().unwrap().to_string(),
+                    r["frames"].as_u64().unwrap(),
+                    r["mean_sr"].as_f64().unwrap(),
+                )
+            })
+            .collect();
+        r.sort_by(|a, b| (&a.0, &a.1).cmp(&(&b.0, &b.1)));
+        r
+    };
+    let (w, m) = (rows(&whole), rows(&merged));
+    assert_eq!(w.len(), 6, "4 runs and 2 pooled rows: {w:?}");
+    assert_eq!(w, m);
+    assert!(w.iter().any(|r| r.0 == "ALL" && r.2 == 20));
+
     // A shard runs only its share.
     let shard = d.path().join("shard");
     let out = regtrack(&[
@@ -131,7 +219,12 @@ fn synth_track_and_eval_end_to_end() {
         String::from_utf8_lossy(&out.stderr)
     );
     let csv = std::fs::read_to_string(shard.join("summary.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 2, "{csv}");
+    assert_eq!(
+        csv.lines().count(),
+        4,
+        "runs 1 and 3 of 4, and their pooled row: {csv}"
+    );
+    assert!(!csv.contains(",esm,"));
     assert!(csv.contains(",fclk,"));
 }
 

@@ -532,7 +532,7 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("regtrack inspector")
-            .with_inner_size([1400.0, 860.0]),
+            .with_inner_size([1280.0, 800.0]),
         ..Default::default()
     };
     let shot = opts.screenshot.clone();

@@ -34,8 +34,14 @@ pub struct LoadedFrames {
 /// Loads up to `max_frames` frames.
 pub fn load_frames(seq: &Sequence, max_frames: Option<usize>) -> Result<LoadedFrames> {
     let n = max_frames.unwrap_or(usize::MAX).min(seq.len());
+    if n < 2 {
+        return Err(Error::InvalidParameter(format!(
+            "the benchmark needs at least 2 frames, {} has {n}",
+            seq.name
+        )));
+    }
     let init = seq.ground_truth(0).ok_or_else(|| Error::Sequence {
-        path: seq.frames[0].clone(),
+        path: seq.frames.first().cloned().unwrap_or_default(),
         message: "the benchmark needs ground truth for the first frame".into(),
     })?;
     let gray = (0..n)

@@ -106,10 +106,13 @@ fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
 /// Matrix exponential by scaling and squaring with a Taylor series.
 pub fn expm<const D: usize>(a: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
     let norm = a.iter().fold(0.0f64, |s, v| s + v.abs());
+    if !norm.is_finite() {
+        return SMatrix::<f64, D, D>::from_element(f64::NAN);
+    }
     let mut k = 0;
     let mut scaled = *a;
     if norm > 0.25 {
-        k = (norm / 0.25).log2().ceil() as i32;
+        k = ((norm / 0.25).log2().ceil() as i32).min(1000);
         scaled = a / 2f64.powi(k);
     }
     let mut term = SMatrix::<f64, D, D>::identity();

@@ -541,7 +541,13 @@ fn run_eval(
             .collect()
     });
     pb.finish_and_clear();
-    let runs = runs.into_iter().collect::<Result<Vec<_>>>()?;
+    // A run that fails (a missing frame, no ground truth to start from) is reported; the others
+    // are still written.
+    let mut failed = Vec::new();
+    let runs: Vec<_> = runs
+        .into_iter()
+        .filter_map(|r| r.map_err(|e| failed.push(format!("{e:#}"))).ok())
+        .collect();
     let mut rows = Vec::new();
     for r in &runs {
         eval::write_run_files(out, r)?;
@@ -560,6 +566,9 @@ fn run_eval(
     eval::write_summaries(out, &rows)?;
     print_table(&rows);
     println!("wrote {}", out.join("summary.csv").display());
+    if !failed.is_empty() {
+        bail!("{} run(s) failed:\n  {}", failed.len(), failed.join("\n  "));
+    }
     Ok(())
 }
 

@@ -348,6 +348,8 @@ impl Tracker {
 
     /// Starts tracking `quad` in `input`: samples the template there.
     pub fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+        // Until it succeeds the tracker is not usable (its context is being replaced).
+        self.status = TrackStatus::Uninitialized;
         self.ctx.set_region(quad, self.spec.params.res)?;
         let region = self.region_around(quad);
         self.prepare(input, region);
@@ -437,28 +439,38 @@ impl Tracker {
             self.ctx.params = start_params;
             observer.frame_started(self.frame, &start_corners);
             result = self.iterate_frame(input, region, observer, started, &mut timing);
-            // The search left the pre-processed region: redo the frame on a larger one once.
-            if let (Ok(out), 0, FrameInput::Gray8(_) | FrameInput::Gray32(_)) =
-                (&result, attempt, input)
-            {
+            // The search left the pre-processed region (or failed in it): redo the frame once on
+            // a larger region, or on the whole frame after a failure.
+            let raw = matches!(input, FrameInput::Gray8(_) | FrameInput::Gray32(_));
+            if attempt == 0 && raw {
                 let (rx0, ry0, rx1, ry1) = {
                     let (a, b, c, d) = self.pre.region();
                     (a as f64, b as f64, c as f64, d as f64)
                 };
-                let (x0, y0, x1, y1) = out.0.bbox();
-                let escaped = (x0 - 3.0 < rx0 && rx0 > 0.0)
-                    || (y0 - 3.0 < ry0 && ry0 > 0.0)
-                    || (x1 + 3.0 > rx1 && rx1 < fw as f64)
-                    || (y1 + 3.0 > ry1 && ry1 < fh as f64);
-                if escaped {
-                    let grown = self.region_around(&out.0);
-                    region = (
-                        region.0.min(grown.0),
-                        region.1.min(grown.1),
-                        region.2.max(grown.2),
-                        region.3.max(grown.3),
-                    );
-                    continue;
+                let whole = rx0 <= 0.0 && ry0 <= 0.0 && rx1 >= fw as f64 && ry1 >= fh as f64;
+                match &result {
+                    Ok(out) => {
+                        let (x0, y0, x1, y1) = out.0.bbox();
+                        let escaped = (x0 - 3.0 < rx0 && rx0 > 0.0)
+                            || (y0 - 3.0 < ry0 && ry0 > 0.0)
+                            || (x1 + 3.0 > rx1 && rx1 < fw as f64)
+                            || (y1 + 3.0 > ry1 && ry1 < fh as f64);
+                        if escaped && out.0.is_finite() {
+                            let grown = self.region_around(&out.0);
+                            region = (
+                                region.0.min(grown.0),
+                                region.1.min(grown.1),
+                                region.2.max(grown.2),
+                                region.3.max(grown.3),
+                            );
+                            continue;
+                        }
+                    }
+                    Err(_) if !whole => {
+                        region = (0.0, 0.0, fw as f64, fh as f64);
+                        continue;
+                    }
+                    Err(_) => {}
                 }
             }
             break;

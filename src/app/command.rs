@@ -59,7 +59,17 @@ impl InspectorApp {
     /// The one handler of every command.
     pub fn apply(&mut self, cmd: Command) {
         match cmd {
-            Command::OpenSequence(src) => self.open(src),
+            Command::OpenSequence(src) => {
+                // A new sequence: nothing of the old one's frames carries over.
+                self.state.start_frame = 0;
+                self.state.frame = 0;
+                self.rt.gt_edits.clear();
+                self.rt.gt_dirty = false;
+                for t in &mut self.state.trackers {
+                    t.init = InitSource::GroundTruth;
+                }
+                self.open(src)
+            }
             Command::AddTracker => {
                 let n = self.state.trackers.len();
                 let mut entry = self
@@ -92,10 +102,11 @@ impl InspectorApp {
                     let rerun = t.spec != entry.spec || t.enabled != entry.enabled;
                     *t = entry;
                     if rerun {
-                        if let Err(e) = crate::tracker::Tracker::new(&t.spec) {
-                            self.error(format!("tracker {}: {e}", i + 1));
+                        match crate::tracker::Tracker::new(&t.spec) {
+                            // Re-run once the pointer is released (not on every drag step).
+                            Ok(_) => self.rt.restart_due = true,
+                            Err(e) => self.error(format!("tracker {}: {e}", i + 1)),
                         }
-                        self.restart(self.state.start_frame);
                     }
                 }
             }
@@ -121,6 +132,10 @@ impl InspectorApp {
                 });
             }
             Command::Seek(i) => {
+                if self.rt.playing {
+                    self.rt.playing = false;
+                    self.rt.worker.stop();
+                }
                 let n = self.frame_count();
                 if n > 0 {
                     self.state.frame = i.min(n - 1);
@@ -192,8 +207,8 @@ impl InspectorApp {
         Some(self.project_gt(&q).unwrap_or(q))
     }
 
-    /// A quad projected on the ground-truth SSM: the least-squares warp of the start frame's
-    /// ground truth (or of the quad itself for 8 DOF).
+    /// A quad projected on the ground-truth SSM: the least-squares warp of the first annotated
+    /// frame's ground truth (or the quad itself for 8 DOF).
     fn project_gt(&self, q: &Quad) -> Option<Quad> {
         let m = ssm::build(&self.state.gt_ssm).ok()?;
         if m.dof() == 8 {
@@ -223,7 +238,16 @@ impl InspectorApp {
             })
             .unwrap_or_else(|| PathBuf::from("."));
         let path = dir.join(format!("{}_gt_{}.txt", seq.name, self.state.gt_ssm));
-        crate::dataset::write_corners(&path, &gt, "jpg")?;
+        let names: Vec<String> = seq
+            .frames
+            .iter()
+            .map(|f| {
+                f.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+            .collect();
+        crate::dataset::write_corners_named(&path, &gt, &names)?;
         self.rt.gt_dirty = false;
         Ok(path)
     }

@@ -85,6 +85,12 @@ pub struct Runtime {
     screenshot: Option<ScreenshotPlan>,
     /// The frame view's image-to-screen mapping, as last drawn.
     transform: Option<panels::Transform>,
+    /// A tracker's settings changed: re-run once the pointer is released.
+    restart_due: bool,
+    /// A file dialog running on its own thread, and where it puts its answer.
+    dialog: Option<Arc<Mutex<Option<Option<PathBuf>>>>>,
+    /// Per tracker, the (frame, generation) whose patches the textures show.
+    patch_keys: BTreeMap<usize, (usize, u64)>,
     /// Durations (s) of the window's frames, and of building the UI of each, while the
     /// trackers ran (the last 10 000).
     frame_times: Vec<(f32, f32)>,
@@ -124,12 +130,18 @@ impl InspectorApp {
             patches: BTreeMap::new(),
             screenshot: None,
             transform: None,
+            restart_due: false,
+            dialog: None,
+            patch_keys: BTreeMap::new(),
             frame_times: Vec::new(),
         };
         let mut app = InspectorApp {
             state: State::default(),
             rt,
         };
+        if let Some(e) = app.rt.worker.spawn_error.clone() {
+            app.error(e);
+        }
         app.load_state(state);
         app
     }
@@ -370,6 +382,27 @@ impl InspectorApp {
             .collect()
     }
 
+    /// Speed of tracker `t` over the frames it tracked after the start frame (with or without
+    /// ground truth): `(frames, search us, update us, iterations)`.
+    pub fn speed(&self, t: usize) -> (usize, f64, f64, usize) {
+        let Some(v) = self.rt.results.get(t) else {
+            return (0, 0.0, 0.0, 0);
+        };
+        v.iter()
+            .enumerate()
+            .filter(|(f, _)| *f > self.state.start_frame)
+            .filter_map(|(_, r)| r.as_ref())
+            .filter(|r| r.status == TrackStatus::Tracking)
+            .fold((0, 0.0, 0.0, 0), |a, r| {
+                (
+                    a.0 + 1,
+                    a.1 + r.search_us,
+                    a.2 + r.update_us,
+                    a.3 + r.iterations.len(),
+                )
+            })
+    }
+
     /// The success curve of tracker `t` (from [`eval::success_curve`]).
     pub fn success_curve(&self, t: usize) -> Vec<(f64, f64)> {
         let e: Vec<f64> = self.errors(t).into_iter().map(|(_, e)| e).collect();
@@ -392,6 +425,11 @@ impl InspectorApp {
         panels::plots_panel(self, ui);
         egui::CentralPanel::default().show(ui, |ui| panels::frame_view(self, ui));
         self.apply_pending();
+        if self.rt.restart_due && !ctx.input(|i| i.pointer.any_down()) {
+            self.rt.restart_due = false;
+            self.restart(self.state.start_frame);
+        }
+        self.poll_dialog();
         self.screenshot(&ctx);
         if self.rt.playing || self.rt.progress.is_some() {
             ctx.request_repaint();
@@ -404,6 +442,51 @@ impl InspectorApp {
             self.rt
                 .frame_times
                 .push((dt, built.elapsed().as_secs_f32()));
+        }
+    }
+
+    /// Opens a file dialog on its own thread (the window keeps drawing meanwhile).
+    pub fn open_dialog(&mut self, folder: bool) {
+        if self.rt.dialog.is_some() {
+            return;
+        }
+        let slot = Arc::new(Mutex::new(None));
+        let out = slot.clone();
+        let spawned = std::thread::Builder::new()
+            .name("file-dialog".into())
+            .spawn(move || {
+                let d = rfd::FileDialog::new();
+                let picked = if folder {
+                    d.pick_folder()
+                } else {
+                    d.add_filter("ground truth", &["txt"]).pick_file()
+                };
+                if let Ok(mut s) = out.lock() {
+                    *s = Some(picked);
+                }
+            });
+        match spawned {
+            Ok(_) => self.rt.dialog = Some(slot),
+            Err(e) => self.error(format!(
+                "cannot open a file dialog ({e}): type the path instead"
+            )),
+        }
+    }
+
+    fn poll_dialog(&mut self) {
+        let Some(slot) = &self.rt.dialog else { return };
+        let answer = slot.lock().ok().and_then(|mut s| s.take());
+        match answer {
+            None => {}
+            Some(Some(p)) => {
+                self.rt.dialog = None;
+                self.send(Command::OpenSequence(SequenceSource::Path(p)));
+                self.apply_pending();
+            }
+            Some(None) => {
+                self.rt.dialog = None;
+                self.rt.status = "no file chosen (without a desktop portal the dialog cannot open: type the path)".into();
+            }
         }
     }
 

@@ -9,7 +9,7 @@ use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
 use crate::observe::{IterationRecord, Recorder};
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::time::{Duration, Instant};
 
@@ -61,6 +61,10 @@ pub enum Job {
     },
 }
 
+/// A job with the cancellation epoch it was sent in: an advance runs only while no stop,
+/// start or open came after it.
+type Stamped = (u64, Job);
+
 /// What the thread reports.
 #[derive(Debug)]
 pub enum Reply {
@@ -84,43 +88,45 @@ pub enum Reply {
 
 /// The handle the UI keeps.
 pub struct Worker {
-    jobs: Sender<Job>,
+    jobs: Sender<Stamped>,
     replies: Receiver<Reply>,
-    stop: Arc<AtomicBool>,
+    epoch: Arc<AtomicU64>,
+    /// Why the thread could not start, if it could not.
+    pub spawn_error: Option<String>,
 }
 
 impl Worker {
     /// Starts the thread; `wake` is called after every reply (to request a repaint).
     pub fn spawn(wake: impl Fn() + Send + Sync + 'static) -> Worker {
-        let (jobs, job_rx) = channel::<Job>();
+        let (jobs, job_rx) = channel::<Stamped>();
         let (reply_tx, replies) = channel::<Reply>();
-        let stop = Arc::new(AtomicBool::new(false));
-        let stop2 = stop.clone();
+        let epoch = Arc::new(AtomicU64::new(0));
+        let epoch2 = epoch.clone();
         let spawned = std::thread::Builder::new()
             .name("regtrack-worker".into())
-            .spawn(move || Thread::new(reply_tx, stop2, wake).run(job_rx));
-        if let Err(e) = spawned {
-            // The handle still works: every job then goes nowhere and the UI says why.
-            eprintln!("cannot start the tracking thread: {e}");
-        }
+            .spawn(move || Thread::new(reply_tx, epoch2, wake).run(job_rx));
         Worker {
             jobs,
             replies,
-            stop,
+            epoch,
+            // The handle still works without its thread (jobs go nowhere); the UI shows why.
+            spawn_error: spawned
+                .err()
+                .map(|e| format!("cannot start the tracking thread: {e}")),
         }
     }
 
     /// Queues a job.
     pub fn send(&self, job: Job) {
         if matches!(job, Job::Start { .. } | Job::Open(_)) {
-            self.stop.store(true, Ordering::SeqCst);
+            self.stop();
         }
-        let _ = self.jobs.send(job);
+        let _ = self.jobs.send((self.epoch.load(Ordering::SeqCst), job));
     }
 
-    /// Stops a running advance after its current frame.
+    /// Stops a running advance after its current frame, and any advance queued before.
     pub fn stop(&self) {
-        self.stop.store(true, Ordering::SeqCst);
+        self.epoch.fetch_add(1, Ordering::SeqCst);
     }
 
     /// Replies received so far.
@@ -131,7 +137,7 @@ impl Worker {
 
 struct Thread<W: Fn() + Sync> {
     out: Sender<Reply>,
-    stop: Arc<AtomicBool>,
+    epoch: Arc<AtomicU64>,
     wake: W,
     sequence: Option<Arc<Sequence>>,
     trackers: Vec<(usize, Tracker)>,
@@ -141,10 +147,10 @@ struct Thread<W: Fn() + Sync> {
 }
 
 impl<W: Fn() + Sync> Thread<W> {
-    fn new(out: Sender<Reply>, stop: Arc<AtomicBool>, wake: W) -> Self {
+    fn new(out: Sender<Reply>, epoch: Arc<AtomicU64>, wake: W) -> Self {
         Thread {
             out,
-            stop,
+            epoch,
             wake,
             sequence: None,
             trackers: Vec::new(),
@@ -159,8 +165,8 @@ impl<W: Fn() + Sync> Thread<W> {
         (self.wake)();
     }
 
-    fn run(mut self, jobs: Receiver<Job>) {
-        while let Ok(job) = jobs.recv() {
+    fn run(mut self, jobs: Receiver<Stamped>) {
+        while let Ok((epoch, job)) = jobs.recv() {
             match job {
                 Job::Open(src) => self.open(src),
                 Job::Show(i) => match self.decode(i) {
@@ -171,18 +177,19 @@ impl<W: Fn() + Sync> Thread<W> {
                     generation,
                     frame,
                     trackers,
-                } => {
-                    self.stop.store(false, Ordering::SeqCst);
-                    self.start(generation, frame, trackers)
-                }
+                } => self.start(generation, frame, trackers),
                 Job::Advance {
                     generation,
                     frames,
                     fps,
                 } => {
                     if generation == self.generation {
-                        self.stop.store(false, Ordering::SeqCst);
-                        self.advance(frames, fps)
+                        self.advance(frames, fps, epoch)
+                    } else {
+                        self.reply(Reply::Stopped {
+                            generation,
+                            frame: self.frame,
+                        });
                     }
                 }
             }
@@ -190,7 +197,7 @@ impl<W: Fn() + Sync> Thread<W> {
     }
 
     fn open(&mut self, src: SequenceSource) {
-        self.stop.store(false, Ordering::SeqCst);
+        self.frame = 0;
         let result = match &src {
             SequenceSource::Demo => {
                 let out = self.out.clone();
@@ -301,7 +308,7 @@ impl<W: Fn() + Sync> Thread<W> {
         });
     }
 
-    fn advance(&mut self, frames: Option<usize>, fps: f32) {
+    fn advance(&mut self, frames: Option<usize>, fps: f32, epoch: u64) {
         let Some(seq) = self.sequence.clone() else {
             return self.reply(Reply::Error("no sequence is open".into()));
         };
@@ -312,7 +319,7 @@ impl<W: Fn() + Sync> Thread<W> {
         let mut last_image = Instant::now() - Duration::from_secs(1);
         let started = Instant::now();
         let first = self.frame + 1;
-        while self.frame < last && !self.stop.load(Ordering::SeqCst) {
+        while self.frame < last && self.epoch.load(Ordering::SeqCst) == epoch {
             let i = self.frame + 1;
             let (gray, image) = match self.decode(i) {
                 Ok(v) => v,

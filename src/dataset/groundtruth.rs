@@ -42,7 +42,9 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
             line: line_no,
             message,
         };
+        // A header names columns: `frame ulx uly ...` (not `frame00001.jpg lost`).
         let is_header = first_content
+            && tokens.len() > 2
             && tokens[0].parse::<f64>().is_err()
             && tokens.iter().skip(1).all(|t| t.parse::<f64>().is_err());
         first_content = false;
@@ -98,9 +100,23 @@ pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
 /// Writes corners in the TMT/MTF format (`frame ulx uly ...` header, `frame%05d.<ext>` names,
 /// `lost` for frames without corners), atomically: to a temporary file renamed over `path`.
 pub fn write_corners(path: &Path, corners: &[Option<Quad>], ext: &str) -> Result<()> {
+    let names: Vec<String> = (0..corners.len())
+        .map(|i| format!("frame{:05}.{ext}", i + 1))
+        .collect();
+    write_corners_named(path, corners, &names)
+}
+
+/// Like [`write_corners`] with the frames' own file names.
+pub fn write_corners_named(path: &Path, corners: &[Option<Quad>], names: &[String]) -> Result<()> {
     let mut text = String::from("frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n");
     for (i, q) in corners.iter().enumerate() {
-        text.push_str(&format!("frame{:05}.{ext}", i + 1));
+        match names
+            .get(i)
+            .filter(|n| !n.is_empty() && !n.contains(char::is_whitespace))
+        {
+            Some(n) => text.push_str(n),
+            None => text.push_str(&format!("frame{:05}", i + 1)),
+        }
         match q {
             Some(q) => {
                 for v in q.to_array() {

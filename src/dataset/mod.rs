@@ -16,6 +16,7 @@ pub mod synth;
 
 pub use groundtruth::{
     GtEntry, parse_ground_truth, read_ground_truth, write_atomic, write_corners,
+    write_corners_named,
 };
 
 use crate::error::{Error, Result};

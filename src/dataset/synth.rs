@@ -250,6 +250,11 @@ impl Scene {
             quads.truncate(m.max(1));
         }
         let (w, h) = cfg.size.unwrap_or_else(|| default_frame_size(&profile));
+        if !(16..=8192).contains(&w) || !(16..=8192).contains(&h) {
+            return Err(Error::InvalidParameter(format!(
+                "frame size {w}x{h}: each side must be in 16..=8192"
+            )));
+        }
         let background = match &cfg.background {
             Some(p) => Rgb::load(p)?.resized(w, h),
             None => Rgb {
@@ -289,22 +294,31 @@ impl Scene {
         let (w, h) = (self.w, self.h);
         let mut img = self.background.px.clone();
         let q = self.quads[i];
-        // Sub-frame quads along the motion (motion blur) or the frame's quad.
+        // Sub-frame quads along the motion (motion blur): an exposure from half-way from the
+        // previous frame to half-way to the next, so the ground truth is its middle.
         let sub = cfg.motion_blur.max(1);
         let prev = if i > 0 { self.quads[i - 1] } else { q };
+        let next = self.quads.get(i + 1).copied().unwrap_or(q);
+        let lerp = |a: &Quad, b: &Quad, t: f64| {
+            Quad(std::array::from_fn(|c| {
+                Point::new(
+                    a.0[c].x + t * (b.0[c].x - a.0[c].x),
+                    a.0[c].y + t * (b.0[c].y - a.0[c].y),
+                )
+            }))
+        };
         let subquads: Vec<Quad> = (0..sub)
             .map(|k| {
-                let t = if sub == 1 {
-                    1.0
+                let s = if sub == 1 {
+                    0.0
                 } else {
-                    (k + 1) as f64 / sub as f64
+                    -0.5 + (k as f64 + 0.5) / sub as f64
                 };
-                Quad(std::array::from_fn(|c| {
-                    Point::new(
-                        prev.0[c].x + t * (q.0[c].x - prev.0[c].x),
-                        prev.0[c].y + t * (q.0[c].y - prev.0[c].y),
-                    )
-                }))
+                if s < 0.0 {
+                    lerp(&prev, &q, 1.0 + s)
+                } else {
+                    lerp(&q, &next, s)
+                }
             })
             .collect();
         let rect = self.texture_rect();

@@ -119,6 +119,13 @@ pub struct RunResult {
     pub sequence: String,
     pub spec: TrackerSpec,
     pub frames: Vec<FrameRecord>,
+    /// A frame fails when the tracker is lost or its E_AL exceeds this (px).
+    #[serde(default = "default_threshold")]
+    pub failure_threshold: f64,
+}
+
+fn default_threshold() -> f64 {
+    SR_MAX
 }
 
 /// One row of `summary.csv`.
@@ -201,7 +208,8 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     }
 }
 
-/// Failure events: transitions into a failed frame (lost, skipped, or E_AL above [`SR_MAX`]).
+/// Failure events: transitions into a failed frame (lost, skipped, or E_AL above the run's
+/// failure threshold).
 fn count_failures(r: &RunResult) -> usize {
     let mut count = 0;
     let mut failed = false;
@@ -210,7 +218,7 @@ fn count_failures(r: &RunResult) -> usize {
             failed = false;
             continue;
         }
-        let now = f.corners.is_none() || f.alignment_error > SR_MAX;
+        let now = f.corners.is_none() || f.alignment_error > r.failure_threshold;
         if now && !failed {
             count += 1;
         }
@@ -232,7 +240,11 @@ pub fn run_sequence(
     let first = init
         .or_else(|| seq.ground_truth(0))
         .ok_or_else(|| Error::Sequence {
-            path: seq.gt_path.clone().unwrap_or_else(|| seq.frames[0].clone()),
+            path: seq
+                .gt_path
+                .clone()
+                .or_else(|| seq.frames.first().cloned())
+                .unwrap_or_default(),
             message: "no ground truth for the first frame: give the initial corners".into(),
         })?;
     let mut tracker = Tracker::new(spec)?;
@@ -269,15 +281,30 @@ pub fn run_sequence(
             Some(k) if i >= k => seq.ground_truth(i).is_some(),
             _ => false,
         };
-        if i == 0 || reinit_here {
-            let q = if i == 0 {
-                first
+        if i == 0 {
+            tracker.initialize(FrameInput::Gray8(&img), &first)?;
+            frames.push(record(
+                i,
+                Some(first),
+                TrackStatus::Tracking,
+                0,
+                0.0,
+                0.0,
+                true,
+            ));
+            continue;
+        }
+        if reinit_here {
+            let q = seq.ground_truth(i).unwrap_or(first);
+            // A frame the tracker cannot start on (occluded, degenerate ground truth) counts as
+            // failed; the next annotated frame is tried.
+            if tracker.initialize(FrameInput::Gray8(&img), &q).is_ok() {
+                skip_until = None;
+                frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
             } else {
-                seq.ground_truth(i).unwrap_or(first)
-            };
-            tracker.initialize(FrameInput::Gray8(&img), &q)?;
-            skip_until = None;
-            frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
+                skip_until = Some(i + 1);
+                frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
+            }
             continue;
         }
         if skip_until.is_some() {
@@ -309,6 +336,7 @@ pub fn run_sequence(
         sequence: seq.name.clone(),
         spec: tracker.spec().clone(),
         frames,
+        failure_threshold: opts.failure_threshold,
     })
 }
 

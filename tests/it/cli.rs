@@ -247,4 +247,24 @@ fn errors_are_clear() {
         err.contains("unknown search method 'nn'") && err.contains("esm"),
         "{err}"
     );
+    // Impossible sizes are refused, not rendered (or looped on).
+    let tex = root().join("assets/textures/skimage_coffee.png");
+    let motion = root().join("assets/motion/ucsb_bricks_rt.txt");
+    let out = regtrack(&[
+        "synth",
+        "--texture",
+        tex.to_str().unwrap(),
+        "--background",
+        tex.to_str().unwrap(),
+        "--motion",
+        motion.to_str().unwrap(),
+        "--out",
+        "/tmp/regtrack-never",
+        "--name",
+        "x",
+        "--size",
+        "0x0",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("16..=8192"));
 }

@@ -138,6 +138,10 @@ fn malformed_ground_truth_names_file_and_line() {
             other => panic!("{text:?}: expected a parse error, got {other:?}"),
         }
     }
+    // A first line for a lost frame is a frame, not a header.
+    let g = parse_ground_truth(p, "frame00001.jpg lost\nframe00002.jpg 1 2 3 4 5 6 7 8\n").unwrap();
+    assert_eq!(g.len(), 2);
+    assert!(g[0].quad.is_none() && g[1].quad.is_some());
     // Empty input, comments and a lone header are fine.
     assert!(parse_ground_truth(p, "").unwrap().is_empty());
     assert!(

@@ -16,19 +16,15 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .button("Open folder…")
                 .on_hover_text("A folder of frames or an MTF dataset sequence folder")
                 .clicked()
-                && let Some(p) = rfd::FileDialog::new().pick_folder()
             {
-                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                app.open_dialog(true);
             }
             if ui
                 .button("Open ground truth…")
                 .on_hover_text("An MTF <seq>.txt or a POT _gt_points.txt file")
                 .clicked()
-                && let Some(p) = rfd::FileDialog::new()
-                    .add_filter("ground truth", &["txt"])
-                    .pick_file()
             {
-                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                app.open_dialog(false);
             }
             // Typed path: works without a desktop portal.
             let edit = ui.add(

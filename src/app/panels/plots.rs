@@ -78,19 +78,7 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
         ui.label("it/frame");
         ui.end_row();
         for (i, t) in app.state.trackers.iter().enumerate() {
-            let (mut s, mut u, mut it, mut n) = (0.0, 0.0, 0usize, 0usize);
-            for (f, _) in app.errors(i) {
-                // Frames after a loss cost nothing: count only the tracked ones.
-                if let Some(r) = app
-                    .result(i, f)
-                    .filter(|r| r.status == crate::tracker::TrackStatus::Tracking)
-                {
-                    s += r.search_us;
-                    u += r.update_us;
-                    it += r.iterations.len();
-                    n += 1;
-                }
-            }
+            let (n, s, u, it) = app.speed(i);
             ui.colored_label(color(t.color), format!("{} {}", i + 1, t.spec.label()));
             let fps = |us: f64| {
                 if us > 0.0 {
@@ -169,13 +157,14 @@ fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
             app.send(Command::SelectIteration(sel.checked_sub(1)));
         }
     }
-    patches(app, ui, i, &r);
+    patches(app, ui, i, frame, &r);
 }
 
 fn patches(
     app: &mut InspectorApp,
     ui: &mut egui::Ui,
     i: usize,
+    frame: usize,
     r: &crate::app::worker::TrackerFrame,
 ) {
     let n = r.res * r.res;
@@ -201,7 +190,11 @@ fn patches(
     let ctx = ui.ctx().clone();
     let size = [r.res, r.res];
     let images = [template, patch, error].map(|g| egui::ColorImage::from_gray(size, &g));
+    let key = (frame, app.rt.generation);
+    let unchanged = app.rt.patch_keys.get(&i) == Some(&key);
+    app.rt.patch_keys.insert(i, key);
     let handles = match app.rt.patches.get_mut(&i) {
+        Some(h) if unchanged => h.clone(),
         Some(h) => {
             for (h, img) in h.iter_mut().zip(images) {
                 h.set(img, egui::TextureOptions::NEAREST);

@@ -144,16 +144,7 @@ fn tracker_stats(app: &InspectorApp, i: usize) -> String {
     let e: Vec<f64> = errors.iter().map(|(_, e)| *e).collect();
     let finite: Vec<f64> = e.iter().copied().filter(|v| v.is_finite()).collect();
     let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
-    let (mut us, mut n) = (0.0, 0usize);
-    for (f, _) in &errors {
-        if let Some(r) = app
-            .result(i, *f)
-            .filter(|r| r.status == crate::tracker::TrackStatus::Tracking)
-        {
-            us += r.search_us;
-            n += 1;
-        }
-    }
+    let (n, us, _, _) = app.speed(i);
     let fps = if us > 0.0 {
         n as f64 / (us * 1e-6)
     } else {

@@ -10,6 +10,22 @@ fn regtrack(args: &[&str]) -> std::process::Output {
         .expect("run regtrack")
 }
 
+/// `regtrack synth` of the bundled coffee texture on a bundled motion profile.
+fn synth(motion: &str, out: &std::path::Path, name: &str, extra: &[&str]) -> std::process::Output {
+    let tex = root().join("assets/textures/skimage_coffee.png");
+    let motion = root().join("assets/motion").join(motion);
+    let mut args = vec![
+        "synth",
+        "--texture",
+        tex.to_str().unwrap(),
+        "--motion",
+        motion.to_str().unwrap(),
+    ];
+    args.extend(["--out", out.to_str().unwrap(), "--name", name]);
+    args.extend(extra);
+    regtrack(&args)
+}
+
 #[test]
 fn list_shows_every_method_with_aliases() {
     let out = regtrack(&["list"]);
@@ -33,23 +49,12 @@ fn list_shows_every_method_with_aliases() {
 fn synth_track_and_eval_end_to_end() {
     let d = TempDir::new("cli");
     let data = d.path().join("data");
-    let tex = root().join("assets/textures/skimage_coffee.png");
-    let motion = root().join("assets/motion/ucsb_bricks_rt.txt");
-    let out = regtrack(&[
-        "synth",
-        "--texture",
-        tex.to_str().unwrap(),
-        "--motion",
-        motion.to_str().unwrap(),
-        "--out",
-        data.to_str().unwrap(),
-        "--name",
+    let out = synth(
+        "ucsb_bricks_rt.txt",
+        &data,
         "rt",
-        "--frames",
-        "12",
-        "--noise",
-        "1",
-    ]);
+        &["--frames", "12", "--noise", "1"],
+    );
     assert!(
         out.status.success(),
         "{}",
@@ -111,20 +116,7 @@ fn synth_track_and_eval_end_to_end() {
     assert_eq!(json.as_array().unwrap().len(), 4);
 
     // Shards of a two-sequence evaluation merge into the summary of the whole.
-    let zm = root().join("assets/motion/ucsb_bricks_zm.txt");
-    let out = regtrack(&[
-        "synth",
-        "--texture",
-        tex.to_str().unwrap(),
-        "--motion",
-        zm.to_str().unwrap(),
-        "--out",
-        data.to_str().unwrap(),
-        "--name",
-        "zm",
-        "--frames",
-        "10",
-    ]);
+    let out = synth("ucsb_bricks_zm.txt", &data, "zm", &["--frames", "10"]);
     assert!(
         out.status.success(),
         "{}",
@@ -249,22 +241,13 @@ fn errors_are_clear() {
     );
     // Impossible sizes are refused, not rendered (or looped on).
     let tex = root().join("assets/textures/skimage_coffee.png");
-    let motion = root().join("assets/motion/ucsb_bricks_rt.txt");
-    let out = regtrack(&[
-        "synth",
-        "--texture",
-        tex.to_str().unwrap(),
-        "--background",
-        tex.to_str().unwrap(),
-        "--motion",
-        motion.to_str().unwrap(),
-        "--out",
-        "/tmp/regtrack-never",
-        "--name",
+    let never = std::path::Path::new("/tmp/regtrack-never");
+    let out = synth(
+        "ucsb_bricks_rt.txt",
+        never,
         "x",
-        "--size",
-        "0x0",
-    ]);
+        &["--background", tex.to_str().unwrap(), "--size", "0x0"],
+    );
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("16..=8192"));
 }

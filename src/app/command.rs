@@ -65,6 +65,7 @@ impl InspectorApp {
                 self.state.frame = 0;
                 self.rt.gt_edits.clear();
                 self.rt.gt_dirty = false;
+                self.rt.gt_version += 1;
                 for t in &mut self.state.trackers {
                     t.init = InitSource::GroundTruth;
                 }
@@ -165,6 +166,7 @@ impl InspectorApp {
                         .gt_edits
                         .insert((self.state.gt_ssm.clone(), frame), fixed);
                     self.rt.gt_dirty = true;
+                    self.rt.gt_version += 1;
                 }
             }
             Command::SetGtSsm(name) => match ssm::build(&name) {

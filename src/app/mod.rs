@@ -55,6 +55,13 @@ pub struct ScreenshotPlan {
     pub result: ShotResult,
 }
 
+/// What a tracker's errors depend on: generation, last tracked frame, ground-truth version and
+/// SSM, start frame.
+type ErrorsKey = (u64, Option<usize>, u64, String, usize);
+
+/// Per tracker, its errors and what they were computed from.
+type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
+
 /// Runtime fields: never saved.
 pub struct Runtime {
     worker: Worker,
@@ -87,6 +94,10 @@ pub struct Runtime {
     transform: Option<panels::Transform>,
     /// A tracker's settings changed: re-run once the pointer is released.
     restart_due: bool,
+    /// Bumped at every ground-truth correction (invalidates the error cache).
+    gt_version: u64,
+    /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
+    errors_cache: ErrorsCache,
     /// A file dialog running on its own thread, and where it puts its answer.
     dialog: Option<Arc<Mutex<Option<Option<PathBuf>>>>>,
     /// Per tracker, the (frame, generation) whose patches the textures show.
@@ -131,6 +142,8 @@ impl InspectorApp {
             screenshot: None,
             transform: None,
             restart_due: false,
+            gt_version: 0,
+            errors_cache: Default::default(),
             dialog: None,
             patch_keys: BTreeMap::new(),
             frame_times: Vec::new(),
@@ -164,6 +177,7 @@ impl InspectorApp {
         self.state = state;
         self.rt.results = vec![Vec::new(); self.state.trackers.len()];
         self.rt.gt_edits.clear();
+        self.rt.gt_version += 1;
         self.open(src);
     }
 
@@ -363,6 +377,31 @@ impl InspectorApp {
     /// Alignment errors of tracker `t` on the frames tracked after the start frame (lost frames
     /// are infinite), against the ground truth shown.
     pub fn errors(&self, t: usize) -> Vec<(usize, f64)> {
+        let key: ErrorsKey = (
+            self.rt.generation,
+            self.rt.tracked_until,
+            self.rt.gt_version,
+            self.state.gt_ssm.clone(),
+            self.state.start_frame,
+        );
+        if let Some((_, v)) = self
+            .rt
+            .errors_cache
+            .borrow()
+            .get(&t)
+            .filter(|(k, _)| *k == key)
+        {
+            return v.clone();
+        }
+        let v = self.compute_errors(t);
+        self.rt
+            .errors_cache
+            .borrow_mut()
+            .insert(t, (key, v.clone()));
+        v
+    }
+
+    fn compute_errors(&self, t: usize) -> Vec<(usize, f64)> {
         let Some(v) = self.rt.results.get(t) else {
             return Vec::new();
         };

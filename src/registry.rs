@@ -51,8 +51,3 @@ pub fn lookup<'a, B>(
                 .join(", "),
         })
 }
-
-/// The canonical names of a registry.
-pub fn names<B>(entries: &[Entry<B>]) -> Vec<&'static str> {
-    entries.iter().map(|e| e.name).collect()
-}

@@ -284,17 +284,20 @@ impl<W: Fn() + Sync> Thread<W> {
                     self.trackers.push((idx, t));
                     let k = self.trackers.len() - 1;
                     let t = &self.trackers[k].1;
-                    let out = crate::tracker::FrameOutcome {
-                        frame: 0,
+                    // At initialisation the patch is the template.
+                    let template = self.templates[k].clone();
+                    let snap = TrackerFrame {
+                        tracker: idx,
                         status: t.status(),
                         corners: t.corners(),
-                        iterations: 0,
-                        converged: true,
-                        similarity: f64::NAN,
-                        timing: Default::default(),
+                        iterations: Vec::new(),
+                        start: None,
+                        search_us: 0.0,
+                        update_us: 0.0,
+                        res: t.spec().params.res,
+                        patch: template.to_vec(),
+                        template,
                     };
-                    let mut snap = self.snapshot(k, t, &Recorder::default(), &out);
-                    snap.patch = snap.template.to_vec();
                     results.push(snap);
                 }
                 Err(e) => self.reply(Reply::Error(format!("{}: {e}", spec.label()))),

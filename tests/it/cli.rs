@@ -10,6 +10,15 @@ fn regtrack(args: &[&str]) -> std::process::Output {
         .expect("run regtrack")
 }
 
+/// Checks that a command succeeded, showing its error output otherwise.
+fn succeed(out: std::process::Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// `regtrack synth` of the bundled coffee texture on a bundled motion profile.
 fn synth(motion: &str, out: &std::path::Path, name: &str, extra: &[&str]) -> std::process::Output {
     let tex = root().join("assets/textures/skimage_coffee.png");
@@ -49,21 +58,16 @@ fn list_shows_every_method_with_aliases() {
 fn synth_track_and_eval_end_to_end() {
     let d = TempDir::new("cli");
     let data = d.path().join("data");
-    let out = synth(
+    succeed(synth(
         "ucsb_bricks_rt.txt",
         &data,
         "rt",
         &["--frames", "12", "--noise", "1"],
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    ));
     assert!(data.join("rt/frame00012.jpg").is_file());
 
     let corners = d.path().join("rt_corners.txt");
-    let out = regtrack(&[
+    succeed(regtrack(&[
         "track",
         "--seq",
         data.join("rt.txt").to_str().unwrap(),
@@ -75,17 +79,12 @@ fn synth_track_and_eval_end_to_end() {
         "8",
         "--out",
         corners.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    ]));
     let text = std::fs::read_to_string(&corners).unwrap();
     assert_eq!(text.lines().count(), 13, "header + 12 frames");
 
     let res = d.path().join("res");
-    let out = regtrack(&[
+    succeed(regtrack(&[
         "eval",
         "--dataset",
         data.to_str().unwrap(),
@@ -99,12 +98,7 @@ fn synth_track_and_eval_end_to_end() {
         res.to_str().unwrap(),
         "--jobs",
         "2",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    ]));
     let csv = std::fs::read_to_string(res.join("summary.csv")).unwrap();
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(
@@ -116,12 +110,12 @@ fn synth_track_and_eval_end_to_end() {
     assert_eq!(json.as_array().unwrap().len(), 4);
 
     // Shards of a two-sequence evaluation merge into the summary of the whole.
-    let out = synth("ucsb_bricks_zm.txt", &data, "zm", &["--frames", "10"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeed(synth(
+        "ucsb_bricks_zm.txt",
+        &data,
+        "zm",
+        &["--frames", "10"],
+    ));
     let whole = d.path().join("whole");
     let args = |out: &std::path::Path| -> Vec<String> {
         [
@@ -192,7 +186,7 @@ fn synth_track_and_eval_end_to_end() {
 
     // A shard runs only its share.
     let shard = d.path().join("shard");
-    let out = regtrack(&[
+    succeed(regtrack(&[
         "eval",
         "--dataset",
         data.to_str().unwrap(),
@@ -204,12 +198,7 @@ fn synth_track_and_eval_end_to_end() {
         shard.to_str().unwrap(),
         "--shard",
         "1/2",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    ]));
     let csv = std::fs::read_to_string(shard.join("summary.csv")).unwrap();
     assert_eq!(
         csv.lines().count(),

@@ -117,6 +117,26 @@ impl Correlation {
         &self.template
     }
 
+    /// `sqrt(beta)` times the unit vector of `P x`: `|e(a) - e(b)|^2 = 2 beta (1 - rho)`.
+    pub fn embed(&self, patch: &[f32], out: &mut [f32]) {
+        let m = mean(patch, self.centered);
+        let norm = patch
+            .iter()
+            .map(|&v| (v as f64 - m).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let beta = if self.centered { patch.len() as f64 } else { 1.0 };
+        let s = if norm > 1e-9 {
+            (beta.sqrt() / norm) as f32
+        } else {
+            0.0
+        };
+        let m = m as f32;
+        for (o, &v) in out.iter_mut().zip(patch) {
+            *o = s * (v - m);
+        }
+    }
+
     /// Normalises the current patch into the scratch buffer; returns `(|P I|, rho)`.
     fn current(&mut self, current: &[f32]) -> (f64, f64) {
         let n = unit(current, self.centered, &mut self.c_unit);

@@ -51,11 +51,31 @@ pub enum HessianKind {
 pub struct Capabilities {
     /// Has analytic derivatives (the gradient-based search methods need them).
     pub derivatives: bool,
-    /// Can serve as a distance between patches (nearest-neighbour search).
+    /// Has an embedding ([`Am::embed`]) in which the squared L2 distance ranks patches as the
+    /// similarity does (nearest-neighbour search).
     pub distance: bool,
 }
 
+impl Capabilities {
+    /// What `need` asks for that `self` lacks, in words (`None` when nothing is missing).
+    pub fn missing(&self, need: &Capabilities) -> Option<&'static str> {
+        if need.derivatives && !self.derivatives {
+            Some("analytic derivatives")
+        } else if need.distance && !self.distance {
+            Some("a patch embedding for nearest-neighbour search")
+        } else {
+            None
+        }
+    }
+}
+
 /// An appearance model.
+///
+/// Per iteration a search method calls [`Am::gradient`] (or [`Am::similarity`]) once, then
+/// possibly [`Am::hessian`] on the same patch: a model computes the statistics of a patch (means,
+/// norms, joint histograms) in the first call and the Hessian reuses them, so they are never built
+/// twice. Once a frame has converged the driver calls [`Am::update_model`] with the patch sampled
+/// at the final parameters, for the models that say so in [`Am::updates_model`].
 pub trait Am: Send + Sync + std::fmt::Debug {
     /// The registry name.
     fn name(&self) -> &'static str;
@@ -79,7 +99,8 @@ pub trait Am: Send + Sync + std::fmt::Debug {
     /// The similarity and its gradient with respect to the `wrt` pixels, written to `grad`.
     fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64;
     /// `J^T (d2f / dI2) J` with respect to the `wrt` pixels (`J` is `N x dof`), written row-major
-    /// into the first `dof * dof` entries of `out`.
+    /// into the first `dof * dof` entries of `out`. Called after [`Am::gradient`] with the same
+    /// `wrt` and `current` (the statistics computed there may be reused).
     fn hessian(
         &mut self,
         wrt: Wrt,
@@ -89,8 +110,21 @@ pub trait Am: Send + Sync + std::fmt::Debug {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     );
-    /// Updates an internal model (e.g. the intensity map of SCV) once a frame has converged.
+    /// Whether [`Am::update_model`] does something (the driver then samples the final patch of
+    /// each frame for it).
+    fn updates_model(&self) -> bool {
+        false
+    }
+    /// Updates an internal model (e.g. the intensity map of SCV) once a frame has converged;
+    /// `current` is the patch at the final parameters.
     fn update_model(&mut self, _current: &[f32]) {}
+    /// Writes the embedding of `patch` into `out` (same length as the patch): the squared L2
+    /// distance between embeddings ranks patches as the similarity does, so that nearest-neighbour
+    /// search can index them. Models without [`Capabilities::distance`] leave it unused; the
+    /// default is the patch itself (SSD's geometry).
+    fn embed(&self, patch: &[f32], out: &mut [f32]) {
+        out.copy_from_slice(patch);
+    }
 }
 
 /// Builds an AM.

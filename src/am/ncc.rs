@@ -30,6 +30,9 @@ impl Am for Ncc {
     fn template(&self) -> &[f32] {
         self.0.template()
     }
+    fn embed(&self, patch: &[f32], out: &mut [f32]) {
+        self.0.embed(patch, out)
+    }
     fn similarity(&mut self, current: &[f32]) -> f64 {
         self.0.similarity(current)
     }

@@ -21,6 +21,8 @@ pub struct BenchRow {
     pub us_per_iteration: f64,
     pub tracker_fps: f64,
     pub live_fps: f64,
+    /// Initialisation time (template, NN index, ...), ms.
+    pub init_ms: f64,
     /// Frames lost (in the live-path run).
     pub lost_at: Option<usize>,
 }
@@ -69,19 +71,24 @@ pub fn bench_tracker(
     frames: &LoadedFrames,
     repeats: usize,
 ) -> Result<BenchRow> {
-    let kernel = gaussian_kernel(spec.params.blur_size, spec.params.blur_sigma);
+    // A whole tracker's own pre-processing is its business: it gets the default smoothing.
+    let p = spec.params().cloned().unwrap_or_default();
+    let kernel = gaussian_kernel(p.blur_size, p.blur_sigma);
     let smoothed: Vec<GrayF32> = frames
         .gray
         .iter()
         .map(|g| gaussian_blur(g, &kernel))
         .collect();
     let (mut fps_t, mut fps_l, mut ipf, mut upi) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut init_ms = Vec::new();
     let mut tracked = 0;
     let mut lost_at = None;
     for _ in 0..repeats.max(1) {
         // Tracker only: pre-smoothed whole frames, the search alone is timed.
         let mut t = Tracker::new(spec)?;
+        let start = Instant::now();
         t.initialize(FrameInput::Smoothed(&smoothed[0]), &frames.init)?;
+        init_ms.push(start.elapsed().as_secs_f64() * 1e3);
         let mut counter = IterationCounter::default();
         let mut n = 0usize;
         let start = Instant::now();
@@ -126,6 +133,7 @@ pub fn bench_tracker(
         us_per_iteration: median(upi),
         tracker_fps: median(fps_t),
         live_fps: median(fps_l),
+        init_ms: median(init_ms),
         lost_at,
     })
 }

@@ -50,10 +50,12 @@ pub mod geometry;
 pub mod imaging;
 pub mod linalg;
 pub mod observe;
+pub mod params;
 pub mod registry;
 pub mod rng;
 pub mod sm;
 pub mod ssm;
+pub mod status;
 pub mod tracker;
 
 pub use error::{Error, Result};

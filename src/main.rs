@@ -7,7 +7,7 @@ use regtrack::dataset::{self, Sequence, demo, synth};
 use regtrack::eval::{self, EvalOptions, Summary};
 use regtrack::geometry::Quad;
 use regtrack::observe::NoObserver;
-use regtrack::tracker::{TrackerParams, TrackerSpec};
+use regtrack::tracker::TrackerSpec;
 use regtrack::{am, bench, sm, ssm};
 use std::path::{Path, PathBuf};
 
@@ -82,6 +82,9 @@ enum Command {
         /// State space models.
         #[arg(long, value_delimiter = ',', default_value = "homography")]
         ssm: Vec<String>,
+        /// Whole trackers, evaluated beside the registration trackers.
+        #[arg(long, value_delimiter = ',')]
+        tracker: Vec<String>,
         #[command(flatten)]
         params: ParamArgs,
         /// Output folder.
@@ -124,6 +127,9 @@ enum Command {
         am: Vec<String>,
         #[arg(long, value_delimiter = ',', default_value = "homography")]
         ssm: Vec<String>,
+        /// Whole trackers, benchmarked beside the registration trackers.
+        #[arg(long, value_delimiter = ',')]
+        tracker: Vec<String>,
         #[command(flatten)]
         params: ParamArgs,
         /// Repeats (the median is reported).
@@ -140,6 +146,10 @@ enum Command {
 
 #[derive(Args)]
 struct TrackerArgs {
+    /// A whole tracker (instead of --sm/--am/--ssm).
+    #[arg(long)]
+    tracker: Option<String>,
+    /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`.
     #[arg(long, default_value = "esm")]
     sm: String,
     #[arg(long, default_value = "ssd")]
@@ -150,39 +160,68 @@ struct TrackerArgs {
     params: ParamArgs,
 }
 
-#[derive(Args, Clone)]
+/// Tracker parameters. Each flag is a shortcut for `--param NAME=VALUE`; ranges and defaults are
+/// those of `regtrack list` (one definition for the command line, the inspector and sessions).
+#[derive(Args, Clone, Default)]
 struct ParamArgs {
-    /// Sampling resolution (res x res points).
-    #[arg(long, default_value_t = 50)]
-    res: usize,
-    /// Maximum iterations per frame.
-    #[arg(long, default_value_t = 30)]
-    max_iters: usize,
-    /// Stop when the corners move less than this (L2 norm, px).
-    #[arg(long, default_value_t = 0.001)]
-    eps: f64,
-    /// Gaussian pre-smoothing standard deviation (px; 0 = none).
-    #[arg(long, default_value_t = 3.0)]
-    sigma: f32,
-    /// Gaussian pre-smoothing kernel size.
-    #[arg(long, default_value_t = 5)]
-    blur: usize,
-    /// Coarse-to-fine pyramid levels (1 = none).
-    #[arg(long, default_value_t = 1)]
-    levels: usize,
+    /// Sampling resolution (res x res points; default 50).
+    #[arg(long)]
+    res: Option<String>,
+    /// Maximum iterations per frame (default 30).
+    #[arg(long)]
+    max_iters: Option<String>,
+    /// Stop when the corners move less than this (L2 norm, px; default 0.001).
+    #[arg(long)]
+    eps: Option<String>,
+    /// Gaussian pre-smoothing standard deviation (px; default 3).
+    #[arg(long)]
+    sigma: Option<String>,
+    /// Gaussian pre-smoothing kernel size (default 5; 1 = none).
+    #[arg(long)]
+    blur: Option<String>,
+    /// Coarse-to-fine pyramid levels (default 1 = none).
+    #[arg(long)]
+    levels: Option<String>,
+    /// Hessian: default, gauss_newton, newton, after_convergence.
+    #[arg(long)]
+    hessian: Option<String>,
+    /// Margin of the pre-processed region around the target, in target sizes (default 0.25).
+    #[arg(long)]
+    roi_margin: Option<String>,
+    /// Seed of the sampling search methods (NN, PF; default 0).
+    #[arg(long)]
+    seed: Option<String>,
+    /// Any tracker or search-method parameter as NAME=VALUE, repeatable (e.g. `--param
+    /// samples=5000 --param sigma=0.03`); `regtrack list` lists them.
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    param: Vec<String>,
 }
 
 impl ParamArgs {
-    fn params(&self) -> TrackerParams {
-        TrackerParams {
-            res: self.res,
-            max_iters: self.max_iters,
-            eps: self.eps,
-            blur_size: self.blur,
-            blur_sigma: self.sigma,
-            pyramid_levels: self.levels,
-            ..TrackerParams::default()
+    /// Sets every given parameter on `spec` (checked against its definition).
+    fn apply(&self, spec: &mut TrackerSpec) -> Result<()> {
+        let flags = [
+            ("res", &self.res),
+            ("max_iters", &self.max_iters),
+            ("eps", &self.eps),
+            ("blur_sigma", &self.sigma),
+            ("blur_size", &self.blur),
+            ("pyramid_levels", &self.levels),
+            ("hessian", &self.hessian),
+            ("roi_margin", &self.roi_margin),
+            ("seed", &self.seed),
+        ];
+        for (name, v) in flags {
+            if let Some(v) = v {
+                spec.set_param(name, v)?;
+            }
         }
+        for a in &self.param {
+            let (name, v) = regtrack::params::split_assignment(a)?;
+            spec.set_param(name, v)?;
+        }
+        spec.check()?;
+        Ok(())
     }
 }
 
@@ -269,6 +308,7 @@ fn main() -> Result<()> {
             sm,
             am,
             ssm,
+            tracker,
             params,
             out,
             jobs,
@@ -280,6 +320,7 @@ fn main() -> Result<()> {
             &sm,
             &am,
             &ssm,
+            &tracker,
             &params,
             &out,
             jobs,
@@ -302,6 +343,7 @@ fn main() -> Result<()> {
             sm,
             am,
             ssm,
+            tracker,
             params,
             repeats,
             frames,
@@ -311,6 +353,7 @@ fn main() -> Result<()> {
             &sm,
             &am,
             &ssm,
+            &tracker,
             &params,
             repeats,
             frames,
@@ -371,10 +414,13 @@ fn load_demo(cache: Option<&Path>) -> Result<Sequence> {
     Ok(seq)
 }
 
+/// Every registration tracker of the product `sms x ams x ssms`, then the whole trackers, with the
+/// given parameters.
 fn specs(
     sms: &[String],
     ams: &[String],
     ssms: &[String],
+    whole: &[String],
     params: &ParamArgs,
 ) -> Result<Vec<TrackerSpec>> {
     let mut out = Vec::new();
@@ -382,11 +428,15 @@ fn specs(
         for a in ams {
             for m in ssms {
                 let mut spec = TrackerSpec::from_names(s, a, m)?;
-                spec.params = params.params();
-                regtrack::Tracker::new(&spec)?;
+                params.apply(&mut spec)?;
                 out.push(spec);
             }
         }
+    }
+    for t in whole {
+        let mut spec = TrackerSpec::whole(t)?;
+        params.apply(&mut spec)?;
+        out.push(spec);
     }
     Ok(out)
 }
@@ -409,7 +459,7 @@ fn print_table(rows: &[Summary]) {
         println!(
             "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0}",
             r.sequence,
-            format!("{}_{}_{}", r.sm, r.am, r.ssm),
+            r.tracker,
             r.frames,
             r.sr5,
             r.sr20,
@@ -433,14 +483,8 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
         &["iclk".into(), "fclk".into(), "esm".into()],
         &["ssd".into(), "zncc".into()],
         &["homography".into()],
-        &ParamArgs {
-            res: 50,
-            max_iters: 30,
-            eps: 0.001,
-            sigma: 3.0,
-            blur: 5,
-            levels: 1,
-        },
+        &[],
+        &ParamArgs::default(),
     )?;
     let pb = bar(specs.len(), "tracking");
     let results = eval::run_batch(
@@ -461,8 +505,11 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
 
 fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) -> Result<()> {
     let seq = Sequence::open(seq)?;
-    let mut spec = TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?;
-    spec.params = t.params.params();
+    let mut spec = match &t.tracker {
+        Some(name) => TrackerSpec::whole(name)?,
+        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
+    };
+    t.params.apply(&mut spec)?;
     let init = match init {
         Some(v) => {
             let arr: [f64; 8] = v
@@ -495,13 +542,14 @@ fn run_eval(
     sms: &[String],
     ams: &[String],
     ssms: &[String],
+    whole: &[String],
     params: &ParamArgs,
     out: &Path,
     jobs: usize,
     shard: Option<&str>,
     reinit: bool,
 ) -> Result<()> {
-    let specs = specs(sms, ams, ssms, params)?;
+    let specs = specs(sms, ams, ssms, whole, params)?;
     let sequences = dataset::discover(root, seqs.as_deref())?;
     let opts = EvalOptions {
         reinit,
@@ -573,32 +621,50 @@ fn run_eval(
 }
 
 fn print_list() {
+    let row = |name: &str, al: &[&str], desc: &str| {
+        println!("  {:<12} {:<22} {}", name, aliases(al), desc)
+    };
     println!("appearance models (--am):");
     for e in am::REGISTRY {
-        println!(
-            "  {:<12} {:<28} {}",
-            e.name,
-            aliases(e.aliases),
-            e.description
-        );
+        let c = (e.build)().capabilities();
+        let mut tags = Vec::new();
+        if !c.derivatives {
+            tags.push("no derivatives");
+        }
+        if c.distance {
+            tags.push("NN");
+        }
+        let tags = if tags.is_empty() {
+            String::new()
+        } else {
+            format!(" [{}]", tags.join(", "))
+        };
+        row(e.name, e.aliases, &format!("{}{tags}", e.description));
     }
     println!("state space models (--ssm):");
     for e in ssm::REGISTRY {
-        println!(
-            "  {:<12} {:<28} {}",
-            e.name,
-            aliases(e.aliases),
-            e.description
-        );
+        row(e.name, e.aliases, e.description);
     }
-    println!("search methods (--sm):");
+    println!("search methods (--sm; composites: cascade:A+B+..., parallel:A+B+...):");
     for e in sm::REGISTRY {
-        println!(
-            "  {:<12} {:<28} {}",
-            e.name,
-            aliases(e.aliases),
-            e.description
-        );
+        row(e.name, e.aliases, e.description);
+        for d in e.build.params {
+            println!("  {:<12}   --param {}", "", d.describe());
+        }
+    }
+    println!("whole trackers (--tracker):");
+    if regtrack::tracker::WHOLE_REGISTRY.is_empty() {
+        println!("  (none yet)");
+    }
+    for e in regtrack::tracker::WHOLE_REGISTRY {
+        row(e.name, e.aliases, e.description);
+        for d in e.build.params {
+            println!("  {:<12}   --param {}", "", d.describe());
+        }
+    }
+    println!("tracker parameters (--param NAME=VALUE, or their flags):");
+    for d in regtrack::tracker::TRACKER_PARAMS {
+        println!("  {}", d.describe());
     }
 }
 
@@ -657,6 +723,7 @@ fn run_bench(
     sms: &[String],
     ams: &[String],
     ssms: &[String],
+    whole: &[String],
     params: &ParamArgs,
     repeats: usize,
     frames: Option<usize>,
@@ -674,20 +741,21 @@ fn run_bench(
         repeats
     );
     println!(
-        "{:<26} {:>7} {:>8} {:>8} {:>12} {:>10}",
-        "tracker", "frames", "it/frame", "us/iter", "tracker FPS", "live FPS"
+        "{:<26} {:>7} {:>8} {:>8} {:>12} {:>10} {:>9}",
+        "tracker", "frames", "it/frame", "us/iter", "tracker FPS", "live FPS", "init ms"
     );
     let mut rows = Vec::new();
-    for spec in specs(sms, ams, ssms, params)? {
+    for spec in specs(sms, ams, ssms, whole, params)? {
         let r = bench::bench_tracker(&spec, &loaded, repeats)?;
         println!(
-            "{:<26} {:>7} {:>8.2} {:>8.1} {:>12.0} {:>10.0}{}",
+            "{:<26} {:>7} {:>8.2} {:>8.1} {:>12.0} {:>10.0} {:>9.1}{}",
             r.tracker,
             r.frames,
             r.iterations_per_frame,
             r.us_per_iteration,
             r.tracker_fps,
             r.live_fps,
+            r.init_ms,
             r.lost_at
                 .map(|f| format!("  (lost at frame {f})"))
                 .unwrap_or_default()

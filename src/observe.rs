@@ -3,7 +3,8 @@
 //! [`NoObserver`].
 
 use crate::geometry::Quad;
-use crate::tracker::FrameOutcome;
+use crate::sm::MethodVisual;
+use crate::status::FrameOutcome;
 use serde::{Deserialize, Serialize};
 use std::time::Duration;
 
@@ -36,6 +37,13 @@ pub trait Observer {
     fn iteration(&mut self, it: &Iteration<'_>);
     /// The frame finished.
     fn frame_finished(&mut self, _frame: usize, _outcome: &FrameOutcome) {}
+    /// Whether [`Observer::method_visual`] should be called (drawing a sampling method's state
+    /// costs time, so only observers that show it ask).
+    fn wants_method_visuals(&self) -> bool {
+        false
+    }
+    /// What a sampling method shows after iteration `iteration` (NN's samples, PF's particles).
+    fn method_visual(&mut self, _frame: usize, _iteration: usize, _visual: &MethodVisual<'_>) {}
 }
 
 /// Ignores everything (for benchmarks and batch runs).
@@ -60,13 +68,27 @@ pub struct IterationRecord {
     pub elapsed_us: f64,
 }
 
+/// An owned copy of a [`MethodVisual`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VisualRecord {
+    pub iteration: usize,
+    pub label: String,
+    pub points: Vec<crate::geometry::Point>,
+    pub weights: Vec<f32>,
+    pub chosen: Option<usize>,
+}
+
 /// Keeps the iterations of the last frame (and the frame's starting corners), for the
-/// convergence plot and the step-through view.
+/// convergence plot and the step-through view; with `visuals` set, also what sampling methods
+/// show at each iteration.
 #[derive(Clone, Debug, Default)]
 pub struct Recorder {
     pub frame: usize,
     pub start: Option<Quad>,
     pub iterations: Vec<IterationRecord>,
+    /// Whether to keep method visuals.
+    pub visuals: bool,
+    pub method_visuals: Vec<VisualRecord>,
 }
 
 impl Observer for Recorder {
@@ -74,6 +96,7 @@ impl Observer for Recorder {
         self.frame = frame;
         self.start = Some(*corners);
         self.iterations.clear();
+        self.method_visuals.clear();
     }
     fn iteration(&mut self, it: &Iteration<'_>) {
         self.iterations.push(IterationRecord {
@@ -85,6 +108,18 @@ impl Observer for Recorder {
             similarity: it.similarity,
             step: it.step,
             elapsed_us: it.elapsed.as_secs_f64() * 1e6,
+        });
+    }
+    fn wants_method_visuals(&self) -> bool {
+        self.visuals
+    }
+    fn method_visual(&mut self, _frame: usize, iteration: usize, v: &MethodVisual<'_>) {
+        self.method_visuals.push(VisualRecord {
+            iteration,
+            label: v.label.to_string(),
+            points: v.points.to_vec(),
+            weights: v.weights.to_vec(),
+            chosen: v.chosen,
         });
     }
 }

@@ -2,117 +2,126 @@
 //! iteration loop: pre-processing of the region the tracker reads, the stop test, the observer
 //! and the loss-of-track checks.
 
-use crate::am::{self, HessianKind};
+use crate::am;
 use crate::error::{Error, Result};
+use crate::params::{MethodParams, ParamDef};
+pub use crate::params::{TRACKER_PARAMS, TrackerParams};
+pub use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::geometry::Quad;
 use crate::imaging::{GrayF32, GrayU8, ImageView, Preprocessor, gaussian_kernel};
 use crate::observe::{Iteration, Observer};
-use crate::registry;
-use crate::sm::{self, Context, LossReason, SearchMethod};
+use crate::registry::{self, Entry};
+use crate::sm::{self, Context, Control, SearchMethod, SmConfig};
 use crate::ssm;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
-/// The parameters every tracker has (the paper's defaults).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TrackerParams {
-    /// Sampling resolution: `res x res` points on the target.
-    pub res: usize,
-    /// Maximum iterations per frame.
-    pub max_iters: usize,
-    /// Stop when the L2 norm of the change of the corners in an iteration is below this (px).
-    pub eps: f64,
-    /// Gaussian pre-smoothing kernel size (1 = none).
-    pub blur_size: usize,
-    /// Gaussian pre-smoothing standard deviation (px).
-    pub blur_sigma: f32,
-    /// Which Hessian the search method uses.
-    pub hessian: HessianKind,
-    /// Margin of the pre-processed region around the target, as a fraction of its size.
-    pub roi_margin: f64,
-    /// Coarse-to-fine search over this many pyramid levels (1 = the frame only), each half the
-    /// size of the previous; each level has its own template.
-    pub pyramid_levels: usize,
-}
-
-impl Default for TrackerParams {
-    fn default() -> Self {
-        TrackerParams {
-            res: 50,
-            max_iters: 30,
-            eps: 0.001,
-            blur_size: 5,
-            blur_sigma: 3.0,
-            hessian: HessianKind::Default,
-            roi_margin: 0.25,
-            pyramid_levels: 1,
-        }
-    }
-}
-
-impl TrackerParams {
-    /// Checks the ranges; the error says which parameter is wrong.
-    pub fn validate(&self) -> Result<()> {
-        let bad = |m: String| Err(Error::InvalidParameter(m));
-        if !(2..=1000).contains(&self.res) {
-            return bad(format!("res must be in 2..=1000, got {}", self.res));
-        }
-        if !(1..=10_000).contains(&self.max_iters) {
-            return bad(format!(
-                "max_iters must be in 1..=10000, got {}",
-                self.max_iters
-            ));
-        }
-        if !(self.eps >= 0.0 && self.eps.is_finite()) {
-            return bad(format!(
-                "eps must be a finite number >= 0, got {}",
-                self.eps
-            ));
-        }
-        if self.blur_size > 31 {
-            return bad(format!(
-                "blur_size must be at most 31, got {}",
-                self.blur_size
-            ));
-        }
-        if !(self.blur_sigma >= 0.0 && self.blur_sigma.is_finite()) {
-            return bad(format!("blur_sigma must be >= 0, got {}", self.blur_sigma));
-        }
-        if !(1..=6).contains(&self.pyramid_levels) {
-            return bad(format!(
-                "pyramid_levels must be in 1..=6, got {}",
-                self.pyramid_levels
-            ));
-        }
-        if !(0.0..=10.0).contains(&self.roi_margin) {
-            return bad(format!(
-                "roi_margin must be in 0..=10, got {}",
-                self.roi_margin
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// A tracker by name: search method, appearance model, state space model, and parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TrackerSpec {
+/// A registration tracker by name: search method, appearance model, state space model, the
+/// tracker's parameters and the search method's own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegistrationSpec {
     pub sm: String,
     pub am: String,
     pub ssm: String,
-    #[serde(default)]
     pub params: TrackerParams,
+    /// The search method's parameters ([`sm::param_defs`]); unset ones take their defaults.
+    pub method: MethodParams,
+}
+
+/// A whole tracker by name (one entry of [`WHOLE_REGISTRY`]) with its parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WholeSpec {
+    pub tracker: String,
+    pub method: MethodParams,
+}
+
+/// Any tracker, by name: a registration tracker (AM x SSM x SM) or a whole tracker. Sessions and
+/// run files store it as a table: `sm`, `am`, `ssm`, `params`, `method` for the first, `tracker`
+/// and `method` for the second.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RawSpec", into = "RawSpec")]
+pub enum TrackerSpec {
+    Registration(RegistrationSpec),
+    Whole(WholeSpec),
+}
+
+/// The stored form of a [`TrackerSpec`].
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSpec {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tracker: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sm: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    am: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    ssm: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    params: Option<TrackerParams>,
+    #[serde(default, skip_serializing_if = "MethodParams::is_empty")]
+    method: MethodParams,
+}
+
+impl TryFrom<RawSpec> for TrackerSpec {
+    type Error = String;
+    fn try_from(r: RawSpec) -> std::result::Result<Self, String> {
+        match (r.tracker, r.sm, r.am, r.ssm) {
+            (Some(tracker), None, None, None) => {
+                if r.params.is_some() {
+                    return Err(format!(
+                        "tracker '{tracker}' takes its parameters in `method`, not `params`"
+                    ));
+                }
+                Ok(TrackerSpec::Whole(WholeSpec {
+                    tracker,
+                    method: r.method,
+                }))
+            }
+            (None, Some(sm), Some(am), Some(ssm)) => {
+                Ok(TrackerSpec::Registration(RegistrationSpec {
+                    sm,
+                    am,
+                    ssm,
+                    params: r.params.unwrap_or_default(),
+                    method: r.method,
+                }))
+            }
+            (Some(_), _, _, _) => {
+                Err("a tracker is either `tracker = NAME` or `sm`, `am` and `ssm`, not both".into())
+            }
+            _ => Err("a registration tracker needs `sm`, `am` and `ssm`".into()),
+        }
+    }
+}
+
+impl From<TrackerSpec> for RawSpec {
+    fn from(s: TrackerSpec) -> Self {
+        match s {
+            TrackerSpec::Registration(r) => RawSpec {
+                sm: Some(r.sm),
+                am: Some(r.am),
+                ssm: Some(r.ssm),
+                params: Some(r.params),
+                method: r.method,
+                ..Default::default()
+            },
+            TrackerSpec::Whole(w) => RawSpec {
+                tracker: Some(w.tracker),
+                method: w.method,
+                ..Default::default()
+            },
+        }
+    }
 }
 
 impl TrackerSpec {
-    /// A spec from names or aliases, with the default parameters; names are made canonical.
-    /// Fails with the list of what exists on an unknown name or an impossible combination.
+    /// A registration tracker from names or aliases, with the default parameters; names are
+    /// made canonical. Fails with the list of what exists on an unknown name or an impossible
+    /// combination.
     pub fn from_names(sm: &str, am: &str, ssm: &str) -> Result<Self> {
-        let spec = TrackerSpec {
-            sm: registry::lookup(sm::REGISTRY, "search method", sm)?
-                .name
-                .to_string(),
+        let spec = TrackerSpec::Registration(RegistrationSpec {
+            sm: sm::canonical_name(sm)?,
             am: registry::lookup(am::REGISTRY, "appearance model", am)?
                 .name
                 .to_string(),
@@ -120,14 +129,117 @@ impl TrackerSpec {
                 .name
                 .to_string(),
             params: TrackerParams::default(),
-        };
-        Tracker::new(&spec)?;
+            method: MethodParams::default(),
+        });
+        spec.check()?;
         Ok(spec)
     }
 
-    /// `sm_am_ssm`, as used in result file names.
+    /// A whole tracker by name or alias, with its default parameters.
+    pub fn whole(name: &str) -> Result<Self> {
+        let e = registry::lookup(WHOLE_REGISTRY, "tracker", name)?;
+        Ok(TrackerSpec::Whole(WholeSpec {
+            tracker: e.name.to_string(),
+            method: MethodParams::default(),
+        }))
+    }
+
+    /// Builds the tracker once to check names, combination and parameters.
+    pub fn check(&self) -> Result<()> {
+        Tracker::new(self).map(|_| ())
+    }
+
+    /// The registration tracker's names and parameters, if it is one.
+    pub fn registration(&self) -> Option<&RegistrationSpec> {
+        match self {
+            TrackerSpec::Registration(r) => Some(r),
+            TrackerSpec::Whole(_) => None,
+        }
+    }
+
+    /// Mutable [`TrackerSpec::registration`].
+    pub fn registration_mut(&mut self) -> Option<&mut RegistrationSpec> {
+        match self {
+            TrackerSpec::Registration(r) => Some(r),
+            TrackerSpec::Whole(_) => None,
+        }
+    }
+
+    /// The tracker's parameters (a registration tracker's; `None` for a whole tracker).
+    pub fn params(&self) -> Option<&TrackerParams> {
+        self.registration().map(|r| &r.params)
+    }
+
+    /// Mutable [`TrackerSpec::params`].
+    pub fn params_mut(&mut self) -> Option<&mut TrackerParams> {
+        self.registration_mut().map(|r| &mut r.params)
+    }
+
+    /// The method's own parameters.
+    pub fn method_params(&self) -> &MethodParams {
+        match self {
+            TrackerSpec::Registration(r) => &r.method,
+            TrackerSpec::Whole(w) => &w.method,
+        }
+    }
+
+    /// The definitions of the method's own parameters (the SM's, or the whole tracker's).
+    pub fn method_defs(&self) -> Result<Vec<&'static ParamDef>> {
+        match self {
+            TrackerSpec::Registration(r) => sm::param_defs(&r.sm),
+            TrackerSpec::Whole(w) => Ok(registry::lookup(WHOLE_REGISTRY, "tracker", &w.tracker)?
+                .build
+                .params
+                .iter()
+                .collect()),
+        }
+    }
+
+    /// Sets a parameter by name from its typed form: a tracker parameter ([`TRACKER_PARAMS`]) or
+    /// one of the method's own. An unknown name is an error that lists the known ones.
+    pub fn set_param(&mut self, name: &str, value: &str) -> Result<()> {
+        if let TrackerSpec::Registration(r) = self {
+            if r.params.assign(name, value)? {
+                return Ok(());
+            }
+        }
+        let defs = self.method_defs()?;
+        let owner = self.label();
+        let def = defs.iter().find(|d| d.name == name).ok_or_else(|| {
+            let mut known: Vec<&str> = defs.iter().map(|d| d.name).collect();
+            if self.registration().is_some() {
+                known.extend(TRACKER_PARAMS.iter().map(|d| d.name));
+            }
+            Error::InvalidParameter(format!(
+                "{owner} has no parameter '{name}'; its parameters: {}",
+                known.join(", ")
+            ))
+        })?;
+        let v = def.parse(&owner, value)?;
+        match self {
+            TrackerSpec::Registration(r) => r.method.set(name, v),
+            TrackerSpec::Whole(w) => w.method.set(name, v),
+        }
+        Ok(())
+    }
+
+    /// `(sm, am, ssm)` as summary columns (a whole tracker: its name, then empty).
+    pub fn columns(&self) -> (String, String, String) {
+        match self {
+            TrackerSpec::Registration(r) => (r.sm.clone(), r.am.clone(), r.ssm.clone()),
+            TrackerSpec::Whole(w) => (w.tracker.clone(), String::new(), String::new()),
+        }
+    }
+
+    /// `sm_am_ssm` (or the whole tracker's name), as used in result file names; a composite's
+    /// `cascade:a+b` becomes `cascade-a+b`.
     pub fn label(&self) -> String {
-        format!("{}_{}_{}", self.sm, self.am, self.ssm)
+        match self {
+            TrackerSpec::Registration(r) => {
+                format!("{}_{}_{}", r.sm.replace(':', "-"), r.am, r.ssm)
+            }
+            TrackerSpec::Whole(w) => w.tracker.clone(),
+        }
     }
 }
 
@@ -158,49 +270,98 @@ impl<'a> From<&'a GrayU8> for FrameInput<'a> {
     }
 }
 
-/// Whether a tracker follows its target.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "status", content = "reason")]
-pub enum TrackStatus {
-    /// Not initialised yet.
-    Uninitialized,
-    /// Tracking.
-    Tracking,
-    /// The target was lost; the tracker stays lost until it is initialised again.
-    Lost(LossReason),
+/// What a tracker shows of its inner state for inspection: the template and the current patch
+/// (on a `res x res` grid, row-major), from which the error image follows.
+#[derive(Clone, Copy, Debug)]
+pub struct Inspection<'a> {
+    pub res: usize,
+    pub template: &'a [f32],
+    pub patch: &'a [f32],
 }
 
-/// The result of one frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FrameOutcome {
-    /// Frame index since initialisation (the initialisation frame is 0).
-    pub frame: usize,
-    pub status: TrackStatus,
-    /// The corners: the new estimate, or the last good one when lost (always finite).
-    pub corners: Quad,
-    /// Iterations run.
-    pub iterations: usize,
-    /// Whether the stop test was met before the iteration limit.
-    pub converged: bool,
-    /// The similarity before the last iteration's step.
-    pub similarity: f64,
-    /// Time spent pre-processing (smoothing the region read) and searching.
-    pub timing: FrameTiming,
+/// Any tracker: initialised on a frame and a quad, then updated frame by frame. Registration
+/// trackers ([`RegistrationTracker`]) and whole trackers ([`WHOLE_REGISTRY`]) implement it; the
+/// evaluation, the benchmarks, the command line and the inspector use only this.
+pub trait VisualTracker: Send + std::fmt::Debug {
+    /// The spec it was built from (with canonical names).
+    fn spec(&self) -> &TrackerSpec;
+    /// Starts tracking `quad` in `input`.
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()>;
+    /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
+    /// reported in the status, with the last good corners.
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome;
+    /// Moves the tracker to `quad` keeping what it learnt, and resumes tracking if it was lost.
+    fn set_corners(&mut self, quad: &Quad) -> Result<()>;
+    /// Current status.
+    fn status(&self) -> TrackStatus;
+    /// Current corners (image coordinates).
+    fn corners(&self) -> Quad;
+    /// The template and current patch, for trackers that have them.
+    fn inspection(&self) -> Option<Inspection<'_>> {
+        None
+    }
+    /// The label used in file names and tables.
+    fn label(&self) -> String {
+        self.spec().label()
+    }
 }
 
-/// Where the time of one update went.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct FrameTiming {
-    /// Conversion and smoothing of the region the tracker reads (zero for smoothed input).
-    pub preprocess: std::time::Duration,
-    /// The search method's iterations (what MTF reports as the tracker's speed).
-    pub search: std::time::Duration,
+/// A registry entry of a whole tracker: its parameters and its constructor.
+#[derive(Clone, Copy)]
+pub struct WholeDef {
+    pub params: &'static [ParamDef],
+    pub build: fn(&WholeSpec) -> Result<Box<dyn VisualTracker>>,
 }
 
-/// A registration tracker: SSM + AM + SM, built from a [`TrackerSpec`].
+/// Whole trackers (not decomposed into AM x SSM x SM): the learning-based trackers the paper
+/// compares with.
+pub const WHOLE_REGISTRY: &[Entry<WholeDef>] = &[];
+
+/// A tracker of any kind built from a [`TrackerSpec`]; derefs to [`VisualTracker`].
 #[derive(Debug)]
-pub struct Tracker {
+pub struct Tracker(Box<dyn VisualTracker>);
+
+impl Tracker {
+    /// Builds a tracker; fails on unknown names, impossible combinations or bad parameters.
+    pub fn new(spec: &TrackerSpec) -> Result<Self> {
+        Ok(Tracker(match spec {
+            TrackerSpec::Registration(r) => Box::new(RegistrationTracker::new(r)?),
+            TrackerSpec::Whole(w) => {
+                let e = registry::lookup(WHOLE_REGISTRY, "tracker", &w.tracker)?;
+                let defs: Vec<&ParamDef> = e.build.params.iter().collect();
+                w.method.validate(&format!("tracker '{}'", e.name), &defs)?;
+                let mut w = w.clone();
+                w.tracker = e.name.to_string();
+                (e.build.build)(&w)?
+            }
+        }))
+    }
+
+    /// Wraps a tracker built elsewhere.
+    pub fn from_boxed(inner: Box<dyn VisualTracker>) -> Self {
+        Tracker(inner)
+    }
+}
+
+impl std::ops::Deref for Tracker {
+    type Target = dyn VisualTracker;
+    fn deref(&self) -> &Self::Target {
+        &*self.0
+    }
+}
+
+impl std::ops::DerefMut for Tracker {
+    fn deref_mut(&mut self) -> &mut Self::Target {
+        &mut *self.0
+    }
+}
+
+/// A registration tracker: SSM + AM + SM, built from a [`RegistrationSpec`], and the driver that
+/// owns the iteration loop.
+#[derive(Debug)]
+pub struct RegistrationTracker {
     spec: TrackerSpec,
+    params: TrackerParams,
     ctx: Context,
     sm: Box<dyn SearchMethod>,
     /// Pyramid levels 1, 2, ... (coarser and coarser), each with its own template.
@@ -214,31 +375,27 @@ pub struct Tracker {
     initial_area: f64,
 }
 
-impl Tracker {
+impl RegistrationTracker {
     /// Builds a tracker; fails on unknown names, impossible combinations or bad parameters.
-    pub fn new(spec: &TrackerSpec) -> Result<Self> {
+    pub fn new(spec: &RegistrationSpec) -> Result<Self> {
         spec.params.validate()?;
         let ssm = ssm::build(&spec.ssm)?;
         let am = am::build(&spec.am)?;
-        let sm = sm::build(&spec.sm, &spec.params)?;
+        let cfg = SmConfig {
+            method: &spec.method,
+            tracker: &spec.params,
+        };
+        let sm = sm::build(&spec.sm, &cfg)?;
         let (need, have) = (sm.requires(), am.capabilities());
-        if (need.derivatives && !have.derivatives) || (need.distance && !have.distance) {
+        if let Some(missing) = have.missing(&need) {
             return Err(Error::Incompatible(format!(
-                "search method '{}' needs {} which appearance model '{}' does not provide; \
+                "search method '{}' needs {missing}, which appearance model '{}' does not have; \
                  appearance models that do: {}",
                 sm.name(),
-                if need.derivatives && !have.derivatives {
-                    "analytic derivatives"
-                } else {
-                    "a patch distance"
-                },
                 am.name(),
                 am::REGISTRY
                     .iter()
-                    .filter(|e| {
-                        let c = (e.build)().capabilities();
-                        (!need.derivatives || c.derivatives) && (!need.distance || c.distance)
-                    })
+                    .filter(|e| (e.build)().capabilities().missing(&need).is_none())
                     .map(|e| e.name)
                     .collect::<Vec<_>>()
                     .join(", ")
@@ -248,7 +405,7 @@ impl Tracker {
         spec.sm = sm.name().to_string();
         spec.am = am.name().to_string();
         spec.ssm = ssm.name().to_string();
-        let p = &spec.params;
+        let p = spec.params.clone();
         let ctx = Context::new(ssm, am, p.hessian, p.res);
         let mut coarse = Vec::new();
         for _ in 1..p.pyramid_levels {
@@ -258,11 +415,12 @@ impl Tracker {
                 p.hessian,
                 p.res,
             );
-            coarse.push((c, sm::build(&spec.sm, p)?));
+            coarse.push((c, sm::build(&spec.sm, &cfg)?));
         }
         let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma));
-        Ok(Tracker {
-            spec,
+        Ok(RegistrationTracker {
+            spec: TrackerSpec::Registration(spec),
+            params: p,
             ctx,
             sm,
             coarse,
@@ -275,18 +433,6 @@ impl Tracker {
         })
     }
 
-    /// The spec (with canonical names).
-    pub fn spec(&self) -> &TrackerSpec {
-        &self.spec
-    }
-    /// Current status.
-    pub fn status(&self) -> TrackStatus {
-        self.status
-    }
-    /// Current corners (image coordinates).
-    pub fn corners(&self) -> Quad {
-        self.corners
-    }
     /// Current SSM parameters (normalised frame).
     pub fn params(&self) -> &[f64] {
         &self.ctx.params[..self.ctx.dof]
@@ -342,15 +488,170 @@ impl Tracker {
     /// The region to pre-process around `q`: its bounding box grown by the margin.
     fn region_around(&self, q: &Quad) -> (f64, f64, f64, f64) {
         let (x0, y0, x1, y1) = q.bbox();
-        let m = self.spec.params.roi_margin * (x1 - x0).max(y1 - y0) + 8.0;
+        let m = self.params.roi_margin * (x1 - x0).max(y1 - y0) + 8.0;
         (x0 - m, y0 - m, x1 + m, y1 + m)
     }
 
+    /// The iteration loop on one pre-processed region.
+    fn iterate_frame(
+        &mut self,
+        input: FrameInput<'_>,
+        region: (f64, f64, f64, f64),
+        observer: &mut dyn Observer,
+        started: Instant,
+        timing: &mut FrameTiming,
+    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let t0 = Instant::now();
+        self.prepare(input, region);
+        let t1 = Instant::now();
+        timing.preprocess += t1 - t0;
+        let params = &self.params;
+        let mut p = self.ctx.params;
+        let mut done = 0;
+        // Coarse to fine: each level starts from the parameters the coarser one found (the
+        // parameters live in the normalised frame, the same at every level).
+        for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate().rev() {
+            ctx.params = p;
+            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            let (_, iters, _, _) = Self::search(
+                ctx,
+                &mut **sm,
+                params,
+                self.frame,
+                l + 1,
+                done,
+                &view,
+                observer,
+                started,
+            )?;
+            done += iters;
+            p = ctx.params;
+        }
+        self.ctx.params = p;
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        let result = Self::search(
+            &mut self.ctx,
+            &mut *self.sm,
+            params,
+            self.frame,
+            0,
+            done,
+            &view,
+            observer,
+            started,
+        )
+        .map(|(q, iters, conv, f)| (q, iters + done, conv, f));
+        timing.search += t1.elapsed();
+        result
+    }
+
+    /// The iteration loop proper.
+    #[allow(clippy::too_many_arguments)]
+    fn search(
+        ctx: &mut Context,
+        sm: &mut dyn SearchMethod,
+        params: &TrackerParams,
+        frame: usize,
+        level: usize,
+        first: usize,
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        started: Instant,
+    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let mut prev = ctx.corners(&ctx.params);
+        let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
+        sm.start_frame(ctx);
+        for it in 0..sm.max_iterations(params.max_iters) {
+            let s = sm.iterate(ctx, view)?;
+            let f = s.similarity;
+            let corners = ctx.corners(&ctx.params);
+            if !corners.is_finite() || f.is_nan() {
+                return Err(LossReason::NonFinite);
+            }
+            let step = corners.change_norm(&prev);
+            prev = corners;
+            iterations = it + 1;
+            similarity = f;
+            observer.iteration(&Iteration {
+                frame,
+                level,
+                iteration: first + it,
+                params: &ctx.params[..ctx.dof],
+                corners,
+                similarity: f,
+                step,
+                elapsed: started.elapsed(),
+            });
+            if observer.wants_method_visuals() {
+                if let Some(v) = sm.visual(ctx) {
+                    observer.method_visual(frame, first + it, &v);
+                }
+            }
+            let stop = match s.control {
+                Control::Done => true,
+                Control::Continue => false,
+                Control::Auto => step < params.eps,
+            };
+            if stop {
+                converged = true;
+                break;
+            }
+        }
+        Ok((prev, iterations, converged, similarity))
+    }
+
+    /// Gives the AMs that keep a model (SCV's intensity map...) the patch at the frame's final
+    /// parameters, at every pyramid level.
+    fn update_models(&mut self, input: FrameInput<'_>) {
+        let levels = std::iter::once(&mut self.ctx).chain(self.coarse.iter_mut().map(|(c, _)| c));
+        for (l, ctx) in levels.enumerate() {
+            if ctx.am.updates_model() {
+                let p = ctx.params;
+                ctx.warp_grid(&p);
+                ctx.sample(&Self::view(&self.pre, &self.pre_copy, input, l), false);
+                let values = std::mem::take(&mut ctx.values);
+                ctx.am.update_model(&values);
+                ctx.values = values;
+            }
+        }
+    }
+
+    /// The loss-of-track checks on a frame's final quad.
+    fn check_quad(&self, q: &Quad, fw: usize, fh: usize) -> std::result::Result<(), LossReason> {
+        if !q.is_finite() {
+            return Err(LossReason::NonFinite);
+        }
+        let area = q.signed_area().abs();
+        if !q.is_convex() || area < self.initial_area / 100.0 || area > self.initial_area * 100.0 {
+            return Err(LossReason::Degenerate);
+        }
+        let c = q.centroid();
+        let (w, h) = (fw as f64, fh as f64);
+        if c.x < -0.5 * w || c.x > 1.5 * w || c.y < -0.5 * h || c.y > 1.5 * h {
+            return Err(LossReason::OutOfFrame);
+        }
+        Ok(())
+    }
+}
+
+impl VisualTracker for RegistrationTracker {
+    /// The spec (with canonical names).
+    fn spec(&self) -> &TrackerSpec {
+        &self.spec
+    }
+    /// Current status.
+    fn status(&self) -> TrackStatus {
+        self.status
+    }
+    /// Current corners (image coordinates).
+    fn corners(&self) -> Quad {
+        self.corners
+    }
     /// Starts tracking `quad` in `input`: samples the template there.
-    pub fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         // Until it succeeds the tracker is not usable (its context is being replaced).
         self.status = TrackStatus::Uninitialized;
-        self.ctx.set_region(quad, self.spec.params.res)?;
+        self.ctx.set_region(quad, self.params.res)?;
         let region = self.region_around(quad);
         self.prepare(input, region);
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
@@ -371,12 +672,13 @@ impl Tracker {
             )));
         }
         self.sm
-            .initialize(&mut self.ctx)
+            .initialize(&mut self.ctx, &view)
             .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
         for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate() {
-            ctx.set_region(quad, self.spec.params.res)?;
-            ctx.sample_template(&Self::view(&self.pre, &self.pre_copy, input, l + 1));
-            sm.initialize(ctx).map_err(|r| {
+            ctx.set_region(quad, self.params.res)?;
+            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            ctx.sample_template(&view);
+            sm.initialize(ctx, &view).map_err(|r| {
                 Error::InvalidRegion(format!(
                     "cannot track {quad} at pyramid level {}: {r}",
                     l + 1
@@ -392,7 +694,7 @@ impl Tracker {
 
     /// Moves the tracker to `quad` keeping its template (the SSM's least-squares fit to the
     /// quad), and resumes tracking if it was lost.
-    pub fn set_corners(&mut self, quad: &Quad) -> Result<()> {
+    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
         if self.status == TrackStatus::Uninitialized {
             return Err(Error::InvalidRegion(
                 "the tracker is not initialised".into(),
@@ -405,7 +707,7 @@ impl Tracker {
             .ssm
             .fit(&self.ctx.template_corners.0, &target.0)
             .ok_or_else(|| {
-                Error::InvalidRegion(format!("cannot fit {} to {quad}", self.spec.ssm))
+                Error::InvalidRegion(format!("cannot fit {} to {quad}", self.ctx.ssm.name()))
             })?;
         self.ctx.params = p;
         self.corners = self.ctx.corners(&p);
@@ -415,7 +717,7 @@ impl Tracker {
 
     /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
     /// reported in the status, with the last good corners.
-    pub fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         if self.status != TrackStatus::Tracking {
             return FrameOutcome {
                 frame: self.frame,
@@ -480,6 +782,7 @@ impl Tracker {
         }) {
             Ok((q, iterations, converged, similarity)) => {
                 self.corners = q;
+                self.update_models(input);
                 FrameOutcome {
                     frame: self.frame,
                     status: TrackStatus::Tracking,
@@ -508,116 +811,11 @@ impl Tracker {
         outcome
     }
 
-    /// The iteration loop on one pre-processed region.
-    fn iterate_frame(
-        &mut self,
-        input: FrameInput<'_>,
-        region: (f64, f64, f64, f64),
-        observer: &mut dyn Observer,
-        started: Instant,
-        timing: &mut FrameTiming,
-    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
-        let t0 = Instant::now();
-        self.prepare(input, region);
-        let t1 = Instant::now();
-        timing.preprocess += t1 - t0;
-        let params = &self.spec.params;
-        let mut p = self.ctx.params;
-        let mut done = 0;
-        // Coarse to fine: each level starts from the parameters the coarser one found (the
-        // parameters live in the normalised frame, the same at every level).
-        for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate().rev() {
-            ctx.params = p;
-            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
-            let (_, iters, _, _) = Self::search(
-                ctx,
-                &mut **sm,
-                params,
-                self.frame,
-                l + 1,
-                done,
-                &view,
-                observer,
-                started,
-            )?;
-            done += iters;
-            p = ctx.params;
-        }
-        self.ctx.params = p;
-        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
-        let result = Self::search(
-            &mut self.ctx,
-            &mut *self.sm,
-            params,
-            self.frame,
-            0,
-            done,
-            &view,
-            observer,
-            started,
-        )
-        .map(|(q, iters, conv, f)| (q, iters + done, conv, f));
-        timing.search += t1.elapsed();
-        result
-    }
-
-    /// The iteration loop proper.
-    #[allow(clippy::too_many_arguments)]
-    fn search(
-        ctx: &mut Context,
-        sm: &mut dyn SearchMethod,
-        params: &TrackerParams,
-        frame: usize,
-        level: usize,
-        first: usize,
-        view: &ImageView,
-        observer: &mut dyn Observer,
-        started: Instant,
-    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
-        let mut prev = ctx.corners(&ctx.params);
-        let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
-        for it in 0..params.max_iters {
-            let f = sm.iterate(ctx, view)?;
-            let corners = ctx.corners(&ctx.params);
-            if !corners.is_finite() || f.is_nan() {
-                return Err(LossReason::NonFinite);
-            }
-            let step = corners.change_norm(&prev);
-            prev = corners;
-            iterations = it + 1;
-            similarity = f;
-            observer.iteration(&Iteration {
-                frame,
-                level,
-                iteration: first + it,
-                params: &ctx.params[..ctx.dof],
-                corners,
-                similarity: f,
-                step,
-                elapsed: started.elapsed(),
-            });
-            if step < params.eps {
-                converged = true;
-                break;
-            }
-        }
-        Ok((prev, iterations, converged, similarity))
-    }
-
-    /// The loss-of-track checks on a frame's final quad.
-    fn check_quad(&self, q: &Quad, fw: usize, fh: usize) -> std::result::Result<(), LossReason> {
-        if !q.is_finite() {
-            return Err(LossReason::NonFinite);
-        }
-        let area = q.signed_area().abs();
-        if !q.is_convex() || area < self.initial_area / 100.0 || area > self.initial_area * 100.0 {
-            return Err(LossReason::Degenerate);
-        }
-        let c = q.centroid();
-        let (w, h) = (fw as f64, fh as f64);
-        if c.x < -0.5 * w || c.x > 1.5 * w || c.y < -0.5 * h || c.y > 1.5 * h {
-            return Err(LossReason::OutOfFrame);
-        }
-        Ok(())
+    fn inspection(&self) -> Option<Inspection<'_>> {
+        Some(Inspection {
+            res: self.params.res,
+            template: &self.ctx.template,
+            patch: &self.ctx.values,
+        })
     }
 }

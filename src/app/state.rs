@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
-use crate::tracker::TrackerSpec;
+use crate::tracker::{RegistrationSpec, TrackerSpec};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -95,12 +95,13 @@ pub const PALETTE: [[u8; 3]; 8] = [
 impl Default for State {
     fn default() -> Self {
         let entry = |sm: &str, am: &str, color| TrackerEntry {
-            spec: TrackerSpec {
+            spec: TrackerSpec::Registration(RegistrationSpec {
                 sm: sm.into(),
                 am: am.into(),
                 ssm: "homography".into(),
                 params: Default::default(),
-            },
+                method: Default::default(),
+            }),
             color,
             enabled: true,
             init: InitSource::GroundTruth,

@@ -248,7 +248,7 @@ impl<W: Fn() + Sync> Thread<W> {
         rec: &Recorder,
         out: &crate::tracker::FrameOutcome,
     ) -> TrackerFrame {
-        let ctx = t.context();
+        let patch = t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default();
         TrackerFrame {
             tracker: self.trackers[k].0,
             status: out.status,
@@ -257,9 +257,9 @@ impl<W: Fn() + Sync> Thread<W> {
             start: rec.start,
             search_us: out.timing.search.as_secs_f64() * 1e6,
             update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
-            res: t.spec().params.res,
+            res: t.inspection().map(|i| i.res).unwrap_or(0),
             template: self.templates[k].clone(),
-            patch: ctx.values.clone(),
+            patch,
         }
     }
 
@@ -280,7 +280,8 @@ impl<W: Fn() + Sync> Thread<W> {
             });
             match made {
                 Ok(t) => {
-                    self.templates.push(Arc::new(t.context().template.clone()));
+                    self.templates
+                        .push(Arc::new(t.inspection().map(|i| i.template.to_vec()).unwrap_or_default()));
                     self.trackers.push((idx, t));
                     let k = self.trackers.len() - 1;
                     let t = &self.trackers[k].1;
@@ -294,7 +295,7 @@ impl<W: Fn() + Sync> Thread<W> {
                         start: None,
                         search_us: 0.0,
                         update_us: 0.0,
-                        res: t.spec().params.res,
+                        res: t.inspection().map(|i| i.res).unwrap_or(0),
                         patch: template.to_vec(),
                         template,
                     };

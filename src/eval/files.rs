@@ -112,12 +112,13 @@ fn serde_plain<T: serde::Serialize>(v: &T) -> String {
 /// Writes `summary.csv` and `summary.json` in `out`.
 pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let mut csv = String::from(
-        "sequence,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps\n",
+        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps\n",
     );
     for r in rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1}\n",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1}\n",
             r.sequence,
+            r.tracker,
             r.sm,
             r.am,
             r.ssm,

@@ -132,6 +132,9 @@ fn default_threshold() -> f64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
     pub sequence: String,
+    /// The tracker's label (`sm_am_ssm`, or a whole tracker's name).
+    #[serde(default)]
+    pub tracker: String,
     pub sm: String,
     pub am: String,
     pub ssm: String,
@@ -182,11 +185,13 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     let fps = |us: f64| if us > 0.0 { n / (us * 1e-6) } else { 0.0 };
     let failures = runs.iter().map(|r| count_failures(r)).sum();
     let spec = runs.first().map(|r| r.spec.clone());
+    let cols = spec.as_ref().map(|s| s.columns()).unwrap_or_default();
     Summary {
         sequence: name.to_string(),
-        sm: spec.as_ref().map(|s| s.sm.clone()).unwrap_or_default(),
-        am: spec.as_ref().map(|s| s.am.clone()).unwrap_or_default(),
-        ssm: spec.as_ref().map(|s| s.ssm.clone()).unwrap_or_default(),
+        tracker: spec.as_ref().map(|s| s.label()).unwrap_or_default(),
+        sm: cols.0,
+        am: cols.1,
+        ssm: cols.2,
         frames: errors.len(),
         sr5: success_rate(&errors, 5.0),
         sr10: success_rate(&errors, 10.0),

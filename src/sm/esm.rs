@@ -2,25 +2,28 @@
 //! uses: the Jacobian is the mean of the forward (current frame, warped) and inverse (template)
 //! Jacobians, both with `dw/dp` at the identity; `p <- p o dp`.
 
-use super::{Context, LossReason, SearchMethod, SmBuilder, Update};
+use super::{Context, Step, LossReason, SearchMethod, SmDef, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
-pub const ENTRY: Entry<SmBuilder> = Entry {
+pub const ENTRY: Entry<SmDef> = Entry {
     name: "esm",
     aliases: &[],
     description: "efficient second-order minimisation (mean of initial and current Jacobians)",
-    build: |_| Box::new(Esm),
+    build: SmDef {
+        params: &[],
+        build: |_| Ok(Box::new(Esm)),
+    },
 };
 
 #[derive(Debug, Clone, Copy)]
 pub struct Esm;
 
 impl SearchMethod for Esm {
-    fn name(&self) -> &'static str {
+    fn name(&self) -> &str {
         ENTRY.name
     }
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason> {
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, true);
@@ -30,6 +33,6 @@ impl SearchMethod for Esm {
             ctx.gy[i] = 0.5 * (ctx.gy[i] + ctx.template_gy[i]);
         }
         ctx.project_gradients(None);
-        ctx.forward_step(Update::Compose)
+        ctx.forward_step(Update::Compose).map(Step::auto)
     }
 }

@@ -1,25 +1,28 @@
 //! Forward additive Lucas-Kanade (FALK, the original of Lucas and Kanade): linearise
 //! `I_t(w(x, p + dp))` with the frame gradient and `dw/dp` at the current `p`; `p <- p + dp`.
 
-use super::{Context, SearchMethod, SmBuilder, Update};
+use super::{Context, Step, SearchMethod, SmDef, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
-pub const ENTRY: Entry<SmBuilder> = Entry {
+pub const ENTRY: Entry<SmDef> = Entry {
     name: "falk",
     aliases: &["fa"],
     description: "forward additive Lucas-Kanade",
-    build: |_| Box::new(Falk),
+    build: SmDef {
+        params: &[],
+        build: |_| Ok(Box::new(Falk)),
+    },
 };
 
 #[derive(Debug, Clone, Copy)]
 pub struct Falk;
 
 impl SearchMethod for Falk {
-    fn name(&self) -> &'static str {
+    fn name(&self) -> &str {
         ENTRY.name
     }
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, super::LossReason> {
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, true);
@@ -30,6 +33,6 @@ impl SearchMethod for Falk {
             .chain(ctx.gy.iter_mut())
             .for_each(|g| *g *= s);
         ctx.project_gradients(Some(&p));
-        ctx.forward_step(Update::Additive)
+        ctx.forward_step(Update::Additive).map(Step::auto)
     }
 }

@@ -1,30 +1,33 @@
 //! Forward compositional Lucas-Kanade (FCLK): linearise `I_t(w(w(x, dp), p))` at `dp = 0` with
 //! the gradient of the warped current frame and `dw/dp` at the identity; `p <- p o dp`.
 
-use super::{Context, SearchMethod, SmBuilder, Update};
+use super::{Context, Step, SearchMethod, SmDef, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
-pub const ENTRY: Entry<SmBuilder> = Entry {
+pub const ENTRY: Entry<SmDef> = Entry {
     name: "fclk",
     aliases: &["fc"],
     description: "forward compositional Lucas-Kanade",
-    build: |_| Box::new(Fclk),
+    build: SmDef {
+        params: &[],
+        build: |_| Ok(Box::new(Fclk)),
+    },
 };
 
 #[derive(Debug, Clone, Copy)]
 pub struct Fclk;
 
 impl SearchMethod for Fclk {
-    fn name(&self) -> &'static str {
+    fn name(&self) -> &str {
         ENTRY.name
     }
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, super::LossReason> {
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, true);
         ctx.warped_gradient(&p);
         ctx.project_gradients(None);
-        ctx.forward_step(Update::Compose)
+        ctx.forward_step(Update::Compose).map(Step::auto)
     }
 }

@@ -3,25 +3,28 @@
 //! `grad I_t(w(x, p)) ~ grad I*(x) (dw/dx)^-1`, so only the template is differentiated;
 //! `p <- p + dp`.
 
-use super::{Context, SearchMethod, SmBuilder, Update};
+use super::{Context, Step, SearchMethod, SmDef, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
-pub const ENTRY: Entry<SmBuilder> = Entry {
+pub const ENTRY: Entry<SmDef> = Entry {
     name: "ialk",
     aliases: &["ia"],
     description: "inverse additive Lucas-Kanade (Hager-Belhumeur)",
-    build: |_| Box::new(Ialk),
+    build: SmDef {
+        params: &[],
+        build: |_| Ok(Box::new(Ialk)),
+    },
 };
 
 #[derive(Debug, Clone, Copy)]
 pub struct Ialk;
 
 impl SearchMethod for Ialk {
-    fn name(&self) -> &'static str {
+    fn name(&self) -> &str {
         ENTRY.name
     }
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, super::LossReason> {
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, false);
@@ -43,6 +46,6 @@ impl SearchMethod for Ialk {
             ctx.gy[i] = (-tx * a01 + ty * a00) / det;
         }
         ctx.project_gradients(Some(&p));
-        ctx.forward_step(Update::Additive)
+        ctx.forward_step(Update::Additive).map(Step::auto)
     }
 }

@@ -2,17 +2,20 @@
 //! `I*(w(x, dp))`, so the Jacobian `grad I*(x) dw/dp(x, 0)` and (for every Hessian kind but
 //! Newton) the Hessian are computed once per template; `p <- p o dp^-1`.
 
-use super::{Context, LossReason, SearchMethod, SmBuilder, Update};
+use super::{Context, Step, LossReason, SearchMethod, SmDef, Update};
 use crate::am::{HessianKind, Wrt};
 use crate::imaging::ImageView;
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
 
-pub const ENTRY: Entry<SmBuilder> = Entry {
+pub const ENTRY: Entry<SmDef> = Entry {
     name: "iclk",
     aliases: &["ic"],
     description: "inverse compositional Lucas-Kanade (Baker-Matthews)",
-    build: |_| Box::new(Iclk::default()),
+    build: SmDef {
+        params: &[],
+        build: |_| Ok(Box::new(Iclk::default())),
+    },
 };
 
 #[derive(Debug, Clone)]
@@ -33,10 +36,10 @@ impl Default for Iclk {
 }
 
 impl SearchMethod for Iclk {
-    fn name(&self) -> &'static str {
+    fn name(&self) -> &str {
         ENTRY.name
     }
-    fn initialize(&mut self, ctx: &mut Context) -> Result<(), LossReason> {
+    fn initialize(&mut self, ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         self.jac.resize(ctx.len() * ctx.dof, 0.0);
         Context::project(
             &ctx.template_gx,
@@ -51,6 +54,8 @@ impl SearchMethod for Iclk {
             k => k,
         };
         let template = ctx.template.clone();
+        // The AM's contract: the Hessian follows a gradient on the same patch.
+        ctx.am.gradient(Wrt::Template, &template, &mut ctx.grad);
         ctx.am.hessian(
             Wrt::Template,
             kind,
@@ -61,7 +66,7 @@ impl SearchMethod for Iclk {
         );
         Ok(())
     }
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason> {
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, false);
@@ -77,6 +82,6 @@ impl SearchMethod for Iclk {
             );
         }
         ctx.step(&self.jac, &self.hessian, Update::ComposeInverse)?;
-        Ok(f)
+        Ok(Step::auto(f))
     }
 }

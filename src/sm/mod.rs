@@ -8,11 +8,15 @@
 //!
 //! Each method is one file and one line in [`REGISTRY`].
 
+mod cascade;
 mod esm;
 mod falk;
 mod fclk;
 mod ialk;
 mod iclk;
+mod nn;
+mod nnic;
+mod pf;
 
 use crate::am::{Am, Capabilities, HessianKind, Wrt, jt_times};
 use crate::geometry::{Normaliser, Point, Quad};
@@ -20,39 +24,65 @@ use crate::imaging::{ImageView, sample_values, sample_values_gradients};
 use crate::linalg::{MAX_DOF, newton_step};
 use crate::registry::{self, Entry};
 use crate::ssm::{Params, Ssm};
-use crate::tracker::TrackerParams;
+use crate::params::{MethodParams, ParamDef};
+pub use crate::status::LossReason;
+use crate::params::TrackerParams;
 use nalgebra::Matrix3;
-use serde::{Deserialize, Serialize};
 
-/// Why a tracker lost the target.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LossReason {
-    /// A parameter, a corner or the similarity became NaN or infinite.
-    NonFinite,
-    /// The Newton system could not be solved (flat patch, degenerate Jacobian).
-    Singular,
-    /// The quad folded over, or its area changed by more than a factor of 100.
-    Degenerate,
-    /// The quad's centre left the frame by more than half a frame.
-    OutOfFrame,
+/// What the driver does after an iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// The driver's stop test decides (the corners moved less than `eps`).
+    Auto,
+    /// The method has finished this frame (one-shot methods such as NN, the last stage of a
+    /// cascade).
+    Done,
+    /// Go on even if the corners did not move (a cascade moving to its next stage).
+    Continue,
 }
 
-impl std::fmt::Display for LossReason {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            LossReason::NonFinite => "non-finite values",
-            LossReason::Singular => "singular system",
-            LossReason::Degenerate => "degenerate quad",
-            LossReason::OutOfFrame => "out of frame",
-        })
+/// The result of one iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// The similarity before the step (at the parameters the iteration started from).
+    pub similarity: f64,
+    pub control: Control,
+}
+
+impl Step {
+    /// A step left to the driver's stop test.
+    pub fn auto(similarity: f64) -> Self {
+        Step {
+            similarity,
+            control: Control::Auto,
+        }
     }
+    /// The last step of the frame.
+    pub fn done(similarity: f64) -> Self {
+        Step {
+            similarity,
+            control: Control::Done,
+        }
+    }
+}
+
+/// What a sampling method shows of its state (NN's samples, PF's particles): points in frame
+/// pixels (the centres of the sampled warps of the target) and their weights.
+#[derive(Clone, Copy, Debug)]
+pub struct MethodVisual<'a> {
+    /// What the points are ("samples", "particles").
+    pub label: &'static str,
+    pub points: &'a [Point],
+    /// One weight per point in `0..=1` (the best is 1).
+    pub weights: &'a [f32],
+    /// The point the method chose, if any.
+    pub chosen: Option<usize>,
 }
 
 /// One search method. Object-safe; its per-pixel loops are concrete.
 pub trait SearchMethod: Send + std::fmt::Debug {
-    /// The registry name.
-    fn name(&self) -> &'static str;
+    /// The canonical name (the registry name, or a composite's `cascade:a+b`).
+    fn name(&self) -> &str;
     /// AM capabilities the method needs.
     fn requires(&self) -> Capabilities {
         Capabilities {
@@ -60,31 +90,146 @@ pub trait SearchMethod: Send + std::fmt::Debug {
             distance: false,
         }
     }
-    /// Called once the template is set in `ctx` (values and gradients sampled).
-    fn initialize(&mut self, _ctx: &mut Context) -> Result<(), LossReason> {
+    /// Called once the template is set in `ctx` (values and gradients sampled) with the
+    /// (pre-processed) initialisation frame, which sampling methods draw warped patches from.
+    fn initialize(&mut self, _ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         Ok(())
     }
-    /// One iteration on `img`: updates `ctx.params` and returns the similarity before the step.
-    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<f64, LossReason>;
+    /// A new frame starts from `ctx.params`.
+    fn start_frame(&mut self, _ctx: &mut Context) {}
+    /// One iteration on `img`: updates `ctx.params`.
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason>;
+    /// How many iterations a frame may take, given the tracker's `max_iters` (a cascade gives
+    /// each of its stages that many).
+    fn max_iterations(&self, max_iters: usize) -> usize {
+        max_iters
+    }
+    /// What the method shows of its state after the last iteration (asked only when an
+    /// observer wants it).
+    fn visual(&mut self, _ctx: &Context) -> Option<MethodVisual<'_>> {
+        None
+    }
 }
 
-/// Builds an SM from the tracker's parameters.
-pub type SmBuilder = fn(&TrackerParams) -> Box<dyn SearchMethod>;
+/// What a search method is built from: its own parameters (validated against its
+/// [`SmDef::params`]) and the tracker's.
+#[derive(Clone, Copy, Debug)]
+pub struct SmConfig<'a> {
+    pub method: &'a MethodParams,
+    pub tracker: &'a TrackerParams,
+}
 
-/// Every search method.
-pub const REGISTRY: &[Entry<SmBuilder>] = &[
+impl SmConfig<'_> {
+    /// The value of one of the method's parameters.
+    pub fn get(&self, def: &ParamDef) -> f64 {
+        self.method.get(def)
+    }
+}
+
+/// A registry entry's contents: the method's parameters and its constructor.
+#[derive(Clone, Copy)]
+pub struct SmDef {
+    pub params: &'static [ParamDef],
+    pub build: fn(&SmConfig) -> crate::Result<Box<dyn SearchMethod>>,
+}
+
+/// Every search method. Composites are named `cascade:a+b+...` (each stage in turn, each with
+/// the tracker's iteration limit) and `parallel:a+b+...` (each from the same start, the best by
+/// similarity kept).
+pub const REGISTRY: &[Entry<SmDef>] = &[
     falk::ENTRY,
     ialk::ENTRY,
     fclk::ENTRY,
     iclk::ENTRY,
     esm::ENTRY,
+    nn::ENTRY,
+    nn::ENTRY_1K,
+    nn::ENTRY_10K,
+    nnic::ENTRY,
+    pf::ENTRY,
 ];
 
-/// The SM called `name` (or one of its aliases).
-pub fn build(name: &str, params: &TrackerParams) -> crate::Result<Box<dyn SearchMethod>> {
-    Ok((registry::lookup(REGISTRY, "search method", name)?.build)(
-        params,
-    ))
+/// The stages of a composite name: `Some(("cascade", ["nn", "iclk"]))`.
+fn composite(name: &str) -> Option<(&'static str, Vec<&str>)> {
+    let name = name.trim();
+    for kind in ["cascade", "parallel"] {
+        if name.len() > kind.len() + 1
+            && name[..kind.len()].eq_ignore_ascii_case(kind)
+            && name.as_bytes()[kind.len()] == b':'
+        {
+            return Some((kind, name[kind.len() + 1..].split('+').map(str::trim).collect()));
+        }
+    }
+    None
+}
+
+/// The canonical name of `name` (an alias resolved, composites stage by stage); an error lists
+/// what exists.
+pub fn canonical_name(name: &str) -> crate::Result<String> {
+    match composite(name) {
+        Some((kind, stages)) => {
+            if stages.len() < 2 {
+                return Err(crate::Error::InvalidParameter(format!(
+                    "{kind} '{name}' needs at least two stages joined by '+'"
+                )));
+            }
+            let names = stages
+                .iter()
+                .map(|s| canonical_name(s))
+                .collect::<crate::Result<Vec<_>>>()?;
+            Ok(format!("{kind}:{}", names.join("+")))
+        }
+        None => Ok(registry::lookup(REGISTRY, "search method", name)?
+            .name
+            .to_string()),
+    }
+}
+
+/// The parameters of the method `name` (for a composite: those of its stages, each once).
+pub fn param_defs(name: &str) -> crate::Result<Vec<&'static ParamDef>> {
+    let mut out: Vec<&'static ParamDef> = Vec::new();
+    match composite(name) {
+        Some((_, stages)) => {
+            for s in stages {
+                for d in param_defs(s)? {
+                    if !out.iter().any(|o| o.name == d.name) {
+                        out.push(d);
+                    }
+                }
+            }
+        }
+        None => out.extend(
+            registry::lookup(REGISTRY, "search method", name)?
+                .build
+                .params
+                .iter(),
+        ),
+    }
+    Ok(out)
+}
+
+/// The SM called `name` (an alias, or a composite), with its parameters checked.
+pub fn build(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMethod>> {
+    let canonical = canonical_name(name)?;
+    cfg.method
+        .validate(&format!("search method '{canonical}'"), &param_defs(&canonical)?)?;
+    build_checked(&canonical, cfg)
+}
+
+fn build_checked(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMethod>> {
+    match composite(name) {
+        Some((kind, stages)) => {
+            let built = stages
+                .iter()
+                .map(|s| build_checked(s, cfg))
+                .collect::<crate::Result<Vec<_>>>()?;
+            Ok(match kind {
+                "cascade" => Box::new(cascade::Cascade::new(name.to_string(), built, cfg)),
+                _ => Box::new(cascade::Parallel::new(name.to_string(), built, cfg)),
+            })
+        }
+        None => (registry::lookup(REGISTRY, "search method", name)?.build.build)(cfg),
+    }
 }
 
 /// How a step `dp` changes the parameters.
@@ -308,6 +453,12 @@ impl Context {
         let mut g = [0.0f64; MAX_DOF];
         jt_times(jac, &self.grad, self.dof, &mut g);
         let dp = newton_step(h, &g, self.dof).ok_or(LossReason::Singular)?;
+        self.apply(&dp, update)
+    }
+
+    /// Applies the step `dp` to the parameters.
+    pub fn apply(&mut self, dp: &Params, update: Update) -> Result<(), LossReason> {
+        let dp = *dp;
         let p = self.params;
         let next = match update {
             Update::Additive => Some(self.ssm.additive_update(&p, &dp)),

@@ -56,7 +56,7 @@ fn update_does_not_allocate() {
             for ssm in ["homography", "sl3", "corner", "affine"] {
                 let mut spec = TrackerSpec::from_names(sm.name, am.name, ssm).unwrap();
                 // A pyramid too (its levels are kept between frames as well).
-                spec.params.pyramid_levels = if ssm == "affine" { 3 } else { 1 };
+                spec.params_mut().unwrap().pyramid_levels = if ssm == "affine" { 3 } else { 1 };
                 let mut t = Tracker::new(&spec).unwrap();
                 t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
                 // A first update grows the buffers of the pre-processed region.

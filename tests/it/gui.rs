@@ -73,7 +73,7 @@ fn pick_an_am_play_and_watch_the_plots_grow() {
     h.get_by_label("ncc").click();
     h.run_steps(2);
     step_until(&mut h, "re-initialisation", |a| {
-        a.state.trackers[0].spec.am == "ncc" && a.tracked_until() == Some(0)
+        a.state.trackers[0].spec.registration().unwrap().am == "ncc" && a.tracked_until() == Some(0)
     });
     let first = h.state().result(0, 0).unwrap().corners;
     h.get_by_label("Play").click();
@@ -111,8 +111,9 @@ fn sessions_load_and_every_bundled_session_is_valid() {
     let seq = small_sequence(d.path(), 6);
     let mut state = state_on(&seq);
     state.trackers.truncate(1);
-    state.trackers[0].spec.sm = "fclk".into();
-    state.trackers[0].spec.ssm = "affine".into();
+    let r = state.trackers[0].spec.registration_mut().unwrap();
+    r.sm = "fclk".into();
+    r.ssm = "affine".into();
     let session = d.path().join("s.toml");
     state.save(&session).unwrap();
     // Start on another session, then load the saved one through the command handler.

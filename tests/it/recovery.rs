@@ -6,6 +6,7 @@ use rayon::prelude::*;
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::observe::NoObserver;
 use regtrack::rng::Rng;
+use regtrack::params::{MethodParams, TrackerParams};
 use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use regtrack::{am, sm, ssm};
 
@@ -16,7 +17,7 @@ fn converged(spec: &TrackerSpec, sigma: f64, trials: usize, tol: f64, seed: u64)
     let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
     let mut tracker = Tracker::new(spec).unwrap();
     tracker.initialize(FrameInput::Gray8(&img), &truth).unwrap();
-    let model = ssm::build(&spec.ssm).unwrap();
+    let model = ssm::build(&spec.registration().unwrap().ssm).unwrap();
     let mut rng = Rng::new(seed);
     let mut ok = 0;
     for _ in 0..trials {
@@ -32,35 +33,106 @@ fn converged(spec: &TrackerSpec, sigma: f64, trials: usize, tol: f64, seed: u64)
     ok
 }
 
+/// Whether a search method searches by sampling (no derivatives): its precision is that of its
+/// samples, not of a Newton step.
+fn sampling(sm_name: &str) -> bool {
+    let (method, tracker) = (MethodParams::default(), TrackerParams::default());
+    let cfg = sm::SmConfig {
+        method: &method,
+        tracker: &tracker,
+    };
+    !sm::build(sm_name, &cfg).unwrap().requires().derivatives
+}
+
 #[test]
 fn every_combination_recovers_a_known_warp() {
+    // Every AM x SSM x SM that the capabilities allow is built and run; the others must be
+    // refused with the reason.
     let mut combos = Vec::new();
     for s in sm::REGISTRY {
         for a in am::REGISTRY {
             for m in ssm::REGISTRY {
-                combos.push(TrackerSpec::from_names(s.name, a.name, m.name).unwrap());
+                match TrackerSpec::from_names(s.name, a.name, m.name) {
+                    Ok(spec) => combos.push((spec, sampling(s.name))),
+                    Err(e) => {
+                        let msg = e.to_string();
+                        assert!(
+                            msg.contains("needs") && msg.contains(a.name),
+                            "{} x {} x {} refused without a reason: {msg}",
+                            s.name,
+                            a.name,
+                            m.name
+                        );
+                    }
+                }
             }
         }
     }
-    let results: Vec<(String, usize)> = combos
+    // Gradient methods: 100 trials within 0.1 px. Sampling methods (NN, PF) are as precise as
+    // their samples: 40 trials within 3 px (the start is about 2.5 px off), and a separate test
+    // below holds them to 0.5 px on translation.
+    let results: Vec<(String, usize, usize)> = combos
         .par_iter()
-        .map(|spec| (spec.label(), converged(spec, 2.0, 100, 0.1, 42)))
+        .map(|(spec, sampled)| {
+            let (trials, tol) = if *sampled { (40, 3.0) } else { (100, 0.1) };
+            (spec.label(), converged(spec, 2.0, trials, tol, 42), trials)
+        })
         .collect();
-    for (label, ok) in &results {
-        eprintln!("{label}: {ok}/100");
+    for (label, ok, n) in &results {
+        eprintln!("{label}: {ok}/{n}");
     }
-    let failures: Vec<_> = results.iter().filter(|(_, ok)| *ok < 95).collect();
+    let failures: Vec<_> = results
+        .iter()
+        .filter(|(_, ok, n)| (*ok as f64) < 0.95 * *n as f64)
+        .collect();
     assert!(
         failures.is_empty(),
-        "combinations converging in fewer than 95 of 100 trials: {failures:?}"
+        "combinations converging in fewer than 95% of the trials: {failures:?}"
     );
+}
+
+#[test]
+fn sampling_methods_are_precise_on_low_dof_and_seeded() {
+    for sm in ["nn1k", "nn10k", "pf", "nnic"] {
+        for m in ["translation", "similitude"] {
+            let spec = TrackerSpec::from_names(sm, "ssd", m).unwrap();
+            let ok = converged(&spec, 2.0, 40, 0.5, 7);
+            assert!(ok >= 38, "{sm} {m}: {ok}/40 within 0.5 px");
+        }
+    }
+    // The same seed gives the same result; another seed another one.
+    let run = |seed: u64| {
+        let mut spec = TrackerSpec::from_names("pf", "ssd", "homography").unwrap();
+        spec.params_mut().unwrap().seed = seed;
+        let img = texture("skimage_coffee.png");
+        let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+        let mut t = Tracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
+        let start = Quad::from_rect(252.0, 149.0, 100.0, 100.0);
+        t.set_corners(&start).unwrap();
+        t.update(FrameInput::Gray8(&img), &mut NoObserver).corners
+    };
+    assert_eq!(run(3), run(3));
+    assert_ne!(run(3), run(4));
+}
+
+#[test]
+fn nnic_is_at_least_as_precise_as_nn_and_iclk_alone_on_large_motion() {
+    // At sigma 6 px ICLK alone often fails; NN brings it into ICLK's basin.
+    let at = |sm: &str, tol: f64| {
+        let spec = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        converged(&spec, 6.0, 60, tol, 11)
+    };
+    let (nnic, iclk, nn) = (at("nnic", 0.1), at("iclk", 0.1), at("nn1k", 0.1));
+    eprintln!("sigma 6 px, within 0.1 px: nnic {nnic}, iclk {iclk}, nn1k {nn} of 60");
+    assert!(nnic >= iclk && nnic >= nn, "nnic {nnic} iclk {iclk} nn {nn}");
 }
 
 #[test]
 fn baker_matthews_homography_ssd_sigma_4() {
     for sm in ["iclk", "fclk", "esm"] {
         let mut spec = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
-        spec.params.max_iters = 15;
+        spec.params_mut().unwrap().max_iters = 15;
         let ok = converged(&spec, 4.0, 100, 1.0, 7);
         eprintln!("Baker-Matthews sigma 4: {sm}: {ok}/100");
         assert!(ok >= 95, "{sm}: {ok}/100 converged at sigma 4 px");
@@ -76,7 +148,7 @@ fn a_pyramid_widens_the_basin_of_convergence() {
     for sm in ["esm", "iclk", "fclk"] {
         let one = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
         let mut three = one.clone();
-        three.params.pyramid_levels = 3;
+        three.params_mut().unwrap().pyramid_levels = 3;
         let (a, b) = (
             converged(&one, 10.0, 60, 0.1, 3),
             converged(&three, 10.0, 60, 0.1, 3),
@@ -87,7 +159,7 @@ fn a_pyramid_widens_the_basin_of_convergence() {
     // And it still recovers small perturbations exactly, in every SSM.
     for m in ssm::REGISTRY {
         let mut spec = TrackerSpec::from_names("esm", "zncc", m.name).unwrap();
-        spec.params.pyramid_levels = 2;
+        spec.params_mut().unwrap().pyramid_levels = 2;
         let ok = converged(&spec, 2.0, 50, 0.1, 5);
         assert!(ok >= 48, "{}: {ok}/50 with a 2-level pyramid", m.name);
     }

@@ -2,7 +2,8 @@
 //! truth's settings.
 
 use super::color;
-use crate::am::HessianKind;
+use crate::params::{ParamDef, ParamKind};
+use crate::tracker::{TRACKER_PARAMS, TrackerSpec};
 use crate::app::command::Command;
 use crate::app::state::InitSource;
 use crate::app::{InspectorApp, Tool};
@@ -46,47 +47,21 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                             app.send(Command::SelectTracker(i));
                         }
                     });
-                    if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &entry.spec.sm, sm::REGISTRY) {
-                        next.spec.sm = v;
-                    }
-                    if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &entry.spec.am, am::REGISTRY) {
-                        next.spec.am = v;
-                    }
-                    if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &entry.spec.ssm, ssm::REGISTRY) {
-                        next.spec.ssm = v;
+                    if let Some(r) = next.spec.registration_mut() {
+                        if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
+                            r.sm = v;
+                            // Another method has other parameters.
+                            r.method = Default::default();
+                        }
+                        if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &r.am, am::REGISTRY) {
+                            r.am = v;
+                        }
+                        if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &r.ssm, ssm::REGISTRY) {
+                            r.ssm = v;
+                        }
                     }
                     ui.collapsing(format!("Parameters {}", i + 1), |ui| {
-                        let p = &mut next.spec.params;
-                        egui::Grid::new(("params", i)).num_columns(2).show(ui, |ui| {
-                            ui.label("sampling");
-                            ui.add(egui::DragValue::new(&mut p.res).range(2..=400).suffix(" px²"));
-                            ui.end_row();
-                            ui.label("max iterations");
-                            ui.add(egui::DragValue::new(&mut p.max_iters).range(1..=500));
-                            ui.end_row();
-                            ui.label("epsilon");
-                            ui.add(egui::DragValue::new(&mut p.eps).range(0.0..=10.0).speed(0.0005).suffix(" px"));
-                            ui.end_row();
-                            ui.label("blur σ");
-                            ui.add(egui::DragValue::new(&mut p.blur_sigma).range(0.0..=20.0).speed(0.05));
-                            ui.end_row();
-                            ui.label("blur size");
-                            ui.add(egui::DragValue::new(&mut p.blur_size).range(1..=31));
-                            ui.end_row();
-                            ui.label("pyramid levels");
-                            ui.add(egui::DragValue::new(&mut p.pyramid_levels).range(1..=6));
-                            ui.end_row();
-                            ui.label("region margin");
-                            ui.add(egui::DragValue::new(&mut p.roi_margin).range(0.0..=10.0).speed(0.01));
-                            ui.end_row();
-                            ui.label("Hessian");
-                            egui::ComboBox::from_id_salt(("hessian", i)).selected_text(format!("{:?}", p.hessian)).show_ui(ui, |ui| {
-                                for k in [HessianKind::Default, HessianKind::GaussNewton, HessianKind::Newton, HessianKind::AfterConvergence] {
-                                    ui.selectable_value(&mut p.hessian, k, format!("{k:?}"));
-                                }
-                            });
-                            ui.end_row();
-                        });
+                        param_grid(ui, i, &mut next.spec);
                     });
                     ui.horizontal_wrapped(|ui| {
                         if ui.button("Init from GT").on_hover_text("Start from the ground truth of this frame").clicked() {
@@ -157,4 +132,60 @@ fn tracker_stats(app: &InspectorApp, i: usize) -> String {
         mean,
         fps
     )
+}
+
+/// One drag value for a parameter, with its definition's range and help; returns the new value.
+fn param_widget(ui: &mut egui::Ui, id: (usize, &str), def: &ParamDef, value: f64) -> f64 {
+    let mut v = value;
+    ui.label(def.name).on_hover_text(def.help);
+    match def.kind {
+        ParamKind::Choice(names) => {
+            egui::ComboBox::from_id_salt(id).selected_text(def.format(v)).show_ui(ui, |ui| {
+                for (k, n) in names.iter().enumerate() {
+                    ui.selectable_value(&mut v, k as f64, *n);
+                }
+            });
+        }
+        ParamKind::Int => {
+            let speed = ((def.max - def.min) / 500.0).clamp(0.05, 50.0);
+            ui.add(egui::DragValue::new(&mut v).range(def.min..=def.max).speed(speed).max_decimals(0))
+                .on_hover_text(def.help);
+        }
+        ParamKind::Float => {
+            let speed = ((def.max - def.min) / 2000.0).clamp(1e-4, 1.0);
+            ui.add(egui::DragValue::new(&mut v).range(def.min..=def.max).speed(speed))
+                .on_hover_text(def.help);
+        }
+    }
+    ui.end_row();
+    v
+}
+
+/// The tracker's and the method's parameters, from their definitions.
+fn param_grid(ui: &mut egui::Ui, i: usize, spec: &mut TrackerSpec) {
+    egui::Grid::new(("params", i)).num_columns(2).show(ui, |ui| {
+        if let Some(r) = spec.registration_mut() {
+            for d in TRACKER_PARAMS {
+                let v = param_widget(ui, (i, d.name), d, r.params.value(d.name));
+                if v != r.params.value(d.name) {
+                    r.params.set_value(d.name, v);
+                }
+            }
+        }
+        let defs = spec.method_defs().unwrap_or_default();
+        if !defs.is_empty() {
+            ui.label(egui::RichText::new("method").strong());
+            ui.end_row();
+        }
+        for d in defs {
+            let old = spec.method_params().get(d);
+            let v = param_widget(ui, (i, d.name), d, old);
+            if v != old {
+                match spec {
+                    TrackerSpec::Registration(r) => r.method.set(d.name, v),
+                    TrackerSpec::Whole(w) => w.method.set(d.name, v),
+                }
+            }
+        }
+    });
 }

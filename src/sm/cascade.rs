@@ -1,0 +1,208 @@
+//! Composite search methods built from any others.
+//!
+//! - **Cascade** (`cascade:a+b+...`, and MTF's NNIC as `nnic` = `cascade:nn+iclk`): the stages
+//!   run in turn on each frame, each from where the previous one stopped, each until its own stop
+//!   test (the tracker's `eps`, or the method's "done") or the tracker's iteration limit. A
+//!   sampling stage gives a coarse estimate with a wide basin, a gradient stage refines it.
+//! - **Parallel** (`parallel:a+b+...`): every stage runs a whole frame from the same start; the
+//!   estimate with the highest similarity is kept. The observer sees one iteration per frame.
+
+use super::{Context, Control, LossReason, MethodVisual, SearchMethod, SmConfig, Step};
+use crate::am::Capabilities;
+use crate::imaging::ImageView;
+
+/// The union of what the stages need.
+fn union(stages: &[Box<dyn SearchMethod>]) -> Capabilities {
+    stages.iter().fold(Capabilities::default(), |acc, s| {
+        let r = s.requires();
+        Capabilities {
+            derivatives: acc.derivatives || r.derivatives,
+            distance: acc.distance || r.distance,
+        }
+    })
+}
+
+/// Stages run one after the other on each frame.
+#[derive(Debug)]
+pub struct Cascade {
+    name: String,
+    stages: Vec<Box<dyn SearchMethod>>,
+    eps: f64,
+    max_iters: usize,
+    /// The running stage and its iterations on this frame.
+    stage: usize,
+    count: usize,
+}
+
+impl Cascade {
+    pub fn new(name: String, stages: Vec<Box<dyn SearchMethod>>, cfg: &SmConfig) -> Self {
+        Cascade {
+            name,
+            stages,
+            eps: cfg.tracker.eps,
+            max_iters: cfg.tracker.max_iters,
+            stage: 0,
+            count: 0,
+        }
+    }
+}
+
+impl SearchMethod for Cascade {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn requires(&self) -> Capabilities {
+        union(&self.stages)
+    }
+    fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
+        for s in &mut self.stages {
+            s.initialize(ctx, img)?;
+        }
+        Ok(())
+    }
+    fn start_frame(&mut self, ctx: &mut Context) {
+        self.stage = 0;
+        self.count = 0;
+        if let Some(s) = self.stages.first_mut() {
+            s.start_frame(ctx);
+        }
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
+        let before = ctx.corners(&ctx.params);
+        let k = self.stage.min(self.stages.len() - 1);
+        let step = self.stages[k].iterate(ctx, img)?;
+        self.count += 1;
+        let moved = ctx.corners(&ctx.params).change_norm(&before);
+        let finished = match step.control {
+            Control::Done => true,
+            Control::Continue => false,
+            Control::Auto => moved < self.eps,
+        } || self.count >= self.max_iters;
+        if !finished {
+            return Ok(Step {
+                similarity: step.similarity,
+                control: Control::Continue,
+            });
+        }
+        if k + 1 >= self.stages.len() {
+            return Ok(Step::done(step.similarity));
+        }
+        self.stage = k + 1;
+        self.count = 0;
+        self.stages[k + 1].start_frame(ctx);
+        Ok(Step {
+            similarity: step.similarity,
+            control: Control::Continue,
+        })
+    }
+    fn max_iterations(&self, max_iters: usize) -> usize {
+        self.stages
+            .iter()
+            .map(|s| s.max_iterations(max_iters))
+            .sum()
+    }
+    fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
+        // The first stage that shows something (the sampling stage of NNIC).
+        let k = (0..self.stages.len()).find(|&k| self.stages[k].visual(ctx).is_some())?;
+        self.stages[k].visual(ctx)
+    }
+}
+
+/// Stages run from the same start; the most similar result is kept.
+#[derive(Debug)]
+pub struct Parallel {
+    name: String,
+    stages: Vec<Box<dyn SearchMethod>>,
+    eps: f64,
+    max_iters: usize,
+}
+
+impl Parallel {
+    pub fn new(name: String, stages: Vec<Box<dyn SearchMethod>>, cfg: &SmConfig) -> Self {
+        Parallel {
+            name,
+            stages,
+            eps: cfg.tracker.eps,
+            max_iters: cfg.tracker.max_iters,
+        }
+    }
+}
+
+impl SearchMethod for Parallel {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn requires(&self) -> Capabilities {
+        union(&self.stages)
+    }
+    fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
+        for s in &mut self.stages {
+            s.initialize(ctx, img)?;
+        }
+        Ok(())
+    }
+    fn max_iterations(&self, _max_iters: usize) -> usize {
+        1
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
+        // Each stage runs its own loop with the tracker's stop test and iteration limit.
+        let start = ctx.params;
+        let start_corners = ctx.corners(&start);
+        let mut best: Option<(f64, crate::ssm::Params)> = None;
+        let mut first_err = None;
+        for s in &mut self.stages {
+            ctx.params = start;
+            s.start_frame(ctx);
+            let mut prev = start_corners;
+            let mut failed = None;
+            for _ in 0..s.max_iterations(self.max_iters) {
+                match s.iterate(ctx, img) {
+                    Ok(step) => {
+                        let now = ctx.corners(&ctx.params);
+                        let moved = now.change_norm(&prev);
+                        prev = now;
+                        if !now.is_finite() {
+                            failed = Some(LossReason::NonFinite);
+                            break;
+                        }
+                        match step.control {
+                            Control::Done => break,
+                            Control::Continue => {}
+                            Control::Auto if moved < self.eps => break,
+                            Control::Auto => {}
+                        }
+                    }
+                    Err(r) => {
+                        failed = Some(r);
+                        break;
+                    }
+                }
+            }
+            if let Some(r) = failed {
+                first_err.get_or_insert(r);
+                continue;
+            }
+            let p = ctx.params;
+            ctx.warp_grid(&p);
+            ctx.sample(img, false);
+            let f = ctx.am.similarity(&ctx.values);
+            if f.is_finite() && best.is_none_or(|(b, _)| f > b) {
+                best = Some((f, p));
+            }
+        }
+        match best {
+            Some((f, p)) => {
+                ctx.params = p;
+                Ok(Step::done(f))
+            }
+            None => {
+                ctx.params = start;
+                Err(first_err.unwrap_or(LossReason::NonFinite))
+            }
+        }
+    }
+    fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
+        let k = (0..self.stages.len()).find(|&k| self.stages[k].visual(ctx).is_some())?;
+        self.stages[k].visual(ctx)
+    }
+}

@@ -1,0 +1,322 @@
+//! Nearest-neighbour search (Dick et al., "Realtime registration-based tracking via approximate
+//! nearest neighbour search"), as the paper's NN1K / NN10K.
+//!
+//! At initialisation the method draws `samples` random warps `q_k` around the identity (each
+//! corner of the target moved by Gaussian noise of `sigma`, in units of the target's size, and the
+//! SSM fitted to the moved corners; with `scales` > 1 the samples alternate between `sigma`,
+//! `sigma / 4`, ... so that the iterations refine coarse to fine), samples the initialisation frame under each,
+//! `I_0(w(w(x, q_k), p_0))`, and indexes the AM's embeddings of these patches. A frame's patch at
+//! `p` that looks like sample `k` means the target sits at `p o q_k^-1`: each iteration finds the
+//! nearest sample and composes with its stored inverse. Sample 0 is the identity, so a converged
+//! frame stops moving and the driver's stop test ends it.
+//!
+//! The index: exact brute force over the full embeddings costs `samples x N` multiply-adds per
+//! query (25 M for NN10K at 50x50); the default `projected` index first ranks every sample by
+//! a seeded Gaussian random projection of the embeddings to `dims` dimensions
+//! (Johnson-Lindenstrauss), then re-ranks the `candidates` best exactly. `regtrack bench` compares
+//! the two (`--param index=exact`).
+
+use super::{Context, LossReason, MethodVisual, SearchMethod, SmConfig, SmDef, Step, Update};
+use crate::am::{Capabilities, dot};
+use crate::geometry::Point;
+use crate::imaging::ImageView;
+use crate::params::ParamDef;
+use crate::registry::Entry;
+use crate::rng::Rng;
+use crate::ssm::{Params, random_warp};
+
+/// The parameters of the NN family (`samples`'s default differs per entry).
+const fn params(samples: f64) -> [ParamDef; 6] {
+    [
+        ParamDef::int("samples", "random warps indexed at initialisation", 10.0, 100_000.0, samples),
+        ParamDef::float(
+            "sigma",
+            "standard deviation of the corner noise of the samples, in target sizes",
+            0.001,
+            1.0,
+            0.05,
+        ),
+        ParamDef::choice(
+            "index",
+            "projected: random projection then exact re-ranking; exact: brute force",
+            &["projected", "exact"],
+        ),
+        ParamDef::int("dims", "dimensions of the projected index", 4.0, 1024.0, 64.0),
+        ParamDef::int(
+            "candidates",
+            "samples re-ranked exactly after the projected search",
+            1.0,
+            10_000.0,
+            32.0,
+        ),
+        ParamDef::int(
+            "scales",
+            "noise scales of the samples: sample k has sigma / 4^(k mod scales), coarse to fine",
+            1.0,
+            4.0,
+            3.0,
+        ),
+    ]
+}
+
+pub(super) const NN_PARAMS: [ParamDef; 6] = params(1000.0);
+const NN10K_PARAMS: [ParamDef; 6] = params(10_000.0);
+
+pub const ENTRY: Entry<SmDef> = Entry {
+    name: "nn",
+    aliases: &[],
+    description: "nearest-neighbour search over random warps of the first frame (samples as a parameter)",
+    build: SmDef {
+        params: &NN_PARAMS,
+        build: |cfg| Ok(Box::new(Nn::new("nn", &NN_PARAMS, cfg))),
+    },
+};
+
+pub const ENTRY_1K: Entry<SmDef> = Entry {
+    name: "nn1k",
+    aliases: &[],
+    description: "nearest-neighbour search, 1000 samples",
+    build: SmDef {
+        params: &NN_PARAMS,
+        build: |cfg| Ok(Box::new(Nn::new("nn1k", &NN_PARAMS, cfg))),
+    },
+};
+
+pub const ENTRY_10K: Entry<SmDef> = Entry {
+    name: "nn10k",
+    aliases: &[],
+    description: "nearest-neighbour search, 10000 samples",
+    build: SmDef {
+        params: &NN10K_PARAMS,
+        build: |cfg| Ok(Box::new(Nn::new("nn10k", &NN10K_PARAMS, cfg))),
+    },
+};
+
+/// Nearest-neighbour search method.
+#[derive(Debug)]
+pub struct Nn {
+    name: &'static str,
+    samples: usize,
+    sigma: f64,
+    exact: bool,
+    dims: usize,
+    candidates: usize,
+    scales: usize,
+    seed: u64,
+    /// Patch length.
+    n: usize,
+    /// `q_k^-1` per sample.
+    inverse: Vec<Params>,
+    /// Sample centres in the normalised frame (for the teaching view).
+    centres: Vec<Point>,
+    /// Embeddings, `samples x n`, and their squared norms.
+    data: Vec<f32>,
+    norms: Vec<f32>,
+    /// Projection `dims x n` and projected samples `samples x dims`.
+    proj: Vec<f32>,
+    reduced: Vec<f32>,
+    /// Per query scratch.
+    query: Vec<f32>,
+    qred: Vec<f32>,
+    dist: Vec<f32>,
+    order: Vec<u32>,
+    chosen: usize,
+    /// Teaching-view scratch.
+    vis_points: Vec<Point>,
+    vis_weights: Vec<f32>,
+}
+
+impl Nn {
+    pub(super) fn new(name: &'static str, defs: &[ParamDef; 6], cfg: &SmConfig) -> Self {
+        Nn {
+            name,
+            samples: cfg.get(&defs[0]) as usize,
+            sigma: cfg.get(&defs[1]),
+            exact: cfg.get(&defs[2]) == 1.0,
+            dims: cfg.get(&defs[3]) as usize,
+            candidates: cfg.get(&defs[4]) as usize,
+            scales: cfg.get(&defs[5]) as usize,
+            seed: cfg.tracker.seed,
+            n: 0,
+            inverse: Vec::new(),
+            centres: Vec::new(),
+            data: Vec::new(),
+            norms: Vec::new(),
+            proj: Vec::new(),
+            reduced: Vec::new(),
+            query: Vec::new(),
+            qred: Vec::new(),
+            dist: Vec::new(),
+            order: Vec::new(),
+            chosen: 0,
+            vis_points: Vec::new(),
+            vis_weights: Vec::new(),
+        }
+    }
+
+    /// `reduced[j] = proj_j . e` for every projected dimension.
+    fn project(proj: &[f32], n: usize, e: &[f32], out: &mut [f32]) {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = dot(&proj[j * n..(j + 1) * n], e) as f32;
+        }
+    }
+
+    /// The squared distance between the query and sample `k`, from the stored norm.
+    fn exact_distance(&self, k: usize, qnorm: f32) -> f32 {
+        let row = &self.data[k * self.n..(k + 1) * self.n];
+        (self.norms[k] + qnorm - 2.0 * dot(row, &self.query) as f32).max(0.0)
+    }
+
+    /// The index of the nearest sample to `self.query`.
+    fn nearest(&mut self) -> usize {
+        let qnorm = dot(&self.query, &self.query) as f32;
+        if self.exact {
+            for k in 0..self.samples {
+                self.dist[k] = self.exact_distance(k, qnorm);
+            }
+            return argmin(&self.dist);
+        }
+        Self::project(&self.proj, self.n, &self.query, &mut self.qred);
+        let d = self.dims;
+        for (k, dk) in self.dist.iter_mut().enumerate() {
+            let row = &self.reduced[k * d..(k + 1) * d];
+            *dk = row
+                .iter()
+                .zip(&self.qred)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
+        }
+        let c = self.candidates.min(self.samples);
+        self.order.clear();
+        self.order.extend(0..self.samples as u32);
+        let dist = &self.dist;
+        if c < self.samples {
+            self.order
+                .select_nth_unstable_by(c - 1, |&a, &b| dist[a as usize].total_cmp(&dist[b as usize]));
+        }
+        let mut best = (f32::INFINITY, 0usize);
+        for i in 0..c {
+            let k = self.order[i] as usize;
+            let e = self.exact_distance(k, qnorm);
+            if e < best.0 {
+                best = (e, k);
+            }
+        }
+        best.1
+    }
+}
+
+fn argmin(v: &[f32]) -> usize {
+    let mut best = (f32::INFINITY, 0);
+    for (i, &x) in v.iter().enumerate() {
+        if x < best.0 {
+            best = (x, i);
+        }
+    }
+    best.1
+}
+
+impl SearchMethod for Nn {
+    fn name(&self) -> &str {
+        self.name
+    }
+    fn requires(&self) -> Capabilities {
+        Capabilities {
+            derivatives: false,
+            distance: true,
+        }
+    }
+    fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
+        let n = ctx.len();
+        let s = self.samples;
+        self.n = n;
+        let mut rng = Rng::new(self.seed);
+        let identity = ctx.ssm.identity();
+        self.inverse.clear();
+        self.centres.clear();
+        self.data.resize(s * n, 0.0);
+        self.norms.resize(s, 0.0);
+        self.dist.resize(s, 0.0);
+        self.query.resize(n, 0.0);
+        let base = ctx.template_corners;
+        for k in 0..s {
+            // Sample 0 is the identity; a warp the SSM cannot fit or invert is drawn again.
+            let (q, inv) = if k == 0 {
+                (identity, identity)
+            } else {
+                let mut tries = 0;
+                loop {
+                    tries += 1;
+                    let sigma = self.sigma / 4f64.powi((k % self.scales.max(1)) as i32);
+                    let q = random_warp(&*ctx.ssm, &base, sigma, &mut rng);
+                    if let Some((q, inv)) = q.and_then(|q| ctx.ssm.invert(&q).map(|i| (q, i))) {
+                        break (q, inv);
+                    }
+                    if tries > 100 {
+                        return Err(LossReason::Singular);
+                    }
+                }
+            };
+            ctx.warp_grid(&q);
+            ctx.sample(img, false);
+            let row = &mut self.data[k * n..(k + 1) * n];
+            ctx.am.embed(&ctx.values, row);
+            self.norms[k] = dot(row, row) as f32;
+            self.inverse.push(inv);
+            let c = crate::ssm::warp_quad(&*ctx.ssm, &q, &base).centroid();
+            self.centres.push(c);
+        }
+        if !self.exact {
+            let d = self.dims;
+            let scale = 1.0 / (d as f64).sqrt();
+            self.proj.clear();
+            self.proj
+                .extend((0..d * n).map(|_| (rng.normal() * scale) as f32));
+            self.reduced.resize(s * d, 0.0);
+            self.qred.resize(d, 0.0);
+            for k in 0..s {
+                let (row, out) = (&self.data[k * n..(k + 1) * n], &mut self.reduced[k * d..(k + 1) * d]);
+                Self::project(&self.proj, n, row, out);
+            }
+            self.order.reserve(s);
+        }
+        if self.data.iter().any(|v| !v.is_finite()) {
+            return Err(LossReason::NonFinite);
+        }
+        Ok(())
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
+        let p = ctx.params;
+        ctx.warp_grid(&p);
+        ctx.sample(img, false);
+        let f = ctx.am.similarity(&ctx.values);
+        ctx.am.embed(&ctx.values, &mut self.query);
+        let k = self.nearest();
+        self.chosen = k;
+        ctx.apply(&self.inverse[k], Update::Compose)?;
+        Ok(Step::auto(f))
+    }
+    fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
+        // The samples' centres around the current estimate, weighted by closeness of their
+        // patches to the last query (1 = the nearest).
+        let m = ctx.pixel_matrix(&ctx.params);
+        self.vis_points.clear();
+        self.vis_points.extend(
+            self.centres
+                .iter()
+                .map(|&c| crate::geometry::apply_homography(&m, c)),
+        );
+        let lo = self.dist.iter().copied().fold(f32::INFINITY, f32::min);
+        let mean = self.dist.iter().sum::<f32>() / self.dist.len().max(1) as f32;
+        let spread = (mean - lo).max(1e-12);
+        self.vis_weights.clear();
+        self.vis_weights
+            .extend(self.dist.iter().map(|&d| (-(d - lo) / spread * 3.0).exp()));
+        Some(MethodVisual {
+            label: "samples",
+            points: &self.vis_points,
+            weights: &self.vis_weights,
+            chosen: Some(self.chosen),
+        })
+    }
+}

@@ -1,0 +1,70 @@
+//! What a tracker reports about a frame: whether it follows its target, why it lost it, where
+//! the time went. Shared by the trackers, the observer and the evaluation.
+
+use crate::geometry::Quad;
+use serde::{Deserialize, Serialize};
+
+/// Why a tracker lost the target.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossReason {
+    /// A parameter, a corner or the similarity became NaN or infinite.
+    NonFinite,
+    /// The Newton system could not be solved (flat patch, degenerate Jacobian).
+    Singular,
+    /// The quad folded over, or its area changed by more than a factor of 100.
+    Degenerate,
+    /// The quad's centre left the frame by more than half a frame.
+    OutOfFrame,
+}
+
+impl std::fmt::Display for LossReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LossReason::NonFinite => "non-finite values",
+            LossReason::Singular => "singular system",
+            LossReason::Degenerate => "degenerate quad",
+            LossReason::OutOfFrame => "out of frame",
+        })
+    }
+}
+
+/// Whether a tracker follows its target.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "status", content = "reason")]
+pub enum TrackStatus {
+    /// Not initialised yet.
+    Uninitialized,
+    /// Tracking.
+    Tracking,
+    /// The target was lost; the tracker stays lost until it is initialised again.
+    Lost(LossReason),
+}
+
+/// The result of one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameOutcome {
+    /// Frame index since initialisation (the initialisation frame is 0).
+    pub frame: usize,
+    pub status: TrackStatus,
+    /// The corners: the new estimate, or the last good one when lost (always finite).
+    pub corners: Quad,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Whether the stop test was met before the iteration limit.
+    pub converged: bool,
+    /// The similarity before the last iteration's step.
+    pub similarity: f64,
+    /// Time spent pre-processing (smoothing the region read) and searching.
+    pub timing: FrameTiming,
+}
+
+/// Where the time of one update went.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTiming {
+    /// Conversion and smoothing of the region the tracker reads (zero for smoothed input).
+    pub preprocess: std::time::Duration,
+    /// The search method's iterations (what MTF reports as the tracker's speed).
+    pub search: std::time::Duration,
+}
+

@@ -221,13 +221,31 @@ fn errors_are_clear() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/nonexistent/seq.txt"), "{err}");
-    let out = regtrack(&["eval", "--dataset", "/tmp", "--sm", "nn", "--out", "/tmp/x"]);
+    let out = regtrack(&["eval", "--dataset", "/tmp", "--sm", "gd", "--out", "/tmp/x"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("unknown search method 'nn'") && err.contains("esm"),
+        err.contains("unknown search method 'gd'") && err.contains("esm"),
         "{err}"
     );
+    // Parameters: unknown names list the known ones, values out of range name the range.
+    let bad = |args: &[&str]| {
+        let mut all = vec!["eval", "--dataset", "/tmp", "--out", "/tmp/x"];
+        all.extend_from_slice(args);
+        let out = regtrack(&all);
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let err = bad(&["--sm", "nn", "--param", "particles=5"]);
+    assert!(err.contains("'particles'") && err.contains("samples"), "{err}");
+    let err = bad(&["--sm", "nn", "--param", "samples=3"]);
+    assert!(err.contains("samples") && err.contains("10..=100000"), "{err}");
+    let err = bad(&["--hessian", "exact"]);
+    assert!(err.contains("gauss_newton"), "{err}");
+    let err = bad(&["--roi-margin", "-1"]);
+    assert!(err.contains("roi_margin"), "{err}");
+    let err = bad(&["--sm", "cascade:nn"]);
+    assert!(err.contains("at least two stages"), "{err}");
     // Impossible sizes are refused, not rendered (or looped on).
     let tex = root().join("assets/textures/skimage_coffee.png");
     let never = std::path::Path::new("/tmp/regtrack-never");

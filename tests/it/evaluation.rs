@@ -45,7 +45,7 @@ fn esm_ssd_homography_tracks_the_rendered_tmt_sequence() {
         csv.lines()
             .nth(1)
             .unwrap()
-            .starts_with("tmt_book,esm,ssd,homography,380,")
+            .starts_with("tmt_book,esm_ssd_homography,esm,ssd,homography,380,")
     );
 }
 

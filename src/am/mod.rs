@@ -11,7 +11,11 @@
 //! Each model is one file and one line in [`REGISTRY`].
 
 mod correlation;
+mod intensity_map;
+mod lscv;
 mod ncc;
+mod rscv;
+mod scv;
 mod ssd;
 mod zncc;
 
@@ -131,7 +135,14 @@ pub trait Am: Send + Sync + std::fmt::Debug {
 pub type AmBuilder = fn() -> Box<dyn Am>;
 
 /// Every appearance model.
-pub const REGISTRY: &[Entry<AmBuilder>] = &[ssd::ENTRY, zncc::ENTRY, ncc::ENTRY];
+pub const REGISTRY: &[Entry<AmBuilder>] = &[
+    ssd::ENTRY,
+    zncc::ENTRY,
+    ncc::ENTRY,
+    scv::ENTRY,
+    rscv::ENTRY,
+    lscv::ENTRY,
+];
 
 /// The AM called `name` (or one of its aliases).
 pub fn build(name: &str) -> crate::Result<Box<dyn Am>> {

@@ -10,10 +10,13 @@
 //!
 //! Each model is one file and one line in [`REGISTRY`].
 
+mod ccre;
 mod correlation;
 mod intensity_map;
 mod lscv;
+mod mi;
 mod ncc;
+mod parzen;
 mod rscv;
 mod scv;
 mod ssd;
@@ -142,6 +145,8 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     scv::ENTRY,
     rscv::ENTRY,
     lscv::ENTRY,
+    mi::ENTRY,
+    ccre::ENTRY,
 ];
 
 /// The AM called `name` (or one of its aliases).

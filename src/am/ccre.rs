@@ -76,14 +76,17 @@ mod tests {
                 (
                     rng.range(0.05, 0.4) as f32,
                     rng.range(0.05, 0.4) as f32,
-                    rng.range(0.0, 6.28) as f32,
+                    rng.range(0.0, std::f64::consts::TAU) as f32,
                 )
             })
             .collect();
         (0..res * res)
             .map(|i| {
                 let (x, y) = ((i % res) as f32, (i / res) as f32);
-                let v: f32 = waves.iter().map(|&(a, b, p)| (a * x + b * y + p).sin()).sum();
+                let v: f32 = waves
+                    .iter()
+                    .map(|&(a, b, p)| (a * x + b * y + p).sin())
+                    .sum();
                 125.0 + 17.0 * v
             })
             .collect()

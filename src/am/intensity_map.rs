@@ -21,8 +21,8 @@
 //! are not centred on it) and undefined for empty bins. Here the node values solve the weighted
 //! least-squares regression of `Y` on the hat functions of `X`:
 //!
-//! `min_m sum_i w_i (y_i - sum_k phi_k(x_i) m_k)^2 + lambda sum_k (m_{k-1} - 2 m_k + m_{k+1})^2
-//!  + eps sum_k (m_k - x_k)^2`.
+//! `min_m sum_i w_i (y_i - sum_k phi_k(x_i) m_k)^2 + lambda sum_k (m_{k-1} - 2 m_k + m_{k+1})^2 +
+//! eps sum_k (m_k - x_k)^2`.
 //!
 //! The data term needs exactly the statistics of the linearly binned joint histogram:
 //! `sum_i w_i phi_k(x_i) phi_l(x_i)` (the joint histogram of `X` with itself, tridiagonal) and
@@ -277,7 +277,10 @@ mod tests {
         let m = PlMap::identity();
         for x in [-40.0, 0.0, 3.3, 100.0, 254.9, 255.0, 300.0] {
             let (v, s) = m.eval(x);
-            assert!((v - x).abs() < 1e-9 && (s - 1.0).abs() < 1e-9, "{x}: {v} {s}");
+            assert!(
+                (v - x).abs() < 1e-9 && (s - 1.0).abs() < 1e-9,
+                "{x}: {v} {s}"
+            );
         }
     }
 

@@ -15,8 +15,8 @@
 //! `df/dI*_i = m'(x_i, I*_i) (I_i - m(x_i, I*_i))`, `d2f/dI*_i^2 = -m'(x_i, I*_i)^2`, for every
 //! Hessian kind.
 
-use super::scv::Scv;
 use super::AmBuilder;
+use super::scv::Scv;
 use crate::registry::Entry;
 
 /// Blocks per side of the patch.
@@ -38,7 +38,9 @@ mod tests {
     fn follows_light_that_varies_across_the_target() {
         let res = 50;
         let mut rng = Rng::new(23);
-        let t: Vec<f32> = (0..res * res).map(|_| rng.range(20.0, 230.0) as f32).collect();
+        let t: Vec<f32> = (0..res * res)
+            .map(|_| rng.range(20.0, 230.0) as f32)
+            .collect();
         // Gain from 0.6 to 1.3 left to right, bias from -10 to 30 top to bottom.
         let lit: Vec<f32> = t
             .iter()
@@ -58,7 +60,12 @@ mod tests {
         // Per pixel RMS residual: SCV's global map cannot follow the gradient, LSCV's can.
         let rms = |f: f64| (-2.0 * f / (res * res) as f64).sqrt();
         assert!(rms(fs) > 15.0, "scv {}", rms(fs));
-        assert!(rms(fl) < 0.25 * rms(fs), "lscv {} vs scv {}", rms(fl), rms(fs));
+        assert!(
+            rms(fl) < 0.25 * rms(fs),
+            "lscv {} vs scv {}",
+            rms(fl),
+            rms(fs)
+        );
         // And the tracker still prefers the true patch to a shifted one.
         let shifted: Vec<f32> = (0..res * res).map(|i| lit[(i + 1) % (res * res)]).collect();
         assert!(lscv.similarity(&shifted) < 4.0 * lscv.similarity(&lit));

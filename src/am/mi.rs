@@ -75,14 +75,17 @@ mod tests {
                 (
                     rng.range(0.05, 0.4) as f32,
                     rng.range(0.05, 0.4) as f32,
-                    rng.range(0.0, 6.28) as f32,
+                    rng.range(0.0, std::f64::consts::TAU) as f32,
                 )
             })
             .collect();
         (0..res * res)
             .map(|i| {
                 let (x, y) = ((i % res) as f32, (i / res) as f32);
-                let v: f32 = waves.iter().map(|&(a, b, p)| (a * x + b * y + p).sin()).sum();
+                let v: f32 = waves
+                    .iter()
+                    .map(|&(a, b, p)| (a * x + b * y + p).sin())
+                    .sum();
                 125.0 + 17.0 * v
             })
             .collect()
@@ -138,7 +141,10 @@ mod tests {
     fn symmetric_in_its_arguments_and_gradients() {
         let mut rng = Rng::new(41);
         let a: Vec<f32> = (0..300).map(|_| rng.range(20.0, 230.0) as f32).collect();
-        let b: Vec<f32> = a.iter().map(|&v| 0.5 * v + 60.0 + rng.range(-30.0, 30.0) as f32).collect();
+        let b: Vec<f32> = a
+            .iter()
+            .map(|&v| 0.5 * v + 60.0 + rng.range(-30.0, 30.0) as f32)
+            .collect();
         let mut m = Mi(Parzen::new(Measure::Mi));
         m.set_template(&a);
         let (mut ga, mut gb) = (vec![0f32; 300], vec![0f32; 300]);

@@ -25,8 +25,8 @@
 //! With `G(a, b) = dF/dp(a, b)` (the marginals being functions of `p`):
 //!
 //! - gradient: `dF/dx_j = sum_ab G(a, b) dp(a, b)/dx_j` (16 terms per pixel);
-//! - Hessian: `d2F/dx_j dx_l = delta_jl sum_ab G(a, b) d2p(a, b)/dx_j^2
-//!   + sum_{ab, a'b'} dp(a, b)/dx_j (d2F/dp(a, b) dp(a', b')) dp(a', b')/dx_l`.
+//! - Hessian: `d2F/dx_j dx_l = delta_jl sum_ab G(a, b) d2p(a, b)/dx_j^2 +
+//!   sum_{ab, a'b'} dp(a, b)/dx_j (d2F/dp(a, b) dp(a', b')) dp(a', b')/dx_l`.
 //!
 //! Projected on the pixel Jacobian `J` (rows `J_j`, `dof` wide) the second term only needs
 //! `V(a, b) = sum_j dp(a, b)/dx_j J_j` (one `dof`-vector per cell, `O(16 N dof)`), so that
@@ -48,8 +48,8 @@
 //! `dF/dp(a, b) = sum_{a' >= a} L(a', b) - S(b) / p_c(b)` (the `+1`s of the entropies cancel);
 //! second differential, with `U(a, b) = sum_{a' <= a} V(a', b)`, `U_a = sum_b U(a, b)`,
 //! `X_b = sum_a U(a, b)`, `W_b = sum_a V(a, b)`:
-//! `Q = sum_ab U U^T / P - sum_a U_a U_a^T / P_t - sum_b (X_b W_b^T + W_b X_b^T) / p_c
-//!  + sum_b S(b) W_b W_b^T / p_c^2`.
+//! `Q = sum_ab U U^T / P - sum_a U_a U_a^T / P_t - sum_b (X_b W_b^T + W_b X_b^T) / p_c +
+//! sum_b S(b) W_b W_b^T / p_c^2`.
 //! Rows of the histogram above the template's data (`P = p_c`, `P_t = 1`) contribute nothing to
 //! `F` or its derivatives, so only the bins in use are visited. Cells with `P = 0` (or `p = 0`)
 //! contribute `0 log 0 = 0`; their derivatives vanish too (the B-spline and its first two
@@ -135,7 +135,12 @@ impl Weights {
                 f * f * f / 6.0,
             ];
             if inside {
-                self.d[i] = [-0.5 * g * g, -2.0 * f + 1.5 * f * f, 2.0 * g - 1.5 * g * g, 0.5 * f * f];
+                self.d[i] = [
+                    -0.5 * g * g,
+                    -2.0 * f + 1.5 * f * f,
+                    2.0 * g - 1.5 * g * g,
+                    0.5 * f * f,
+                ];
                 self.d2[i] = [g, 3.0 * f - 2.0, 1.0 - 3.0 * f, f];
             } else {
                 self.d[i] = [0.0; 4];

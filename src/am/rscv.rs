@@ -196,7 +196,11 @@ mod tests {
             cm[i] -= h;
             let step = cp[i] as f64 - cm[i] as f64;
             let fd = (am.similarity(&cp) - am.similarity(&cm)) / step;
-            assert!((fd - g[i] as f64).abs() < 2e-2 * (1.0 + fd.abs()), "{i}: {fd} {}", g[i]);
+            assert!(
+                (fd - g[i] as f64).abs() < 2e-2 * (1.0 + fd.abs()),
+                "{i}: {fd} {}",
+                g[i]
+            );
         }
         // Hessian: -J^T diag(m'(I)^2) J, and at the template's intensities after convergence.
         let jac: Vec<f32> = (0..n).map(|_| rng.range(-1.0, 1.0) as f32).collect();
@@ -206,7 +210,14 @@ mod tests {
             .map(|i| -(am.map.eval(c[i] as f64).1 * jac[i] as f64).powi(2))
             .sum();
         assert!((h[0] - want).abs() < 1e-4 * want.abs());
-        am.hessian(Wrt::Current, HessianKind::AfterConvergence, &c, &jac, 1, &mut h);
+        am.hessian(
+            Wrt::Current,
+            HessianKind::AfterConvergence,
+            &c,
+            &jac,
+            1,
+            &mut h,
+        );
         let want: f64 = (0..n)
             .map(|i| -(am.map.eval(t[i] as f64).1 * jac[i] as f64).powi(2))
             .sum();

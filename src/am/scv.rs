@@ -257,7 +257,11 @@ mod tests {
         for i in 0..n {
             let (x, h) = (t[i] as f64, 1e-4);
             let fd = (f_of(&scv, i, x + h) - f_of(&scv, i, x - h)) / (2.0 * h);
-            assert!((fd - g[i] as f64).abs() < 1e-2 * (1.0 + fd.abs()), "{i}: {fd} {}", g[i]);
+            assert!(
+                (fd - g[i] as f64).abs() < 1e-2 * (1.0 + fd.abs()),
+                "{i}: {fd} {}",
+                g[i]
+            );
         }
         // The Hessian wrt the template is -J^T diag(m'^2) J.
         let jac: Vec<f32> = (0..2 * n).map(|_| rng.range(-1.0, 1.0) as f32).collect();

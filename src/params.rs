@@ -36,7 +36,13 @@ pub struct ParamDef {
 
 impl ParamDef {
     /// A whole-number parameter.
-    pub const fn int(name: &'static str, help: &'static str, min: f64, max: f64, default: f64) -> Self {
+    pub const fn int(
+        name: &'static str,
+        help: &'static str,
+        min: f64,
+        max: f64,
+        default: f64,
+    ) -> Self {
         ParamDef {
             name,
             help,
@@ -66,7 +72,11 @@ impl ParamDef {
     }
 
     /// A parameter that is one of `names` (default: the first).
-    pub const fn choice(name: &'static str, help: &'static str, names: &'static [&'static str]) -> Self {
+    pub const fn choice(
+        name: &'static str,
+        help: &'static str,
+        names: &'static [&'static str],
+    ) -> Self {
         ParamDef {
             name,
             help,
@@ -218,18 +228,35 @@ mod tests {
         p.set("samples", 50.0);
         assert!(p.validate("nn", &defs).is_ok());
         p.set("samples", 50.5);
-        assert!(p.validate("nn", &defs).unwrap_err().to_string().contains("whole"));
+        assert!(
+            p.validate("nn", &defs)
+                .unwrap_err()
+                .to_string()
+                .contains("whole")
+        );
         p.set("samples", 500.0);
-        assert!(p.validate("nn", &defs).unwrap_err().to_string().contains("10..=100"));
+        assert!(
+            p.validate("nn", &defs)
+                .unwrap_err()
+                .to_string()
+                .contains("10..=100")
+        );
         let mut q = MethodParams::default();
         q.set("particles", 3.0);
         let e = q.validate("nn", &defs).unwrap_err().to_string();
-        assert!(e.contains("'particles'") && e.contains("samples, sigma, kind"), "{e}");
+        assert!(
+            e.contains("'particles'") && e.contains("samples, sigma, kind"),
+            "{e}"
+        );
         assert_eq!(DEFS[2].parse("x", "B").unwrap(), 1.0);
         assert!(DEFS[2].parse("x", "c").is_err());
         assert!(DEFS[1].parse("x", "two").is_err());
         assert_eq!(DEFS[2].format(1.0), "b");
-        assert!(DEFS[0].describe().starts_with("samples (10..=100, default 20)"));
+        assert!(
+            DEFS[0]
+                .describe()
+                .starts_with("samples (10..=100, default 20)")
+        );
         assert_eq!(split_assignment("a = 3").unwrap(), ("a", "3"));
         assert!(split_assignment("=3").is_err());
     }
@@ -271,8 +298,20 @@ const HESSIANS: [HessianKind; 4] = [
 
 /// The definitions of [`TrackerParams`]: names, ranges, defaults.
 pub const TRACKER_PARAMS: &[ParamDef] = &[
-    ParamDef::int("res", "sampling resolution: res x res points on the target", 2.0, 1000.0, 50.0),
-    ParamDef::int("max_iters", "maximum iterations per frame", 1.0, 10_000.0, 30.0),
+    ParamDef::int(
+        "res",
+        "sampling resolution: res x res points on the target",
+        2.0,
+        1000.0,
+        50.0,
+    ),
+    ParamDef::int(
+        "max_iters",
+        "maximum iterations per frame",
+        1.0,
+        10_000.0,
+        30.0,
+    ),
     ParamDef::float(
         "eps",
         "stop when the corners move less than this in an iteration (L2 norm of the 8 coordinates, px)",
@@ -280,8 +319,20 @@ pub const TRACKER_PARAMS: &[ParamDef] = &[
         1000.0,
         0.001,
     ),
-    ParamDef::int("blur_size", "Gaussian pre-smoothing kernel size (1 = none)", 1.0, 31.0, 5.0),
-    ParamDef::float("blur_sigma", "Gaussian pre-smoothing standard deviation (px)", 0.0, 100.0, 3.0),
+    ParamDef::int(
+        "blur_size",
+        "Gaussian pre-smoothing kernel size (1 = none)",
+        1.0,
+        31.0,
+        5.0,
+    ),
+    ParamDef::float(
+        "blur_sigma",
+        "Gaussian pre-smoothing standard deviation (px)",
+        0.0,
+        100.0,
+        3.0,
+    ),
     ParamDef::choice(
         "hessian",
         "the Hessian of the Newton step (default: the AM's own)",
@@ -294,7 +345,13 @@ pub const TRACKER_PARAMS: &[ParamDef] = &[
         10.0,
         0.25,
     ),
-    ParamDef::int("pyramid_levels", "coarse-to-fine pyramid levels (1 = none)", 1.0, 6.0, 1.0),
+    ParamDef::int(
+        "pyramid_levels",
+        "coarse-to-fine pyramid levels (1 = none)",
+        1.0,
+        6.0,
+        1.0,
+    ),
     ParamDef::int(
         "seed",
         "seed of the random generators (NN samples, PF particles)",

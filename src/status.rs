@@ -67,4 +67,3 @@ pub struct FrameTiming {
     /// The search method's iterations (what MTF reports as the tracker's speed).
     pub search: std::time::Duration,
 }
-

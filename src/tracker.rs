@@ -4,15 +4,15 @@
 
 use crate::am;
 use crate::error::{Error, Result};
-use crate::params::{MethodParams, ParamDef};
-pub use crate::params::{TRACKER_PARAMS, TrackerParams};
-pub use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::geometry::Quad;
 use crate::imaging::{GrayF32, GrayU8, ImageView, Preprocessor, gaussian_kernel};
 use crate::observe::{Iteration, Observer};
+use crate::params::{MethodParams, ParamDef};
+pub use crate::params::{TRACKER_PARAMS, TrackerParams};
 use crate::registry::{self, Entry};
 use crate::sm::{self, Context, Control, SearchMethod, SmConfig};
 use crate::ssm;
+pub use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 

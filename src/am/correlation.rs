@@ -125,7 +125,11 @@ impl Correlation {
             .map(|&v| (v as f64 - m).powi(2))
             .sum::<f64>()
             .sqrt();
-        let beta = if self.centered { patch.len() as f64 } else { 1.0 };
+        let beta = if self.centered {
+            patch.len() as f64
+        } else {
+            1.0
+        };
         let s = if norm > 1e-9 {
             (beta.sqrt() / norm) as f32
         } else {

@@ -10,8 +10,15 @@
 //!
 //! Each model is one file and one line in [`REGISTRY`].
 
+mod ccre;
 mod correlation;
+mod intensity_map;
+mod lscv;
+mod mi;
 mod ncc;
+mod parzen;
+mod rscv;
+mod scv;
 mod ssd;
 mod zncc;
 
@@ -131,7 +138,16 @@ pub trait Am: Send + Sync + std::fmt::Debug {
 pub type AmBuilder = fn() -> Box<dyn Am>;
 
 /// Every appearance model.
-pub const REGISTRY: &[Entry<AmBuilder>] = &[ssd::ENTRY, zncc::ENTRY, ncc::ENTRY];
+pub const REGISTRY: &[Entry<AmBuilder>] = &[
+    ssd::ENTRY,
+    zncc::ENTRY,
+    ncc::ENTRY,
+    scv::ENTRY,
+    rscv::ENTRY,
+    lscv::ENTRY,
+    mi::ENTRY,
+    ccre::ENTRY,
+];
 
 /// The AM called `name` (or one of its aliases).
 pub fn build(name: &str) -> crate::Result<Box<dyn Am>> {

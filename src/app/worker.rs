@@ -280,8 +280,11 @@ impl<W: Fn() + Sync> Thread<W> {
             });
             match made {
                 Ok(t) => {
-                    self.templates
-                        .push(Arc::new(t.inspection().map(|i| i.template.to_vec()).unwrap_or_default()));
+                    self.templates.push(Arc::new(
+                        t.inspection()
+                            .map(|i| i.template.to_vec())
+                            .unwrap_or_default(),
+                    ));
                     self.trackers.push((idx, t));
                     let k = self.trackers.len() - 1;
                     let t = &self.trackers[k].1;

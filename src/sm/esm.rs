@@ -2,7 +2,7 @@
 //! uses: the Jacobian is the mean of the forward (current frame, warped) and inverse (template)
 //! Jacobians, both with `dw/dp` at the identity; `p <- p o dp`.
 
-use super::{Context, Step, LossReason, SearchMethod, SmDef, Update};
+use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 

@@ -1,7 +1,7 @@
 //! Forward additive Lucas-Kanade (FALK, the original of Lucas and Kanade): linearise
 //! `I_t(w(x, p + dp))` with the frame gradient and `dw/dp` at the current `p`; `p <- p + dp`.
 
-use super::{Context, Step, SearchMethod, SmDef, Update};
+use super::{Context, SearchMethod, SmDef, Step, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 

@@ -1,7 +1,7 @@
 //! Forward compositional Lucas-Kanade (FCLK): linearise `I_t(w(w(x, dp), p))` at `dp = 0` with
 //! the gradient of the warped current frame and `dw/dp` at the identity; `p <- p o dp`.
 
-use super::{Context, Step, SearchMethod, SmDef, Update};
+use super::{Context, SearchMethod, SmDef, Step, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 

@@ -3,7 +3,7 @@
 //! `grad I_t(w(x, p)) ~ grad I*(x) (dw/dx)^-1`, so only the template is differentiated;
 //! `p <- p + dp`.
 
-use super::{Context, Step, SearchMethod, SmDef, Update};
+use super::{Context, SearchMethod, SmDef, Step, Update};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 

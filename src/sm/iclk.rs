@@ -2,7 +2,7 @@
 //! `I*(w(x, dp))`, so the Jacobian `grad I*(x) dw/dp(x, 0)` and (for every Hessian kind but
 //! Newton) the Hessian are computed once per template; `p <- p o dp^-1`.
 
-use super::{Context, Step, LossReason, SearchMethod, SmDef, Update};
+use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
 use crate::am::{HessianKind, Wrt};
 use crate::imaging::ImageView;
 use crate::linalg::MAX_DOF;

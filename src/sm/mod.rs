@@ -22,11 +22,11 @@ use crate::am::{Am, Capabilities, HessianKind, Wrt, jt_times};
 use crate::geometry::{Normaliser, Point, Quad};
 use crate::imaging::{ImageView, sample_values, sample_values_gradients};
 use crate::linalg::{MAX_DOF, newton_step};
+use crate::params::TrackerParams;
+use crate::params::{MethodParams, ParamDef};
 use crate::registry::{self, Entry};
 use crate::ssm::{Params, Ssm};
-use crate::params::{MethodParams, ParamDef};
 pub use crate::status::LossReason;
-use crate::params::TrackerParams;
 use nalgebra::Matrix3;
 
 /// What the driver does after an iteration.
@@ -157,7 +157,10 @@ fn composite(name: &str) -> Option<(&'static str, Vec<&str>)> {
             && name[..kind.len()].eq_ignore_ascii_case(kind)
             && name.as_bytes()[kind.len()] == b':'
         {
-            return Some((kind, name[kind.len() + 1..].split('+').map(str::trim).collect()));
+            return Some((
+                kind,
+                name[kind.len() + 1..].split('+').map(str::trim).collect(),
+            ));
         }
     }
     None
@@ -211,8 +214,10 @@ pub fn param_defs(name: &str) -> crate::Result<Vec<&'static ParamDef>> {
 /// The SM called `name` (an alias, or a composite), with its parameters checked.
 pub fn build(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMethod>> {
     let canonical = canonical_name(name)?;
-    cfg.method
-        .validate(&format!("search method '{canonical}'"), &param_defs(&canonical)?)?;
+    cfg.method.validate(
+        &format!("search method '{canonical}'"),
+        &param_defs(&canonical)?,
+    )?;
     build_checked(&canonical, cfg)
 }
 
@@ -228,7 +233,9 @@ fn build_checked(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMeth
                 _ => Box::new(cascade::Parallel::new(name.to_string(), built, cfg)),
             })
         }
-        None => (registry::lookup(REGISTRY, "search method", name)?.build.build)(cfg),
+        None => (registry::lookup(REGISTRY, "search method", name)?
+            .build
+            .build)(cfg),
     }
 }
 

@@ -28,7 +28,13 @@ use crate::ssm::{Params, random_warp};
 /// The parameters of the NN family (`samples`'s default differs per entry).
 const fn params(samples: f64) -> [ParamDef; 6] {
     [
-        ParamDef::int("samples", "random warps indexed at initialisation", 10.0, 100_000.0, samples),
+        ParamDef::int(
+            "samples",
+            "random warps indexed at initialisation",
+            10.0,
+            100_000.0,
+            samples,
+        ),
         ParamDef::float(
             "sigma",
             "standard deviation of the corner noise of the samples, in target sizes",
@@ -41,7 +47,13 @@ const fn params(samples: f64) -> [ParamDef; 6] {
             "projected: random projection then exact re-ranking; exact: brute force",
             &["projected", "exact"],
         ),
-        ParamDef::int("dims", "dimensions of the projected index", 4.0, 1024.0, 64.0),
+        ParamDef::int(
+            "dims",
+            "dimensions of the projected index",
+            4.0,
+            1024.0,
+            64.0,
+        ),
         ParamDef::int(
             "candidates",
             "samples re-ranked exactly after the projected search",
@@ -191,8 +203,9 @@ impl Nn {
         self.order.extend(0..self.samples as u32);
         let dist = &self.dist;
         if c < self.samples {
-            self.order
-                .select_nth_unstable_by(c - 1, |&a, &b| dist[a as usize].total_cmp(&dist[b as usize]));
+            self.order.select_nth_unstable_by(c - 1, |&a, &b| {
+                dist[a as usize].total_cmp(&dist[b as usize])
+            });
         }
         let mut best = (f32::INFINITY, 0usize);
         for i in 0..c {
@@ -275,7 +288,10 @@ impl SearchMethod for Nn {
             self.reduced.resize(s * d, 0.0);
             self.qred.resize(d, 0.0);
             for k in 0..s {
-                let (row, out) = (&self.data[k * n..(k + 1) * n], &mut self.reduced[k * d..(k + 1) * d]);
+                let (row, out) = (
+                    &self.data[k * n..(k + 1) * n],
+                    &mut self.reduced[k * d..(k + 1) * d],
+                );
                 Self::project(&self.proj, n, row, out);
             }
             self.order.reserve(s);

@@ -131,7 +131,8 @@ impl SearchMethod for Pf {
         self.states.clear();
         self.states.resize(self.particles, ctx.params);
         self.sims.resize(self.particles, 0.0);
-        self.weights.resize(self.particles, 1.0 / self.particles as f64);
+        self.weights
+            .resize(self.particles, 1.0 / self.particles as f64);
         self.next.reserve(self.particles);
         self.last = Some(ctx.params);
         Ok(())

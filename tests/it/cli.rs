@@ -237,9 +237,15 @@ fn errors_are_clear() {
         String::from_utf8_lossy(&out.stderr).to_string()
     };
     let err = bad(&["--sm", "nn", "--param", "particles=5"]);
-    assert!(err.contains("'particles'") && err.contains("samples"), "{err}");
+    assert!(
+        err.contains("'particles'") && err.contains("samples"),
+        "{err}"
+    );
     let err = bad(&["--sm", "nn", "--param", "samples=3"]);
-    assert!(err.contains("samples") && err.contains("10..=100000"), "{err}");
+    assert!(
+        err.contains("samples") && err.contains("10..=100000"),
+        "{err}"
+    );
     let err = bad(&["--hessian", "exact"]);
     assert!(err.contains("gauss_newton"), "{err}");
     let err = bad(&["--roi-margin", "-1"]);

@@ -2,12 +2,12 @@
 //! truth's settings.
 
 use super::color;
-use crate::params::{ParamDef, ParamKind};
-use crate::tracker::{TRACKER_PARAMS, TrackerSpec};
 use crate::app::command::Command;
 use crate::app::state::InitSource;
 use crate::app::{InspectorApp, Tool};
+use crate::params::{ParamDef, ParamKind};
 use crate::registry::Entry;
+use crate::tracker::{TRACKER_PARAMS, TrackerSpec};
 use crate::{am, sm, ssm};
 use eframe::egui;
 
@@ -140,21 +140,32 @@ fn param_widget(ui: &mut egui::Ui, id: (usize, &str), def: &ParamDef, value: f64
     ui.label(def.name).on_hover_text(def.help);
     match def.kind {
         ParamKind::Choice(names) => {
-            egui::ComboBox::from_id_salt(id).selected_text(def.format(v)).show_ui(ui, |ui| {
-                for (k, n) in names.iter().enumerate() {
-                    ui.selectable_value(&mut v, k as f64, *n);
-                }
-            });
+            egui::ComboBox::from_id_salt(id)
+                .selected_text(def.format(v))
+                .show_ui(ui, |ui| {
+                    for (k, n) in names.iter().enumerate() {
+                        ui.selectable_value(&mut v, k as f64, *n);
+                    }
+                });
         }
         ParamKind::Int => {
             let speed = ((def.max - def.min) / 500.0).clamp(0.05, 50.0);
-            ui.add(egui::DragValue::new(&mut v).range(def.min..=def.max).speed(speed).max_decimals(0))
-                .on_hover_text(def.help);
+            ui.add(
+                egui::DragValue::new(&mut v)
+                    .range(def.min..=def.max)
+                    .speed(speed)
+                    .max_decimals(0),
+            )
+            .on_hover_text(def.help);
         }
         ParamKind::Float => {
             let speed = ((def.max - def.min) / 2000.0).clamp(1e-4, 1.0);
-            ui.add(egui::DragValue::new(&mut v).range(def.min..=def.max).speed(speed))
-                .on_hover_text(def.help);
+            ui.add(
+                egui::DragValue::new(&mut v)
+                    .range(def.min..=def.max)
+                    .speed(speed),
+            )
+            .on_hover_text(def.help);
         }
     }
     ui.end_row();
@@ -163,29 +174,31 @@ fn param_widget(ui: &mut egui::Ui, id: (usize, &str), def: &ParamDef, value: f64
 
 /// The tracker's and the method's parameters, from their definitions.
 fn param_grid(ui: &mut egui::Ui, i: usize, spec: &mut TrackerSpec) {
-    egui::Grid::new(("params", i)).num_columns(2).show(ui, |ui| {
-        if let Some(r) = spec.registration_mut() {
-            for d in TRACKER_PARAMS {
-                let v = param_widget(ui, (i, d.name), d, r.params.value(d.name));
-                if v != r.params.value(d.name) {
-                    r.params.set_value(d.name, v);
+    egui::Grid::new(("params", i))
+        .num_columns(2)
+        .show(ui, |ui| {
+            if let Some(r) = spec.registration_mut() {
+                for d in TRACKER_PARAMS {
+                    let v = param_widget(ui, (i, d.name), d, r.params.value(d.name));
+                    if v != r.params.value(d.name) {
+                        r.params.set_value(d.name, v);
+                    }
                 }
             }
-        }
-        let defs = spec.method_defs().unwrap_or_default();
-        if !defs.is_empty() {
-            ui.label(egui::RichText::new("method").strong());
-            ui.end_row();
-        }
-        for d in defs {
-            let old = spec.method_params().get(d);
-            let v = param_widget(ui, (i, d.name), d, old);
-            if v != old {
-                match spec {
-                    TrackerSpec::Registration(r) => r.method.set(d.name, v),
-                    TrackerSpec::Whole(w) => w.method.set(d.name, v),
+            let defs = spec.method_defs().unwrap_or_default();
+            if !defs.is_empty() {
+                ui.label(egui::RichText::new("method").strong());
+                ui.end_row();
+            }
+            for d in defs {
+                let old = spec.method_params().get(d);
+                let v = param_widget(ui, (i, d.name), d, old);
+                if v != old {
+                    match spec {
+                        TrackerSpec::Registration(r) => r.method.set(d.name, v),
+                        TrackerSpec::Whole(w) => w.method.set(d.name, v),
+                    }
                 }
             }
-        }
-    });
+        });
 }

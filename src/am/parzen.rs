@@ -1,0 +1,668 @@
+//! The joint-histogram core shared by MI and CCRE: a joint probability of the template and
+//! current intensities estimated with a cubic B-spline Parzen window (Dame and Marchand), a
+//! similarity `F(p)` of it, and the exact derivatives of `F` with respect to either patch.
+//!
+//! ## The histogram
+//!
+//! An intensity `v` is scaled to bin units `s = v (B - 1) / 255` with `B = 8` (so `0..255` spans
+//! `0..7`); the cubic B-spline `beta` (support `(-2, 2)`, C2, a partition of unity:
+//! `sum_a beta(a - s) = 1` for every `s`) spreads it over the four bins `floor(s) - 1 ..
+//! floor(s) + 2`, the "8 bins + 3 padding bins" of Dame and Marchand for grey levels in `0..255`.
+//! Values outside `0..255` simply use further padding bins (the similarity does not depend on how
+//! many empty bins there are), up to `-255..510`, beyond which they are clamped (zero derivative).
+//! With `t_i`, `c_i` the scaled template and current intensities:
+//!
+//! `p(a, b) = 1/N sum_i beta(a - t_i) beta(b - c_i)`, `p_t(a) = sum_b p(a, b)`,
+//! `p_c(b) = sum_a p(a, b)`.
+//!
+//! ## Derivatives, for any `F(p)`
+//!
+//! Write `x_j` for the pixel the derivative is taken with respect to (`c_j` for the current
+//! pixels, `t_j` for the template's) and `k = (B - 1) / 255` the scale. Only the 16 cells of
+//! pixel `j` move:
+//! `dp(a, b)/dx_j = k/N beta(a - t_j) beta'(b - c_j)` (current) or `k/N beta'(a - t_j) beta(b - c_j)`
+//! (template), where `beta'` is the derivative with respect to the intensity's bin coordinate.
+//! With `G(a, b) = dF/dp(a, b)` (the marginals being functions of `p`):
+//!
+//! - gradient: `dF/dx_j = sum_ab G(a, b) dp(a, b)/dx_j` (16 terms per pixel);
+//! - Hessian: `d2F/dx_j dx_l = delta_jl sum_ab G(a, b) d2p(a, b)/dx_j^2 +
+//!   sum_{ab, a'b'} dp(a, b)/dx_j (d2F/dp(a, b) dp(a', b')) dp(a', b')/dx_l`.
+//!
+//! Projected on the pixel Jacobian `J` (rows `J_j`, `dof` wide) the second term only needs
+//! `V(a, b) = sum_j dp(a, b)/dx_j J_j` (one `dof`-vector per cell, `O(16 N dof)`), so that
+//! `J^T H J = sum_j D_j J_j J_j^T + Q(V)` with `D_j = sum_ab G(a, b) d2p(a, b)/dx_j^2` and `Q` the
+//! quadratic form of `d2F/dp2` applied to `V`: `O(bins^2 dof^2)`, never `N x N`.
+//!
+//! **MI**: `F = sum_ab p log(p / (p_t p_c))`. `dF/dp(a, b) = log(p(a, b) / (p_t(a) p_c(b))) - 1`;
+//! the constant drops out, since `sum_ab dp(a, b)/dx_j = 0` (partition of unity), and so does
+//! `log p_t(a)` for the current pixels (`sum_b dp(a, b)/dc_j = 0`: `p_t` does not move), which
+//! leaves Dame and Marchand's `sum_ab dp/dc_j log(p / p_c)`. The quadratic form, from the
+//! second differential of `sum p log p - sum p_t log p_t - sum p_c log p_c`:
+//! `Q = sum_ab V V^T / p - sum_a V_a V_a^T / p_t(a) - sum_b V_b V_b^T / p_c(b)` with
+//! `V_a = sum_b V(a, b)` (zero for the current pixels) and `V_b = sum_a V(a, b)`.
+//!
+//! **CCRE** (cumulative over the template intensity): `P(a, b) = sum_{a' <= a} p(a', b)`,
+//! `P_t(a) = sum_b P(a, b)` (the template's cumulative distribution), and
+//! `F = sum_ab P log(P / (P_t p_c)) = sum P log P - sum_a P_t log P_t - sum_ab P log p_c`.
+//! With `S(b) = sum_a P(a, b)` and `L(a, b) = log(P / (P_t p_c))`:
+//! `dF/dp(a, b) = sum_{a' >= a} L(a', b) - S(b) / p_c(b)` (the `+1`s of the entropies cancel);
+//! second differential, with `U(a, b) = sum_{a' <= a} V(a', b)`, `U_a = sum_b U(a, b)`,
+//! `X_b = sum_a U(a, b)`, `W_b = sum_a V(a, b)`:
+//! `Q = sum_ab U U^T / P - sum_a U_a U_a^T / P_t - sum_b (X_b W_b^T + W_b X_b^T) / p_c +
+//! sum_b S(b) W_b W_b^T / p_c^2`.
+//! Rows of the histogram above the template's data (`P = p_c`, `P_t = 1`) contribute nothing to
+//! `F` or its derivatives, so only the bins in use are visited. Cells with `P = 0` (or `p = 0`)
+//! contribute `0 log 0 = 0`; their derivatives vanish too (the B-spline and its first two
+//! derivatives are zero at the end of its support).
+//!
+//! ## Hessian kinds
+//!
+//! - Newton: the above at the current patch.
+//! - After convergence: the above with the current patch replaced by the template (its
+//!   statistics are computed once per template and kept).
+//! - Gauss-Newton: these models are maximised and their "first-order" term `Q` is positive
+//!   semi-definite (by Cauchy-Schwarz for MI), so the least-squares Gauss-Newton idea does not
+//!   apply. What is used is the negative semi-definite part of the projected Newton Hessian
+//!   (its eigen-decomposition with the positive eigenvalues set to zero): an ascent direction
+//!   always, and equal to Newton wherever Newton is already negative semi-definite, as at
+//!   convergence.
+//!
+//! The statistics of the last patch (weights, histogram, `G`) are kept from the similarity or
+//! gradient call and reused by the Hessian when it is asked for the same patch (recomputed
+//! otherwise, e.g. when a search method asks for a Hessian first).
+
+use crate::linalg::MAX_DOF;
+
+/// Bins spanning grey levels `0..255`.
+const BINS: usize = 8;
+/// Bin units per grey level.
+pub(crate) const SCALE: f64 = (BINS - 1) as f64 / 255.0;
+/// The bin coordinates are clamped to this range (grey levels `-255..510`).
+const S_MIN: f64 = -7.0;
+const S_MAX: f64 = 14.0;
+/// Histogram index of bin coordinate `floor(s) - 1` is `floor(s) - 1 + OFFSET`.
+const OFFSET: i64 = 8;
+/// Histogram side.
+const SIDE: usize = 25;
+
+/// Which function of the joint histogram.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Measure {
+    Mi,
+    Ccre,
+}
+
+/// The B-spline weights of every pixel of a patch: the first of its four bins, the weights, and
+/// their first and second derivatives with respect to the bin coordinate.
+#[derive(Clone, Debug, Default)]
+struct Weights {
+    base: Vec<u32>,
+    w: Vec<[f64; 4]>,
+    d: Vec<[f64; 4]>,
+    d2: Vec<[f64; 4]>,
+    /// Range of histogram indices in use (`lo..hi`).
+    lo: usize,
+    hi: usize,
+}
+
+impl Weights {
+    fn fill(&mut self, x: &[f32]) {
+        let n = x.len();
+        self.base.resize(n, 0);
+        self.w.resize(n, [0.0; 4]);
+        self.d.resize(n, [0.0; 4]);
+        self.d2.resize(n, [0.0; 4]);
+        let (mut lo, mut hi) = (SIDE, 0);
+        for (i, &v) in x.iter().enumerate() {
+            let raw = v as f64 * SCALE;
+            let s = if raw.is_finite() {
+                raw.clamp(S_MIN, S_MAX)
+            } else {
+                0.0
+            };
+            let inside = s == raw;
+            let fl = s.floor();
+            let f = s - fl;
+            let g = 1.0 - f;
+            let b = (fl as i64 - 1 + OFFSET) as usize;
+            self.base[i] = b as u32;
+            lo = lo.min(b);
+            hi = hi.max(b + 4);
+            self.w[i] = [
+                g * g * g / 6.0,
+                2.0 / 3.0 - f * f + 0.5 * f * f * f,
+                2.0 / 3.0 - g * g + 0.5 * g * g * g,
+                f * f * f / 6.0,
+            ];
+            if inside {
+                self.d[i] = [
+                    -0.5 * g * g,
+                    -2.0 * f + 1.5 * f * f,
+                    2.0 * g - 1.5 * g * g,
+                    0.5 * f * f,
+                ];
+                self.d2[i] = [g, 3.0 * f - 2.0, 1.0 - 3.0 * f, f];
+            } else {
+                self.d[i] = [0.0; 4];
+                self.d2[i] = [0.0; 4];
+            }
+        }
+        if lo >= hi {
+            (lo, hi) = (0, 0);
+        }
+        self.lo = lo;
+        self.hi = hi;
+    }
+}
+
+/// The statistics of one (template, current) pair: the histogram, its marginals (and cumulative
+/// tables for CCRE), the value and `G = dF/dp`. Tables are `SIDE x SIDE`, indexed
+/// `[a * SIDE + b]` with `a` the template bin and `b` the current bin.
+#[derive(Clone, Debug)]
+struct Stats {
+    p: Vec<f64>,
+    pt: [f64; SIDE],
+    pc: [f64; SIDE],
+    /// CCRE: `P` (cumulative over `a`), `P_t`, `S`.
+    cum: Vec<f64>,
+    cum_t: [f64; SIDE],
+    s: [f64; SIDE],
+    g: Vec<f64>,
+    value: f64,
+    /// Index ranges in use: template rows and current columns.
+    rows: (usize, usize),
+    cols: (usize, usize),
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Stats {
+            p: vec![0.0; SIDE * SIDE],
+            pt: [0.0; SIDE],
+            pc: [0.0; SIDE],
+            cum: vec![0.0; SIDE * SIDE],
+            cum_t: [0.0; SIDE],
+            s: [0.0; SIDE],
+            g: vec![0.0; SIDE * SIDE],
+            value: 0.0,
+            rows: (0, 0),
+            cols: (0, 0),
+        }
+    }
+}
+
+/// `x log x`-safe logarithm ratio: 0 when the numerator is 0.
+#[inline]
+fn log_ratio(num: f64, den: f64) -> f64 {
+    if num > 0.0 && den > 0.0 {
+        (num / den).ln()
+    } else {
+        0.0
+    }
+}
+
+impl Stats {
+    fn compute(&mut self, measure: Measure, t: &Weights, c: &Weights) {
+        let (r0, r1) = (t.lo, t.hi);
+        let (c0, c1) = (c.lo, c.hi);
+        self.rows = (r0, r1);
+        self.cols = (c0, c1);
+        for a in r0..r1 {
+            self.p[a * SIDE + c0..a * SIDE + c1].fill(0.0);
+        }
+        let n = t.base.len();
+        for i in 0..n {
+            let (ta, cb) = (t.base[i] as usize, c.base[i] as usize);
+            let (tw, cw) = (&t.w[i], &c.w[i]);
+            for (u, &x) in tw.iter().enumerate() {
+                let row = &mut self.p[(ta + u) * SIDE + cb..(ta + u) * SIDE + cb + 4];
+                for (cell, &y) in row.iter_mut().zip(cw) {
+                    *cell += x * y;
+                }
+            }
+        }
+        let inv = 1.0 / n.max(1) as f64;
+        self.pt = [0.0; SIDE];
+        self.pc = [0.0; SIDE];
+        for a in r0..r1 {
+            for b in c0..c1 {
+                let v = self.p[a * SIDE + b] * inv;
+                self.p[a * SIDE + b] = v;
+                self.pt[a] += v;
+                self.pc[b] += v;
+            }
+        }
+        match measure {
+            Measure::Mi => {
+                let mut value = 0.0;
+                for a in r0..r1 {
+                    for b in c0..c1 {
+                        let v = self.p[a * SIDE + b];
+                        let l = log_ratio(v, self.pt[a] * self.pc[b]);
+                        value += v * l;
+                        self.g[a * SIDE + b] = l;
+                    }
+                }
+                self.value = value;
+            }
+            Measure::Ccre => {
+                self.cum_t = [0.0; SIDE];
+                self.s = [0.0; SIDE];
+                for b in c0..c1 {
+                    let mut acc = 0.0;
+                    for a in r0..r1 {
+                        acc += self.p[a * SIDE + b];
+                        self.cum[a * SIDE + b] = acc;
+                        self.cum_t[a] += acc;
+                        self.s[b] += acc;
+                    }
+                }
+                let mut value = 0.0;
+                for b in c0..c1 {
+                    // G(a, b) = sum_{a' >= a} L(a', b) - S(b) / p_c(b).
+                    let shift = if self.pc[b] > 0.0 {
+                        self.s[b] / self.pc[b]
+                    } else {
+                        0.0
+                    };
+                    let mut acc = 0.0;
+                    for a in (r0..r1).rev() {
+                        let v = self.cum[a * SIDE + b];
+                        let l = log_ratio(v, self.cum_t[a] * self.pc[b]);
+                        value += v * l;
+                        acc += l;
+                        self.g[a * SIDE + b] = acc - shift;
+                    }
+                }
+                self.value = value;
+            }
+        }
+    }
+}
+
+/// The MI / CCRE model.
+#[derive(Clone, Debug)]
+pub(crate) struct Parzen {
+    measure: Measure,
+    template: Vec<f32>,
+    tw: Weights,
+    cw: Weights,
+    /// Statistics of the last patch, and that patch.
+    stats: Stats,
+    last: Vec<f32>,
+    valid: bool,
+    /// Statistics of the template against itself (after convergence).
+    self_stats: Stats,
+    self_valid: bool,
+    /// Scratch: `V` (`SIDE x SIDE x MAX_DOF`), per-pixel diagonal terms, a product buffer.
+    v: Vec<f64>,
+    diag: Vec<f32>,
+    tmp: Vec<f32>,
+}
+
+impl Parzen {
+    pub fn new(measure: Measure) -> Self {
+        Parzen {
+            measure,
+            template: Vec::new(),
+            tw: Weights::default(),
+            cw: Weights::default(),
+            stats: Stats::default(),
+            last: Vec::new(),
+            valid: false,
+            self_stats: Stats::default(),
+            self_valid: false,
+            v: vec![0.0; SIDE * SIDE * MAX_DOF],
+            diag: Vec::new(),
+            tmp: Vec::new(),
+        }
+    }
+
+    pub fn set_template(&mut self, template: &[f32]) {
+        self.template.clear();
+        self.template.extend_from_slice(template);
+        self.tw.fill(template);
+        self.valid = false;
+        self.self_valid = false;
+        self.diag.resize(template.len(), 0.0);
+        self.tmp.resize(template.len(), 0.0);
+    }
+
+    pub fn template(&self) -> &[f32] {
+        &self.template
+    }
+
+    /// Makes `stats` those of `current`.
+    fn observe(&mut self, current: &[f32]) {
+        if self.valid && self.last.as_slice() == current {
+            return;
+        }
+        self.cw.fill(current);
+        self.stats.compute(self.measure, &self.tw, &self.cw);
+        self.last.clear();
+        self.last.extend_from_slice(current);
+        self.valid = true;
+    }
+
+    pub fn similarity(&mut self, current: &[f32]) -> f64 {
+        self.observe(current);
+        self.stats.value
+    }
+
+    pub fn gradient(&mut self, wrt: super::Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
+        self.observe(current);
+        let g = &self.stats.g;
+        let k = SCALE / current.len().max(1) as f64;
+        let (tw, cw) = (&self.tw, &self.cw);
+        for (j, out) in grad.iter_mut().enumerate() {
+            let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
+            let (x, y) = match wrt {
+                super::Wrt::Current => (&tw.w[j], &cw.d[j]),
+                super::Wrt::Template => (&tw.d[j], &cw.w[j]),
+            };
+            let mut acc = 0.0;
+            for u in 0..4 {
+                let row = &g[(ta + u) * SIDE + cb..(ta + u) * SIDE + cb + 4];
+                acc += x[u] * (row[0] * y[0] + row[1] * y[1] + row[2] * y[2] + row[3] * y[3]);
+            }
+            *out = (k * acc) as f32;
+        }
+        self.stats.value
+    }
+
+    pub fn hessian(
+        &mut self,
+        wrt: super::Wrt,
+        kind: super::HessianKind,
+        current: &[f32],
+        jac: &[f32],
+        dof: usize,
+        out: &mut [f64; MAX_DOF * MAX_DOF],
+    ) {
+        use super::HessianKind;
+        let after = kind == HessianKind::AfterConvergence;
+        if after {
+            if !self.self_valid {
+                self.self_stats.compute(self.measure, &self.tw, &self.tw);
+                self.self_valid = true;
+            }
+        } else {
+            self.observe(current);
+        }
+        let (stats, cw) = if after {
+            (&self.self_stats, &self.tw)
+        } else {
+            (&self.stats, &self.cw)
+        };
+        newton(
+            self.measure,
+            stats,
+            &self.tw,
+            cw,
+            wrt == super::Wrt::Current,
+            jac,
+            dof,
+            &mut self.v,
+            &mut self.diag,
+            &mut self.tmp,
+            out,
+        );
+        if kind == HessianKind::GaussNewton {
+            negative_part(out, dof);
+        }
+    }
+}
+
+/// The projected Newton Hessian `J^T (d2F/dx2) J` for the statistics `st` of the patches with
+/// weights `tw`, `cw`; `current`: with respect to the current pixels (else the template's).
+#[allow(clippy::too_many_arguments)]
+fn newton(
+    measure: Measure,
+    st: &Stats,
+    tw: &Weights,
+    cw: &Weights,
+    current: bool,
+    jac: &[f32],
+    dof: usize,
+    v: &mut [f64],
+    diag: &mut [f32],
+    tmp: &mut Vec<f32>,
+    out: &mut [f64; MAX_DOF * MAX_DOF],
+) {
+    let n = tw.base.len();
+    let inv_n = 1.0 / n.max(1) as f64;
+    let (r0, r1) = st.rows;
+    let (c0, c1) = st.cols;
+    // V(a, b) = sum_j dp(a, b)/dx_j J_j (without the factor k/N, applied below), and the
+    // per-pixel diagonal D_j = sum_ab G d2p/dx_j^2 (without k^2/N).
+    for a in r0..r1 {
+        v[(a * SIDE + c0) * MAX_DOF..(a * SIDE + c1) * MAX_DOF].fill(0.0);
+    }
+    let g = &st.g;
+    for j in 0..n {
+        let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
+        let (x, y, x2, y2) = if current {
+            (&tw.w[j], &cw.d[j], &tw.w[j], &cw.d2[j])
+        } else {
+            (&tw.d[j], &cw.w[j], &tw.d2[j], &cw.w[j])
+        };
+        let mut jj = [0.0f64; MAX_DOF];
+        for (k, e) in jj.iter_mut().enumerate().take(dof) {
+            *e = jac[k * n + j] as f64;
+        }
+        let mut dj = 0.0;
+        for u in 0..4 {
+            let row = (ta + u) * SIDE + cb;
+            for w in 0..4 {
+                let cell = row + w;
+                dj += x2[u] * y2[w] * g[cell];
+                let coef = x[u] * y[w];
+                let vc = &mut v[cell * MAX_DOF..cell * MAX_DOF + dof];
+                for (e, &q) in vc.iter_mut().zip(&jj[..dof]) {
+                    *e += coef * q;
+                }
+            }
+        }
+        diag[j] = dj as f32;
+    }
+    let kn = SCALE * inv_n;
+    // Diagonal part: k^2/N sum_j D_j J_j J_j^T.
+    super::intensity_map::jt_diag_j(jac, diag, dof, tmp, out);
+    let s_diag = SCALE * SCALE * inv_n;
+    let mut q = [0.0f64; MAX_DOF * MAX_DOF];
+    let add = |q: &mut [f64; MAX_DOF * MAX_DOF], x: &[f64], y: &[f64], w: f64| {
+        for i in 0..dof {
+            let xi = w * x[i];
+            for j in 0..dof {
+                q[i * MAX_DOF + j] += xi * y[j];
+            }
+        }
+    };
+    let cell = |a: usize, b: usize| -> [f64; MAX_DOF] {
+        let mut r = [0.0; MAX_DOF];
+        r[..dof].copy_from_slice(&v[(a * SIDE + b) * MAX_DOF..(a * SIDE + b) * MAX_DOF + dof]);
+        r
+    };
+    match measure {
+        Measure::Mi => {
+            let mut col = [[0.0f64; MAX_DOF]; SIDE];
+            for a in r0..r1 {
+                let mut row = [0.0f64; MAX_DOF];
+                for b in c0..c1 {
+                    let vab = cell(a, b);
+                    let p = st.p[a * SIDE + b];
+                    if p > 0.0 {
+                        add(&mut q, &vab, &vab, 1.0 / p);
+                    }
+                    for k in 0..dof {
+                        row[k] += vab[k];
+                        col[b][k] += vab[k];
+                    }
+                }
+                if st.pt[a] > 0.0 {
+                    add(&mut q, &row, &row, -1.0 / st.pt[a]);
+                }
+            }
+            for b in c0..c1 {
+                if st.pc[b] > 0.0 {
+                    add(&mut q, &col[b], &col[b], -1.0 / st.pc[b]);
+                }
+            }
+        }
+        Measure::Ccre => {
+            let mut rows = [[0.0f64; MAX_DOF]; SIDE];
+            for b in c0..c1 {
+                let (mut u, mut x, mut w) = ([0.0f64; MAX_DOF], [0.0f64; MAX_DOF], [0.0; MAX_DOF]);
+                for a in r0..r1 {
+                    let vab = cell(a, b);
+                    for k in 0..dof {
+                        u[k] += vab[k];
+                        w[k] += vab[k];
+                        x[k] += u[k];
+                        rows[a][k] += u[k];
+                    }
+                    let pc = st.cum[a * SIDE + b];
+                    if pc > 0.0 {
+                        add(&mut q, &u, &u, 1.0 / pc);
+                    }
+                }
+                let pb = st.pc[b];
+                if pb > 0.0 {
+                    add(&mut q, &x, &w, -1.0 / pb);
+                    add(&mut q, &w, &x, -1.0 / pb);
+                    add(&mut q, &w, &w, st.s[b] / (pb * pb));
+                }
+            }
+            for a in r0..r1 {
+                if st.cum_t[a] > 0.0 {
+                    add(&mut q, &rows[a], &rows[a], -1.0 / st.cum_t[a]);
+                }
+            }
+        }
+    }
+    for i in 0..dof {
+        for j in 0..dof {
+            out[i * dof + j] = s_diag * out[i * dof + j] + kn * kn * q[i * MAX_DOF + j];
+        }
+    }
+}
+
+/// Replaces the symmetric `dof x dof` matrix in `h` (row-major) by its negative semi-definite
+/// part (cyclic Jacobi eigen-decomposition, positive eigenvalues set to zero).
+pub(crate) fn negative_part(h: &mut [f64; MAX_DOF * MAX_DOF], dof: usize) {
+    let n = dof;
+    let mut a = [0.0f64; MAX_DOF * MAX_DOF];
+    let mut e = [0.0f64; MAX_DOF * MAX_DOF];
+    for i in 0..n {
+        for j in 0..n {
+            a[i * MAX_DOF + j] = 0.5 * (h[i * n + j] + h[j * n + i]);
+        }
+        e[i * MAX_DOF + i] = 1.0;
+    }
+    for _sweep in 0..60 {
+        let mut off = 0.0;
+        let mut total = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let v = a[i * MAX_DOF + j] * a[i * MAX_DOF + j];
+                total += v;
+                if i != j {
+                    off += v;
+                }
+            }
+        }
+        if off <= 1e-30 * total || total == 0.0 {
+            break;
+        }
+        for p in 0..n {
+            for r in p + 1..n {
+                let apr = a[p * MAX_DOF + r];
+                if apr == 0.0 {
+                    continue;
+                }
+                let (app, arr) = (a[p * MAX_DOF + p], a[r * MAX_DOF + r]);
+                let theta = (arr - app) / (2.0 * apr);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..n {
+                    let (akp, akr) = (a[k * MAX_DOF + p], a[k * MAX_DOF + r]);
+                    a[k * MAX_DOF + p] = c * akp - s * akr;
+                    a[k * MAX_DOF + r] = s * akp + c * akr;
+                }
+                for k in 0..n {
+                    let (apk, ark) = (a[p * MAX_DOF + k], a[r * MAX_DOF + k]);
+                    a[p * MAX_DOF + k] = c * apk - s * ark;
+                    a[r * MAX_DOF + k] = s * apk + c * ark;
+                }
+                for k in 0..n {
+                    let (ekp, ekr) = (e[k * MAX_DOF + p], e[k * MAX_DOF + r]);
+                    e[k * MAX_DOF + p] = c * ekp - s * ekr;
+                    e[k * MAX_DOF + r] = s * ekp + c * ekr;
+                }
+            }
+        }
+    }
+    for i in 0..n {
+        for j in 0..n {
+            let mut v = 0.0;
+            for k in 0..n {
+                let l = a[k * MAX_DOF + k];
+                if l < 0.0 {
+                    v += l * e[i * MAX_DOF + k] * e[j * MAX_DOF + k];
+                }
+            }
+            h[i * n + j] = v;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bspline_weights_are_a_partition_of_unity_with_consistent_derivatives() {
+        let mut w = Weights::default();
+        let xs: Vec<f32> = (0..200).map(|i| -30.0 + i as f32 * 1.77).collect();
+        w.fill(&xs);
+        for i in 0..xs.len() {
+            let s: f64 = w.w[i].iter().sum();
+            let d: f64 = w.d[i].iter().sum();
+            let d2: f64 = w.d2[i].iter().sum();
+            assert!((s - 1.0).abs() < 1e-12 && d.abs() < 1e-12 && d2.abs() < 1e-12);
+        }
+        // Derivatives by finite differences in the bin coordinate (away from bin edges).
+        let (x, h) = (100.3f32, 0.01f32);
+        let mut p = Weights::default();
+        let mut m = Weights::default();
+        w.fill(&[x]);
+        p.fill(&[x + h]);
+        m.fill(&[x - h]);
+        let ds = ((x + h) as f64 - (x - h) as f64) * SCALE;
+        for u in 0..4 {
+            let fd = (p.w[0][u] - m.w[0][u]) / ds;
+            assert!((fd - w.d[0][u]).abs() < 1e-4, "{u}: {fd} {}", w.d[0][u]);
+            let fd2 = (p.d[0][u] - m.d[0][u]) / ds;
+            assert!((fd2 - w.d2[0][u]).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn negative_part_of_a_matrix() {
+        // diag(-3, 2) rotated by 30 degrees: the negative part is -3 u u^T.
+        let (c, s) = (0.75f64.sqrt(), 0.5);
+        let mut h = [0.0; MAX_DOF * MAX_DOF];
+        let (l1, l2) = (-3.0, 2.0);
+        h[0] = l1 * c * c + l2 * s * s;
+        h[1] = (l1 - l2) * c * s;
+        h[2] = h[1];
+        h[3] = l1 * s * s + l2 * c * c;
+        negative_part(&mut h, 2);
+        let want = [l1 * c * c, l1 * c * s, l1 * c * s, l1 * s * s];
+        for i in 0..4 {
+            assert!((h[i] - want[i]).abs() < 1e-12, "{i}: {} {}", h[i], want[i]);
+        }
+    }
+}

@@ -11,8 +11,11 @@
 //! frame stops moving and the driver's stop test ends it.
 //!
 //! The index: exact brute force over the full embeddings costs `samples x N` multiply-adds per
-//! query (25 M for NN10K at 50x50); the default `projected` index first ranks every sample by
-//! a seeded Gaussian random projection of the embeddings to `dims` dimensions
+//! query (25 M for NN10K at 50x50, and 100 MB of samples read per query: memory-bound); the
+//! default `projected` index first ranks every sample by a seeded very sparse random projection
+//! of the embeddings to `dims` dimensions (Li, Hastie and Church 2006: each dimension a signed
+//! sum of `sqrt(N)` random entries, so a query costs `dims sqrt(N)` additions; a distance-preserving
+//! Johnson-Lindenstrauss map)
 //! (Johnson-Lindenstrauss), then re-ranks the `candidates` best exactly. `regtrack bench` compares
 //! the two (`--param index=exact`).
 
@@ -59,7 +62,7 @@ const fn params(samples: f64) -> [ParamDef; 6] {
             "samples re-ranked exactly after the projected search",
             1.0,
             10_000.0,
-            32.0,
+            16.0,
         ),
         ParamDef::int(
             "scales",
@@ -124,14 +127,18 @@ pub struct Nn {
     /// Embeddings, `samples x n`, and their squared norms.
     data: Vec<f32>,
     norms: Vec<f32>,
-    /// Projection `dims x n` and projected samples `samples x dims`.
-    proj: Vec<f32>,
+    /// Sparse projection: per dimension `per_dim` (entry index, sign) pairs; projected samples
+    /// `samples x dims`.
+    proj_idx: Vec<u32>,
+    proj_sign: Vec<f32>,
+    per_dim: usize,
     reduced: Vec<f32>,
     /// Per query scratch.
     query: Vec<f32>,
     qred: Vec<f32>,
     dist: Vec<f32>,
     order: Vec<u32>,
+    best: Vec<f32>,
     chosen: usize,
     /// Teaching-view scratch.
     vis_points: Vec<Point>,
@@ -154,22 +161,30 @@ impl Nn {
             centres: Vec::new(),
             data: Vec::new(),
             norms: Vec::new(),
-            proj: Vec::new(),
+            proj_idx: Vec::new(),
+            proj_sign: Vec::new(),
+            per_dim: 0,
             reduced: Vec::new(),
             query: Vec::new(),
             qred: Vec::new(),
             dist: Vec::new(),
             order: Vec::new(),
+            best: Vec::new(),
             chosen: 0,
             vis_points: Vec::new(),
             vis_weights: Vec::new(),
         }
     }
 
-    /// `reduced[j] = proj_j . e` for every projected dimension.
-    fn project(proj: &[f32], n: usize, e: &[f32], out: &mut [f32]) {
+    /// `out[j] = sum_t sign_jt e[idx_jt]` for every projected dimension.
+    fn project(idx: &[u32], sign: &[f32], per_dim: usize, e: &[f32], out: &mut [f32]) {
         for (j, o) in out.iter_mut().enumerate() {
-            *o = dot(&proj[j * n..(j + 1) * n], e) as f32;
+            let r = j * per_dim..(j + 1) * per_dim;
+            *o = idx[r.clone()]
+                .iter()
+                .zip(&sign[r])
+                .map(|(&i, &s)| s * e[i as usize])
+                .sum();
         }
     }
 
@@ -188,27 +203,38 @@ impl Nn {
             }
             return argmin(&self.dist);
         }
-        Self::project(&self.proj, self.n, &self.query, &mut self.qred);
+        Self::project(
+            &self.proj_idx,
+            &self.proj_sign,
+            self.per_dim,
+            &self.query,
+            &mut self.qred,
+        );
         let d = self.dims;
-        for (k, dk) in self.dist.iter_mut().enumerate() {
-            let row = &self.reduced[k * d..(k + 1) * d];
-            *dk = row
-                .iter()
-                .zip(&self.qred)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-        }
-        let c = self.candidates.min(self.samples);
+        // The `c` nearest in the projection, kept sorted in `order` (with their distances in
+        // `best`) while scanning: most samples are rejected by one comparison.
+        let c = self.candidates.min(self.samples).max(1);
         self.order.clear();
-        self.order.extend(0..self.samples as u32);
-        let dist = &self.dist;
-        if c < self.samples {
-            self.order.select_nth_unstable_by(c - 1, |&a, &b| {
-                dist[a as usize].total_cmp(&dist[b as usize])
-            });
+        self.best.clear();
+        let mut worst = f32::INFINITY;
+        for k in 0..self.samples {
+            let dk = sq_dist(&self.reduced[k * d..(k + 1) * d], &self.qred);
+            self.dist[k] = dk;
+            if self.order.len() < c || dk < worst {
+                let at = self.best.partition_point(|&b| b <= dk);
+                if self.order.len() == c {
+                    self.order.pop();
+                    self.best.pop();
+                }
+                self.order.insert(at, k as u32);
+                self.best.insert(at, dk);
+                if self.order.len() == c {
+                    worst = self.best[c - 1];
+                }
+            }
         }
         let mut best = (f32::INFINITY, 0usize);
-        for i in 0..c {
+        for i in 0..self.order.len() {
             let k = self.order[i] as usize;
             let e = self.exact_distance(k, qnorm);
             if e < best.0 {
@@ -217,6 +243,25 @@ impl Nn {
         }
         best.1
     }
+}
+
+/// `|a - b|^2` over 8 independent lanes (so that it vectorises).
+fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
+    let mut lanes = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            let e = x[l] - y[l];
+            lanes[l] += e * e;
+        }
+    }
+    lanes.iter().sum::<f32>() + tail
 }
 
 fn argmin(v: &[f32]) -> usize {
@@ -281,10 +326,17 @@ impl SearchMethod for Nn {
         }
         if !self.exact {
             let d = self.dims;
-            let scale = 1.0 / (d as f64).sqrt();
-            self.proj.clear();
-            self.proj
-                .extend((0..d * n).map(|_| (rng.normal() * scale) as f32));
+            let per = ((n as f64).sqrt().ceil() as usize).clamp(1, n);
+            let scale = (1.0 / per as f64).sqrt() as f32;
+            self.per_dim = per;
+            self.proj_idx.clear();
+            self.proj_sign.clear();
+            for _ in 0..d * per {
+                self.proj_idx
+                    .push(((rng.uniform() * n as f64) as usize).min(n - 1) as u32);
+                self.proj_sign
+                    .push(if rng.uniform() < 0.5 { -scale } else { scale });
+            }
             self.reduced.resize(s * d, 0.0);
             self.qred.resize(d, 0.0);
             for k in 0..s {
@@ -292,9 +344,10 @@ impl SearchMethod for Nn {
                     &self.data[k * n..(k + 1) * n],
                     &mut self.reduced[k * d..(k + 1) * d],
                 );
-                Self::project(&self.proj, n, row, out);
+                Self::project(&self.proj_idx, &self.proj_sign, per, row, out);
             }
-            self.order.reserve(s);
+            self.order.reserve(self.candidates + 1);
+            self.best.reserve(self.candidates + 1);
         }
         if self.data.iter().any(|v| !v.is_finite()) {
             return Err(LossReason::NonFinite);

@@ -223,3 +223,21 @@ fn a_pyramid_widens_the_basin_of_convergence() {
         assert!(ok >= 48, "{}: {ok}/50 with a 2-level pyramid", m.name);
     }
 }
+
+#[test]
+fn the_projected_nn_index_is_as_accurate_as_exact_search() {
+    // The default index ranks by a sparse random projection and re-ranks a few candidates
+    // exactly; it must find warps as good as brute force does.
+    for m in ["similitude", "homography"] {
+        let mut exact = TrackerSpec::from_names("nn1k", "ssd", m).unwrap();
+        exact.set_param("index", "exact").unwrap();
+        let projected = TrackerSpec::from_names("nn1k", "ssd", m).unwrap();
+        let (e, p) = (
+            converged(&exact, 2.0, 60, 1.0, 5),
+            converged(&projected, 2.0, 60, 1.0, 5),
+        );
+        eprintln!("nn1k {m} within 1 px: exact {e}/60, projected {p}/60");
+        assert!(p + 3 >= e, "{m}: projected {p} vs exact {e}");
+        assert!(e >= 45, "{m}: exact {e}");
+    }
+}

@@ -48,6 +48,9 @@ pub struct View {
     pub center: [f32; 2],
     pub show_ground_truth: bool,
     pub show_corner_numbers: bool,
+    /// Draw the samples of NN and the particles of PF (newest frame).
+    #[serde(default)]
+    pub show_samples: bool,
 }
 
 impl Default for View {
@@ -57,6 +60,7 @@ impl Default for View {
             center: [0.0, 0.0],
             show_ground_truth: true,
             show_corner_numbers: true,
+            show_samples: false,
         }
     }
 }

@@ -6,7 +6,7 @@ use super::state::SequenceSource;
 use crate::dataset::{Sequence, demo};
 use crate::geometry::Quad;
 use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
-use crate::observe::{IterationRecord, Recorder};
+use crate::observe::{IterationRecord, Recorder, VisualRecord};
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -38,6 +38,9 @@ pub struct TrackerFrame {
     pub res: usize,
     pub template: Arc<Vec<f32>>,
     pub patch: Vec<f32>,
+    /// What a sampling search method showed at its last iteration (NN's samples, PF's
+    /// particles); the app keeps it for the newest frame only.
+    pub visual: Option<Arc<VisualRecord>>,
 }
 
 /// Work for the thread.
@@ -245,7 +248,7 @@ impl<W: Fn() + Sync> Thread<W> {
         &self,
         k: usize,
         t: &Tracker,
-        rec: &Recorder,
+        rec: &mut Recorder,
         out: &crate::tracker::FrameOutcome,
     ) -> TrackerFrame {
         let patch = t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default();
@@ -254,6 +257,7 @@ impl<W: Fn() + Sync> Thread<W> {
             status: out.status,
             corners: out.corners,
             iterations: rec.iterations.clone(),
+            visual: rec.method_visuals.pop().map(Arc::new),
             start: rec.start,
             search_us: out.timing.search.as_secs_f64() * 1e6,
             update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
@@ -295,6 +299,7 @@ impl<W: Fn() + Sync> Thread<W> {
                         status: t.status(),
                         corners: t.corners(),
                         iterations: Vec::new(),
+                        visual: None,
                         start: None,
                         search_us: 0.0,
                         update_us: 0.0,
@@ -337,11 +342,14 @@ impl<W: Fn() + Sync> Thread<W> {
             };
             let mut results = Vec::with_capacity(self.trackers.len());
             for k in 0..self.trackers.len() {
-                let mut rec = Recorder::default();
+                let mut rec = Recorder {
+                    visuals: true,
+                    ..Recorder::default()
+                };
                 let out = self.trackers[k]
                     .1
                     .update(FrameInput::Gray8(&gray), &mut rec);
-                results.push(self.snapshot(k, &self.trackers[k].1, &rec, &out));
+                results.push(self.snapshot(k, &self.trackers[k].1, &mut rec, &out));
             }
             self.frame = i;
             // Images at display rate (and always the last one): the UI shows only the newest.

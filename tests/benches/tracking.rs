@@ -6,7 +6,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use regtrack::geometry::Quad;
 use regtrack::imaging::{Preprocessor, gaussian_kernel, load_gray};
 use regtrack::observe::NoObserver;
-use regtrack::tracker::{FrameInput, Tracker, TrackerSpec};
+use regtrack::tracker::{FrameInput, RegistrationTracker, Tracker, TrackerSpec, VisualTracker};
 use std::hint::black_box;
 use std::path::Path;
 
@@ -20,7 +20,7 @@ fn bench(c: &mut Criterion) {
     let smoothed = regtrack::imaging::gaussian_blur(&img, &gaussian_kernel(5, 3.0));
     for sm in ["iclk", "fclk", "esm"] {
         let mut spec = TrackerSpec::from_names(sm, "ssd", "homography").expect("spec");
-        spec.params.max_iters = 1;
+        spec.set_param("max_iters", "1").expect("param");
         let mut t = Tracker::new(&spec).expect("tracker");
         t.initialize(FrameInput::Smoothed(&smoothed), &truth)
             .expect("init");
@@ -33,7 +33,7 @@ fn bench(c: &mut Criterion) {
     }
     // The stages of one iteration, on the context of a built tracker.
     let spec = TrackerSpec::from_names("fclk", "ssd", "homography").expect("spec");
-    let mut t = Tracker::new(&spec).expect("tracker");
+    let mut t = RegistrationTracker::new(spec.registration().expect("registration")).expect("tracker");
     t.initialize(FrameInput::Smoothed(&smoothed), &truth)
         .expect("init");
     let mut ctx = t.into_context();
@@ -85,6 +85,29 @@ fn bench(c: &mut Criterion) {
     c.bench_function("preprocess 150x150 region (5x5 Gaussian)", |b| {
         b.iter(|| pre.process(black_box(&img), 225.0, 125.0, 375.0, 275.0))
     });
+
+    // Nearest-neighbour search: index build (initialisation) and one query-and-step.
+    for sm in ["nn1k", "nn10k"] {
+        let spec = TrackerSpec::from_names(sm, "ssd", "homography").expect("spec");
+        let mut t = Tracker::new(&spec).expect("tracker");
+        c.bench_function(&format!("{sm} index build"), |b| {
+            b.iter(|| {
+                t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+                    .expect("init")
+            })
+        });
+        let mut one = spec.clone();
+        one.set_param("max_iters", "1").expect("param");
+        let mut t = Tracker::new(&one).expect("tracker");
+        t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+            .expect("init");
+        c.bench_function(&format!("{sm}_ssd_homography one iteration"), |b| {
+            b.iter(|| {
+                t.set_corners(&start).expect("corners");
+                black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench);

@@ -248,7 +248,7 @@ fn errors_are_clear() {
     );
     let err = bad(&["--hessian", "exact"]);
     assert!(err.contains("gauss_newton"), "{err}");
-    let err = bad(&["--roi-margin", "-1"]);
+    let err = bad(&["--roi-margin=-1"]);
     assert!(err.contains("roi_margin"), "{err}");
     let err = bad(&["--sm", "cascade:nn"]);
     assert!(err.contains("at least two stages"), "{err}");

@@ -6,6 +6,7 @@ use crate::app::command::Command;
 use crate::app::state::{InitSource, View};
 use crate::app::{InspectorApp, Tool};
 use crate::geometry::{Point, Quad};
+use crate::observe::VisualRecord;
 use crate::tracker::TrackStatus;
 use eframe::egui;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
@@ -123,6 +124,13 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     {
         draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
     }
+    if app.state.view.show_samples {
+        for (i, entry) in app.state.trackers.iter().enumerate() {
+            if let Some(v) = app.result(i, frame).and_then(|r| r.visual.as_ref()) {
+                draw_visual(&painter, &t, v, color(entry.color));
+            }
+        }
+    }
     for (i, entry) in app.state.trackers.iter().enumerate() {
         if let Some(r) = app.result(i, frame) {
             let c = color(entry.color);
@@ -158,6 +166,18 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
         draw_quad(&painter, &t, &rec.corners, Color32::YELLOW, true, false);
     }
     interact(app, ui, &response, &t, &painter);
+}
+
+/// A sampling method's points: faint when unlike the target, bright when like it; the chosen
+/// one ringed.
+fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
+    for (p, &w) in v.points.iter().zip(&v.weights) {
+        let a = (0.15 + 0.85 * w.clamp(0.0, 1.0)).min(1.0);
+        painter.circle_filled(t.to_screen(*p), 1.0 + 1.5 * w.clamp(0.0, 1.0), c.gamma_multiply(a));
+    }
+    if let Some(p) = v.chosen.and_then(|k| v.points.get(k)) {
+        painter.circle_stroke(t.to_screen(*p), 6.0, egui::Stroke::new(2.0, Color32::WHITE));
+    }
 }
 
 fn interact(

@@ -91,6 +91,8 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             let mut view = app.state.view.clone();
             ui.checkbox(&mut view.show_ground_truth, "show ground truth");
             ui.checkbox(&mut view.show_corner_numbers, "number the corners");
+            ui.checkbox(&mut view.show_samples, "show NN samples / PF particles")
+                .on_hover_text("Where a sampling search method looked on the newest frame, brighter = more similar");
             if view != app.state.view {
                 app.send(Command::SetView(view));
             }

@@ -344,7 +344,8 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Report { dirs, out } => {
-            let out = out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));
+            let out =
+                out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));
             let report = regtrack::report::write_report(&dirs, &out)?;
             println!(
                 "wrote {} ({} trackers, {} figures)",

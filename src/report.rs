@@ -24,6 +24,8 @@ const FAMILY: &str = "sans-serif";
 
 /// Size of the success-rate figures and the width of the speed chart (px).
 pub const FIGURE_SIZE: (u32, u32) = (900, 600);
+/// The smallest figure drawn (px).
+pub const MIN_SIZE: (u32, u32) = (400, 300);
 /// Most curves in one figure; a larger group is split into parts.
 pub const MAX_CURVES: usize = 12;
 /// The SSM the SM and AM comparisons are made with, when it was run (as in the paper).
@@ -365,9 +367,8 @@ pub fn curve_style(i: usize) -> (RGBColor, bool) {
 /// Registers the bundled font with plotters (once per process).
 fn register_font() -> Result<()> {
     static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let ok = *DONE.get_or_init(|| {
-        plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok()
-    });
+    let ok = *DONE
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
     if ok {
         Ok(())
     } else {
@@ -505,9 +506,10 @@ impl<B: DrawingBackend> DrawingBackend for GlyphText<B> {
         if color.alpha == 0.0 {
             return Ok(());
         }
-        let (width, height, ascent) =
-            Self::layout(text, style.size()).ok_or_else(font_missing)?;
-        let font = font().ok_or_else(font_missing)?.as_scaled(style.size() as f32);
+        let (width, height, ascent) = Self::layout(text, style.size()).ok_or_else(font_missing)?;
+        let font = font()
+            .ok_or_else(font_missing)?
+            .as_scaled(style.size() as f32);
         let anchor = style.anchor();
         let x0 = match anchor.h_pos {
             HPos::Left => 0.0,
@@ -596,7 +598,7 @@ fn draw_sr<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> D
         text_w = text_w.max(root.estimate_text_size(e, &legend_font)?.0);
     }
     let (w, h) = root.dim_in_pixel();
-    let legend_w = (text_w + 60).clamp(140, w / 2);
+    let legend_w = (text_w + 60).max(140).min(w / 2);
     let (plot, legend) = root.split_horizontally(w.saturating_sub(legend_w));
 
     let mut chart = ChartBuilder::on(&plot)
@@ -621,12 +623,7 @@ fn draw_sr<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> D
         let (color, dashed) = curve_style(i);
         let style = Color::stroke_width(&color, 2);
         if dashed {
-            chart.draw_series(DashedLineSeries::new(
-                c.points.iter().copied(),
-                9,
-                5,
-                style,
-            ))?;
+            chart.draw_series(DashedLineSeries::new(c.points.iter().copied(), 9, 5, style))?;
         } else {
             chart.draw_series(LineSeries::new(c.points.iter().copied(), style))?;
         }
@@ -695,6 +692,7 @@ fn draw_speed<DB: DrawingBackend>(
     let n = rows.len().max(1) as f64;
     let mut chart = ChartBuilder::on(&root)
         .margin(14)
+        .margin_right(40)
         .x_label_area_size(50)
         .y_label_area_size(name_w + 20)
         .build_cartesian_2d((lo..hi).log_scale(), 0.0..n)?;
@@ -722,19 +720,26 @@ fn draw_speed<DB: DrawingBackend>(
             .enumerate()
             .filter(|(_, r)| r.1.is_finite() && r.1 > 0.0)
             .map(|(i, r)| {
-                let mut rect = Rectangle::new([(lo, i as f64), (r.1, i as f64 + 1.0)], bar.filled());
+                let mut rect =
+                    Rectangle::new([(lo, i as f64), (r.1, i as f64 + 1.0)], bar.filled());
                 rect.set_margin(3, 3, 0, 0);
                 rect
             }),
     )?;
-    let name_font = label_font.color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center));
+    let name_font = label_font
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Right, VPos::Center));
     let value_font = (FAMILY, 13)
         .into_font()
         .color(&BLACK)
         .pos(Pos::new(HPos::Left, VPos::Center));
     for (i, r) in rows.iter().enumerate() {
         let y = i as f64 + 0.5;
-        let x = if r.1.is_finite() && r.1 > 0.0 { r.1 } else { lo };
+        let x = if r.1.is_finite() && r.1 > 0.0 {
+            r.1
+        } else {
+            lo
+        };
         chart.plotting_area().draw(
             &(EmptyElement::at((lo, y)) + Text::new(r.0.clone(), (-8, 0), name_font.clone())),
         )?;
@@ -748,6 +753,15 @@ fn draw_speed<DB: DrawingBackend>(
 
 /// Draws `plot` to `path`, a `.png` or `.svg` file.
 fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
+    if w < MIN_SIZE.0 || h < MIN_SIZE.1 || w > 8192 || h > 8192 {
+        return Err(report_error(
+            path,
+            format!(
+                "a figure of {w}x{h} px: width {}..=8192 and height {}..=8192",
+                MIN_SIZE.0, MIN_SIZE.1
+            ),
+        ));
+    }
     register_font()?;
     let fail = |e: String| report_error(path, format!("cannot draw the figure: {e}"));
     let bytes = match path.extension().and_then(|e| e.to_str()) {
@@ -763,8 +777,8 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
         Some("png") => {
             let mut rgb = vec![255u8; w as usize * h as usize * 3];
             {
-                let area = GlyphText(BitMapBackend::with_buffer(&mut rgb, (w, h)))
-                    .into_drawing_area();
+                let area =
+                    GlyphText(BitMapBackend::with_buffer(&mut rgb, (w, h))).into_drawing_area();
                 plot.draw(&area).map_err(|e| fail(e.to_string()))?;
                 area.present().map_err(|e| fail(e.to_string()))?;
             }
@@ -783,10 +797,7 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
             png
         }
         _ => {
-            return Err(report_error(
-                path,
-                "a figure is written as .png or .svg",
-            ));
+            return Err(report_error(path, "a figure is written as .png or .svg"));
         }
     };
     write_atomic(path, &bytes)
@@ -875,8 +886,14 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
     }
     md.push_str("\n## Success rates\n");
     let sections = [
-        (FigureKind::SmsPerAm, "Search methods, for each appearance model"),
-        (FigureKind::AmsPerSm, "Appearance models, for each search method"),
+        (
+            FigureKind::SmsPerAm,
+            "Search methods, for each appearance model",
+        ),
+        (
+            FigureKind::AmsPerSm,
+            "Appearance models, for each search method",
+        ),
         (FigureKind::Ssms, "State space models"),
         (FigureKind::Others, "Other trackers"),
     ];
@@ -893,9 +910,7 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
             ));
         }
     }
-    md.push_str(
-        "\n## Speed\n\n![Tracker-only FPS, log scale](speed.png)\n\n[SVG](speed.svg)\n",
-    );
+    md.push_str("\n## Speed\n\n![Tracker-only FPS, log scale](speed.png)\n\n[SVG](speed.svg)\n");
     md
 }
 

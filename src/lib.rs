@@ -52,6 +52,7 @@ pub mod linalg;
 pub mod observe;
 pub mod params;
 pub mod registry;
+pub mod report;
 pub mod rng;
 pub mod sm;
 pub mod ssm;

@@ -111,6 +111,16 @@ enum Command {
         #[arg(required = true)]
         shards: Vec<PathBuf>,
     },
+    /// Success-rate and speed figures (PNG, SVG) and a markdown table (`report.md`) of `eval`
+    /// output folders, each tracker pooled over every sequence (shards: give all their folders).
+    Report {
+        /// `eval` output folders.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output folder (default: `report` in the first folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// List every appearance model, state space model and search method with its aliases.
     List,
     /// Render a synthetic sequence with exact ground truth (MTF layout).
@@ -331,6 +341,18 @@ fn main() -> Result<()> {
             let rows = eval::merge_shards(&shards, &out)?;
             print_table(&rows);
             println!("wrote {}", out.join("summary.csv").display());
+            Ok(())
+        }
+        Command::Report { dirs, out } => {
+            let out =
+                out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));
+            let report = regtrack::report::write_report(&dirs, &out)?;
+            println!(
+                "wrote {} ({} trackers, {} figures)",
+                out.join("report.md").display(),
+                report.trackers.len(),
+                report.figures.len() + 1
+            );
             Ok(())
         }
         Command::List => {

@@ -198,10 +198,10 @@ impl TrackerSpec {
     /// Sets a parameter by name from its typed form: a tracker parameter ([`TRACKER_PARAMS`]) or
     /// one of the method's own. An unknown name is an error that lists the known ones.
     pub fn set_param(&mut self, name: &str, value: &str) -> Result<()> {
-        if let TrackerSpec::Registration(r) = self {
-            if r.params.assign(name, value)? {
-                return Ok(());
-            }
+        if let TrackerSpec::Registration(r) = self
+            && r.params.assign(name, value)?
+        {
+            return Ok(());
         }
         let defs = self.method_defs()?;
         let owner = self.label();
@@ -582,10 +582,10 @@ impl RegistrationTracker {
                 step,
                 elapsed: started.elapsed(),
             });
-            if observer.wants_method_visuals() {
-                if let Some(v) = sm.visual(ctx) {
-                    observer.method_visual(frame, first + it, &v);
-                }
+            if observer.wants_method_visuals()
+                && let Some(v) = sm.visual(ctx)
+            {
+                observer.method_visual(frame, first + it, &v);
             }
             let stop = match s.control {
                 Control::Done => true,

@@ -3,7 +3,7 @@
 use crate::common::{TempDir, root};
 use std::process::Command;
 
-fn regtrack(args: &[&str]) -> std::process::Output {
+pub(crate) fn regtrack(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_regtrack"))
         .args(args)
         .output()
@@ -11,7 +11,7 @@ fn regtrack(args: &[&str]) -> std::process::Output {
 }
 
 /// Checks that a command succeeded, showing its error output otherwise.
-fn succeed(out: std::process::Output) {
+pub(crate) fn succeed(out: std::process::Output) {
     assert!(
         out.status.success(),
         "{}",
@@ -20,7 +20,12 @@ fn succeed(out: std::process::Output) {
 }
 
 /// `regtrack synth` of the bundled coffee texture on a bundled motion profile.
-fn synth(motion: &str, out: &std::path::Path, name: &str, extra: &[&str]) -> std::process::Output {
+pub(crate) fn synth(
+    motion: &str,
+    out: &std::path::Path,
+    name: &str,
+    extra: &[&str],
+) -> std::process::Output {
     let tex = root().join("assets/textures/skimage_coffee.png");
     let motion = root().join("assets/motion").join(motion);
     let mut args = vec![

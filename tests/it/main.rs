@@ -8,6 +8,7 @@ mod evaluation;
 #[cfg(feature = "gui")]
 mod gui;
 mod recovery;
+mod report;
 
 #[global_allocator]
 static ALLOCATOR: alloc::Counting = alloc::Counting;

@@ -323,7 +323,9 @@ impl InspectorApp {
                                 v.resize(frame + 1, None);
                             }
                             // Samples and particles are kept for the newest frame only.
-                            if let Some(Some(prev)) = frame.checked_sub(1).and_then(|p| v.get_mut(p)) {
+                            if let Some(Some(prev)) =
+                                frame.checked_sub(1).and_then(|p| v.get_mut(p))
+                            {
                                 prev.visual = None;
                             }
                             v[frame] = Some(r);

@@ -33,7 +33,8 @@ fn bench(c: &mut Criterion) {
     }
     // The stages of one iteration, on the context of a built tracker.
     let spec = TrackerSpec::from_names("fclk", "ssd", "homography").expect("spec");
-    let mut t = RegistrationTracker::new(spec.registration().expect("registration")).expect("tracker");
+    let mut t =
+        RegistrationTracker::new(spec.registration().expect("registration")).expect("tracker");
     t.initialize(FrameInput::Smoothed(&smoothed), &truth)
         .expect("init");
     let mut ctx = t.into_context();

@@ -173,7 +173,11 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
 fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
     for (p, &w) in v.points.iter().zip(&v.weights) {
         let a = (0.15 + 0.85 * w.clamp(0.0, 1.0)).min(1.0);
-        painter.circle_filled(t.to_screen(*p), 1.0 + 1.5 * w.clamp(0.0, 1.0), c.gamma_multiply(a));
+        painter.circle_filled(
+            t.to_screen(*p),
+            1.0 + 1.5 * w.clamp(0.0, 1.0),
+            c.gamma_multiply(a),
+        );
     }
     if let Some(p) = v.chosen.and_then(|k| v.points.get(k)) {
         painter.circle_stroke(t.to_screen(*p), 6.0, egui::Stroke::new(2.0, Color32::WHITE));

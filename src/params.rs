@@ -286,6 +286,21 @@ pub struct TrackerParams {
     pub pyramid_levels: usize,
     /// Seed of the random generators of the sampling search methods (NN, PF).
     pub seed: u64,
+    /// What a tracker does after it lost the target.
+    pub on_loss: LossPolicy,
+}
+
+/// What a tracker does after a loss of track.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossPolicy {
+    /// Stays lost until it is initialised again (or moved with `set_corners`); the evaluation's
+    /// reinit protocol restarts it from the ground truth.
+    #[default]
+    Stop,
+    /// Keeps searching each frame from the last good estimate, reporting `Lost` until a frame
+    /// passes the checks again (as MTF does).
+    Continue,
 }
 
 /// The Hessian kinds in [`TRACKER_PARAMS`]' `hessian` choice order.
@@ -359,6 +374,11 @@ pub const TRACKER_PARAMS: &[ParamDef] = &[
         9_007_199_254_740_991.0,
         0.0,
     ),
+    ParamDef::choice(
+        "on_loss",
+        "after a loss of track: stop (until re-initialised) or continue from the last good estimate",
+        &["stop", "continue"],
+    ),
 ];
 
 impl Default for TrackerParams {
@@ -373,6 +393,7 @@ impl Default for TrackerParams {
             roi_margin: 0.0,
             pyramid_levels: 0,
             seed: 0,
+            on_loss: LossPolicy::Stop,
         };
         for d in TRACKER_PARAMS {
             p.set_value(d.name, d.default);
@@ -402,6 +423,10 @@ impl TrackerParams {
             "roi_margin" => self.roi_margin,
             "pyramid_levels" => self.pyramid_levels as f64,
             "seed" => self.seed as f64,
+            "on_loss" => match self.on_loss {
+                LossPolicy::Stop => 0.0,
+                LossPolicy::Continue => 1.0,
+            },
             _ => f64::NAN,
         }
     }
@@ -420,6 +445,13 @@ impl TrackerParams {
             "roi_margin" => self.roi_margin = v,
             "pyramid_levels" => self.pyramid_levels = whole,
             "seed" => self.seed = v.max(0.0) as u64,
+            "on_loss" => {
+                self.on_loss = if whole == 1 {
+                    LossPolicy::Continue
+                } else {
+                    LossPolicy::Stop
+                }
+            }
             _ => return false,
         }
         true

@@ -718,7 +718,9 @@ impl VisualTracker for RegistrationTracker {
     /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
     /// reported in the status, with the last good corners.
     fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
-        if self.status != TrackStatus::Tracking {
+        let resume = matches!(self.status, TrackStatus::Lost(_))
+            && self.params.on_loss == crate::params::LossPolicy::Continue;
+        if self.status != TrackStatus::Tracking && !resume {
             return FrameOutcome {
                 frame: self.frame,
                 status: self.status,
@@ -782,6 +784,7 @@ impl VisualTracker for RegistrationTracker {
         }) {
             Ok((q, iterations, converged, similarity)) => {
                 self.corners = q;
+                self.status = TrackStatus::Tracking;
                 self.update_models(input);
                 FrameOutcome {
                     frame: self.frame,

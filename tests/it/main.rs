@@ -9,6 +9,7 @@ mod evaluation;
 mod gui;
 mod recovery;
 mod report;
+mod robustness;
 
 #[global_allocator]
 static ALLOCATOR: alloc::Counting = alloc::Counting;

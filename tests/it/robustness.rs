@@ -68,84 +68,54 @@ fn run(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad) -> Vec<f64> {
         .collect()
 }
 
-#[test]
-fn probe_light() {
-    let (frames, truth) = lit_static_sequence(120, 1);
-    for sm in ["esm", "iclk", "fclk"] {
-        for am in ["ssd", "zncc", "lscv", "rscv", "scv"] {
-            let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
-            let e = run(&spec, &frames, &truth);
-            let at = |k: usize| e.get(k).copied().unwrap_or(f64::NAN);
-            eprintln!(
-                "{sm} {am}: err@10 {:.3} @40 {:.3} @80 {:.3} @119 {:.3} max {:.3}",
-                at(9),
-                at(39),
-                at(79),
-                at(118),
-                e.iter().cloned().fold(0.0, f64::max)
-            );
-        }
-    }
+/// The largest error over the first `n` frames.
+fn worst(e: &[f64], n: usize) -> f64 {
+    e.iter().take(n).copied().fold(0.0, f64::max)
 }
 
 #[test]
-fn probe_light2() {
-    let (frames, truth) = lit_static_sequence(60, 1);
-    for am in ["ssd", "zncc"] {
-        let spec = TrackerSpec::from_names("esm", am, "homography").unwrap();
-        let mut t = Tracker::new(&spec).unwrap();
-        t.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
-        let mut line = String::new();
-        for (k, f) in frames.iter().enumerate().skip(1).step_by(5) {
-            t.set_corners(&truth).unwrap();
-            let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
-            line += &format!(
-                " {k}:{:.2}/{}",
-                alignment_error(&out.corners, &truth),
-                out.iterations
-            );
-        }
-        eprintln!("from truth esm {am}:{line}");
-        let e = run(&spec, &frames, &truth);
-        let line: String = e
-            .iter()
-            .enumerate()
-            .step_by(5)
-            .map(|(k, v)| format!(" {}:{v:.2}", k + 1))
-            .collect();
-        eprintln!("tracked esm {am}:{line}");
-    }
-}
-
-#[test]
-fn probe_light3() {
-    let (frames, truth) = lit_static_sequence(40, 1);
+fn under_moving_light_the_drift_of_ssd_and_zncc_is_in_their_cost_not_the_search() {
+    // On this sequence ESM with SSD or ZNCC drifts away from the static target. Started from the
+    // truth on a later frame, the search still ends where the similarity is higher than at the
+    // truth: the optimum of the cost itself moved with the light (see docs/robustness.md).
+    let (frames, truth) = lit_static_sequence(22, 1);
     for am in ["ssd", "zncc"] {
         let spec = TrackerSpec::from_names("esm", am, "homography").unwrap();
         let mut one = spec.clone();
         one.set_param("max_iters", "1").unwrap();
         let mut t = Tracker::new(&spec).unwrap();
-        let mut t1 = Tracker::new(&one).unwrap();
+        let mut probe = Tracker::new(&one).unwrap();
         t.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
-        t1.initialize(FrameInput::Gray8(&frames[0]), &truth)
-            .unwrap();
-        for k in [5usize, 11, 16, 21] {
-            t.set_corners(&truth).unwrap();
-            let out = t.update(FrameInput::Gray8(&frames[k]), &mut NoObserver);
-            t1.set_corners(&truth).unwrap();
-            let at_truth = t1
-                .update(FrameInput::Gray8(&frames[k]), &mut NoObserver)
-                .similarity;
-            t1.set_corners(&out.corners).unwrap();
-            let at_conv = t1
-                .update(FrameInput::Gray8(&frames[k]), &mut NoObserver)
-                .similarity;
-            eprintln!(
-                "{am} frame {k}: err {:.2} f(truth) {at_truth:.3} f(converged) {at_conv:.3}",
-                alignment_error(&out.corners, &truth)
-            );
-        }
+        probe.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
+        t.set_corners(&truth).unwrap();
+        let out = t.update(FrameInput::Gray8(&frames[21]), &mut NoObserver);
+        probe.set_corners(&truth).unwrap();
+        let at_truth = probe.update(FrameInput::Gray8(&frames[21]), &mut NoObserver);
+        probe.set_corners(&out.corners).unwrap();
+        let at_found = probe.update(FrameInput::Gray8(&frames[21]), &mut NoObserver);
+        let err = alignment_error(&out.corners, &truth);
+        eprintln!(
+            "esm {am}, frame 21 from the truth: {err:.2} px off, f(truth) {:.1} < f(found) {:.1}",
+            at_truth.similarity, at_found.similarity
+        );
+        assert!(err > 1.0, "{am}: {err}");
+        assert!(at_found.similarity > at_truth.similarity, "{am}");
     }
+}
+
+#[test]
+fn local_intensity_models_hold_a_static_target_under_moving_light() {
+    // LSCV (per-region intensity maps, updated every frame) follows the light; SSD and ZNCC lose
+    // the target within 40 frames of this sequence.
+    let (frames, truth) = lit_static_sequence(61, 1);
+    let err = |sm: &str, am: &str| {
+        let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+        worst(&run(&spec, &frames, &truth), 60)
+    };
+    let (lscv, zncc, ssd) = (err("esm", "lscv"), err("esm", "zncc"), err("esm", "ssd"));
+    eprintln!("worst error over 60 frames: esm lscv {lscv:.2}, zncc {zncc:.2}, ssd {ssd:.2}");
+    assert!(lscv < 5.0, "lscv {lscv}");
+    assert!(lscv < zncc && lscv < ssd, "zncc {zncc} ssd {ssd}");
 }
 
 #[test]

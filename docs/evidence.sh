@@ -19,7 +19,7 @@ render() { # name motion texture background [nuisance flags...]
 render book_plain   tmt_dl_bookIII_s5 skimage_coffee.png skimage_grass.png
 render bricks_light ucsb_bricks_ld    skimage_brick.png  skimage_grass.png --gain-drift 0.3 --local-light 0.4
 render bricks_m1    ucsb_bricks_m1    skimage_brick.png  skimage_coffee.png --motion-blur 3
-render bricks_m3    ucsb_bricks_m3    skimage_brick.png  skimage_coffee.png --noise 4
+render bricks_m3    ucsb_bricks_m3    skimage_brick.png  skimage_coffee.png --jpeg-quality 70
 render bricks_rt    ucsb_bricks_rt    skimage_brick.png  skimage_grass.png --bias-drift 20
 render bricks_uc    ucsb_bricks_uc    skimage_brick.png  skimage_grass.png --occlusion 0.15 --jpeg-quality 80
 render bricks_zm    ucsb_bricks_zm    skimage_brick.png  skimage_coffee.png --local-light 0.3

@@ -73,7 +73,7 @@ pub struct IterationRecord {
 pub struct VisualRecord {
     pub iteration: usize,
     pub label: String,
-    pub points: Vec<crate::geometry::Point>,
+    pub quads: Vec<Quad>,
     pub weights: Vec<f32>,
     pub chosen: Option<usize>,
 }
@@ -117,7 +117,7 @@ impl Observer for Recorder {
         self.method_visuals.push(VisualRecord {
             iteration,
             label: v.label.to_string(),
-            points: v.points.to_vec(),
+            quads: v.quads.to_vec(),
             weights: v.weights.to_vec(),
             chosen: v.chosen,
         });

@@ -66,16 +66,16 @@ impl Step {
     }
 }
 
-/// What a sampling method shows of its state (NN's samples, PF's particles): points in frame
-/// pixels (the centres of the sampled warps of the target) and their weights.
+/// What a sampling method shows of its state (NN's samples, PF's particles): the target's quad
+/// under each candidate warp, in frame pixels, and their weights.
 #[derive(Clone, Copy, Debug)]
 pub struct MethodVisual<'a> {
     /// What the points are ("samples", "particles").
     pub label: &'static str,
-    pub points: &'a [Point],
-    /// One weight per point in `0..=1` (the best is 1).
+    pub quads: &'a [Quad],
+    /// One weight per quad in `0..=1` (the best is 1).
     pub weights: &'a [f32],
-    /// The point the method chose, if any.
+    /// The candidate the method chose, if any.
     pub chosen: Option<usize>,
 }
 

@@ -21,7 +21,7 @@
 
 use super::{Context, LossReason, MethodVisual, SearchMethod, SmConfig, SmDef, Step, Update};
 use crate::am::{Capabilities, dot};
-use crate::geometry::Point;
+use crate::geometry::Quad;
 use crate::imaging::ImageView;
 use crate::params::ParamDef;
 use crate::registry::Entry;
@@ -122,8 +122,10 @@ pub struct Nn {
     n: usize,
     /// `q_k^-1` per sample.
     inverse: Vec<Params>,
-    /// Sample centres in the normalised frame (for the teaching view).
-    centres: Vec<Point>,
+    /// The target's corners under each `q_k^-1` (normalised frame), and the parameters the last
+    /// query started from (for the teaching view).
+    candidates_quads: Vec<Quad>,
+    queried_at: Params,
     /// Embeddings, `samples x n`, and their squared norms.
     data: Vec<f32>,
     norms: Vec<f32>,
@@ -141,7 +143,7 @@ pub struct Nn {
     best: Vec<f32>,
     chosen: usize,
     /// Teaching-view scratch.
-    vis_points: Vec<Point>,
+    vis_quads: Vec<Quad>,
     vis_weights: Vec<f32>,
 }
 
@@ -158,7 +160,8 @@ impl Nn {
             seed: cfg.tracker.seed,
             n: 0,
             inverse: Vec::new(),
-            centres: Vec::new(),
+            candidates_quads: Vec::new(),
+            queried_at: [0.0; crate::linalg::MAX_DOF],
             data: Vec::new(),
             norms: Vec::new(),
             proj_idx: Vec::new(),
@@ -171,7 +174,7 @@ impl Nn {
             order: Vec::new(),
             best: Vec::new(),
             chosen: 0,
-            vis_points: Vec::new(),
+            vis_quads: Vec::new(),
             vis_weights: Vec::new(),
         }
     }
@@ -291,7 +294,7 @@ impl SearchMethod for Nn {
         let mut rng = Rng::new(self.seed);
         let identity = ctx.ssm.identity();
         self.inverse.clear();
-        self.centres.clear();
+        self.candidates_quads.clear();
         self.data.resize(s * n, 0.0);
         self.norms.resize(s, 0.0);
         self.dist.resize(s, 0.0);
@@ -321,8 +324,8 @@ impl SearchMethod for Nn {
             ctx.am.embed(&ctx.values, row);
             self.norms[k] = dot(row, row) as f32;
             self.inverse.push(inv);
-            let c = crate::ssm::warp_quad(&*ctx.ssm, &q, &base).centroid();
-            self.centres.push(c);
+            self.candidates_quads
+                .push(crate::ssm::warp_quad(&*ctx.ssm, &inv, &base));
         }
         if !self.exact {
             let d = self.dims;
@@ -362,18 +365,19 @@ impl SearchMethod for Nn {
         ctx.am.embed(&ctx.values, &mut self.query);
         let k = self.nearest();
         self.chosen = k;
+        self.queried_at = p;
         ctx.apply(&self.inverse[k], Update::Compose)?;
         Ok(Step::auto(f))
     }
     fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
-        // The samples' centres around the current estimate, weighted by closeness of their
-        // patches to the last query (1 = the nearest).
-        let m = ctx.pixel_matrix(&ctx.params);
-        self.vis_points.clear();
-        self.vis_points.extend(
-            self.centres
+        // Where each sample would put the target, from where the last query started; weighted
+        // by how close its patch was to the query (1 = the nearest).
+        let m = ctx.pixel_matrix(&self.queried_at);
+        self.vis_quads.clear();
+        self.vis_quads.extend(
+            self.candidates_quads
                 .iter()
-                .map(|&c| crate::geometry::apply_homography(&m, c)),
+                .map(|q| q.map(|c| crate::geometry::apply_homography(&m, c))),
         );
         let lo = self.dist.iter().copied().fold(f32::INFINITY, f32::min);
         let mean = self.dist.iter().sum::<f32>() / self.dist.len().max(1) as f32;
@@ -383,7 +387,7 @@ impl SearchMethod for Nn {
             .extend(self.dist.iter().map(|&d| (-(d - lo) / spread * 3.0).exp()));
         Some(MethodVisual {
             label: "samples",
-            points: &self.vis_points,
+            quads: &self.vis_quads,
             weights: &self.vis_weights,
             chosen: Some(self.chosen),
         })

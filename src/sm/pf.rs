@@ -74,7 +74,7 @@ pub struct Pf {
     weights: Vec<f64>,
     /// The estimate given last; a different `ctx.params` at the next frame resets the particles.
     last: Option<Params>,
-    vis_points: Vec<Point>,
+    vis_quads: Vec<Quad>,
     vis_weights: Vec<f32>,
 }
 
@@ -95,7 +95,7 @@ impl Pf {
             sims: Vec::new(),
             weights: Vec::new(),
             last: None,
-            vis_points: Vec::new(),
+            vis_quads: Vec::new(),
             vis_weights: Vec::new(),
         }
     }
@@ -201,12 +201,12 @@ impl SearchMethod for Pf {
         // The teaching view before resampling: where the particles were and what they weighed.
         let wmax = self.weights.iter().copied().fold(0.0, f64::max).max(1e-300);
         let m = ctx.pixel_matrix(&ctx.ssm.identity());
-        self.vis_points.clear();
+        self.vis_quads.clear();
         self.vis_weights.clear();
         for (s, &w) in self.states.iter().zip(&self.weights) {
-            let c = crate::ssm::warp_quad(&*ctx.ssm, s, &base).centroid();
-            self.vis_points
-                .push(crate::geometry::apply_homography(&m, c));
+            let q = crate::ssm::warp_quad(&*ctx.ssm, s, &base);
+            self.vis_quads
+                .push(q.map(|c| crate::geometry::apply_homography(&m, c)));
             self.vis_weights.push((w / wmax) as f32);
         }
         self.resample();
@@ -224,7 +224,7 @@ impl SearchMethod for Pf {
     fn visual(&mut self, _ctx: &Context) -> Option<MethodVisual<'_>> {
         Some(MethodVisual {
             label: "particles",
-            points: &self.vis_points,
+            quads: &self.vis_quads,
             weights: &self.vis_weights,
             chosen: None,
         })

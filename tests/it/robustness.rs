@@ -86,7 +86,9 @@ fn under_moving_light_the_drift_of_ssd_and_zncc_is_in_their_cost_not_the_search(
         let mut t = Tracker::new(&spec).unwrap();
         let mut probe = Tracker::new(&one).unwrap();
         t.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
-        probe.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
+        probe
+            .initialize(FrameInput::Gray8(&frames[0]), &truth)
+            .unwrap();
         t.set_corners(&truth).unwrap();
         let out = t.update(FrameInput::Gray8(&frames[21]), &mut NoObserver);
         probe.set_corners(&truth).unwrap();

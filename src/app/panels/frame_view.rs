@@ -168,19 +168,19 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     interact(app, ui, &response, &t, &painter);
 }
 
-/// A sampling method's points: faint when unlike the target, bright when like it; the chosen
-/// one ringed.
+/// A sampling method's candidates: the corners of the target under each, faint when unlike the
+/// template, bright when like it; the chosen one outlined.
 fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
-    for (p, &w) in v.points.iter().zip(&v.weights) {
-        let a = (0.15 + 0.85 * w.clamp(0.0, 1.0)).min(1.0);
-        painter.circle_filled(
-            t.to_screen(*p),
-            1.0 + 1.5 * w.clamp(0.0, 1.0),
-            c.gamma_multiply(a),
-        );
+    for (q, &w) in v.quads.iter().zip(&v.weights) {
+        let w = w.clamp(0.0, 1.0);
+        let col = c.gamma_multiply(0.12 + 0.88 * w);
+        for p in q.0 {
+            painter.circle_filled(t.to_screen(p), 0.8 + 1.4 * w, col);
+        }
     }
-    if let Some(p) = v.chosen.and_then(|k| v.points.get(k)) {
-        painter.circle_stroke(t.to_screen(*p), 6.0, egui::Stroke::new(2.0, Color32::WHITE));
+    if let Some(q) = v.chosen.and_then(|k| v.quads.get(k)) {
+        let pts = quad_points(t, q);
+        painter.add(Shape::closed_line(pts, Stroke::new(1.5, Color32::WHITE)));
     }
 }
 

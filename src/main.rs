@@ -667,7 +667,9 @@ fn print_list() {
     for e in ssm::REGISTRY {
         row(e.name, e.aliases, e.description);
     }
-    println!("search methods (--sm; composites: cascade:A+B+..., parallel:A+B+...):");
+    println!(
+        "search methods (--sm; composites: cascade:A+B+... stages in turn, parallel:A+B+... the most similar, lm:A Levenberg-Marquardt damping):"
+    );
     for e in sm::REGISTRY {
         row(e.name, e.aliases, e.description);
         for d in e.build.params {

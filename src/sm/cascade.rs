@@ -6,6 +6,10 @@
 //!   sampling stage gives a coarse estimate with a wide basin, a gradient stage refines it.
 //! - **Parallel** (`parallel:a+b+...`): every stage runs a whole frame from the same start; the
 //!   estimate with the highest similarity is kept. The observer sees one iteration per frame.
+//! - **Levenberg-Marquardt** (`lm:a`, for the gradient methods): the Newton system's diagonal is
+//!   scaled by `1 + lambda`. Each iteration learns the similarity at the parameters the previous
+//!   step reached: if it fell, that step is undone and `lambda` grows tenfold; if it rose, the
+//!   step is kept and `lambda` shrinks tenfold (from 0.01 at each frame's start).
 
 use super::{Context, Control, LossReason, MethodVisual, SearchMethod, SmConfig, Step};
 use crate::am::Capabilities;
@@ -204,5 +208,79 @@ impl SearchMethod for Parallel {
     fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
         let k = (0..self.stages.len()).find(|&k| self.stages[k].visual(ctx).is_some())?;
         self.stages[k].visual(ctx)
+    }
+}
+
+/// A gradient method with Levenberg-Marquardt damping and step rejection.
+#[derive(Debug)]
+pub struct LevenbergMarquardt {
+    name: String,
+    inner: Box<dyn SearchMethod>,
+    lambda: f64,
+    /// The parameters and similarity the last accepted step started from.
+    last: Option<(crate::ssm::Params, f64)>,
+}
+
+impl LevenbergMarquardt {
+    pub fn new(name: String, mut stages: Vec<Box<dyn SearchMethod>>) -> Self {
+        let inner = stages.remove(0);
+        LevenbergMarquardt {
+            name,
+            inner,
+            lambda: 0.01,
+            last: None,
+        }
+    }
+}
+
+impl SearchMethod for LevenbergMarquardt {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn requires(&self) -> Capabilities {
+        self.inner.requires()
+    }
+    fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
+        self.inner.initialize(ctx, img)
+    }
+    fn start_frame(&mut self, ctx: &mut Context) {
+        self.lambda = 0.01;
+        self.last = None;
+        self.inner.start_frame(ctx);
+    }
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
+        let start = ctx.params;
+        ctx.damping = self.lambda;
+        let step = self.inner.iterate(ctx, img);
+        ctx.damping = 0.0;
+        let step = step?;
+        match self.last {
+            Some((prev, f_prev)) if step.similarity < f_prev => {
+                // The previous step made things worse: undo it, damp more, try again from there.
+                ctx.params = prev;
+                self.lambda = (self.lambda * 10.0).min(1e8);
+                Ok(Step {
+                    similarity: f_prev,
+                    control: if self.lambda >= 1e8 {
+                        Control::Done
+                    } else {
+                        Control::Continue
+                    },
+                })
+            }
+            Some((_, f_prev)) if step.similarity > f_prev => {
+                self.last = Some((start, step.similarity));
+                self.lambda = (self.lambda / 10.0).max(1e-9);
+                Ok(step)
+            }
+            // The first iteration of the frame, or the same point again after a rejection.
+            _ => {
+                self.last = Some((start, step.similarity));
+                Ok(step)
+            }
+        }
+    }
+    fn max_iterations(&self, max_iters: usize) -> usize {
+        self.inner.max_iterations(max_iters)
     }
 }

@@ -134,8 +134,8 @@ pub struct SmDef {
 }
 
 /// Every search method. Composites are named `cascade:a+b+...` (each stage in turn, each with
-/// the tracker's iteration limit) and `parallel:a+b+...` (each from the same start, the best by
-/// similarity kept).
+/// the tracker's iteration limit), `parallel:a+b+...` (each from the same start, the best by
+/// similarity kept) and `lm:a` (a gradient method with Levenberg-Marquardt damping).
 pub const REGISTRY: &[Entry<SmDef>] = &[
     falk::ENTRY,
     ialk::ENTRY,
@@ -152,7 +152,7 @@ pub const REGISTRY: &[Entry<SmDef>] = &[
 /// The stages of a composite name: `Some(("cascade", ["nn", "iclk"]))`.
 fn composite(name: &str) -> Option<(&'static str, Vec<&str>)> {
     let name = name.trim();
-    for kind in ["cascade", "parallel"] {
+    for kind in ["cascade", "parallel", "lm"] {
         if name.len() > kind.len() + 1
             && name[..kind.len()].eq_ignore_ascii_case(kind)
             && name.as_bytes()[kind.len()] == b':'
@@ -171,7 +171,12 @@ fn composite(name: &str) -> Option<(&'static str, Vec<&str>)> {
 pub fn canonical_name(name: &str) -> crate::Result<String> {
     match composite(name) {
         Some((kind, stages)) => {
-            if stages.len() < 2 {
+            if kind == "lm" && stages.len() != 1 {
+                return Err(crate::Error::InvalidParameter(format!(
+                    "'{name}': lm takes one gradient search method, e.g. lm:iclk"
+                )));
+            }
+            if kind != "lm" && stages.len() < 2 {
                 return Err(crate::Error::InvalidParameter(format!(
                     "{kind} '{name}' needs at least two stages joined by '+'"
                 )));
@@ -230,6 +235,7 @@ fn build_checked(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMeth
                 .collect::<crate::Result<Vec<_>>>()?;
             Ok(match kind {
                 "cascade" => Box::new(cascade::Cascade::new(name.to_string(), built, cfg)),
+                "lm" => Box::new(cascade::LevenbergMarquardt::new(name.to_string(), built)),
                 _ => Box::new(cascade::Parallel::new(name.to_string(), built, cfg)),
             })
         }
@@ -258,6 +264,8 @@ pub struct Context {
     pub am: Box<dyn Am>,
     /// The Hessian kind to use (resolved: never [`HessianKind::Default`]).
     pub hessian: HessianKind,
+    /// Levenberg-Marquardt damping `lambda` of the Newton steps (0: none); set by `lm:`.
+    pub damping: f64,
     pub dof: usize,
     /// Image <-> normalised frame.
     pub norm: Normaliser,
@@ -304,6 +312,7 @@ impl Context {
             ssm,
             am,
             hessian,
+            damping: 0.0,
             dof,
             norm: Normaliser {
                 cx: 0.0,
@@ -459,7 +468,18 @@ impl Context {
     ) -> Result<(), LossReason> {
         let mut g = [0.0f64; MAX_DOF];
         jt_times(jac, &self.grad, self.dof, &mut g);
-        let dp = newton_step(h, &g, self.dof).ok_or(LossReason::Singular)?;
+        let dp = if self.damping > 0.0 {
+            // Levenberg-Marquardt: the diagonal scaled by 1 + lambda (a shorter, more
+            // gradient-like step).
+            let mut hd = *h;
+            for i in 0..self.dof {
+                hd[i * self.dof + i] *= 1.0 + self.damping;
+            }
+            newton_step(&hd, &g, self.dof)
+        } else {
+            newton_step(h, &g, self.dof)
+        }
+        .ok_or(LossReason::Singular)?;
         self.apply(&dp, update)
     }
 

@@ -241,3 +241,33 @@ fn the_projected_nn_index_is_as_accurate_as_exact_search() {
         assert!(e >= 45, "{m}: exact {e}");
     }
 }
+
+#[test]
+fn composites_recover_known_warps() {
+    // Levenberg-Marquardt variants, a cascade and a parallel combination, as the registry's
+    // methods are tested above.
+    for sm in [
+        "lm:iclk",
+        "lm:fclk",
+        "lm:esm",
+        "lm:falk",
+        "cascade:nn1k+esm",
+        "parallel:esm+fclk",
+    ] {
+        let spec = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        let ok = converged(&spec, 2.0, 50, 0.1, 42);
+        eprintln!("{sm}: {ok}/50");
+        assert!(ok >= 48, "{sm}: {ok}/50");
+    }
+    // Damping trades speed for a wider basin: at sigma 8 px it does not do worse.
+    for sm in ["iclk", "esm"] {
+        let plain = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        let lm = TrackerSpec::from_names(&format!("lm:{sm}"), "ssd", "homography").unwrap();
+        let (p, l) = (
+            converged(&plain, 8.0, 60, 0.1, 3),
+            converged(&lm, 8.0, 60, 0.1, 3),
+        );
+        eprintln!("sigma 8 px: {sm} {p}/60, lm:{sm} {l}/60");
+        assert!(l + 3 >= p, "lm:{sm} {l} vs {sm} {p}");
+    }
+}

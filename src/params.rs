@@ -288,6 +288,9 @@ pub struct TrackerParams {
     pub seed: u64,
     /// What a tracker does after it lost the target.
     pub on_loss: LossPolicy,
+    /// Hierarchical search over SSMs (MTF's `hrch`): each frame is first searched with the SSMs
+    /// of 2, 4 and 6 DOF below the tracker's own, each from the previous one's result.
+    pub ssm_hierarchy: bool,
 }
 
 /// What a tracker does after a loss of track.
@@ -379,6 +382,11 @@ pub const TRACKER_PARAMS: &[ParamDef] = &[
         "after a loss of track: stop (until re-initialised) or continue from the last good estimate",
         &["stop", "continue"],
     ),
+    ParamDef::choice(
+        "ssm_hierarchy",
+        "off, or on: search translation, similitude and affine (those below the tracker's SSM) first, then the tracker's SSM (MTF's hrch)",
+        &["off", "on"],
+    ),
 ];
 
 impl Default for TrackerParams {
@@ -394,6 +402,7 @@ impl Default for TrackerParams {
             pyramid_levels: 0,
             seed: 0,
             on_loss: LossPolicy::Stop,
+            ssm_hierarchy: false,
         };
         for d in TRACKER_PARAMS {
             p.set_value(d.name, d.default);
@@ -423,6 +432,7 @@ impl TrackerParams {
             "roi_margin" => self.roi_margin,
             "pyramid_levels" => self.pyramid_levels as f64,
             "seed" => self.seed as f64,
+            "ssm_hierarchy" => self.ssm_hierarchy as u8 as f64,
             "on_loss" => match self.on_loss {
                 LossPolicy::Stop => 0.0,
                 LossPolicy::Continue => 1.0,
@@ -445,6 +455,7 @@ impl TrackerParams {
             "roi_margin" => self.roi_margin = v,
             "pyramid_levels" => self.pyramid_levels = whole,
             "seed" => self.seed = v.max(0.0) as u64,
+            "ssm_hierarchy" => self.ssm_hierarchy = whole == 1,
             "on_loss" => {
                 self.on_loss = if whole == 1 {
                     LossPolicy::Continue

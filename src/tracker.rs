@@ -366,6 +366,8 @@ pub struct RegistrationTracker {
     sm: Box<dyn SearchMethod>,
     /// Pyramid levels 1, 2, ... (coarser and coarser), each with its own template.
     coarse: Vec<(Context, Box<dyn SearchMethod>)>,
+    /// The SSM hierarchy's stages (fewer DOF first), at full resolution.
+    lower: Vec<(Context, Box<dyn SearchMethod>)>,
     pre: Preprocessor,
     /// Builds the pyramid of already smoothed input.
     pre_copy: Preprocessor,
@@ -417,6 +419,17 @@ impl RegistrationTracker {
             );
             coarse.push((c, sm::build(&spec.sm, &cfg)?));
         }
+        let mut lower = Vec::new();
+        if p.ssm_hierarchy {
+            let dof = ssm::build(&spec.ssm)?.dof();
+            for name in ["translation", "similitude", "affine"] {
+                let m = ssm::build(name)?;
+                if m.dof() < dof {
+                    let c = Context::new(m, am::build(&spec.am)?, p.hessian, p.res);
+                    lower.push((c, sm::build(&spec.sm, &cfg)?));
+                }
+            }
+        }
         let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma));
         Ok(RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
@@ -424,6 +437,7 @@ impl RegistrationTracker {
             ctx,
             sm,
             coarse,
+            lower,
             pre,
             pre_copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
             status: TrackStatus::Uninitialized,
@@ -506,8 +520,38 @@ impl RegistrationTracker {
         let t1 = Instant::now();
         timing.preprocess += t1 - t0;
         let params = &self.params;
-        let mut p = self.ctx.params;
         let mut done = 0;
+        // The SSM hierarchy: each stage starts from its SSM's least-squares fit to the corners the
+        // previous stage found (every context shares the normaliser and the template corners).
+        if !self.lower.is_empty() {
+            let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+            // The corners in the normalised frame.
+            let m = self.ctx.ssm.matrix(&self.ctx.params);
+            let mut corners = self
+                .ctx
+                .template_corners
+                .map(|c| crate::geometry::apply_homography(&m, c));
+            for (ctx, sm) in self.lower.iter_mut() {
+                ctx.params = ctx
+                    .ssm
+                    .fit(&ctx.template_corners.0, &corners.0)
+                    .ok_or(LossReason::Singular)?;
+                let (_, iters, _, _) = Self::search(
+                    ctx, &mut **sm, params, self.frame, 0, done, &view, observer, started,
+                )?;
+                done += iters;
+                let m = ctx.ssm.matrix(&ctx.params);
+                corners = ctx
+                    .template_corners
+                    .map(|c| crate::geometry::apply_homography(&m, c));
+            }
+            self.ctx.params = self
+                .ctx
+                .ssm
+                .fit(&self.ctx.template_corners.0, &corners.0)
+                .ok_or(LossReason::Singular)?;
+        }
+        let mut p = self.ctx.params;
         // Coarse to fine: each level starts from the parameters the coarser one found (the
         // parameters live in the normalised frame, the same at every level).
         for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate().rev() {
@@ -603,8 +647,12 @@ impl RegistrationTracker {
     /// Gives the AMs that keep a model (SCV's intensity map...) the patch at the frame's final
     /// parameters, at every pyramid level.
     fn update_models(&mut self, input: FrameInput<'_>) {
-        let levels = std::iter::once(&mut self.ctx).chain(self.coarse.iter_mut().map(|(c, _)| c));
-        for (l, ctx) in levels.enumerate() {
+        let lower = self.lower.iter_mut().map(|(c, _)| (0, c));
+        let levels = std::iter::once(&mut self.ctx)
+            .chain(self.coarse.iter_mut().map(|(c, _)| c))
+            .enumerate()
+            .chain(lower);
+        for (l, ctx) in levels {
             if ctx.am.updates_model() {
                 let p = ctx.params;
                 ctx.warp_grid(&p);
@@ -683,6 +731,14 @@ impl VisualTracker for RegistrationTracker {
                     "cannot track {quad} at pyramid level {}: {r}",
                     l + 1
                 ))
+            })?;
+        }
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        for (ctx, sm) in self.lower.iter_mut() {
+            ctx.set_region(quad, self.params.res)?;
+            ctx.sample_template(&view);
+            sm.initialize(ctx, &view).map_err(|r| {
+                Error::InvalidRegion(format!("cannot track {quad} with {}: {r}", ctx.ssm.name()))
             })?;
         }
         self.status = TrackStatus::Tracking;

@@ -271,3 +271,25 @@ fn composites_recover_known_warps() {
         assert!(l + 3 >= p, "lm:{sm} {l} vs {sm} {p}");
     }
 }
+
+#[test]
+fn the_ssm_hierarchy_recovers_known_warps() {
+    // MTF's hrch: translation, similitude and affine first, then the tracker's SSM.
+    for (sm, m) in [
+        ("iclk", "homography"),
+        ("esm", "homography"),
+        ("fclk", "affine"),
+    ] {
+        let mut h = TrackerSpec::from_names(sm, "zncc", m).unwrap();
+        h.set_param("ssm_hierarchy", "on").unwrap();
+        let ok = converged(&h, 2.0, 50, 0.1, 42);
+        let plain = TrackerSpec::from_names(sm, "zncc", m).unwrap();
+        let (p8, h8) = (
+            converged(&plain, 8.0, 60, 0.1, 3),
+            converged(&h, 8.0, 60, 0.1, 3),
+        );
+        eprintln!("{sm} {m} hierarchy: {ok}/50 at 2 px; at 8 px {h8}/60 (plain {p8}/60)");
+        assert!(ok >= 48, "{sm} {m}: {ok}/50");
+        assert!(h8 + 6 >= p8, "{sm} {m}: {h8} vs {p8}");
+    }
+}

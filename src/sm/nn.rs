@@ -55,7 +55,7 @@ const fn params(samples: f64) -> [ParamDef; 6] {
             "dimensions of the projected index",
             4.0,
             1024.0,
-            64.0,
+            32.0,
         ),
         ParamDef::int(
             "candidates",

@@ -223,3 +223,36 @@ fn screenshot_under_xvfb_is_not_blank() {
     }
     assert!(colours.len() > 500, "only {} colours", colours.len());
 }
+
+#[test]
+fn nn_samples_reach_the_frame_view_and_method_parameters_the_panel() {
+    let d = TempDir::new("gui-nn");
+    let seq = small_sequence(d.path(), 6);
+    let mut state = state_on(&seq);
+    let r = state.trackers[0].spec.registration_mut().unwrap();
+    r.sm = "nn1k".into();
+    r.method.set("samples", 200.0);
+    state.trackers.truncate(1);
+    state.view.show_samples = true;
+    let mut h = harness(state);
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    // The method's own parameters are in the panel, from their definitions.
+    h.get_by_label("Parameters 1").click();
+    h.run_steps(3);
+    h.get_by_label("samples");
+    h.get_by_label("candidates");
+    h.get_by_label("Play").click();
+    step_until(&mut h, "the end of the sequence", |a| {
+        a.tracked_until() == Some(5)
+    });
+    let a = h.state();
+    let v = a
+        .result(0, 5)
+        .and_then(|r| r.visual.clone())
+        .expect("samples of the newest frame");
+    assert_eq!(v.quads.len(), 200);
+    assert_eq!(v.weights.len(), 200);
+    assert!(v.chosen.is_some_and(|k| k < 200));
+    // Older frames drop theirs (memory stays bounded).
+    assert!(a.result(0, 3).unwrap().visual.is_none());
+}

@@ -18,6 +18,7 @@ mod mi;
 mod ncc;
 mod parzen;
 mod rscv;
+mod sad;
 mod scv;
 mod ssd;
 mod zncc;
@@ -147,6 +148,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     lscv::ENTRY,
     mi::ENTRY,
     ccre::ENTRY,
+    sad::ENTRY,
 ];
 
 /// The AM called `name` (or one of its aliases).

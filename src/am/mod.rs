@@ -21,6 +21,7 @@ mod rscv;
 mod sad;
 mod scv;
 mod ssd;
+mod ssim;
 mod zncc;
 
 use crate::linalg::MAX_DOF;
@@ -148,6 +149,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     lscv::ENTRY,
     mi::ENTRY,
     ccre::ENTRY,
+    ssim::ENTRY,
     sad::ENTRY,
 ];
 

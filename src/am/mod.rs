@@ -16,6 +16,7 @@ mod intensity_map;
 mod lscv;
 mod mi;
 mod ncc;
+mod nssd;
 mod parzen;
 mod rscv;
 mod sad;
@@ -150,6 +151,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     mi::ENTRY,
     ccre::ENTRY,
     ssim::ENTRY,
+    nssd::ENTRY,
     sad::ENTRY,
 ];
 

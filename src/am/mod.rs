@@ -21,6 +21,7 @@ mod parzen;
 mod rscv;
 mod sad;
 mod scv;
+mod spss;
 mod ssd;
 mod ssim;
 mod zncc;
@@ -152,6 +153,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     ccre::ENTRY,
     ssim::ENTRY,
     nssd::ENTRY,
+    spss::ENTRY,
     sad::ENTRY,
 ];
 

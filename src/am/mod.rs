@@ -18,6 +18,7 @@ mod mi;
 mod ncc;
 mod nssd;
 mod parzen;
+mod riu;
 mod rscv;
 mod sad;
 mod scv;
@@ -154,6 +155,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     ssim::ENTRY,
     nssd::ENTRY,
     spss::ENTRY,
+    riu::ENTRY,
     sad::ENTRY,
 ];
 

@@ -16,6 +16,7 @@ mod intensity_map;
 mod lscv;
 mod mi;
 mod ncc;
+mod ngf;
 mod nssd;
 mod parzen;
 mod riu;
@@ -156,6 +157,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     nssd::ENTRY,
     spss::ENTRY,
     riu::ENTRY,
+    ngf::ENTRY,
     sad::ENTRY,
 ];
 

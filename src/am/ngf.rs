@@ -142,7 +142,7 @@ fn dims(n: usize) -> (usize, usize) {
         return (0, 0);
     }
     let mut w = (n as f64).sqrt().floor() as usize;
-    while w > 1 && n % w != 0 {
+    while w > 1 && !n.is_multiple_of(w) {
         w -= 1;
     }
     let w = w.max(1);

@@ -83,7 +83,7 @@ const S_MAX: f64 = 14.0;
 /// Histogram index of bin coordinate `floor(s) - 1` is `floor(s) - 1 + OFFSET`.
 const OFFSET: i64 = 8;
 /// Histogram side.
-const SIDE: usize = 25;
+pub(crate) const SIDE: usize = 25;
 
 /// Which function of the joint histogram.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,18 +95,18 @@ pub(crate) enum Measure {
 /// The B-spline weights of every pixel of a patch: the first of its four bins, the weights, and
 /// their first and second derivatives with respect to the bin coordinate.
 #[derive(Clone, Debug, Default)]
-struct Weights {
-    base: Vec<u32>,
-    w: Vec<[f64; 4]>,
-    d: Vec<[f64; 4]>,
-    d2: Vec<[f64; 4]>,
+pub(crate) struct Weights {
+    pub base: Vec<u32>,
+    pub w: Vec<[f64; 4]>,
+    pub d: Vec<[f64; 4]>,
+    pub d2: Vec<[f64; 4]>,
     /// Range of histogram indices in use (`lo..hi`).
-    lo: usize,
-    hi: usize,
+    pub lo: usize,
+    pub hi: usize,
 }
 
 impl Weights {
-    fn fill(&mut self, x: &[f32]) {
+    pub fn fill(&mut self, x: &[f32]) {
         let n = x.len();
         self.base.resize(n, 0);
         self.w.resize(n, [0.0; 4]);

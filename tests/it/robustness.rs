@@ -28,7 +28,7 @@ pub fn lit_static_sequence(frames: usize, seed: u64) -> (Vec<GrayU8>, Quad) {
         for y in 0..h {
             for x in 0..w {
                 let (fx, fy) = (x as f64, y as f64);
-                let inside = fx >= 170.0 && fx < 310.0 && fy >= 110.0 && fy < 250.0;
+                let inside = (170.0..310.0).contains(&fx) && (110.0..250.0).contains(&fy);
                 let base = if inside {
                     let (u, v) = ((x - 170) * 2, (y - 110) * 2);
                     let s = tex.data[(v % tex.height) * tex.width + (u % tex.width)] as f64;

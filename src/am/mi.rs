@@ -38,29 +38,7 @@ impl Am for Mi {
     fn default_hessian(&self) -> HessianKind {
         HessianKind::AfterConvergence
     }
-    fn set_template(&mut self, template: &[f32]) {
-        self.0.set_template(template)
-    }
-    fn template(&self) -> &[f32] {
-        self.0.template()
-    }
-    fn similarity(&mut self, current: &[f32]) -> f64 {
-        self.0.similarity(current)
-    }
-    fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
-        self.0.gradient(wrt, current, grad)
-    }
-    fn hessian(
-        &mut self,
-        wrt: Wrt,
-        kind: HessianKind,
-        current: &[f32],
-        jac: &[f32],
-        dof: usize,
-        out: &mut [f64; MAX_DOF * MAX_DOF],
-    ) {
-        self.0.hessian(wrt, kind, current, jac, dof, out)
-    }
+    super::forward_to_engine!();
 }
 
 #[cfg(test)]

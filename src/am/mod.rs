@@ -22,7 +22,6 @@ mod lscv;
 mod mi;
 mod ncc;
 mod ngf;
-mod nssd;
 mod parzen;
 mod riu;
 mod rscv;
@@ -145,6 +144,37 @@ pub trait Am: Send + Sync + std::fmt::Debug {
     }
 }
 
+/// Implements the [`Am`] methods that a newtype model (`struct M(Engine)`) forwards to its
+/// engine: the template, the similarity and its derivatives.
+macro_rules! forward_to_engine {
+    () => {
+        fn set_template(&mut self, template: &[f32]) {
+            self.0.set_template(template)
+        }
+        fn template(&self) -> &[f32] {
+            self.0.template()
+        }
+        fn similarity(&mut self, current: &[f32]) -> f64 {
+            self.0.similarity(current)
+        }
+        fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
+            self.0.gradient(wrt, current, grad)
+        }
+        fn hessian(
+            &mut self,
+            wrt: Wrt,
+            kind: HessianKind,
+            current: &[f32],
+            jac: &[f32],
+            dof: usize,
+            out: &mut [f64; MAX_DOF * MAX_DOF],
+        ) {
+            self.0.hessian(wrt, kind, current, jac, dof, out)
+        }
+    };
+}
+use forward_to_engine;
+
 /// Builds an AM.
 pub type AmBuilder = fn() -> Box<dyn Am>;
 
@@ -159,7 +189,6 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     mi::ENTRY,
     ccre::ENTRY,
     ssim::ENTRY,
-    nssd::ENTRY,
     spss::ENTRY,
     riu::ENTRY,
     ngf::ENTRY,

@@ -9,7 +9,8 @@ use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "zncc",
-    aliases: &[],
+    // MTF's NSSD (SSD of zero-mean, unit-variance patches) is N (rho - 1): this model exactly.
+    aliases: &["nssd"],
     description: "zero-mean normalised cross-correlation (SSD of z-scores)",
     build: || Box::new(Zncc(Correlation::new(true))),
 };
@@ -21,30 +22,8 @@ impl Am for Zncc {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
-    fn set_template(&mut self, template: &[f32]) {
-        self.0.set_template(template)
-    }
-    fn template(&self) -> &[f32] {
-        self.0.template()
-    }
+    super::forward_to_engine!();
     fn embed(&self, patch: &[f32], out: &mut [f32]) {
         self.0.embed(patch, out)
-    }
-    fn similarity(&mut self, current: &[f32]) -> f64 {
-        self.0.similarity(current)
-    }
-    fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
-        self.0.gradient(wrt, current, grad)
-    }
-    fn hessian(
-        &mut self,
-        wrt: Wrt,
-        kind: HessianKind,
-        current: &[f32],
-        jac: &[f32],
-        dof: usize,
-        out: &mut [f64; MAX_DOF * MAX_DOF],
-    ) {
-        self.0.hessian(wrt, kind, current, jac, dof, out)
     }
 }

@@ -48,27 +48,7 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    fn smooth_patch(rng: &mut Rng, res: usize) -> Vec<f32> {
-        let waves: Vec<(f32, f32, f32)> = (0..6)
-            .map(|_| {
-                (
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.0, std::f64::consts::TAU) as f32,
-                )
-            })
-            .collect();
-        (0..res * res)
-            .map(|i| {
-                let (x, y) = ((i % res) as f32, (i / res) as f32);
-                let v: f32 = waves
-                    .iter()
-                    .map(|&(a, b, p)| (a * x + b * y + p).sin())
-                    .sum();
-                125.0 + 17.0 * v
-            })
-            .collect()
-    }
+    use crate::am::tests::smooth_patch;
 
     #[test]
     fn maximum_at_identity_over_shifts_and_robust_to_gain_and_bias() {

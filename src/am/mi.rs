@@ -46,28 +46,7 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    fn smooth_patch(rng: &mut Rng, res: usize) -> Vec<f32> {
-        // A smooth random texture (sum of a few sinusoids) in 20..230.
-        let waves: Vec<(f32, f32, f32)> = (0..6)
-            .map(|_| {
-                (
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.0, std::f64::consts::TAU) as f32,
-                )
-            })
-            .collect();
-        (0..res * res)
-            .map(|i| {
-                let (x, y) = ((i % res) as f32, (i / res) as f32);
-                let v: f32 = waves
-                    .iter()
-                    .map(|&(a, b, p)| (a * x + b * y + p).sin())
-                    .sum();
-                125.0 + 17.0 * v
-            })
-            .collect()
-    }
+    use crate::am::tests::smooth_patch;
 
     #[test]
     fn invariant_to_gain_and_bias_and_to_an_inversion() {

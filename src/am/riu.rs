@@ -252,9 +252,7 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    fn patch(rng: &mut Rng, n: usize) -> Vec<f32> {
-        (0..n).map(|_| rng.range(20.0, 230.0) as f32).collect()
-    }
+    use crate::am::tests::patch;
 
     #[test]
     fn zero_at_identity_nearly_invariant_to_gain() {

@@ -3,8 +3,33 @@
 use super::*;
 use crate::rng::Rng;
 
-fn patch(rng: &mut Rng, n: usize) -> Vec<f32> {
+/// A random patch of `n` intensities in 20..230 (shared by the models' own tests).
+pub(super) fn patch(rng: &mut Rng, n: usize) -> Vec<f32> {
     (0..n).map(|_| rng.range(20.0, 230.0) as f32).collect()
+}
+
+/// A smooth random texture (a sum of a few sinusoids), `res x res`, around 125.
+pub(super) fn smooth_patch(rng: &mut Rng, res: usize) -> Vec<f32> {
+    // A smooth random texture (sum of a few sinusoids) in 20..230.
+    let waves: Vec<(f32, f32, f32)> = (0..6)
+        .map(|_| {
+            (
+                rng.range(0.05, 0.4) as f32,
+                rng.range(0.05, 0.4) as f32,
+                rng.range(0.0, std::f64::consts::TAU) as f32,
+            )
+        })
+        .collect();
+    (0..res * res)
+        .map(|i| {
+            let (x, y) = ((i % res) as f32, (i / res) as f32);
+            let v: f32 = waves
+                .iter()
+                .map(|&(a, b, p)| (a * x + b * y + p).sin())
+                .sum();
+            125.0 + 17.0 * v
+        })
+        .collect()
 }
 
 /// Similarity with the `wrt` argument replaced by `x`.

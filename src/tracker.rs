@@ -605,7 +605,9 @@ impl RegistrationTracker {
         let mut prev = ctx.corners(&ctx.params);
         let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
         sm.start_frame(ctx);
-        for it in 0..sm.max_iterations(params.max_iters) {
+        let budget = sm.max_iterations(params.max_iters);
+        let mut relearnt = 0;
+        for it in 0..budget {
             let s = sm.iterate(ctx, view)?;
             let f = s.similarity;
             let corners = ctx.corners(&ctx.params);
@@ -637,6 +639,16 @@ impl RegistrationTracker {
                 Control::Auto => step < params.eps,
             };
             if stop {
+                // A model that follows the light (SCV's intensity map) was learnt on the previous
+                // frame: once the search has settled, it learns this frame's light there and the
+                // search goes on (alternating the warp and the intensity map), up to three times a
+                // frame. Learnt only once per frame, after convergence, it lagged one frame behind
+                // a steady change of light; learnt where the frame starts, it absorbs the motion.
+                if ctx.am.updates_model() && relearnt < 3 && it + 1 < budget {
+                    relearnt += 1;
+                    Self::learn_model(ctx, sm, view);
+                    continue;
+                }
                 converged = true;
                 break;
             }
@@ -644,24 +656,16 @@ impl RegistrationTracker {
         Ok((prev, iterations, converged, similarity))
     }
 
-    /// Gives the AMs that keep a model (SCV's intensity map...) the patch at the frame's final
-    /// parameters, at every pyramid level.
-    fn update_models(&mut self, input: FrameInput<'_>) {
-        let lower = self.lower.iter_mut().map(|(c, _)| (0, c));
-        let levels = std::iter::once(&mut self.ctx)
-            .chain(self.coarse.iter_mut().map(|(c, _)| c))
-            .enumerate()
-            .chain(lower);
-        for (l, ctx) in levels {
-            if ctx.am.updates_model() {
-                let p = ctx.params;
-                ctx.warp_grid(&p);
-                ctx.sample(&Self::view(&self.pre, &self.pre_copy, input, l), false);
-                let values = std::mem::take(&mut ctx.values);
-                ctx.am.update_model(&values);
-                ctx.values = values;
-            }
-        }
+    /// The AM's model learns the patch of `view` at the current parameters; the search method
+    /// refreshes what depends on it.
+    fn learn_model(ctx: &mut Context, sm: &mut dyn SearchMethod, view: &ImageView) {
+        let p = ctx.params;
+        ctx.warp_grid(&p);
+        ctx.sample(view, false);
+        let values = std::mem::take(&mut ctx.values);
+        ctx.am.update_model(&values);
+        ctx.values = values;
+        sm.model_updated(ctx);
     }
 
     /// The loss-of-track checks on a frame's final quad.
@@ -841,7 +845,6 @@ impl VisualTracker for RegistrationTracker {
             Ok((q, iterations, converged, similarity)) => {
                 self.corners = q;
                 self.status = TrackStatus::Tracking;
-                self.update_models(input);
                 FrameOutcome {
                     frame: self.frame,
                     status: TrackStatus::Tracking,

@@ -91,8 +91,9 @@ impl Capabilities {
 /// Per iteration a search method calls [`Am::gradient`] (or [`Am::similarity`]) once, then
 /// possibly [`Am::hessian`] on the same patch: a model computes the statistics of a patch (means,
 /// norms, joint histograms) in the first call and the Hessian reuses them, so they are never built
-/// twice. Once a frame has converged the driver calls [`Am::update_model`] with the patch sampled
-/// at the final parameters, for the models that say so in [`Am::updates_model`].
+/// twice. For the models that say so in [`Am::updates_model`], each time the search settles on a
+/// frame the driver calls [`Am::update_model`] with the patch sampled there and lets the search go
+/// on (up to three times a frame), so that the model follows the light of the frame being tracked.
 pub trait Am: Send + Sync + std::fmt::Debug {
     /// The registry name.
     fn name(&self) -> &'static str;
@@ -127,13 +128,13 @@ pub trait Am: Send + Sync + std::fmt::Debug {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     );
-    /// Whether [`Am::update_model`] does something (the driver then samples the final patch of
-    /// each frame for it).
+    /// Whether [`Am::update_model`] does something (the driver then samples the patch where the
+    /// search settles for it).
     fn updates_model(&self) -> bool {
         false
     }
-    /// Updates an internal model (e.g. the intensity map of SCV) once a frame has converged;
-    /// `current` is the patch at the final parameters.
+    /// Updates an internal model (e.g. the intensity map of SCV) from `current`, the patch of the
+    /// frame being tracked where the search has settled.
     fn update_model(&mut self, _current: &[f32]) {}
     /// Writes the embedding of `patch` into `out` (same length as the patch): the squared L2
     /// distance between embeddings ranks patches as the similarity does, so that nearest-neighbour

@@ -64,6 +64,11 @@ impl SearchMethod for Cascade {
         }
         Ok(())
     }
+    fn model_updated(&mut self, ctx: &mut Context) {
+        for s in &mut self.stages {
+            s.model_updated(ctx);
+        }
+    }
     fn start_frame(&mut self, ctx: &mut Context) {
         self.stage = 0;
         self.count = 0;
@@ -147,6 +152,11 @@ impl SearchMethod for Parallel {
     }
     fn max_iterations(&self, _max_iters: usize) -> usize {
         1
+    }
+    fn model_updated(&mut self, ctx: &mut Context) {
+        for s in &mut self.stages {
+            s.model_updated(ctx);
+        }
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         // Each stage runs its own loop with the tracker's stop test and iteration limit.
@@ -242,6 +252,9 @@ impl SearchMethod for LevenbergMarquardt {
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         self.inner.initialize(ctx, img)
+    }
+    fn model_updated(&mut self, ctx: &mut Context) {
+        self.inner.model_updated(ctx);
     }
     fn start_frame(&mut self, ctx: &mut Context) {
         self.lambda = 0.01;

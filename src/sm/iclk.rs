@@ -35,6 +35,29 @@ impl Default for Iclk {
     }
 }
 
+impl Iclk {
+    /// The constant Hessian: at the template the current patch equals it. Allocation-free (it
+    /// runs after every frame for the AMs that keep a model).
+    fn template_hessian(&mut self, ctx: &mut Context) {
+        let kind = match ctx.hessian {
+            HessianKind::Newton => HessianKind::AfterConvergence,
+            k => k,
+        };
+        let template = std::mem::take(&mut ctx.template);
+        // The AM's contract: the Hessian follows a gradient on the same patch.
+        ctx.am.gradient(Wrt::Template, &template, &mut ctx.grad);
+        ctx.am.hessian(
+            Wrt::Template,
+            kind,
+            &template,
+            &self.jac,
+            ctx.dof,
+            &mut self.hessian,
+        );
+        ctx.template = template;
+    }
+}
+
 impl SearchMethod for Iclk {
     fn name(&self) -> &str {
         ENTRY.name
@@ -48,23 +71,13 @@ impl SearchMethod for Iclk {
             ctx.dof,
             &mut self.jac,
         );
-        // At the template the current patch equals it: the constant Hessian.
-        let kind = match ctx.hessian {
-            HessianKind::Newton => HessianKind::AfterConvergence,
-            k => k,
-        };
-        let template = ctx.template.clone();
-        // The AM's contract: the Hessian follows a gradient on the same patch.
-        ctx.am.gradient(Wrt::Template, &template, &mut ctx.grad);
-        ctx.am.hessian(
-            Wrt::Template,
-            kind,
-            &template,
-            &self.jac,
-            ctx.dof,
-            &mut self.hessian,
-        );
+        self.template_hessian(ctx);
         Ok(())
+    }
+    fn model_updated(&mut self, ctx: &mut Context) {
+        // An intensity map (SCV...) changed the AM's second derivative: refresh the constant
+        // Hessian (the Jacobian of the template does not change).
+        self.template_hessian(ctx);
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;

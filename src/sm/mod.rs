@@ -97,6 +97,9 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     }
     /// A new frame starts from `ctx.params`.
     fn start_frame(&mut self, _ctx: &mut Context) {}
+    /// The AM's model was just updated ([`Am::update_model`]): refresh what was computed from it
+    /// (ICLK's constant Hessian).
+    fn model_updated(&mut self, _ctx: &mut Context) {}
     /// One iteration on `img`: updates `ctx.params`.
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason>;
     /// How many iterations a frame may take, given the tracker's `max_iters` (a cascade gives

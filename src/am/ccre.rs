@@ -32,10 +32,7 @@ impl Am for Ccre {
         ENTRY.name
     }
     fn capabilities(&self) -> Capabilities {
-        Capabilities {
-            derivatives: true,
-            distance: false,
-        }
+        Capabilities::DERIVATIVES_ONLY
     }
     fn default_hessian(&self) -> HessianKind {
         HessianKind::AfterConvergence

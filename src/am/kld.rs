@@ -174,10 +174,7 @@ impl Am for Kld {
         ENTRY.name
     }
     fn capabilities(&self) -> Capabilities {
-        Capabilities {
-            derivatives: true,
-            distance: false,
-        }
+        Capabilities::DERIVATIVES_ONLY
     }
     fn default_hessian(&self) -> HessianKind {
         HessianKind::Newton
@@ -253,10 +250,7 @@ impl Am for Kld {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
-        let kind = match kind {
-            HessianKind::Default => self.default_hessian(),
-            k => k,
-        };
+        let kind = kind.or(self.default_hessian());
         let after = kind == HessianKind::AfterConvergence;
         if after {
             if !self.self_valid {

@@ -62,6 +62,16 @@ pub enum HessianKind {
     AfterConvergence,
 }
 
+impl HessianKind {
+    /// The kind itself, or `default` for [`HessianKind::Default`].
+    pub fn or(self, default: HessianKind) -> HessianKind {
+        match self {
+            HessianKind::Default => default,
+            k => k,
+        }
+    }
+}
+
 /// Optional capabilities that only some AMs have; a search method that needs one rejects AMs
 /// without it when the tracker is built.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -74,6 +84,12 @@ pub struct Capabilities {
 }
 
 impl Capabilities {
+    /// Analytic derivatives, no patch embedding (the robust models).
+    pub const DERIVATIVES_ONLY: Capabilities = Capabilities {
+        derivatives: true,
+        distance: false,
+    };
+
     /// What `need` asks for that `self` lacks, in words (`None` when nothing is missing).
     pub fn missing(&self, need: &Capabilities) -> Option<&'static str> {
         if need.derivatives && !self.derivatives {

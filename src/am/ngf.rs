@@ -213,10 +213,7 @@ impl Am for Ngf {
         ENTRY.name
     }
     fn capabilities(&self) -> Capabilities {
-        Capabilities {
-            derivatives: true,
-            distance: false,
-        }
+        Capabilities::DERIVATIVES_ONLY
     }
     fn set_template(&mut self, template: &[f32]) {
         let n = template.len();
@@ -280,10 +277,7 @@ impl Am for Ngf {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
-        let kind = match kind {
-            HessianKind::Default => self.default_hessian(),
-            k => k,
-        };
+        let kind = kind.or(self.default_hessian());
         let after = kind == HessianKind::AfterConvergence;
         if !after {
             self.observe(current);

@@ -133,10 +133,7 @@ impl Am for Riu {
         ENTRY.name
     }
     fn capabilities(&self) -> Capabilities {
-        Capabilities {
-            derivatives: true,
-            distance: false,
-        }
+        Capabilities::DERIVATIVES_ONLY
     }
     fn set_template(&mut self, template: &[f32]) {
         self.template.clear();
@@ -183,10 +180,7 @@ impl Am for Riu {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
-        let kind = match kind {
-            HessianKind::Default => self.default_hessian(),
-            k => k,
-        };
+        let kind = kind.or(self.default_hessian());
         let s = if kind == HessianKind::AfterConvergence {
             let t = std::mem::take(&mut self.template);
             let s = self.ratios(&t);

@@ -74,10 +74,7 @@ impl Am for Spss {
         ENTRY.name
     }
     fn capabilities(&self) -> Capabilities {
-        Capabilities {
-            derivatives: true,
-            distance: false,
-        }
+        Capabilities::DERIVATIVES_ONLY
     }
     fn set_template(&mut self, template: &[f32]) {
         self.template.clear();
@@ -121,10 +118,7 @@ impl Am for Spss {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
-        let kind = match kind {
-            HessianKind::Default => self.default_hessian(),
-            k => k,
-        };
+        let kind = kind.or(self.default_hessian());
         self.diag.resize(self.template.len(), 0.0);
         for ((h, &a), &b) in self.diag.iter_mut().zip(&self.template).zip(current) {
             let (x, y) = match wrt {

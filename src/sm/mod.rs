@@ -305,10 +305,7 @@ impl Context {
     /// A context for the given models with an `res x res` grid (buffers allocated here).
     pub fn new(ssm: Box<dyn Ssm>, am: Box<dyn Am>, hessian: HessianKind, res: usize) -> Self {
         let dof = ssm.dof();
-        let hessian = match hessian {
-            HessianKind::Default => am.default_hessian(),
-            k => k,
-        };
+        let hessian = hessian.or(am.default_hessian());
         let n = res * res;
         let z = |len: usize| vec![0.0f32; len];
         Context {

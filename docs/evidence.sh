@@ -26,11 +26,11 @@ render bricks_uc    ucsb_bricks_uc    skimage_brick.png  skimage_grass.png --occ
 render bricks_zm    ucsb_bricks_zm    skimage_brick.png  skimage_coffee.png --local-light 0.3
 
 ams=ssd,zncc,ncc,scv,rscv,lscv,mi,ccre
-# 1. Every AM x SM on homography (NN needs an AM with an embedding: MI and CCRE are refused,
-#    so they run with the gradient SMs only).
+# 1. Every AM x SM on homography (NN ranks MI and CCRE, which have no embedding, by their own
+#    similarity).
 "$bin" eval --dataset "$data" --sm falk,ialk,fclk,iclk,esm --am "$ams" --ssm homography \
     --jobs 2 --reinit --out "$out/grid_am_sm"
-"$bin" eval --dataset "$data" --sm nn1k,nn10k,nnic --am ssd,zncc,ncc,scv,rscv,lscv --ssm homography \
+"$bin" eval --dataset "$data" --sm nn1k,nn10k,nnic --am "$ams" --ssm homography \
     --jobs 2 --reinit --out "$out/grid_nn"
 # 2. Every SSM with ESM + ZNCC (homography is in grid 1, translation in grid 3).
 "$bin" eval --dataset "$data" --sm esm --am zncc \

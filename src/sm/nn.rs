@@ -18,6 +18,13 @@
 //! Johnson-Lindenstrauss map)
 //! (Johnson-Lindenstrauss), then re-ranks the `candidates` best exactly. `regtrack bench` compares
 //! the two (`--param index=exact`).
+//!
+//! Models without an embedding (MI, CCRE, SSIM, SAD, ...: [`Capabilities::distance`] false) are
+//! searched by their own similarity: the stored rows are the sample patches themselves, the
+//! `projected` index ranks them by the projection of their zero-mean, unit-norm intensities
+//! (invariant to gain and bias) and re-ranks the `candidates` best by the model's similarity to
+//! the query; `exact` scores every sample by the similarity (slow: `samples` evaluations per
+//! query, but exactly the model's nearest neighbour).
 
 use super::{Context, LossReason, MethodVisual, SearchMethod, SmConfig, SmDef, Step, Update};
 use crate::am::{Capabilities, dot};
@@ -142,6 +149,10 @@ pub struct Nn {
     order: Vec<u32>,
     best: Vec<f32>,
     chosen: usize,
+    /// For models without an embedding: rows are raw patches, ranked by this second instance of
+    /// the model (its template set to the query); `unit` is the normalised query.
+    scorer: Option<Box<dyn crate::am::Am>>,
+    unit: Vec<f32>,
     /// Teaching-view scratch.
     vis_quads: Vec<Quad>,
     vis_weights: Vec<f32>,
@@ -174,6 +185,8 @@ impl Nn {
             order: Vec::new(),
             best: Vec::new(),
             chosen: 0,
+            scorer: None,
+            unit: Vec::new(),
             vis_quads: Vec::new(),
             vis_weights: Vec::new(),
         }
@@ -197,20 +210,44 @@ impl Nn {
         (self.norms[k] + qnorm - 2.0 * dot(row, &self.query) as f32).max(0.0)
     }
 
+    /// The rank of sample `k` against the query (lower is nearer): the squared distance of the
+    /// embeddings, or the negated similarity of the patches for a model without an embedding.
+    fn exact_rank(&mut self, k: usize, qnorm: f32) -> f32 {
+        match self.scorer.as_mut() {
+            Some(am) => -(am.similarity(&self.data[k * self.n..(k + 1) * self.n]) as f32),
+            None => self.exact_distance(k, qnorm),
+        }
+    }
+
     /// The index of the nearest sample to `self.query`.
     fn nearest(&mut self) -> usize {
         let qnorm = dot(&self.query, &self.query) as f32;
+        if let Some(am) = self.scorer.as_mut() {
+            am.set_template(&self.query);
+        }
         if self.exact {
+            if self.scorer.is_some() {
+                for k in 0..self.samples {
+                    self.dist[k] = self.exact_rank(k, qnorm);
+                }
+                return argmin(&self.dist);
+            }
             for k in 0..self.samples {
                 self.dist[k] = self.exact_distance(k, qnorm);
             }
             return argmin(&self.dist);
         }
+        let key = if self.scorer.is_some() {
+            unit_patch(&self.query, &mut self.unit);
+            &self.unit
+        } else {
+            &self.query
+        };
         Self::project(
             &self.proj_idx,
             &self.proj_sign,
             self.per_dim,
-            &self.query,
+            key,
             &mut self.qred,
         );
         let d = self.dims;
@@ -239,13 +276,27 @@ impl Nn {
         let mut best = (f32::INFINITY, 0usize);
         for i in 0..self.order.len() {
             let k = self.order[i] as usize;
-            let e = self.exact_distance(k, qnorm);
+            let e = self.exact_rank(k, qnorm);
             if e < best.0 {
                 best = (e, k);
             }
         }
         best.1
     }
+}
+
+/// `out` = `patch` with zero mean and unit norm (zero when the patch is flat).
+fn unit_patch(patch: &[f32], out: &mut Vec<f32>) {
+    let n = patch.len().max(1) as f64;
+    let mean = patch.iter().map(|&v| v as f64).sum::<f64>() / n;
+    let norm = patch
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let scale = if norm > 1e-12 { 1.0 / norm } else { 0.0 };
+    out.clear();
+    out.extend(patch.iter().map(|&v| ((v as f64 - mean) * scale) as f32));
 }
 
 /// `|a - b|^2` over 8 independent lanes (so that it vectorises).
@@ -282,13 +333,17 @@ impl SearchMethod for Nn {
         self.name
     }
     fn requires(&self) -> Capabilities {
-        Capabilities {
-            derivatives: false,
-            distance: true,
-        }
+        // Models without an embedding are ranked by their similarity.
+        Capabilities::default()
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         let n = ctx.len();
+        self.scorer = if ctx.am.capabilities().distance {
+            None
+        } else {
+            // The registry built the tracker's model under this name, so it builds again.
+            Some(crate::am::build(ctx.am.name()).map_err(|_| LossReason::Singular)?)
+        };
         let s = self.samples;
         self.n = n;
         let mut rng = Rng::new(self.seed);
@@ -321,7 +376,11 @@ impl SearchMethod for Nn {
             ctx.warp_grid(&q);
             ctx.sample(img, false);
             let row = &mut self.data[k * n..(k + 1) * n];
-            ctx.am.embed(&ctx.values, row);
+            if self.scorer.is_some() {
+                row.copy_from_slice(&ctx.values);
+            } else {
+                ctx.am.embed(&ctx.values, row);
+            }
             self.norms[k] = dot(row, row) as f32;
             self.inverse.push(inv);
             self.candidates_quads
@@ -343,10 +402,14 @@ impl SearchMethod for Nn {
             self.reduced.resize(s * d, 0.0);
             self.qred.resize(d, 0.0);
             for k in 0..s {
-                let (row, out) = (
+                let (mut row, out) = (
                     &self.data[k * n..(k + 1) * n],
                     &mut self.reduced[k * d..(k + 1) * d],
                 );
+                if self.scorer.is_some() {
+                    unit_patch(row, &mut self.unit);
+                    row = &self.unit;
+                }
                 Self::project(&self.proj_idx, &self.proj_sign, per, row, out);
             }
             self.order.reserve(self.candidates + 1);
@@ -362,7 +425,11 @@ impl SearchMethod for Nn {
         ctx.warp_grid(&p);
         ctx.sample(img, false);
         let f = ctx.am.similarity(&ctx.values);
-        ctx.am.embed(&ctx.values, &mut self.query);
+        if self.scorer.is_some() {
+            self.query.copy_from_slice(&ctx.values);
+        } else {
+            ctx.am.embed(&ctx.values, &mut self.query);
+        }
         let k = self.nearest();
         self.chosen = k;
         self.queried_at = p;

@@ -47,6 +47,7 @@ pub mod dataset;
 pub mod error;
 pub mod eval;
 pub mod geometry;
+pub mod gt;
 pub mod imaging;
 pub mod linalg;
 pub mod observe;

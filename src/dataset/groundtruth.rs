@@ -4,7 +4,8 @@
 //! space or commas):
 //! - `frame00001.jpg ulx uly urx ury lrx lry llx lly` (TMT/MTF, after a header line `frame ...`);
 //! - `ulx uly urx ury lrx lry llx lly` (8 numbers: folders of images, POT `_gt_points.txt`);
-//! - `frame00012.jpg lost` (a frame without corners: tracking results of a lost tracker).
+//! - `frame00012.jpg lost` (a frame without corners: tracking results of a lost tracker; also
+//!   `occluded`, `none`, `invalid`), or the word alone in the 8-number layout.
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
@@ -21,7 +22,14 @@ pub struct GtEntry {
 }
 
 /// Words that mark a frame without corners.
-const NO_CORNERS: &[&str] = &["lost", "invalid", "invalid_tracker_state", "none", "nan"];
+const NO_CORNERS: &[&str] = &[
+    "lost",
+    "invalid",
+    "invalid_tracker_state",
+    "none",
+    "nan",
+    "occluded",
+];
 
 /// Parses ground-truth text; errors name `path` and the 1-based line.
 pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
@@ -37,6 +45,10 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
             .split(|c: char| c.is_whitespace() || c == ',')
             .filter(|t| !t.is_empty())
             .collect();
+        if tokens.is_empty() {
+            // Only separators.
+            continue;
+        }
         let err = |message: String| Error::Parse {
             path: path.to_path_buf(),
             line: line_no,
@@ -51,11 +63,14 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
         if is_header {
             continue;
         }
-        let (frame, nums) = if tokens[0].parse::<f64>().is_err() {
-            (Some(tokens[0].to_string()), &tokens[1..])
-        } else {
-            (None, &tokens[..])
-        };
+        let (frame, nums) =
+            if tokens.len() == 1 && NO_CORNERS.contains(&tokens[0].to_ascii_lowercase().as_str()) {
+                (None, &tokens[..])
+            } else if tokens[0].parse::<f64>().is_err() {
+                (Some(tokens[0].to_string()), &tokens[1..])
+            } else {
+                (None, &tokens[..])
+            };
         if nums.len() == 1 && NO_CORNERS.contains(&nums[0].to_ascii_lowercase().as_str()) {
             out.push(GtEntry { frame, quad: None });
             continue;
@@ -91,10 +106,63 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
     Ok(out)
 }
 
+/// Parses ground-truth bytes: text that is not UTF-8 is an error naming the line.
+pub fn parse_ground_truth_bytes(path: &Path, bytes: &[u8]) -> Result<Vec<GtEntry>> {
+    match std::str::from_utf8(bytes) {
+        Ok(text) => parse_ground_truth(path, text),
+        Err(e) => Err(Error::Parse {
+            path: path.to_path_buf(),
+            line: bytes[..e.valid_up_to()]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count()
+                + 1,
+            message: "not UTF-8 text".into(),
+        }),
+    }
+}
+
 /// Reads and parses a ground-truth file.
 pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_ground_truth(path, &text)
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_ground_truth_bytes(path, &bytes)
+}
+
+/// Writes ground truth atomically: with `names`, in the MTF format (header, frame names); else
+/// 8 numbers per line. Frames without corners are written `occluded` where `occluded` says so,
+/// `none` otherwise.
+pub fn write_ground_truth(
+    path: &Path,
+    quads: &[Option<Quad>],
+    occluded: &[bool],
+    names: Option<&[String]>,
+) -> Result<()> {
+    let mut text = String::new();
+    if names.is_some() {
+        text.push_str("frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n");
+    }
+    for (i, q) in quads.iter().enumerate() {
+        if let Some(names) = names {
+            match names
+                .get(i)
+                .filter(|n| !n.is_empty() && !n.contains(char::is_whitespace))
+            {
+                Some(n) => text.push_str(n),
+                None => text.push_str(&format!("frame{:05}", i + 1)),
+            }
+            text.push(' ');
+        }
+        match q {
+            Some(q) => {
+                let v: Vec<String> = q.to_array().iter().map(|v| format!("{v:.4}")).collect();
+                text.push_str(&v.join(" "));
+            }
+            None if occluded.get(i).copied().unwrap_or(false) => text.push_str("occluded"),
+            None => text.push_str("none"),
+        }
+        text.push('\n');
+    }
+    write_atomic(path, text.as_bytes())
 }
 
 /// Writes corners in the TMT/MTF format (`frame ulx uly ...` header, `frame%05d.<ext>` names,

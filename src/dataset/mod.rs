@@ -15,8 +15,8 @@ mod groundtruth;
 pub mod synth;
 
 pub use groundtruth::{
-    GtEntry, parse_ground_truth, read_ground_truth, write_atomic, write_corners,
-    write_corners_named,
+    GtEntry, parse_ground_truth, parse_ground_truth_bytes, read_ground_truth, write_atomic,
+    write_corners, write_corners_named, write_ground_truth,
 };
 
 use crate::error::{Error, Result};
@@ -98,8 +98,29 @@ impl Sequence {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let name = stem.strip_suffix("_gt_points").unwrap_or(&stem).to_string();
-        let parent = gt.parent().unwrap_or(Path::new("."));
+        let mut name = stem.strip_suffix("_gt_points").unwrap_or(&stem).to_string();
+        let mut parent = gt.parent().unwrap_or(Path::new(".")).to_path_buf();
+        // An exported correction (`<seq>_gt_<ssm>.txt` beside the original) or a low-DOF ground
+        // truth in MTF's OptGT layout (`<root>/OptGT/<seq>_<ssm>.txt`): the frames are the
+        // sequence's.
+        let ssm_suffix = |s: &str, sep: &str| {
+            crate::ssm::REGISTRY.iter().find_map(|e| {
+                s.strip_suffix(&format!("{sep}{}", e.name))
+                    .filter(|base| !base.is_empty())
+                    .map(str::to_string)
+            })
+        };
+        if parent.file_name().is_some_and(|n| n == "OptGT")
+            && let Some(base) = ssm_suffix(&name, "_")
+        {
+            name = base;
+            parent = parent.parent().unwrap_or(Path::new(".")).to_path_buf();
+        } else if let Some(base) = ssm_suffix(&name, "_gt_")
+            && !parent.join(&name).is_dir()
+        {
+            name = base;
+        }
+        let parent = parent.as_path();
         let candidates = [
             parent.join(&name).join("img"),
             parent.join(&name),

@@ -1,0 +1,589 @@
+//! Ground truth: low-DOF fitting (the paper's protocol, MTF's OptGT layout) and corrections that
+//! are never lost.
+//!
+//! A correction is kept per SSM (the 8-DOF ground truth and each low-DOF one are corrected
+//! separately; the 8-DOF SSMs share one) and per frame: corrected corners, or "occluded". Every
+//! edit goes to the [`journal`] beside the sequence's ground truth, synced to disk, *before* it
+//! takes effect; the original file is never written. [`Corrections::open`] replays the journal,
+//! so reopening a sequence after a crash restores every edit, undo and redo included.
+//! [`export`] writes the corrected ground truth atomically, in the sequence's own format and in
+//! OptGT layout.
+
+pub mod fit;
+pub mod journal;
+
+pub use fit::{
+    LowDofGroundTruth, best_fit, fit_ground_truth, ground_truth_dir, low_dof_ground_truth,
+    opt_gt_path, write_opt_gt,
+};
+pub use journal::{Change, Mark};
+
+use crate::dataset::{Sequence, read_ground_truth, write_ground_truth};
+use crate::error::{Error, Result};
+use crate::geometry::{Quad, alignment_error};
+use crate::ssm;
+use journal::{Record, Writer};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The key corrections are kept under for an SSM: its registry name, `homography` for every
+/// 8-DOF SSM (they describe the same quads).
+pub fn ssm_key(name: &str) -> Result<String> {
+    let m = ssm::build(name)?;
+    Ok(if m.dof() == 8 {
+        "homography".into()
+    } else {
+        m.name().to_string()
+    })
+}
+
+/// The journal of a sequence: `<ground-truth folder>/<seq>_corrections.jsonl`.
+pub fn journal_path(seq: &Sequence) -> PathBuf {
+    ground_truth_dir(seq).join(format!("{}_corrections.jsonl", seq.name))
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct Edit {
+    id: u64,
+    label: String,
+    changes: Vec<Change>,
+}
+
+/// The corrections of one sequence, with undo/redo and the journal.
+#[derive(Debug)]
+pub struct Corrections {
+    frames: usize,
+    marks: BTreeMap<(String, usize), Mark>,
+    done: Vec<Edit>,
+    undone: Vec<Edit>,
+    next_id: u64,
+    journal: Option<Writer>,
+    /// Edits (and undos/redos) since the last export.
+    since_export: usize,
+}
+
+/// What [`Corrections::open`] found in the journal.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Recovery {
+    /// Edits in effect after the replay.
+    pub edits: usize,
+    /// Frames (over every SSM) with a correction.
+    pub corrected: usize,
+    /// The last line was cut short by a crash and ignored.
+    pub truncated_tail: bool,
+}
+
+impl Corrections {
+    /// Corrections without a journal (tests, or a sequence whose folder is read-only).
+    pub fn in_memory(frames: usize) -> Self {
+        Corrections {
+            frames,
+            marks: BTreeMap::new(),
+            done: Vec::new(),
+            undone: Vec::new(),
+            next_id: 1,
+            journal: None,
+            since_export: 0,
+        }
+    }
+
+    /// Opens the journal at `path` for a sequence of `frames` frames, replaying what it holds
+    /// (creating it on the first edit's write). Errors name the file and line.
+    pub fn open(path: &Path, sequence: &str, frames: usize) -> Result<(Self, Recovery)> {
+        let mut c = Corrections::in_memory(frames);
+        let mut rec = Recovery::default();
+        if let Some(parsed) = journal::read(path)? {
+            rec.truncated_tail = parsed.truncated_tail;
+            for (line, r) in parsed.records {
+                c.replay(r).map_err(|message| Error::Parse {
+                    path: path.to_path_buf(),
+                    line,
+                    message,
+                })?;
+            }
+        }
+        c.journal = Some(Writer::open(path, sequence)?);
+        rec.edits = c.done.len();
+        rec.corrected = c.marks.len();
+        Ok((c, rec))
+    }
+
+    fn replay(&mut self, r: Record) -> std::result::Result<(), String> {
+        match r {
+            Record::Header { .. } => {}
+            Record::Edit { id, label, changes } => {
+                for ch in &changes {
+                    if ch.frame >= self.frames {
+                        return Err(format!(
+                            "frame {} is beyond the sequence's {} frames",
+                            ch.frame + 1,
+                            self.frames
+                        ));
+                    }
+                    ssm_key(&ch.ssm).map_err(|e| e.to_string())?;
+                }
+                let e = Edit { id, label, changes };
+                self.set(&e, false);
+                self.done.push(e);
+                self.undone.clear();
+                self.next_id = self.next_id.max(id + 1);
+                self.since_export += 1;
+            }
+            Record::Undo { id } => match self.done.pop() {
+                Some(e) if e.id == id => {
+                    self.set(&e, true);
+                    self.undone.push(e);
+                    self.since_export += 1;
+                }
+                _ => return Err(format!("undo of edit {id}, which is not the last edit")),
+            },
+            Record::Redo { id } => match self.undone.pop() {
+                Some(e) if e.id == id => {
+                    self.set(&e, false);
+                    self.done.push(e);
+                    self.since_export += 1;
+                }
+                _ => return Err(format!("redo of edit {id}, which is not the last undone")),
+            },
+            Record::Export { .. } => self.since_export = 0,
+        }
+        Ok(())
+    }
+
+    /// Applies an edit's changes (their `after`), or reverts them (their `before`).
+    fn set(&mut self, e: &Edit, revert: bool) {
+        let changes: Box<dyn Iterator<Item = &Change>> = if revert {
+            Box::new(e.changes.iter().rev())
+        } else {
+            Box::new(e.changes.iter())
+        };
+        for ch in changes {
+            let key = (ch.ssm.clone(), ch.frame);
+            match if revert { ch.before } else { ch.after } {
+                Some(m) => {
+                    self.marks.insert(key, m);
+                }
+                None => {
+                    self.marks.remove(&key);
+                }
+            }
+        }
+    }
+
+    fn log(&mut self, r: &Record) -> Result<()> {
+        match self.journal.as_mut() {
+            Some(w) => w.append(r),
+            None => Ok(()),
+        }
+    }
+
+    /// The journal's path (`None` in memory).
+    pub fn journal_path(&self) -> Option<&Path> {
+        self.journal.as_ref().map(Writer::path)
+    }
+
+    /// The correction of `frame` in `ssm` (a key from [`ssm_key`]).
+    pub fn mark(&self, ssm: &str, frame: usize) -> Option<Mark> {
+        self.marks.get(&(ssm.to_string(), frame)).copied()
+    }
+
+    /// Frames corrected in `ssm`, in order.
+    pub fn corrected_frames(&self, ssm: &str) -> Vec<usize> {
+        self.marks
+            .keys()
+            .filter(|(s, _)| s == ssm)
+            .map(|(_, f)| *f)
+            .collect()
+    }
+
+    /// Corrections in effect (over every SSM).
+    pub fn len(&self) -> usize {
+        self.marks.len()
+    }
+
+    /// Whether there is no correction.
+    pub fn is_empty(&self) -> bool {
+        self.marks.is_empty()
+    }
+
+    /// Whether edits were made since the last export (they are safe in the journal either way).
+    pub fn unexported(&self) -> bool {
+        self.since_export > 0
+    }
+
+    /// One undoable edit: sets each `(ssm, frame)` to its mark (`None`: back to the original).
+    /// The journal is written and synced first; if that fails nothing changes. Changes that
+    /// change nothing are dropped; an edit of no change is not recorded (`Ok(false)`).
+    pub fn edit(&mut self, label: &str, changes: &[(String, usize, Option<Mark>)]) -> Result<bool> {
+        let mut out: Vec<Change> = Vec::new();
+        for (s, f, after) in changes {
+            if *f >= self.frames {
+                return Err(Error::InvalidParameter(format!(
+                    "frame {} is beyond the sequence's {} frames",
+                    f + 1,
+                    self.frames
+                )));
+            }
+            let ssm = ssm_key(s)?;
+            // The state before this edit (an earlier change of the same frame counts).
+            let before = out
+                .iter()
+                .rev()
+                .find(|c| c.ssm == ssm && c.frame == *f)
+                .map(|c| c.after)
+                .unwrap_or_else(|| self.mark(&ssm, *f));
+            if before != *after {
+                out.push(Change {
+                    ssm,
+                    frame: *f,
+                    before,
+                    after: *after,
+                });
+            }
+        }
+        if out.is_empty() {
+            return Ok(false);
+        }
+        let e = Edit {
+            id: self.next_id,
+            label: label.to_string(),
+            changes: out,
+        };
+        self.log(&Record::Edit {
+            id: e.id,
+            label: e.label.clone(),
+            changes: e.changes.clone(),
+        })?;
+        self.next_id += 1;
+        self.set(&e, false);
+        self.done.push(e);
+        self.undone.clear();
+        self.since_export += 1;
+        Ok(true)
+    }
+
+    /// Undoes the last edit; returns its label and the frames it touched (`None`: nothing to
+    /// undo).
+    pub fn undo(&mut self) -> Result<Option<(String, Vec<usize>)>> {
+        let Some(id) = self.done.last().map(|e| e.id) else {
+            return Ok(None);
+        };
+        self.log(&Record::Undo { id })?;
+        let Some(e) = self.done.pop() else {
+            return Ok(None);
+        };
+        self.set(&e, true);
+        let out = (e.label.clone(), e.changes.iter().map(|c| c.frame).collect());
+        self.undone.push(e);
+        self.since_export += 1;
+        Ok(Some(out))
+    }
+
+    /// Redoes the last undone edit.
+    pub fn redo(&mut self) -> Result<Option<(String, Vec<usize>)>> {
+        let Some(id) = self.undone.last().map(|e| e.id) else {
+            return Ok(None);
+        };
+        self.log(&Record::Redo { id })?;
+        let Some(e) = self.undone.pop() else {
+            return Ok(None);
+        };
+        self.set(&e, false);
+        let out = (e.label.clone(), e.changes.iter().map(|c| c.frame).collect());
+        self.done.push(e);
+        self.since_export += 1;
+        Ok(Some(out))
+    }
+
+    /// Labels of the edits that can be undone (oldest first) and redone (next first).
+    pub fn history(&self) -> (Vec<&str>, Vec<&str>) {
+        (
+            self.done.iter().map(|e| e.label.as_str()).collect(),
+            self.undone.iter().rev().map(|e| e.label.as_str()).collect(),
+        )
+    }
+
+    fn note_export(&mut self, paths: &[PathBuf]) -> Result<()> {
+        self.log(&Record::Export {
+            paths: paths.iter().map(|p| p.display().to_string()).collect(),
+        })?;
+        self.since_export = 0;
+        Ok(())
+    }
+}
+
+/// A sequence's ground truth with its corrections, as shown and exported.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GtFrame {
+    /// Corners; `corrected` when they come from a correction.
+    Quad { quad: Quad, corrected: bool },
+    /// Marked occluded / not annotatable.
+    Occluded,
+    /// Not annotated (and not corrected).
+    Missing,
+}
+
+impl GtFrame {
+    /// The corners, if any.
+    pub fn quad(&self) -> Option<Quad> {
+        match self {
+            GtFrame::Quad { quad, .. } => Some(*quad),
+            _ => None,
+        }
+    }
+}
+
+/// The 8-DOF ground truth of every frame with its corrections.
+pub fn full_ground_truth(seq: &Sequence, c: &Corrections) -> Vec<GtFrame> {
+    (0..seq.len())
+        .map(|f| match c.mark("homography", f) {
+            Some(Mark::Quad(v)) => GtFrame::Quad {
+                quad: Quad::from_array(v),
+                corrected: true,
+            },
+            Some(Mark::Occluded) => GtFrame::Occluded,
+            None => match seq.ground_truth(f) {
+                Some(q) => GtFrame::Quad {
+                    quad: q,
+                    corrected: false,
+                },
+                None => GtFrame::Missing,
+            },
+        })
+        .collect()
+}
+
+/// The ground truth of every frame in `ssm_name` with its corrections: a corrected frame as
+/// corrected; otherwise the SSM's best fit (from the first annotated frame's quad) to the 8-DOF
+/// ground truth (itself corrected where it was), with the fit's residual E_AL.
+pub fn ground_truth_in(
+    seq: &Sequence,
+    c: &Corrections,
+    ssm_name: &str,
+) -> Result<(Vec<GtFrame>, Vec<Option<f64>>)> {
+    let key = ssm_key(ssm_name)?;
+    let full = full_ground_truth(seq, c);
+    if key == "homography" {
+        let n = full.len();
+        return Ok((full, vec![Some(0.0); n]));
+    }
+    let quads: Vec<Option<Quad>> = full.iter().map(GtFrame::quad).collect();
+    let low = fit_ground_truth(&key, &quads)?;
+    let frames = (0..seq.len())
+        .map(|f| match c.mark(&key, f) {
+            Some(Mark::Quad(v)) => GtFrame::Quad {
+                quad: Quad::from_array(v),
+                corrected: true,
+            },
+            Some(Mark::Occluded) => GtFrame::Occluded,
+            None => match (low.quads[f], full[f]) {
+                (Some(q), _) => GtFrame::Quad {
+                    quad: q,
+                    corrected: false,
+                },
+                (None, GtFrame::Occluded) => GtFrame::Occluded,
+                _ => GtFrame::Missing,
+            },
+        })
+        .collect::<Vec<_>>();
+    // Residuals against the (corrected) 8-DOF ground truth.
+    let residuals = frames
+        .iter()
+        .zip(&quads)
+        .map(|(g, full)| match (g.quad(), full) {
+            (Some(a), Some(b)) => Some(alignment_error(&a, b)),
+            _ => None,
+        })
+        .collect();
+    Ok((frames, residuals))
+}
+
+/// Whether the sequence's ground-truth file names its frames (the MTF format) rather than
+/// listing 8 numbers per line.
+fn names_frames(seq: &Sequence) -> bool {
+    match &seq.gt_path {
+        Some(p) => read_ground_truth(p)
+            .map(|e| !e.is_empty() && e.iter().all(|e| e.frame.is_some()))
+            .unwrap_or(true),
+        None => true,
+    }
+}
+
+/// Writes the corrected ground truth of `ssm_name` atomically, in the sequence's own format
+/// (`<gt folder>/<seq>_gt_<ssm>.txt`) and in OptGT layout (`<gt folder>/OptGT/<seq>_<ssm>.txt`
+/// with its residuals); the original file is never written. Records the export in the journal.
+pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec<PathBuf>> {
+    let key = ssm_key(ssm_name)?;
+    let (frames, residuals) = ground_truth_in(seq, c, &key)?;
+    let quads: Vec<Option<Quad>> = frames.iter().map(GtFrame::quad).collect();
+    let occluded: Vec<bool> = frames.iter().map(|f| *f == GtFrame::Occluded).collect();
+    let dir = ground_truth_dir(seq);
+    let names = fit::frame_names(seq);
+    let own = dir.join(format!("{}_gt_{key}.txt", seq.name));
+    if seq.gt_path.as_deref() == Some(own.as_path()) {
+        return Err(Error::InvalidParameter(format!(
+            "the export would overwrite the open ground truth {}: open the original sequence",
+            own.display()
+        )));
+    }
+    write_ground_truth(
+        &own,
+        &quads,
+        &occluded,
+        names_frames(seq).then_some(names.as_slice()),
+    )?;
+    let low = LowDofGroundTruth {
+        ssm: key.clone(),
+        quads,
+        residuals,
+    };
+    let (opt, res) = write_opt_gt(&dir, seq, &low)?;
+    let paths = vec![own, opt, res];
+    c.note_export(&paths)?;
+    Ok(paths)
+}
+
+/// Interpolates between two key frames in `ssm_name`'s parameter space: the frames strictly
+/// between `a` and `b` get the SSM warp (of `qa`) whose parameters move linearly from identity
+/// to the warp taking `qa` to `qb`. `None` when the SSM cannot relate the two quads.
+pub fn interpolate(
+    ssm_name: &str,
+    a: (usize, Quad),
+    b: (usize, Quad),
+) -> Result<Option<Vec<(usize, Quad)>>> {
+    let m = ssm::build(ssm_name)?;
+    let ((fa, qa), (fb, qb)) = if a.0 <= b.0 { (a, b) } else { (b, a) };
+    let Some(p) = m.fit(&qa.0, &qb.0) else {
+        return Ok(None);
+    };
+    let id = m.identity();
+    let mut out = Vec::new();
+    for f in fa + 1..fb {
+        let t = (f - fa) as f64 / (fb - fa) as f64;
+        let mut q = id;
+        for k in 0..m.dof() {
+            q[k] = id[k] + t * (p[k] - id[k]);
+        }
+        out.push((f, ssm::warp_quad(&*m, &q, &qa)));
+    }
+    Ok(Some(out))
+}
+
+#[cfg(test)]
+mod tests;
+
+/// Why a propagation stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PropagateStop {
+    /// At a frame the user corrected before (not overwritten).
+    Corrected(usize),
+    /// The tracker's error against the old ground truth jumped at this frame (not proposed).
+    Jump { frame: usize, from: f64, to: f64 },
+    /// The tracker lost the target at this frame.
+    Lost(usize),
+    /// The proposal reached its length limit or the end of the sequence.
+    End,
+    /// A frame could not be read (the message names it).
+    Frame(String),
+}
+
+impl std::fmt::Display for PropagateStop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PropagateStop::Corrected(k) => {
+                write!(f, "stopped before frame {}, corrected earlier", k + 1)
+            }
+            PropagateStop::Jump { frame, from, to } => write!(
+                f,
+                "stopped at frame {}: the error against the old ground truth jumped from {from:.2} to {to:.2} px",
+                frame + 1
+            ),
+            PropagateStop::Lost(k) => write!(f, "the tracker lost the target at frame {}", k + 1),
+            PropagateStop::End => write!(f, "reached the end"),
+            PropagateStop::Frame(m) => write!(f, "stopped: {m}"),
+        }
+    }
+}
+
+/// A propagation's proposed corners for the frames after the start, and why it stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Proposal {
+    pub frames: Vec<(usize, Quad)>,
+    pub stop: PropagateStop,
+}
+
+/// Tracks forward from a corrected frame to propose corrections of the next ones: initialises
+/// `spec` on frame `from` at `start`, then proposes the tracked corners of each next frame until
+/// a frame for which `corrected` holds, a jump of more than `jump_px` in the error against the
+/// `old` ground truth from one frame to the next, the loss of the target, or `max_frames`.
+pub fn propagate(
+    seq: &Sequence,
+    spec: &crate::tracker::TrackerSpec,
+    from: usize,
+    start: Quad,
+    old: &[Option<Quad>],
+    corrected: &dyn Fn(usize) -> bool,
+    jump_px: f64,
+    max_frames: usize,
+) -> Result<Proposal> {
+    use crate::tracker::{FrameInput, TrackStatus, Tracker};
+    let mut tracker = Tracker::new(spec)?;
+    let img = seq.load_gray(from)?;
+    tracker.initialize(FrameInput::Gray8(&img), &start)?;
+    let mut frames = Vec::new();
+    let mut prev_err = old
+        .get(from)
+        .copied()
+        .flatten()
+        .map(|g| alignment_error(&start, &g));
+    let end = seq.len().min(from + 1 + max_frames);
+    for f in from + 1..end {
+        if corrected(f) {
+            return Ok(Proposal {
+                frames,
+                stop: PropagateStop::Corrected(f),
+            });
+        }
+        let img = match seq.load_gray(f) {
+            Ok(i) => i,
+            Err(e) => {
+                return Ok(Proposal {
+                    frames,
+                    stop: PropagateStop::Frame(e.to_string()),
+                });
+            }
+        };
+        let out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+        if out.status != TrackStatus::Tracking {
+            return Ok(Proposal {
+                frames,
+                stop: PropagateStop::Lost(f),
+            });
+        }
+        let err = old
+            .get(f)
+            .copied()
+            .flatten()
+            .map(|g| alignment_error(&out.corners, &g));
+        if let (Some(a), Some(b)) = (prev_err, err)
+            && b - a > jump_px
+        {
+            return Ok(Proposal {
+                frames,
+                stop: PropagateStop::Jump {
+                    frame: f,
+                    from: a,
+                    to: b,
+                },
+            });
+        }
+        if err.is_some() {
+            prev_err = err;
+        }
+        frames.push((f, out.corners));
+    }
+    Ok(Proposal {
+        frames,
+        stop: PropagateStop::End,
+    })
+}

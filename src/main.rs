@@ -100,6 +100,39 @@ enum Command {
         /// Re-initialise from the ground truth 5 frames after a failure.
         #[arg(long)]
         reinit: bool,
+        /// Score against the low-DOF ground truth of this SSM, as the paper does (read from
+        /// `<root>/OptGT/<seq>_<ssm>.txt` when it exists, fitted otherwise: see `gt-fit`).
+        #[arg(long)]
+        gt_ssm: Option<String>,
+        /// Error type of the success rates: alignment (mean corner distance, E_AL), center
+        /// (centre location error) or jaccard (1 - IoU, SR over 0..1).
+        #[arg(long, default_value = "alignment")]
+        error: String,
+        /// Run everything again, even the runs a previous (killed) batch in --out finished.
+        #[arg(long)]
+        no_resume: bool,
+    },
+    /// Low-DOF ground truth (the paper's protocol): per sequence and SSM, the warp of the first
+    /// frame's quad with the least alignment error to each frame's 8-DOF ground truth, written
+    /// in MTF's OptGT layout (`<root>/OptGT/<seq>_<ssm>.txt`) with the residual per frame beside
+    /// it (`<seq>_<ssm>_residuals.txt`).
+    GtFit {
+        /// Dataset root in the MTF layout, or one sequence (ground-truth file or folder).
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Sequences (default: all).
+        #[arg(long, value_delimiter = ',')]
+        seqs: Option<Vec<String>>,
+        /// State space models.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "translation,isometry,similitude,affine"
+        )]
+        ssm: Vec<String>,
+        /// Overwrite OptGT files that exist (they may hold corrections exported by the inspector).
+        #[arg(long)]
+        force: bool,
     },
     /// Merge the outputs of `eval --shard` runs into one summary (with `ALL` rows pooled over
     /// every sequence).
@@ -324,6 +357,9 @@ fn main() -> Result<()> {
             jobs,
             shard,
             reinit,
+            gt_ssm,
+            error,
+            no_resume,
         } => run_eval(
             &dataset,
             seqs,
@@ -335,8 +371,20 @@ fn main() -> Result<()> {
             &out,
             jobs,
             shard.as_deref(),
-            reinit,
+            EvalOptions {
+                reinit,
+                gt_ssm,
+                error: eval::ErrorKind::parse(&error)?,
+                ..EvalOptions::default()
+            },
+            !no_resume,
         ),
+        Command::GtFit {
+            dataset,
+            seqs,
+            ssm,
+            force,
+        } => run_gt_fit(&dataset, seqs, &ssm, force),
         Command::Merge { out, shards } => {
             let rows = eval::merge_shards(&shards, &out)?;
             print_table(&rows);
@@ -546,13 +594,74 @@ fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) ->
     dataset::write_corners(out, &corners, "jpg")?;
     let lost = run.frames.iter().filter(|f| f.corners.is_none()).count();
     println!(
-        "wrote {} ({} frames, {} lost)",
+        "wrote {} ({} of {} frames, {} lost)",
         out.display(),
         run.frames.len(),
+        seq.len(),
         lost
     );
     if !seq.ground_truth.is_empty() {
         print_table(&[run.summary()]);
+    }
+    if let Some(e) = &run.error {
+        bail!(
+            "the run {e}; the frames tracked before it are in {}",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bool) -> Result<()> {
+    let sequences = if root.is_dir() && seqs.is_none() && dataset::discover(root, None).is_err() {
+        vec![Sequence::open(root)?]
+    } else if root.is_file() {
+        vec![Sequence::open(root)?]
+    } else {
+        dataset::discover(root, seqs.as_deref())?
+    };
+    let mut skipped = 0;
+    println!(
+        "{:<24} {:<12} {:>8} {:>10} {:>10}  worst frame",
+        "sequence", "ssm", "frames", "mean px", "max px"
+    );
+    for seq in &sequences {
+        if seq.ground_truth.iter().all(Option::is_none) {
+            bail!("sequence '{}' has no ground truth to fit", seq.name);
+        }
+        let dir = regtrack::gt::ground_truth_dir(seq);
+        for name in ssms {
+            let low = regtrack::gt::fit_ground_truth(name, &seq.ground_truth)?;
+            let path = regtrack::gt::opt_gt_path(&dir, &seq.name, &low.ssm);
+            if path.exists() && !force {
+                println!(
+                    "{:<24} {:<12} kept {} (--force to overwrite)",
+                    seq.name,
+                    low.ssm,
+                    path.display()
+                );
+                skipped += 1;
+                continue;
+            }
+            let (quads, _) = regtrack::gt::write_opt_gt(&dir, seq, &low)?;
+            let r: Vec<f64> = low.residuals.iter().flatten().copied().collect();
+            let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
+            let worst = low.worst_frames();
+            let (wf, wr) = worst.first().copied().unwrap_or((0, 0.0));
+            println!(
+                "{:<24} {:<12} {:>8} {:>10.3} {:>10.3}  {} ({})",
+                seq.name,
+                low.ssm,
+                r.len(),
+                mean,
+                wr,
+                wf + 1,
+                quads.display()
+            );
+        }
+    }
+    if skipped > 0 {
+        println!("{skipped} file(s) kept");
     }
     Ok(())
 }
@@ -569,14 +678,14 @@ fn run_eval(
     out: &Path,
     jobs: usize,
     shard: Option<&str>,
-    reinit: bool,
+    mut opts: EvalOptions,
+    resume: bool,
 ) -> Result<()> {
     let specs = specs(sms, ams, ssms, whole, params)?;
     let sequences = dataset::discover(root, seqs.as_deref())?;
-    let opts = EvalOptions {
-        reinit,
-        ..EvalOptions::default()
-    };
+    if let Some(g) = &opts.gt_ssm {
+        opts.gt_ssm = Some(regtrack::gt::ssm_key(g)?);
+    }
     let pairs: Vec<(usize, usize)> = (0..sequences.len())
         .flat_map(|s| (0..specs.len()).map(move |p| (s, p)))
         .collect();
@@ -596,31 +705,65 @@ fn run_eval(
                 .collect()
         }
     };
-    let pb = bar(selected.len(), "evaluating");
+    // Resume: a run a previous batch finished with the same settings is read back, not redone
+    // (its run file is written last and atomically, so it exists only for a complete run).
+    let mut finished = Vec::new();
+    let mut todo = Vec::new();
+    for &(s, p) in &selected {
+        match resume
+            .then(|| eval::finished_run(out, &sequences[s].name, &specs[p], &opts))
+            .flatten()
+        {
+            Some(r) => finished.push(r),
+            None => todo.push((s, p)),
+        }
+    }
+    if !finished.is_empty() {
+        println!(
+            "resuming: {} of {} runs already finished in {} (--no-resume to redo them)",
+            finished.len(),
+            selected.len(),
+            out.display()
+        );
+    }
+    let pb = bar(todo.len(), "evaluating");
     let done = std::sync::atomic::AtomicUsize::new(0);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build()?;
+    let mut failed = Vec::new();
     let runs: Vec<_> = pool.install(|| {
         use rayon::prelude::*;
-        selected
-            .par_iter()
+        todo.par_iter()
             .map(|&(s, p)| {
-                let r = eval::run_sequence(&sequences[s], &specs[p], &opts, None, &mut NoObserver);
+                let r = eval::run_sequence(&sequences[s], &specs[p], &opts, None, &mut NoObserver)
+                    .with_context(|| format!("{} on {}", specs[p].label(), sequences[s].name));
+                // Each run's files are written as soon as it ends, so a killed batch keeps them.
+                let r = r.and_then(|r| {
+                    eval::write_run_files(out, &r)?;
+                    Ok(r)
+                });
                 pb.set_position(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) as u64 + 1);
-                r.with_context(|| format!("{} on {}", specs[p].label(), sequences[s].name))
+                r
             })
             .collect()
     });
     pb.finish_and_clear();
-    // A run that fails (a missing frame, no ground truth to start from) is reported; the others
-    // are still written.
-    let mut failed = Vec::new();
-    let runs: Vec<_> = runs
-        .into_iter()
-        .filter_map(|r| r.map_err(|e| failed.push(format!("{e:#}"))).ok())
-        .collect();
+    // A run that fails (no ground truth to start from) or stops early (a frame that cannot be
+    // read: what it tracked is kept) is reported; the others are still written.
+    let mut all: Vec<_> = finished;
+    for r in runs {
+        match r {
+            Ok(r) => {
+                if let Some(e) = &r.error {
+                    failed.push(format!("{} on {}: {e}", r.spec.label(), r.sequence));
+                }
+                all.push(r);
+            }
+            Err(e) => failed.push(format!("{e:#}")),
+        }
+    }
+    let runs = all;
     let mut rows = Vec::new();
     for r in &runs {
-        eval::write_run_files(out, r)?;
         rows.push(r.summary());
     }
     // Pooled over all sequences of this output, per tracker.

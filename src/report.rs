@@ -159,7 +159,7 @@ pub fn pool(runs: &[RunResult]) -> Vec<TrackerResult> {
     let mut out: Vec<TrackerResult> = by_label
         .values()
         .map(|mine| {
-            let errors: Vec<f64> = mine.iter().flat_map(|r| r.errors()).collect();
+            let errors: Vec<f64> = mine.iter().flat_map(|r| r.sr_errors()).collect();
             let sequences: BTreeSet<String> = mine.iter().map(|r| r.sequence.clone()).collect();
             TrackerResult {
                 summary: eval::summarize("ALL", mine),

@@ -46,6 +46,28 @@ pub fn write_run_files(out: &Path, run: &RunResult) -> Result<PathBuf> {
     Ok(corners_path)
 }
 
+/// The run file of a tracker on a sequence under an output folder.
+pub fn run_file(out: &Path, sequence: &str, spec: &crate::tracker::TrackerSpec) -> PathBuf {
+    out.join("tracking_data")
+        .join(sequence)
+        .join(format!("{}_run.json", spec.label()))
+}
+
+/// A finished run of `spec` on `sequence` with the same options, saved under `out` (for
+/// resuming a batch): its run file (written last, atomically) exists, reads back, and the run
+/// reached the end of the sequence. Anything else means the run must be made again.
+pub fn finished_run(
+    out: &Path,
+    sequence: &str,
+    spec: &crate::tracker::TrackerSpec,
+    opts: &super::EvalOptions,
+) -> Option<RunResult> {
+    let text = std::fs::read_to_string(run_file(out, sequence, spec)).ok()?;
+    let run: RunResult = serde_json::from_str(&text).ok()?;
+    (run.error.is_none() && &run.spec == spec && &run.options == opts && run.sequence == sequence)
+        .then_some(run)
+}
+
 /// Every run saved under `dir/tracking_data` (sorted by sequence, then tracker).
 pub fn read_runs(dir: &Path) -> Result<Vec<RunResult>> {
     let data = dir.join("tracking_data");
@@ -112,11 +134,11 @@ fn serde_plain<T: serde::Serialize>(v: &T) -> String {
 /// Writes `summary.csv` and `summary.json` in `out`.
 pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let mut csv = String::from(
-        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps\n",
+        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt\n",
     );
     for r in rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1}\n",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{}\n",
             r.sequence,
             r.tracker,
             r.sm,
@@ -131,7 +153,9 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
             r.failures,
             r.iterations_per_frame,
             r.tracker_fps,
-            r.live_fps
+            r.live_fps,
+            r.error_type,
+            r.gt
         ));
     }
     write_atomic(&out.join("summary.csv"), csv.as_bytes())?;

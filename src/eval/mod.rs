@@ -5,7 +5,9 @@
 
 mod files;
 
-pub use files::{merge_shards, read_runs, write_run_files, write_summaries};
+pub use files::{
+    finished_run, merge_shards, read_runs, run_file, write_run_files, write_summaries,
+};
 
 /// JSON has no infinity: errors of frames without corners are written as `null`.
 mod infinite_as_null {
@@ -68,7 +70,61 @@ pub fn mean_success_rate(errors: &[f64]) -> f64 {
     c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64
 }
 
-/// How a batch run treats failures.
+/// The error a success curve is drawn from (MTF's error types).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorKind {
+    /// E_AL, the mean distance of the four corners (px; the paper's measure).
+    #[default]
+    Alignment,
+    /// Centre location error: the distance of the centroids (px).
+    Center,
+    /// Jaccard error, 1 - IoU (0 to 1); its success curve runs over 0..1 instead of 0..20 px.
+    Jaccard,
+}
+
+impl ErrorKind {
+    /// The names accepted on the command line.
+    pub const NAMES: &'static [&'static str] = &["alignment", "center", "jaccard"];
+
+    /// Parses `alignment` (`al`, `mcd`), `center` (`cl`, `cle`) or `jaccard` (`iou`).
+    pub fn parse(s: &str) -> Result<ErrorKind> {
+        match s.to_ascii_lowercase().as_str() {
+            "alignment" | "al" | "mcd" | "e_al" => Ok(ErrorKind::Alignment),
+            "center" | "centre" | "cl" | "cle" => Ok(ErrorKind::Center),
+            "jaccard" | "iou" => Ok(ErrorKind::Jaccard),
+            _ => Err(Error::InvalidParameter(format!(
+                "unknown error type '{s}'; available: {}",
+                Self::NAMES.join(", ")
+            ))),
+        }
+    }
+
+    /// The name.
+    pub fn name(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+
+    /// A frame's error of this kind.
+    pub fn of(self, f: &FrameRecord) -> f64 {
+        match self {
+            ErrorKind::Alignment => f.alignment_error,
+            ErrorKind::Center => f.center_error,
+            ErrorKind::Jaccard => f.iou_error,
+        }
+    }
+
+    /// Errors of this kind per unit of the success curve's 0..20 grid (Jaccard's 0..1 is drawn on
+    /// the same grid: SR at "5" is the fraction with 1 - IoU <= 0.25).
+    pub fn grid_scale(self) -> f64 {
+        match self {
+            ErrorKind::Jaccard => 1.0 / SR_MAX,
+            _ => 1.0,
+        }
+    }
+}
+
+/// How a batch run treats failures, and what it is scored against.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct EvalOptions {
@@ -78,6 +134,11 @@ pub struct EvalOptions {
     pub failure_threshold: f64,
     /// With `reinit`: frames skipped after a failure before re-initialising.
     pub reinit_skip: usize,
+    /// Score against the low-DOF ground truth of this SSM (OptGT when present, fitted
+    /// otherwise), as the paper does; `None`: the sequence's own ground truth.
+    pub gt_ssm: Option<String>,
+    /// The error the success rates are computed from.
+    pub error: ErrorKind,
 }
 
 impl Default for EvalOptions {
@@ -86,6 +147,8 @@ impl Default for EvalOptions {
             reinit: false,
             failure_threshold: SR_MAX,
             reinit_skip: 5,
+            gt_ssm: None,
+            error: ErrorKind::Alignment,
         }
     }
 }
@@ -122,6 +185,13 @@ pub struct RunResult {
     /// A frame fails when the tracker is lost or its E_AL exceeds this (px).
     #[serde(default = "default_threshold")]
     pub failure_threshold: f64,
+    /// The options the run was made with (ground truth, error type, reinit).
+    #[serde(default)]
+    pub options: EvalOptions,
+    /// Why the run stopped before the end of the sequence (a frame that could not be read); the
+    /// frames before it are kept.
+    #[serde(default)]
+    pub error: Option<String>,
 }
 
 fn default_threshold() -> f64 {
@@ -152,16 +222,30 @@ pub struct Summary {
     /// Frames per second of the search alone, and of the whole update.
     pub tracker_fps: f64,
     pub live_fps: f64,
+    /// The error type of the success rates and `mean_error`.
+    #[serde(default)]
+    pub error_type: String,
+    /// The ground truth scored against: `full`, or the SSM of a low-DOF ground truth.
+    #[serde(default)]
+    pub gt: String,
 }
 
 impl RunResult {
-    /// Alignment errors of the evaluated frames (lost frames count as infinite).
+    /// Errors of the evaluated frames, of the run's error type (lost frames count as infinite;
+    /// frames without ground truth, such as occluded ones, are skipped).
     pub fn errors(&self) -> Vec<f64> {
+        let kind = self.options.error;
         self.frames
             .iter()
             .filter(|f| !f.init && f.ground_truth.is_some())
-            .map(|f| f.alignment_error)
+            .map(|f| kind.of(f))
             .collect()
+    }
+
+    /// [`RunResult::errors`] on the success curve's 0..20 grid (see [`ErrorKind::grid_scale`]).
+    pub fn sr_errors(&self) -> Vec<f64> {
+        let s = self.options.error.grid_scale();
+        self.errors().into_iter().map(|e| e / s).collect()
     }
 
     /// The summary row.
@@ -172,13 +256,14 @@ impl RunResult {
 
 /// The summary of one or several runs of the same tracker (pooled over all their frames).
 pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
-    let errors: Vec<f64> = runs.iter().flat_map(|r| r.errors()).collect();
+    let raw: Vec<f64> = runs.iter().flat_map(|r| r.errors()).collect();
+    let errors: Vec<f64> = runs.iter().flat_map(|r| r.sr_errors()).collect();
     let tracked: Vec<&FrameRecord> = runs
         .iter()
         .flat_map(|r| r.frames.iter())
         .filter(|f| !f.init && f.status == TrackStatus::Tracking && f.corners.is_some())
         .collect();
-    let finite: Vec<f64> = errors.iter().copied().filter(|e| e.is_finite()).collect();
+    let finite: Vec<f64> = raw.iter().copied().filter(|e| e.is_finite()).collect();
     let search: f64 = tracked.iter().map(|f| f.search_us).sum();
     let update: f64 = tracked.iter().map(|f| f.update_us).sum();
     let n = tracked.len() as f64;
@@ -210,6 +295,15 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
         },
         tracker_fps: fps(search),
         live_fps: fps(update),
+        error_type: runs
+            .first()
+            .map(|r| r.options.error.name())
+            .unwrap_or_default()
+            .to_string(),
+        gt: runs
+            .first()
+            .and_then(|r| r.options.gt_ssm.clone())
+            .unwrap_or_else(|| "full".into()),
     }
 }
 
@@ -234,7 +328,10 @@ fn count_failures(r: &RunResult) -> usize {
 
 /// Tracks a whole sequence: initialises on frame 0 from `init` or the ground truth, then
 /// updates on every frame, feeding 8-bit frames (the live path). The observer sees every
-/// iteration.
+/// iteration. Scored against the ground truth `opts` names (the low-DOF one with `gt_ssm`).
+///
+/// A frame after the first that cannot be read ends the run early: the frames tracked so far
+/// are kept and [`RunResult::error`] names the frame.
 pub fn run_sequence(
     seq: &Sequence,
     spec: &TrackerSpec,
@@ -242,8 +339,13 @@ pub fn run_sequence(
     init: Option<Quad>,
     observer: &mut dyn Observer,
 ) -> Result<RunResult> {
+    let gt: Vec<Option<Quad>> = match &opts.gt_ssm {
+        Some(ssm) => crate::gt::low_dof_ground_truth(seq, ssm)?.0,
+        None => seq.ground_truth.clone(),
+    };
+    let ground_truth = |i: usize| gt.get(i).copied().flatten();
     let first = init
-        .or_else(|| seq.ground_truth(0))
+        .or_else(|| ground_truth(0))
         .ok_or_else(|| Error::Sequence {
             path: seq
                 .gt_path
@@ -255,9 +357,10 @@ pub fn run_sequence(
     let mut tracker = Tracker::new(spec)?;
     let mut frames = Vec::with_capacity(seq.len());
     let mut skip_until: Option<usize> = None;
+    let mut stopped = None;
     let record =
         |i: usize, corners: Option<Quad>, status, iterations, search_us, update_us, init| {
-            let gt = seq.ground_truth(i);
+            let gt = ground_truth(i);
             let (e, c, o) = match (corners, gt) {
                 (Some(q), Some(g)) => (
                     alignment_error(&q, &g),
@@ -281,9 +384,16 @@ pub fn run_sequence(
             }
         };
     for i in 0..seq.len() {
-        let img = seq.load_gray(i)?;
+        let img = match seq.load_gray(i) {
+            Ok(img) => img,
+            Err(e) if i > 0 => {
+                stopped = Some(format!("stopped at frame {}: {e}", i + 1));
+                break;
+            }
+            Err(e) => return Err(e),
+        };
         let reinit_here = match skip_until {
-            Some(k) if i >= k => seq.ground_truth(i).is_some(),
+            Some(k) if i >= k => ground_truth(i).is_some(),
             _ => false,
         };
         if i == 0 {
@@ -300,7 +410,7 @@ pub fn run_sequence(
             continue;
         }
         if reinit_here {
-            let q = seq.ground_truth(i).unwrap_or(first);
+            let q = ground_truth(i).unwrap_or(first);
             // A frame the tracker cannot start on (occluded, degenerate ground truth) counts as
             // failed; the next annotated frame is tried.
             if tracker.initialize(FrameInput::Gray8(&img), &q).is_ok() {
@@ -342,6 +452,8 @@ pub fn run_sequence(
         spec: tracker.spec().clone(),
         frames,
         failure_threshold: opts.failure_threshold,
+        options: opts.clone(),
+        error: stopped,
     })
 }
 

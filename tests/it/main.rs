@@ -5,6 +5,7 @@ mod cli;
 mod common;
 mod dataset;
 mod evaluation;
+mod groundtruth;
 #[cfg(feature = "gui")]
 mod gui;
 mod recovery;

@@ -234,6 +234,8 @@ fn tracker(sm: &str, am: &str, ssm: &str, mean_sr: f64) -> TrackerResult {
             iterations_per_frame: 5.0,
             tracker_fps: 100.0 + 1000.0 * mean_sr,
             live_fps: 90.0,
+            error_type: "alignment".into(),
+            gt: "full".into(),
         },
         sequences: vec!["a".into()],
         curve: regtrack::eval::thresholds()

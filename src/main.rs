@@ -613,9 +613,10 @@ fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) ->
 }
 
 fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bool) -> Result<()> {
-    let sequences = if root.is_dir() && seqs.is_none() && dataset::discover(root, None).is_err() {
-        vec![Sequence::open(root)?]
-    } else if root.is_file() {
+    // One sequence (a ground-truth file, or a folder that is not a dataset root), or a dataset.
+    let single = root.is_file()
+        || (root.is_dir() && seqs.is_none() && dataset::discover(root, None).is_err());
+    let sequences = if single {
         vec![Sequence::open(root)?]
     } else {
         dataset::discover(root, seqs.as_deref())?

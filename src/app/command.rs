@@ -4,7 +4,7 @@
 use super::state::{InitSource, PALETTE, SequenceSource, State, TrackerEntry};
 use super::worker::Job;
 use super::{InspectorApp, Tool};
-use crate::geometry::{Point, Quad};
+use crate::geometry::Quad;
 use crate::ssm;
 use std::path::PathBuf;
 
@@ -31,15 +31,44 @@ pub enum Command {
     SelectIteration(Option<usize>),
     SetTool(Tool),
     SetView(super::state::View),
-    /// Move a corner of the ground truth shown on a frame (image coordinates).
-    MoveGtCorner {
-        frame: usize,
-        corner: usize,
-        to: Point,
-    },
     /// Show (and correct) the ground truth projected on this SSM.
     SetGtSsm(String),
-    SaveGroundTruth,
+    /// A ground-truth drag in progress (drawn, not yet an edit).
+    GtDrag {
+        frame: usize,
+        quad: Quad,
+    },
+    /// One ground-truth edit: the quad, refitted on the shown SSM.
+    GtCommit {
+        frame: usize,
+        quad: Quad,
+        label: String,
+    },
+    /// The corner the keyboard moves (`None`: the whole quad).
+    GtPickCorner(Option<usize>),
+    /// Moves the picked corner (or the quad) of the shown frame by this many pixels.
+    GtNudge {
+        dx: f64,
+        dy: f64,
+    },
+    /// The nudge step (px).
+    GtStep(f64),
+    /// Marks the shown frame occluded / not annotatable, or unmarks it.
+    GtToggleOccluded,
+    /// The shown frame back to its original ground truth.
+    GtRevert,
+    GtUndo,
+    GtRedo,
+    /// Writes the corrected ground truth (own format and OptGT).
+    GtExport,
+    /// Seek to the uncorrected frame that most needs a look.
+    GtJumpWorst,
+    /// Interpolates between the corrected key frames around the shown frame.
+    GtInterpolate,
+    /// Tracks forward from the shown frame to propose corrections.
+    GtPropagate,
+    GtAcceptProposal,
+    GtRejectProposal,
     SaveSession(PathBuf),
     LoadSession(PathBuf),
     DismissError(usize),
@@ -63,8 +92,6 @@ impl InspectorApp {
                 // A new sequence: nothing of the old one's frames carries over.
                 self.state.start_frame = 0;
                 self.state.frame = 0;
-                self.rt.gt_edits.clear();
-                self.rt.gt_dirty = false;
                 self.rt.gt_version += 1;
                 for t in &mut self.state.trackers {
                     t.init = InitSource::GroundTruth;
@@ -156,27 +183,25 @@ impl InspectorApp {
             Command::SelectIteration(it) => self.rt.selected_iteration = it,
             Command::SetTool(t) => self.rt.tool = t,
             Command::SetView(v) => self.state.view = v,
-            Command::MoveGtCorner { frame, corner, to } => {
-                if let Some(q) = self.ground_truth(frame) {
-                    let mut moved = q;
-                    moved.0[corner.min(3)] = to;
-                    // Keep the correction in the shown SSM: project the moved quad onto it.
-                    let fixed = self.project_gt(&moved).unwrap_or(moved);
-                    self.rt
-                        .gt_edits
-                        .insert((self.state.gt_ssm.clone(), frame), fixed);
-                    self.rt.gt_dirty = true;
-                    self.rt.gt_version += 1;
-                }
-            }
             Command::SetGtSsm(name) => match ssm::build(&name) {
                 Ok(m) => self.state.gt_ssm = m.name().to_string(),
                 Err(e) => self.error(e.to_string()),
             },
-            Command::SaveGroundTruth => match self.save_ground_truth() {
-                Ok(p) => self.rt.status = format!("saved the ground truth to {}", p.display()),
-                Err(e) => self.error(format!("cannot save the ground truth: {e}")),
-            },
+            c @ (Command::GtDrag { .. }
+            | Command::GtCommit { .. }
+            | Command::GtPickCorner(_)
+            | Command::GtNudge { .. }
+            | Command::GtStep(_)
+            | Command::GtToggleOccluded
+            | Command::GtRevert
+            | Command::GtUndo
+            | Command::GtRedo
+            | Command::GtExport
+            | Command::GtJumpWorst
+            | Command::GtInterpolate
+            | Command::GtPropagate
+            | Command::GtAcceptProposal
+            | Command::GtRejectProposal) => self.apply_gt(c),
             Command::SaveSession(p) => match self.state.save(&p) {
                 Ok(()) => {
                     self.rt.status = format!("saved session {}", p.display());
@@ -200,57 +225,14 @@ impl InspectorApp {
         }
     }
 
-    /// Ground truth of a frame as shown: corrected, else projected on the chosen SSM.
+    /// Ground truth of a frame as shown: corrected, else fitted on the chosen SSM; a drag in
+    /// progress shows as dragged. `None` for a frame without corners (or marked occluded).
     pub fn ground_truth(&self, frame: usize) -> Option<Quad> {
-        if let Some(q) = self.rt.gt_edits.get(&(self.state.gt_ssm.clone(), frame)) {
-            return Some(*q);
+        if let Some((f, q)) = self.rt.gt.drag
+            && f == frame
+        {
+            return Some(q);
         }
-        let q = self.rt.sequence.as_ref()?.ground_truth(frame)?;
-        Some(self.project_gt(&q).unwrap_or(q))
-    }
-
-    /// A quad projected on the ground-truth SSM: the least-squares warp of the first annotated
-    /// frame's ground truth (or the quad itself for 8 DOF).
-    fn project_gt(&self, q: &Quad) -> Option<Quad> {
-        let m = ssm::build(&self.state.gt_ssm).ok()?;
-        if m.dof() == 8 {
-            return Some(*q);
-        }
-        let seq = self.rt.sequence.as_ref()?;
-        let base = (0..seq.len()).find_map(|i| seq.ground_truth(i))?;
-        let p = m.fit(&base.0, &q.0)?;
-        Some(ssm::warp_quad(&*m, &p, &base))
-    }
-
-    fn save_ground_truth(&mut self) -> crate::Result<PathBuf> {
-        let seq = self
-            .rt
-            .sequence
-            .clone()
-            .ok_or_else(|| crate::Error::InvalidRegion("no sequence is open".into()))?;
-        let gt: Vec<Option<Quad>> = (0..seq.len()).map(|i| self.ground_truth(i)).collect();
-        let dir = seq
-            .gt_path
-            .as_ref()
-            .and_then(|p| p.parent().map(|d| d.to_path_buf()))
-            .or_else(|| {
-                seq.frames
-                    .first()
-                    .and_then(|f| f.parent().map(|d| d.to_path_buf()))
-            })
-            .unwrap_or_else(|| PathBuf::from("."));
-        let path = dir.join(format!("{}_gt_{}.txt", seq.name, self.state.gt_ssm));
-        let names: Vec<String> = seq
-            .frames
-            .iter()
-            .map(|f| {
-                f.file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default()
-            })
-            .collect();
-        crate::dataset::write_corners_named(&path, &gt, &names)?;
-        self.rt.gt_dirty = false;
-        Ok(path)
+        self.gt_frame(frame)?.quad()
     }
 }

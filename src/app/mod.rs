@@ -9,13 +9,14 @@
 
 use eframe::egui;
 pub mod command;
+mod gt_edit;
 mod panels;
 pub mod state;
 pub mod worker;
 
 use crate::dataset::Sequence;
 use crate::eval;
-use crate::geometry::{Point, Quad, alignment_error};
+use crate::geometry::{Point, alignment_error};
 use crate::tracker::TrackStatus;
 use command::Command;
 use state::{InitSource, SequenceSource, State};
@@ -81,8 +82,8 @@ pub struct Runtime {
     progress: Option<(String, usize, usize)>,
     tool: Tool,
     selected_iteration: Option<usize>,
-    gt_edits: BTreeMap<(String, usize), Quad>,
-    gt_dirty: bool,
+    /// The ground-truth mode: corrections (journaled), drag, proposal, patches.
+    gt: gt_edit::GtRuntime,
     /// Typed-path fallbacks for the file dialogs.
     path_input: String,
     session_path: String,
@@ -132,8 +133,7 @@ impl InspectorApp {
             progress: None,
             tool: Tool::Navigate,
             selected_iteration: None,
-            gt_edits: BTreeMap::new(),
-            gt_dirty: false,
+            gt: gt_edit::GtRuntime::default(),
             path_input: String::new(),
             session_path: String::from("sessions/my_session.toml"),
             recent: Vec::new(),
@@ -176,7 +176,6 @@ impl InspectorApp {
         let src = state.sequence.clone();
         self.state = state;
         self.rt.results = vec![Vec::new(); self.state.trackers.len()];
-        self.rt.gt_edits.clear();
         self.rt.gt_version += 1;
         self.open(src);
     }
@@ -225,14 +224,20 @@ impl InspectorApp {
         self.rt.transform.map(|t| t.to_screen(p))
     }
 
+    /// The status line.
+    pub fn status(&self) -> &str {
+        &self.rt.status
+    }
+
     /// Error messages shown.
     pub fn errors_shown(&self) -> &[String] {
         &self.rt.errors
     }
 
-    /// Whether a ground-truth correction awaits saving.
+    /// Whether corrections were made since the last export (they are in the journal either
+    /// way).
     pub fn ground_truth_edited(&self) -> bool {
-        self.rt.gt_dirty
+        self.rt.gt.corrections.unexported()
     }
 
     /// The open sequence.
@@ -299,6 +304,7 @@ impl InspectorApp {
                     self.rt.progress = None;
                     self.rt.status = format!("{}: {} frames", seq.name, seq.len());
                     let start = self.state.start_frame.min(seq.len() - 1);
+                    self.open_corrections(&seq);
                     self.rt.sequence = Some(seq);
                     self.rt.texture_frame = None;
                     self.restart(start);
@@ -365,6 +371,14 @@ impl InspectorApp {
             }
             self.rt.image_size = [img.width, img.height];
             self.rt.texture_frame = Some(img.index);
+            // The gray frame, for the ground-truth mode's patch view.
+            let gray: Vec<u8> = img
+                .rgba
+                .chunks_exact(4)
+                .map(|p| crate::imaging::luma(p[0], p[1], p[2]))
+                .collect();
+            self.rt.gt.frame_image = crate::imaging::GrayU8::from_vec(img.width, img.height, gray)
+                .map(|g| (img.index, g));
         }
         if self.rt.texture_frame != Some(self.state.frame)
             && self.rt.sequence.is_some()
@@ -462,7 +476,9 @@ impl InspectorApp {
         let built = std::time::Instant::now();
         let ctx = ui.ctx().clone();
         self.poll_worker();
+        self.poll_propagation();
         self.upload(&ctx);
+        self.gt_keys(&ctx);
         self.handle_dropped_files(&ctx);
         panels::top_bar(self, ui);
         panels::playback_bar(self, ui);

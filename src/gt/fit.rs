@@ -76,7 +76,7 @@ pub fn best_fit(model: &dyn Ssm, base: &Quad, target: &Quad) -> Option<(Params, 
         }
         let q = ssm::warp_quad(model, &next, base);
         let e = alignment_error(&q, target);
-        if !(e < err - 1e-12) {
+        if e.is_nan() || e >= err - 1e-12 {
             break;
         }
         let done = err - e < 1e-9 * scale;

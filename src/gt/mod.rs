@@ -512,30 +512,49 @@ pub struct Proposal {
     pub stop: PropagateStop,
 }
 
+/// When a propagation stops on its own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PropagateLimits {
+    /// A rise of the error against the old ground truth from one frame to the next above this
+    /// (px) stops it.
+    pub jump_px: f64,
+    /// At most this many frames are proposed.
+    pub max_frames: usize,
+}
+
+impl Default for PropagateLimits {
+    fn default() -> Self {
+        PropagateLimits {
+            jump_px: 5.0,
+            max_frames: 500,
+        }
+    }
+}
+
 /// Tracks forward from a corrected frame to propose corrections of the next ones: initialises
 /// `spec` on frame `from` at `start`, then proposes the tracked corners of each next frame until
-/// a frame for which `corrected` holds, a jump of more than `jump_px` in the error against the
-/// `old` ground truth from one frame to the next, the loss of the target, or `max_frames`.
+/// a frame for which `corrected` holds, a jump of the error against the `old` ground truth from
+/// one tracked frame to the next, the loss of the target, or the length limit.
 pub fn propagate(
     seq: &Sequence,
     spec: &crate::tracker::TrackerSpec,
-    from: usize,
-    start: Quad,
+    (from, start): (usize, Quad),
     old: &[Option<Quad>],
     corrected: &dyn Fn(usize) -> bool,
-    jump_px: f64,
-    max_frames: usize,
+    limits: PropagateLimits,
 ) -> Result<Proposal> {
+    let PropagateLimits {
+        jump_px,
+        max_frames,
+    } = limits;
     use crate::tracker::{FrameInput, TrackStatus, Tracker};
     let mut tracker = Tracker::new(spec)?;
     let img = seq.load_gray(from)?;
     tracker.initialize(FrameInput::Gray8(&img), &start)?;
     let mut frames = Vec::new();
-    let mut prev_err = old
-        .get(from)
-        .copied()
-        .flatten()
-        .map(|g| alignment_error(&start, &g));
+    // The baseline is the first tracked frame's error: a correction moves the start away from
+    // the old ground truth, and that offset is what the next frames inherit, not a jump.
+    let mut prev_err: Option<f64> = None;
     let end = seq.len().min(from + 1 + max_frames);
     for f in from + 1..end {
         if corrected(f) {

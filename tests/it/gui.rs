@@ -45,8 +45,9 @@ fn step_until(
     while !done(h.state()) {
         assert!(
             start.elapsed() < Duration::from_secs(60),
-            "timed out waiting for {what}; errors: {:?}",
-            h.state().errors_shown()
+            "timed out waiting for {what}; errors: {:?}; status: {}",
+            h.state().errors_shown(),
+            h.state().status()
         );
         h.step();
         std::thread::sleep(Duration::from_millis(5));
@@ -131,19 +132,8 @@ fn sessions_load_and_every_bundled_session_is_valid() {
     assert!(h.state().errors_shown()[0].contains("s.toml"));
 }
 
-#[test]
-fn dragging_a_ground_truth_corner_corrects_it() {
-    let d = TempDir::new("gui-drag");
-    let seq = small_sequence(d.path(), 4);
-    let mut h = harness(state_on(&seq));
-    step_until(&mut h, "the frame", |a| {
-        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
-    });
-    let gt = h.state().ground_truth(0).unwrap();
-    h.get_by_label("Edit ground-truth corners").click();
-    h.step();
-    let from = h.state().screen_pos(gt.0[0]).unwrap();
-    let to = from + egui::Vec2::new(12.0, 9.0);
+/// Drags from `from` to `to` in a few steps.
+fn drag(h: &mut Harness<'static, InspectorApp>, from: egui::Pos2, to: egui::Pos2) {
     h.hover_at(from);
     h.step();
     h.drag_at(from);
@@ -155,23 +145,175 @@ fn dragging_a_ground_truth_corner_corrects_it() {
     h.drop_at(to);
     h.step();
     h.step();
-    let moved = h.state().ground_truth(0).unwrap();
+}
+
+fn press(h: &mut Harness<'static, InspectorApp>, key: egui::Key, modifiers: egui::Modifiers) {
+    h.key_press_modifiers(modifiers, key);
+    h.step();
+    h.step();
+}
+
+#[test]
+fn the_ground_truth_correction_flow() {
+    use regtrack::gt::{GtFrame, Mark};
+    let d = TempDir::new("gui-gt");
+    let seq = small_sequence(d.path(), 8);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    // Correct in similitude: pick it from the GT SSM dropdown.
+    h.get_by_label("GT SSM").click();
+    h.run_steps(3);
+    h.get_by_label("similitude").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.gt_ssm, "similitude");
+    h.get_by_label("Edit ground-truth corners").click();
+    h.step();
+    let gt = h.state().ground_truth(0).unwrap();
+    let sim = regtrack::ssm::build("similitude").unwrap();
+
+    // Pick: drag corner 1; the opposite corner stays and the quad stays a similitude.
+    let from = h.state().screen_pos(gt.0[0]).unwrap();
+    drag(&mut h, from, from + egui::Vec2::new(12.0, 9.0));
+    let dragged = h.state().ground_truth(0).unwrap();
+    assert!(dragged.0[0].dist(gt.0[0]) > 2.0, "{gt} -> {dragged}");
     assert!(
-        moved.0[0].dist(gt.0[0]) > 2.0,
-        "corner 1 moved: {} -> {}",
-        gt,
-        moved
+        dragged.0[2].dist(gt.0[2]) < 1e-6,
+        "the opposite corner stays"
     );
-    assert_eq!(moved.0[2], gt.0[2], "the other corners stay");
+    let (_, _, r) = regtrack::gt::best_fit(&*sim, &gt, &dragged).unwrap();
+    assert!(r < 1e-6, "the edit stays a similitude ({r} px)");
+    assert_eq!(h.state().gt_cursor().0, Some(0));
+
+    // Nudge: corner 2 by 3 steps of 1 px to the right, then the step doubles.
+    press(&mut h, egui::Key::Num2, egui::Modifiers::NONE);
+    assert_eq!(h.state().gt_cursor().0, Some(1));
+    for _ in 0..3 {
+        press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+    }
+    let nudged = h.state().ground_truth(0).unwrap();
+    assert!(
+        (nudged.0[1].x - dragged.0[1].x - 3.0).abs() < 1e-6
+            && (nudged.0[1].y - dragged.0[1].y).abs() < 1e-6,
+        "{dragged} -> {nudged}"
+    );
+    press(&mut h, egui::Key::Plus, egui::Modifiers::NONE);
+    assert_eq!(h.state().gt_cursor().1, 2.0);
+
+    // Undo / redo over every edit.
+    press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
+    let undone = h.state().ground_truth(0).unwrap();
+    assert!(
+        (undone.0[1].x - dragged.0[1].x - 2.0).abs() < 1e-6,
+        "one nudge undone"
+    );
+    for _ in 0..3 {
+        press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
+    }
+    assert!(
+        h.state().ground_truth(0).unwrap().0[0].dist(gt.0[0]) < 1e-6,
+        "back to the start"
+    );
+    press(
+        &mut h,
+        egui::Key::Z,
+        egui::Modifiers::COMMAND | egui::Modifiers::SHIFT,
+    );
+    assert!(
+        h.state().ground_truth(0).unwrap().0[0].dist(dragged.0[0]) < 1e-6,
+        "the drag redone"
+    );
+    for _ in 0..3 {
+        press(
+            &mut h,
+            egui::Key::Z,
+            egui::Modifiers::COMMAND | egui::Modifiers::SHIFT,
+        );
+    }
+    assert!(h.state().ground_truth(0).unwrap().0[1].dist(nudged.0[1]) < 1e-6);
+
+    // Propagate from the corrected frame, then accept the proposal as one edit.
+    h.get_by_label("Propagate").click();
+    step_until(&mut h, "the proposal", |a| a.gt_proposal().is_some());
+    let proposal = h.state().gt_proposal().unwrap().clone();
+    assert_eq!(proposal.frames.first().unwrap().0, 1);
+    assert!(proposal.frames.len() >= 5, "{:?}", proposal.stop);
+    h.get_by_label("Accept").click();
+    h.step();
+    h.step();
+    let key = "similitude";
+    for (f, _) in &proposal.frames {
+        assert!(matches!(
+            h.state().corrections().mark(key, *f),
+            Some(Mark::Quad(_))
+        ));
+    }
+    press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
+    assert!(
+        h.state().corrections().mark(key, 3).is_none(),
+        "one undo removes the whole proposal"
+    );
+    press(&mut h, egui::Key::Y, egui::Modifiers::COMMAND);
+    assert!(h.state().corrections().mark(key, 3).is_some());
+
+    // The next frame is occluded (undo showed the frames it changed).
+    let f0 = h.state().state.frame;
+    press(&mut h, egui::Key::N, egui::Modifiers::NONE);
+    press(&mut h, egui::Key::N, egui::Modifiers::NONE);
+    let occluded = f0 + 2;
+    assert_eq!(h.state().state.frame, occluded);
+    press(&mut h, egui::Key::O, egui::Modifiers::NONE);
+    assert_eq!(h.state().gt_frame(occluded), Some(GtFrame::Occluded));
+    let before_export: Vec<_> = (0..8).map(|f| h.state().gt_frame(f)).collect();
+
+    // Export: the sequence's own format and OptGT, atomically; the original is untouched.
+    let original = std::fs::read_to_string(&seq).unwrap();
     assert!(h.state().ground_truth_edited());
-    // Saving writes the corrected ground truth beside the sequence, atomically.
-    h.get_by_label("Save ground truth*").click();
+    h.get_by_label("Export ground truth*").click();
     h.step();
     h.step();
-    let saved =
-        regtrack::dataset::read_ground_truth(&d.path().join("rt_gt_homography.txt")).unwrap();
-    assert_eq!(saved.len(), 4);
-    assert!(saved[0].quad.unwrap().0[0].dist(moved.0[0]) < 1e-3);
+    assert!(
+        h.state().errors_shown().is_empty(),
+        "{:?}",
+        h.state().errors_shown()
+    );
+    assert!(!h.state().ground_truth_edited());
+    assert_eq!(std::fs::read_to_string(&seq).unwrap(), original);
+    let exported = d.path().join("rt_gt_similitude.txt");
+    let saved = regtrack::dataset::read_ground_truth(&exported).unwrap();
+    assert_eq!(saved.len(), 8);
+    assert!(saved[occluded].quad.is_none(), "occluded");
+    assert!(
+        saved[1].quad.unwrap().0[1].dist(before_export[1].unwrap().quad().unwrap().0[1]) < 1e-3
+    );
+    assert!(d.path().join("OptGT/rt_similitude.txt").is_file());
+    // The exported file opens as the sequence.
+    let reopened = regtrack::dataset::Sequence::open(&exported).unwrap();
+    assert_eq!(reopened.len(), 8);
+    drop(h);
+
+    // Reopening restores every correction from the journal.
+    let mut h = harness(State {
+        gt_ssm: "similitude".into(),
+        ..state_on(&seq)
+    });
+    step_until(&mut h, "the frame", |a| a.tracked_until() == Some(0));
+    for (f, b) in before_export.iter().enumerate() {
+        let (a, b) = (h.state().gt_frame(f).unwrap(), b.unwrap());
+        match (a.quad(), b.quad()) {
+            (Some(x), Some(y)) => assert!(
+                regtrack::geometry::alignment_error(&x, &y) < 1e-9,
+                "frame {f}"
+            ),
+            _ => assert_eq!(a, b, "frame {f}"),
+        }
+    }
+    assert!(
+        h.state().status().contains("restored"),
+        "{}",
+        h.state().status()
+    );
 }
 
 #[test]

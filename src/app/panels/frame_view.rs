@@ -54,6 +54,9 @@ impl Transform {
     }
 }
 
+/// The colour of a propagation's proposal.
+const PROPOSAL_COLOR: Color32 = Color32::from_rgb(255, 150, 30);
+
 fn quad_points(t: &Transform, q: &Quad) -> Vec<Pos2> {
     q.0.iter().map(|p| t.to_screen(*p)).collect()
 }
@@ -119,10 +122,35 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
 
     let frame = app.state.frame;
     let numbers = app.state.view.show_corner_numbers;
-    if app.state.view.show_ground_truth
-        && let Some(gt) = app.ground_truth(frame)
+    if app.state.view.show_ground_truth {
+        // The 8-DOF ground truth under a low-DOF one, thin.
+        if app.rt.tool == Tool::EditGroundTruth
+            && crate::gt::ssm_key(&app.state.gt_ssm).is_ok_and(|k| k != "homography")
+            && let Some(full) = app.sequence().and_then(|s| s.ground_truth(frame))
+        {
+            let pts = quad_points(&t, &full);
+            painter.add(Shape::closed_line(
+                pts,
+                Stroke::new(1.0, GT_COLOR.gamma_multiply(0.6)),
+            ));
+        }
+        if let Some(gt) = app.ground_truth(frame) {
+            draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
+        }
+    }
+    if let Some(q) = app
+        .gt_proposal()
+        .and_then(|p| p.frames.iter().find(|(f, _)| *f == frame))
+        .map(|(_, q)| *q)
     {
-        draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
+        draw_quad(&painter, &t, &q, PROPOSAL_COLOR, true, false);
+        painter.text(
+            t.to_screen(q.0[0]) + Vec2::new(0.0, -14.0),
+            egui::Align2::LEFT_BOTTOM,
+            "proposal",
+            egui::FontId::proportional(13.0),
+            PROPOSAL_COLOR,
+        );
     }
     if app.state.view.show_samples {
         for (i, entry) in app.state.trackers.iter().enumerate() {
@@ -285,38 +313,175 @@ fn interact(
                 }
             }
         }
-        Tool::EditGroundTruth => {
-            let frame = app.state.frame;
-            let Some(gt) = app.ground_truth(frame) else {
-                return;
+        Tool::EditGroundTruth => edit_ground_truth(app, ui, response, t, painter),
+    }
+}
+
+/// The ground-truth mode: drag a corner (constrained to the shown SSM) or the whole quad (from
+/// inside it); one edit on release. Draws the picked corner, a magnifier around it and the
+/// template beside the shown frame's rectified region.
+fn edit_ground_truth(
+    app: &mut InspectorApp,
+    ui: &egui::Ui,
+    response: &egui::Response,
+    t: &Transform,
+    painter: &egui::Painter,
+) {
+    let frame = app.state.frame;
+    let (picked, step) = app.gt_cursor();
+    let Some(gt) = app.ground_truth(frame) else {
+        let occluded = app.gt_frame(frame) == Some(crate::gt::GtFrame::Occluded);
+        painter.text(
+            t.rect.left_top() + Vec2::new(8.0, 8.0),
+            egui::Align2::LEFT_TOP,
+            if occluded {
+                "frame marked occluded (O unmarks it)"
+            } else {
+                "no ground truth on this frame"
+            },
+            egui::FontId::proportional(15.0),
+            Color32::YELLOW,
+        );
+        return;
+    };
+    /// What a drag holds: the corner (or `None`: the whole quad), the press point, the quad then.
+    type Grab = (Option<usize>, Point, Quad);
+    let id = response.id.with("gt_grab");
+    if response.drag_started()
+        && let Some(pos) = ui
+            .input(|i| i.pointer.press_origin())
+            .or(response.interact_pointer_pos())
+    {
+        let nearest = (0..4)
+            .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .filter(|(_, d)| *d < 15.0)
+            .map(|(k, _)| k);
+        let p = t.to_image(pos);
+        let inside = crate::geometry::polygon_area(&[gt.0[0], gt.0[1], p]).signum()
+            == crate::geometry::polygon_area(&[gt.0[1], gt.0[2], p]).signum()
+            && crate::geometry::polygon_area(&[gt.0[1], gt.0[2], p]).signum()
+                == crate::geometry::polygon_area(&[gt.0[2], gt.0[3], p]).signum()
+            && crate::geometry::polygon_area(&[gt.0[2], gt.0[3], p]).signum()
+                == crate::geometry::polygon_area(&[gt.0[3], gt.0[0], p]).signum();
+        let grab: Option<Grab> = match nearest {
+            Some(k) => Some((Some(k), p, gt)),
+            None if inside => Some((None, p, gt)),
+            None => None,
+        };
+        if let Some((k, _, _)) = grab {
+            app.send(Command::GtPickCorner(k));
+        }
+        ui.data_mut(|d| d.insert_temp(id, grab));
+    }
+    let grab: Option<Grab> = ui.data(|d| d.get_temp(id)).flatten();
+    if let Some((k, from, q0)) = grab
+        && let Some(pos) = response.interact_pointer_pos().or(response.hover_pos())
+    {
+        let to = t.to_image(pos);
+        let moved = match k {
+            Some(k) => crate::app::gt_edit::move_corner(&app.state.gt_ssm, &q0, k, to),
+            None => q0.map(|c| Point::new(c.x + to.x - from.x, c.y + to.y - from.y)),
+        };
+        if response.drag_stopped() {
+            ui.data_mut(|d| d.remove::<Option<Grab>>(id));
+            let label = match k {
+                Some(k) => format!("move corner {}", k + 1),
+                None => "move the quad".into(),
             };
-            let id = response.id.with("gt_corner");
-            if response.drag_started()
-                && let Some(pos) = response.interact_pointer_pos()
-            {
-                let nearest = (0..4)
-                    .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .filter(|(_, d)| *d < 15.0)
-                    .map(|(k, _)| k);
-                ui.data_mut(|d| d.insert_temp(id, nearest));
+            app.send(Command::GtCommit {
+                frame,
+                quad: moved,
+                label,
+            });
+        } else if response.dragged() {
+            app.send(Command::GtDrag { frame, quad: moved });
+        }
+    }
+    for (k, p) in gt.0.iter().enumerate() {
+        let picked = picked == Some(k);
+        painter.circle_stroke(
+            t.to_screen(*p),
+            if picked { 11.0 } else { 8.0 },
+            Stroke::new(
+                if picked { 2.5 } else { 1.5 },
+                if picked { Color32::WHITE } else { GT_COLOR },
+            ),
+        );
+    }
+    painter.text(
+        t.rect.left_top() + Vec2::new(8.0, 8.0),
+        egui::Align2::LEFT_TOP,
+        format!(
+            "ground truth ({}): {} · step {step} px · 1-4/0 pick, arrows nudge, +/- step, N/P frame, J worst, O occluded, Ctrl+Z undo",
+            app.state.gt_ssm,
+            match picked {
+                Some(k) => format!("corner {}", k + 1),
+                None => "whole quad".into(),
             }
-            let grabbed: Option<usize> = ui.data(|d| d.get_temp(id)).flatten();
-            if let (Some(k), true, Some(pos)) =
-                (grabbed, response.dragged(), response.interact_pointer_pos())
-            {
-                app.send(Command::MoveGtCorner {
-                    frame,
-                    corner: k,
-                    to: t.to_image(pos),
-                });
-            }
-            if response.drag_stopped() {
-                ui.data_mut(|d| d.remove::<Option<usize>>(id));
-            }
-            for p in gt.0 {
-                painter.circle_stroke(t.to_screen(p), 8.0, Stroke::new(1.5, GT_COLOR));
-            }
+        ),
+        egui::FontId::proportional(13.0),
+        Color32::YELLOW,
+    );
+    // Magnifier around the picked corner (or the centre), 8x.
+    if let Some(texture) = app.rt.texture.clone() {
+        let c = picked.map_or(gt.centroid(), |k| gt.0[k]);
+        let r = 12.0f32;
+        let [w, h] = app.rt.image_size;
+        let (w, h) = (w.max(1) as f32, h.max(1) as f32);
+        let size = 192.0;
+        let area = Rect::from_min_size(
+            t.rect.right_top() + Vec2::new(-size - 8.0, 8.0),
+            Vec2::splat(size),
+        );
+        let uv = Rect::from_min_max(
+            Pos2::new((c.x as f32 + 0.5 - r) / w, (c.y as f32 + 0.5 - r) / h),
+            Pos2::new((c.x as f32 + 0.5 + r) / w, (c.y as f32 + 0.5 + r) / h),
+        );
+        painter.rect_filled(area, 0.0, Color32::BLACK);
+        painter.image(texture.id(), area, uv, Color32::WHITE);
+        let mag = |p: Point| {
+            area.center()
+                + Vec2::new(
+                    (p.x - c.x) as f32 * size / (2.0 * r),
+                    (p.y - c.y) as f32 * size / (2.0 * r),
+                )
+        };
+        let pts: Vec<Pos2> = gt.0.iter().map(|p| mag(*p)).collect();
+        let mag_painter = painter.with_clip_rect(area);
+        mag_painter.add(Shape::closed_line(pts.clone(), Stroke::new(1.5, GT_COLOR)));
+        if let Some(k) = picked {
+            mag_painter.circle_stroke(pts[k], 6.0, Stroke::new(1.5, Color32::WHITE));
+        }
+        painter.rect_stroke(
+            area,
+            0.0,
+            Stroke::new(1.0, Color32::GRAY),
+            egui::StrokeKind::Outside,
+        );
+    }
+    // The template and the shown frame's region, rectified: a misalignment shows as a shift.
+    if let Some([a, b]) = app.gt_patches(ui.ctx()) {
+        let side = 144.0;
+        let top = t.rect.right_top() + Vec2::new(-2.0 * side - 16.0, 216.0);
+        for (k, (tex, label)) in [(a, "template"), (b, "this frame")].into_iter().enumerate() {
+            let r = Rect::from_min_size(
+                top + Vec2::new(k as f32 * (side + 8.0), 0.0),
+                Vec2::splat(side),
+            );
+            painter.image(
+                tex.id(),
+                r,
+                Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+                Color32::WHITE,
+            );
+            painter.text(
+                r.left_bottom() + Vec2::new(0.0, 2.0),
+                egui::Align2::LEFT_TOP,
+                label,
+                egui::FontId::proportional(12.0),
+                Color32::WHITE,
+            );
         }
     }
 }

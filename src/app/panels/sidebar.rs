@@ -101,15 +101,149 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             }
             ui.label(egui::RichText::new("Trackers are scored against the ground truth projected on this SSM (low-DOF ground truth).").small());
             let editing = app.rt.tool == Tool::EditGroundTruth;
-            if ui.selectable_label(editing, "Edit ground-truth corners").clicked() {
+            if ui.selectable_label(editing, "Edit ground-truth corners").on_hover_text("Ground-truth mode: drag a corner or the quad; keys 1-4/0, arrows, +/-, N/P, J, O").clicked() {
                 app.send(Command::SetTool(if editing { Tool::Navigate } else { Tool::EditGroundTruth }));
             }
-            let label = if app.rt.gt_dirty { "Save ground truth*" } else { "Save ground truth" };
-            if ui.add_enabled(!app.rt.gt_edits.is_empty(), egui::Button::new(label)).clicked() {
-                app.send(Command::SaveGroundTruth);
+            if editing {
+                gt_controls(app, ui);
             }
         });
     });
+}
+
+/// The ground-truth mode's controls: corner, step, undo/redo, occluded, propagate,
+/// interpolate, export.
+fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let (picked, step) = app.gt_cursor();
+    ui.horizontal(|ui| {
+        ui.label("move");
+        for k in 0..4 {
+            if ui
+                .selectable_label(picked == Some(k), format!("{}", k + 1))
+                .clicked()
+            {
+                app.send(Command::GtPickCorner(Some(k)));
+            }
+        }
+        if ui.selectable_label(picked.is_none(), "quad").clicked() {
+            app.send(Command::GtPickCorner(None));
+        }
+    });
+    ui.horizontal(|ui| {
+        ui.label(format!("step {step} px"));
+        if ui.small_button("-").clicked() {
+            app.send(Command::GtStep(step / 2.0));
+        }
+        if ui.small_button("+").clicked() {
+            app.send(Command::GtStep(step * 2.0));
+        }
+    });
+    let (done, redo) = {
+        let (d, r) = app.corrections().history();
+        (
+            d.last().map(|s| s.to_string()),
+            r.first().map(|s| s.to_string()),
+        )
+    };
+    ui.horizontal(|ui| {
+        if ui
+            .add_enabled(done.is_some(), egui::Button::new("Undo"))
+            .on_hover_text(format!("Ctrl+Z: {}", done.as_deref().unwrap_or("nothing")))
+            .clicked()
+        {
+            app.send(Command::GtUndo);
+        }
+        if ui
+            .add_enabled(redo.is_some(), egui::Button::new("Redo"))
+            .on_hover_text(format!(
+                "Ctrl+Shift+Z: {}",
+                redo.as_deref().unwrap_or("nothing")
+            ))
+            .clicked()
+        {
+            app.send(Command::GtRedo);
+        }
+        if ui
+            .button("Revert frame")
+            .on_hover_text("Back to the original ground truth")
+            .clicked()
+        {
+            app.send(Command::GtRevert);
+        }
+    });
+    let occluded = app.gt_frame(app.state.frame) == Some(crate::gt::GtFrame::Occluded);
+    ui.horizontal(|ui| {
+        if ui
+            .selectable_label(occluded, "Occluded")
+            .on_hover_text("O: not annotatable; skipped by the evaluation")
+            .clicked()
+        {
+            app.send(Command::GtToggleOccluded);
+        }
+        if ui
+            .button("Jump to worst")
+            .on_hover_text(
+                "J: the uncorrected frame with the largest fit residual or tracker error",
+            )
+            .clicked()
+        {
+            app.send(Command::GtJumpWorst);
+        }
+    });
+    if let Some(r) = app.gt_residual(app.state.frame) {
+        ui.label(format!("fit residual on this frame: {r:.2} px"));
+    }
+    ui.horizontal(|ui| {
+        let running = app.gt_propagating();
+        if ui.add_enabled(!running, egui::Button::new(if running { "Propagating…" } else { "Propagate" }))
+            .on_hover_text("Track forward from this frame with the inspected tracker on this SSM, until a corrected frame or an error jump; then accept or reject")
+            .clicked()
+        {
+            app.send(Command::GtPropagate);
+        }
+        if ui.button("Interpolate").on_hover_text("Between the corrected key frames around this frame, in the SSM's parameters").clicked() {
+            app.send(Command::GtInterpolate);
+        }
+    });
+    if let Some(p) = app.gt_proposal() {
+        let (a, b) = (
+            p.frames.first().map_or(0, |f| f.0),
+            p.frames.last().map_or(0, |f| f.0),
+        );
+        ui.label(format!("proposal: frames {}-{} ({})", a + 1, b + 1, p.stop));
+        ui.horizontal(|ui| {
+            if ui
+                .button("Accept")
+                .on_hover_text("Enter: one undoable edit")
+                .clicked()
+            {
+                app.send(Command::GtAcceptProposal);
+            }
+            if ui.button("Reject").on_hover_text("Esc").clicked() {
+                app.send(Command::GtRejectProposal);
+            }
+        });
+    }
+    let c = app.corrections();
+    let journal = c
+        .journal_path()
+        .map(|p| p.display().to_string())
+        .unwrap_or_else(|| "none: NOT saved".into());
+    ui.label(
+        egui::RichText::new(format!(
+            "{} correction(s), kept in the journal {journal}",
+            c.len()
+        ))
+        .small(),
+    );
+    let label = if app.ground_truth_edited() {
+        "Export ground truth*"
+    } else {
+        "Export ground truth"
+    };
+    if ui.button(label).on_hover_text("Writes <seq>_gt_<ssm>.txt (the sequence's format) and OptGT/<seq>_<ssm>.txt atomically; the original is never written").clicked() {
+        app.send(Command::GtExport);
+    }
 }
 
 /// One line of figures for a tracker: frames, SR@5, mean error, speed.

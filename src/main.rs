@@ -644,7 +644,7 @@ fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bo
                 skipped += 1;
                 continue;
             }
-            let (quads, _) = regtrack::gt::write_opt_gt(&dir, seq, &low)?;
+            let (quads, _) = regtrack::gt::write_opt_gt(&dir, seq, &low, &[])?;
             let r: Vec<f64> = low.residuals.iter().flatten().copied().collect();
             let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
             let worst = low.worst_frames();

@@ -218,13 +218,22 @@ impl InspectorApp {
         self.rt.gt.patch_key = None;
         match Corrections::open(&path, &seq.name, seq.len()) {
             Ok((c, rec)) => {
-                self.rt.gt.corrections = c;
                 if rec.edits > 0 || rec.truncated_tail {
+                    let mut per_ssm: std::collections::BTreeMap<&str, usize> = Default::default();
+                    for s in ssm::REGISTRY.iter().map(|e| e.name) {
+                        let n = c.corrected_frames(s).len();
+                        if n > 0 {
+                            per_ssm.insert(s, n);
+                        }
+                    }
+                    let per: Vec<String> =
+                        per_ssm.iter().map(|(s, n)| format!("{s}: {n}")).collect();
                     self.rt.status = format!(
-                        "{}: {} frames; restored {} correction(s) from {}{}",
+                        "{}: {} frames; restored {} correction(s) ({}) from {}{}",
                         seq.name,
                         seq.len(),
                         rec.corrected,
+                        per.join(", "),
                         path.display(),
                         if rec.truncated_tail {
                             " (its last line, cut by a crash, was dropped)"
@@ -233,6 +242,7 @@ impl InspectorApp {
                         }
                     );
                 }
+                self.rt.gt.corrections = c;
             }
             Err(e) => {
                 self.rt.gt.corrections = Corrections::in_memory(seq.len());

@@ -82,6 +82,8 @@ pub struct Runtime {
     progress: Option<(String, usize, usize)>,
     tool: Tool,
     selected_iteration: Option<usize>,
+    /// A sequence being opened (the session points to it once it opened).
+    opening: Option<SequenceSource>,
     /// The ground-truth mode: corrections (journaled), drag, proposal, patches.
     gt: gt_edit::GtRuntime,
     /// Typed-path fallbacks for the file dialogs.
@@ -133,6 +135,7 @@ impl InspectorApp {
             progress: None,
             tool: Tool::Navigate,
             selected_iteration: None,
+            opening: None,
             gt: gt_edit::GtRuntime::default(),
             path_input: String::new(),
             session_path: String::from("sessions/my_session.toml"),
@@ -195,12 +198,8 @@ impl InspectorApp {
     fn open(&mut self, src: SequenceSource) {
         self.rt.playing = false;
         self.rt.progress = Some(("opening the sequence".into(), 0, 0));
-        if let SequenceSource::Path(p) = &src {
-            self.rt.recent.retain(|r| r != p);
-            self.rt.recent.insert(0, p.clone());
-            self.rt.recent.truncate(8);
-        }
-        self.state.sequence = src.clone();
+        // The session and the recent list change once it opened (a failed open changes nothing).
+        self.rt.opening = Some(src.clone());
         self.rt.worker.send(Job::Open(src));
     }
 
@@ -304,6 +303,14 @@ impl InspectorApp {
                     self.rt.progress = None;
                     self.rt.status = format!("{}: {} frames", seq.name, seq.len());
                     let start = self.state.start_frame.min(seq.len() - 1);
+                    if let Some(src) = self.rt.opening.take() {
+                        if let SequenceSource::Path(p) = &src {
+                            self.rt.recent.retain(|r| r != p);
+                            self.rt.recent.insert(0, p.clone());
+                            self.rt.recent.truncate(8);
+                        }
+                        self.state.sequence = src;
+                    }
                     self.open_corrections(&seq);
                     self.rt.sequence = Some(seq);
                     self.rt.texture_frame = None;
@@ -351,6 +358,7 @@ impl InspectorApp {
                 }
                 Reply::Error(e) => {
                     self.rt.progress = None;
+                    self.rt.opening = None;
                     self.error(e);
                 }
             }
@@ -484,7 +492,12 @@ impl InspectorApp {
         panels::playback_bar(self, ui);
         panels::sidebar(self, ui);
         panels::plots_panel(self, ui);
-        egui::CentralPanel::default().show(ui, |ui| panels::frame_view(self, ui));
+        egui::CentralPanel::default().show(ui, |ui| {
+            if self.rt.tool == Tool::EditGroundTruth && self.rt.sequence.is_some() {
+                egui::Panel::bottom("gt_strip").show(ui, |ui| panels::gt_strip(self, ui));
+            }
+            panels::frame_view(self, ui)
+        });
         self.apply_pending();
         if self.rt.restart_due && !ctx.input(|i| i.pointer.any_down()) {
             self.rt.restart_due = false;

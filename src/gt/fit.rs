@@ -11,7 +11,7 @@
 //! Files in MTF's layout: `<root>/OptGT/<seq>_<ssm>.txt` (the quads, in the MTF format) and,
 //! beside it, `<seq>_<ssm>_residuals.txt` (frame, residual px).
 
-use crate::dataset::{Sequence, read_ground_truth, write_atomic, write_corners_named};
+use crate::dataset::{Sequence, read_ground_truth, write_atomic, write_ground_truth};
 use crate::error::{Error, Result};
 use crate::geometry::{Quad, alignment_error};
 use crate::ssm::{self, Params, Ssm};
@@ -167,15 +167,18 @@ pub fn frame_names(seq: &Sequence) -> Vec<String> {
         .collect()
 }
 
-/// Writes a low-DOF ground truth in OptGT layout under `dir` (atomically); returns the quads
-/// file and the residuals file.
+/// Writes a low-DOF ground truth in OptGT layout under `dir` (atomically); frames without
+/// corners are written `occluded` where `occluded` says so (it may be empty), `none` otherwise.
+/// Returns the quads file and the residuals file.
 pub fn write_opt_gt(
     dir: &Path,
     seq: &Sequence,
     low: &LowDofGroundTruth,
+    occluded: &[bool],
 ) -> Result<(PathBuf, PathBuf)> {
     let path = opt_gt_path(dir, &seq.name, &low.ssm);
-    write_corners_named(&path, &low.quads, &frame_names(seq))?;
+    let names = frame_names(seq);
+    write_ground_truth(&path, &low.quads, occluded, Some(&names))?;
     let mut text = String::from("frame\tresidual_px\n");
     for (i, r) in low.residuals.iter().enumerate() {
         match r {

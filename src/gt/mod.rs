@@ -437,7 +437,7 @@ pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec
         quads,
         residuals,
     };
-    let (opt, res) = write_opt_gt(&dir, seq, &low)?;
+    let (opt, res) = write_opt_gt(&dir, seq, &low, &occluded)?;
     let paths = vec![own, opt, res];
     c.note_export(&paths)?;
     Ok(paths)

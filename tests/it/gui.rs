@@ -169,7 +169,8 @@ fn the_ground_truth_correction_flow() {
     h.run_steps(2);
     assert_eq!(h.state().state.gt_ssm, "similitude");
     h.get_by_label("Edit ground-truth corners").click();
-    h.step();
+    // The strip under the frame appears: let the layout settle.
+    h.run_steps(4);
     let gt = h.state().ground_truth(0).unwrap();
     let sim = regtrack::ssm::build("similitude").unwrap();
 
@@ -267,6 +268,22 @@ fn the_ground_truth_correction_flow() {
     assert_eq!(h.state().gt_frame(occluded), Some(GtFrame::Occluded));
     let before_export: Vec<_> = (0..8).map(|f| h.state().gt_frame(f)).collect();
 
+    // A mistyped path fails to open and loses nothing.
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(
+            d.path().join("no_such_seq.txt"),
+        )));
+    step_until(&mut h, "the error", |a| !a.errors_shown().is_empty());
+    assert_eq!(h.state().gt_frame(occluded), Some(GtFrame::Occluded));
+    assert_eq!(h.state().sequence().unwrap().name, "rt");
+    assert_eq!(
+        h.state().state.sequence,
+        SequenceSource::Path(seq.clone()),
+        "the session keeps it"
+    );
+    h.state_mut().send(Command::DismissError(0));
+    h.run_steps(4);
+
     // Export: the sequence's own format and OptGT, atomically; the original is untouched.
     let original = std::fs::read_to_string(&seq).unwrap();
     assert!(h.state().ground_truth_edited());
@@ -278,7 +295,12 @@ fn the_ground_truth_correction_flow() {
         "{:?}",
         h.state().errors_shown()
     );
-    assert!(!h.state().ground_truth_edited());
+    assert!(
+        !h.state().ground_truth_edited(),
+        "{} {:?}",
+        h.state().status(),
+        h.state().errors_shown()
+    );
     assert_eq!(std::fs::read_to_string(&seq).unwrap(), original);
     let exported = d.path().join("rt_gt_similitude.txt");
     let saved = regtrack::dataset::read_ground_truth(&exported).unwrap();
@@ -287,7 +309,9 @@ fn the_ground_truth_correction_flow() {
     assert!(
         saved[1].quad.unwrap().0[1].dist(before_export[1].unwrap().quad().unwrap().0[1]) < 1e-3
     );
-    assert!(d.path().join("OptGT/rt_similitude.txt").is_file());
+    let opt =
+        regtrack::dataset::read_ground_truth(&d.path().join("OptGT/rt_similitude.txt")).unwrap();
+    assert!(opt[occluded].quad.is_none() && opt[1].quad.is_some());
     // The exported file opens as the sequence.
     let reopened = regtrack::dataset::Sequence::open(&exported).unwrap();
     assert_eq!(reopened.len(), 8);

@@ -413,7 +413,7 @@ fn edit_ground_truth(
         t.rect.left_top() + Vec2::new(8.0, 8.0),
         egui::Align2::LEFT_TOP,
         format!(
-            "ground truth ({}): {} · step {step} px · 1-4/0 pick, arrows nudge, +/- step, N/P frame, J worst, O occluded, Ctrl+Z undo",
+            "GT {}: {} · step {step} px · keys 1-4/0 arrows +/- N/P J O Ctrl+Z",
             app.state.gt_ssm,
             match picked {
                 Some(k) => format!("corner {}", k + 1),
@@ -423,17 +423,45 @@ fn edit_ground_truth(
         egui::FontId::proportional(13.0),
         Color32::YELLOW,
     );
-    // Magnifier around the picked corner (or the centre), 8x.
+}
+
+fn finish_drawing(app: &mut InspectorApp, tracker: usize, q: Quad) {
+    app.send(Command::SetTool(Tool::Navigate));
+    match q.validate() {
+        Ok(()) => app.send(Command::InitTracker(tracker, InitSource::Quad(q))),
+        Err(e) => app.send(Command::ReportError(format!("not a usable quad: {e}"))),
+    }
+}
+
+/// The ground-truth mode's strip under the frame: a magnifier around the picked corner and the
+/// template beside the shown frame's ground-truth region, rectified (a misalignment shows as a
+/// shift between the two).
+pub fn gt_strip(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let side = 150.0f32;
+    let (rect, _) =
+        ui.allocate_exact_size(Vec2::new(ui.available_width(), side + 18.0), Sense::hover());
+    let painter = ui.painter_at(rect);
+    let frame = app.state.frame;
+    let (picked, _) = app.gt_cursor();
+    let Some(gt) = app.ground_truth(frame) else {
+        return;
+    };
+    let label = |r: Rect, text: String| {
+        painter.text(
+            r.left_bottom() + Vec2::new(0.0, 2.0),
+            egui::Align2::LEFT_TOP,
+            text,
+            egui::FontId::proportional(12.0),
+            Color32::LIGHT_GRAY,
+        );
+    };
+    // Magnifier around the picked corner (or the centre), 6x.
     if let Some(texture) = app.rt.texture.clone() {
         let c = picked.map_or(gt.centroid(), |k| gt.0[k]);
-        let r = 12.0f32;
+        let r = side / 12.0;
         let [w, h] = app.rt.image_size;
         let (w, h) = (w.max(1) as f32, h.max(1) as f32);
-        let size = 192.0;
-        let area = Rect::from_min_size(
-            t.rect.right_top() + Vec2::new(-size - 8.0, 8.0),
-            Vec2::splat(size),
-        );
+        let area = Rect::from_min_size(rect.left_top(), Vec2::splat(side));
         let uv = Rect::from_min_max(
             Pos2::new((c.x as f32 + 0.5 - r) / w, (c.y as f32 + 0.5 - r) / h),
             Pos2::new((c.x as f32 + 0.5 + r) / w, (c.y as f32 + 0.5 + r) / h),
@@ -443,30 +471,41 @@ fn edit_ground_truth(
         let mag = |p: Point| {
             area.center()
                 + Vec2::new(
-                    (p.x - c.x) as f32 * size / (2.0 * r),
-                    (p.y - c.y) as f32 * size / (2.0 * r),
+                    (p.x - c.x) as f32 * side / (2.0 * r),
+                    (p.y - c.y) as f32 * side / (2.0 * r),
                 )
         };
         let pts: Vec<Pos2> = gt.0.iter().map(|p| mag(*p)).collect();
-        let mag_painter = painter.with_clip_rect(area);
-        mag_painter.add(Shape::closed_line(pts.clone(), Stroke::new(1.5, GT_COLOR)));
+        let clip = painter.with_clip_rect(area);
+        clip.add(Shape::closed_line(pts.clone(), Stroke::new(1.5, GT_COLOR)));
         if let Some(k) = picked {
-            mag_painter.circle_stroke(pts[k], 6.0, Stroke::new(1.5, Color32::WHITE));
+            clip.circle_stroke(pts[k], 6.0, Stroke::new(1.5, Color32::WHITE));
         }
         painter.rect_stroke(
             area,
             0.0,
             Stroke::new(1.0, Color32::GRAY),
-            egui::StrokeKind::Outside,
+            egui::StrokeKind::Inside,
+        );
+        label(
+            area,
+            match picked {
+                Some(k) => format!("corner {} ({:.1}, {:.1})", k + 1, c.x, c.y),
+                None => format!("centre ({:.1}, {:.1})", c.x, c.y),
+            },
         );
     }
-    // The template and the shown frame's region, rectified: a misalignment shows as a shift.
+    let this = match app.gt_residual(frame) {
+        Some(r) => format!("frame {} · fit residual {r:.2} px", frame + 1),
+        None => format!("frame {}", frame + 1),
+    };
     if let Some([a, b]) = app.gt_patches(ui.ctx()) {
-        let side = 144.0;
-        let top = t.rect.right_top() + Vec2::new(-2.0 * side - 16.0, 216.0);
-        for (k, (tex, label)) in [(a, "template"), (b, "this frame")].into_iter().enumerate() {
+        for (k, (tex, text)) in [(a, "template (first frame)".to_string()), (b, this)]
+            .into_iter()
+            .enumerate()
+        {
             let r = Rect::from_min_size(
-                top + Vec2::new(k as f32 * (side + 8.0), 0.0),
+                rect.left_top() + Vec2::new((k + 1) as f32 * (side + 12.0), 0.0),
                 Vec2::splat(side),
             );
             painter.image(
@@ -475,21 +514,7 @@ fn edit_ground_truth(
                 Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
                 Color32::WHITE,
             );
-            painter.text(
-                r.left_bottom() + Vec2::new(0.0, 2.0),
-                egui::Align2::LEFT_TOP,
-                label,
-                egui::FontId::proportional(12.0),
-                Color32::WHITE,
-            );
+            label(r, text);
         }
-    }
-}
-
-fn finish_drawing(app: &mut InspectorApp, tracker: usize, q: Quad) {
-    app.send(Command::SetTool(Tool::Navigate));
-    match q.validate() {
-        Ok(()) => app.send(Command::InitTracker(tracker, InitSource::Quad(q))),
-        Err(e) => app.send(Command::ReportError(format!("not a usable quad: {e}"))),
     }
 }

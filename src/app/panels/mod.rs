@@ -7,7 +7,7 @@ mod plots;
 mod sidebar;
 
 pub use bars::{playback_bar, top_bar};
-pub use frame_view::{Transform, frame_view};
+pub use frame_view::{Transform, frame_view, gt_strip};
 pub use plots::plots_panel;
 pub use sidebar::sidebar;
 

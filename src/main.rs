@@ -101,7 +101,8 @@ enum Command {
         #[arg(long)]
         reinit: bool,
         /// Score against the low-DOF ground truth of this SSM, as the paper does (read from
-        /// `<root>/OptGT/<seq>_<ssm>.txt` when it exists, fitted otherwise: see `gt-fit`).
+        /// `<root>/OptGT/<seq>_<ssm>.txt` when it exists, fitted otherwise: see `gt-fit`);
+        /// `own`: each tracker against its own SSM's.
         #[arg(long)]
         gt_ssm: Option<String>,
         /// Error type of the success rates: alignment (mean corner distance, E_AL), center
@@ -684,7 +685,7 @@ fn run_eval(
 ) -> Result<()> {
     let specs = specs(sms, ams, ssms, whole, params)?;
     let sequences = dataset::discover(root, seqs.as_deref())?;
-    if let Some(g) = &opts.gt_ssm {
+    if let Some(g) = opts.gt_ssm.as_deref().filter(|g| *g != eval::OWN_SSM) {
         opts.gt_ssm = Some(regtrack::gt::ssm_key(g)?);
     }
     let pairs: Vec<(usize, usize)> = (0..sequences.len())

@@ -291,6 +291,21 @@ pub struct TrackerParams {
     /// Hierarchical search over SSMs (MTF's `hrch`): each frame is first searched with the SSMs
     /// of 2, 4 and 6 DOF below the tracker's own, each from the previous one's result.
     pub ssm_hierarchy: bool,
+    /// Where the `res x res` samples lie: at the centres of a tiling of the target (inside it,
+    /// the default) or spanning it from corner to corner (on its border too, as MTF samples).
+    pub grid: GridLayout,
+}
+
+/// Where a tracker's sampling grid lies on the target.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GridLayout {
+    /// The centres of a `res x res` tiling: every sample inside the target.
+    #[default]
+    Centres,
+    /// `res` points from edge to edge on each axis, corners included: the outer samples lie on
+    /// the target's border (and see the background when smoothed).
+    Border,
 }
 
 /// What a tracker does after a loss of track.
@@ -387,6 +402,11 @@ pub const TRACKER_PARAMS: &[ParamDef] = &[
         "off, or on: search translation, similitude and affine (those below the tracker's SSM) first, then the tracker's SSM (MTF's hrch)",
         &["off", "on"],
     ),
+    ParamDef::choice(
+        "grid",
+        "sampling grid: centres (of a res x res tiling, inside the target) or border (corner to corner, as MTF)",
+        &["centres", "border"],
+    ),
 ];
 
 impl Default for TrackerParams {
@@ -403,6 +423,7 @@ impl Default for TrackerParams {
             seed: 0,
             on_loss: LossPolicy::Stop,
             ssm_hierarchy: false,
+            grid: GridLayout::Centres,
         };
         for d in TRACKER_PARAMS {
             p.set_value(d.name, d.default);
@@ -433,6 +454,7 @@ impl TrackerParams {
             "pyramid_levels" => self.pyramid_levels as f64,
             "seed" => self.seed as f64,
             "ssm_hierarchy" => self.ssm_hierarchy as u8 as f64,
+            "grid" => self.grid as u8 as f64,
             "on_loss" => match self.on_loss {
                 LossPolicy::Stop => 0.0,
                 LossPolicy::Continue => 1.0,
@@ -456,6 +478,13 @@ impl TrackerParams {
             "pyramid_levels" => self.pyramid_levels = whole,
             "seed" => self.seed = v.max(0.0) as u64,
             "ssm_hierarchy" => self.ssm_hierarchy = whole == 1,
+            "grid" => {
+                self.grid = if whole == 1 {
+                    GridLayout::Border
+                } else {
+                    GridLayout::Centres
+                }
+            }
             "on_loss" => {
                 self.on_loss = if whole == 1 {
                     LossPolicy::Continue

@@ -662,9 +662,9 @@ impl RegistrationTracker {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(view, false);
-        let values = std::mem::take(&mut ctx.values);
+        let values = std::mem::take(&mut ctx.work.values);
         ctx.am.update_model(&values);
-        ctx.values = values;
+        ctx.work.values = values;
         sm.model_updated(ctx);
     }
 
@@ -703,7 +703,8 @@ impl VisualTracker for RegistrationTracker {
     fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         // Until it succeeds the tracker is not usable (its context is being replaced).
         self.status = TrackStatus::Uninitialized;
-        self.ctx.set_region(quad, self.params.res)?;
+        self.ctx
+            .set_region(quad, self.params.res, self.params.grid)?;
         let region = self.region_around(quad);
         self.prepare(input, region);
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
@@ -727,7 +728,7 @@ impl VisualTracker for RegistrationTracker {
             .initialize(&mut self.ctx, &view)
             .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
         for (l, (ctx, sm)) in self.coarse.iter_mut().enumerate() {
-            ctx.set_region(quad, self.params.res)?;
+            ctx.set_region(quad, self.params.res, self.params.grid)?;
             let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
             ctx.sample_template(&view);
             sm.initialize(ctx, &view).map_err(|r| {
@@ -739,7 +740,7 @@ impl VisualTracker for RegistrationTracker {
         }
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
         for (ctx, sm) in self.lower.iter_mut() {
-            ctx.set_region(quad, self.params.res)?;
+            ctx.set_region(quad, self.params.res, self.params.grid)?;
             ctx.sample_template(&view);
             sm.initialize(ctx, &view).map_err(|r| {
                 Error::InvalidRegion(format!("cannot track {quad} with {}: {r}", ctx.ssm.name()))
@@ -877,7 +878,7 @@ impl VisualTracker for RegistrationTracker {
         Some(Inspection {
             res: self.params.res,
             template: &self.ctx.template,
-            patch: &self.ctx.values,
+            patch: &self.ctx.work.values,
         })
     }
 }

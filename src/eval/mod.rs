@@ -70,6 +70,10 @@ pub fn mean_success_rate(errors: &[f64]) -> f64 {
     c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64
 }
 
+/// `EvalOptions::gt_ssm` for "each tracker against the low-DOF ground truth of its own SSM" (the
+/// paper's protocol for comparing SSMs).
+pub const OWN_SSM: &str = "own";
+
 /// The error a success curve is drawn from (MTF's error types).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -135,7 +139,8 @@ pub struct EvalOptions {
     /// With `reinit`: frames skipped after a failure before re-initialising.
     pub reinit_skip: usize,
     /// Score against the low-DOF ground truth of this SSM (OptGT when present, fitted
-    /// otherwise), as the paper does; `None`: the sequence's own ground truth.
+    /// otherwise), as the paper does; [`OWN_SSM`]: each tracker against its own SSM's; `None`:
+    /// the sequence's own ground truth.
     pub gt_ssm: Option<String>,
     /// The error the success rates are computed from.
     pub error: ErrorKind,
@@ -302,7 +307,13 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
             .to_string(),
         gt: runs
             .first()
-            .and_then(|r| r.options.gt_ssm.clone())
+            .and_then(|r| match r.options.gt_ssm.as_deref() {
+                Some(OWN_SSM) => r
+                    .spec
+                    .registration()
+                    .map(|x| crate::gt::ssm_key(&x.ssm).unwrap_or_else(|_| x.ssm.clone())),
+                other => other.map(str::to_string),
+            })
             .unwrap_or_else(|| "full".into()),
     }
 }
@@ -339,7 +350,12 @@ pub fn run_sequence(
     init: Option<Quad>,
     observer: &mut dyn Observer,
 ) -> Result<RunResult> {
-    let gt: Vec<Option<Quad>> = match &opts.gt_ssm {
+    let gt_ssm = match opts.gt_ssm.as_deref() {
+        // Each tracker against its own SSM's low-DOF ground truth (a whole tracker: the full one).
+        Some(OWN_SSM) => spec.registration().map(|r| r.ssm.as_str()),
+        other => other,
+    };
+    let gt: Vec<Option<Quad>> = match gt_ssm {
         Some(ssm) => crate::gt::low_dof_ground_truth(seq, ssm)?.0,
         None => seq.ground_truth.clone(),
     };

@@ -199,7 +199,7 @@ impl SearchMethod for Parallel {
             let p = ctx.params;
             ctx.warp_grid(&p);
             ctx.sample(img, false);
-            let f = ctx.am.similarity(&ctx.values);
+            let f = ctx.am.similarity(&ctx.work.values);
             if f.is_finite() && best.is_none_or(|(b, _)| f > b) {
                 best = Some((f, p));
             }

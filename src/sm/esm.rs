@@ -29,8 +29,8 @@ impl SearchMethod for Esm {
         ctx.sample(img, true);
         ctx.warped_gradient(&p);
         for i in 0..ctx.len() {
-            ctx.gx[i] = 0.5 * (ctx.gx[i] + ctx.template_gx[i]);
-            ctx.gy[i] = 0.5 * (ctx.gy[i] + ctx.template_gy[i]);
+            ctx.work.gx[i] = 0.5 * (ctx.work.gx[i] + ctx.template_gx[i]);
+            ctx.work.gy[i] = 0.5 * (ctx.work.gy[i] + ctx.template_gy[i]);
         }
         ctx.project_gradients(None);
         ctx.forward_step(Update::Compose).map(Step::auto)

@@ -28,9 +28,10 @@ impl SearchMethod for Falk {
         ctx.sample(img, true);
         // d pixel / d (normalised point) is the scale of the normaliser.
         let s = ctx.norm.scale as f32;
-        ctx.gx
+        ctx.work
+            .gx
             .iter_mut()
-            .chain(ctx.gy.iter_mut())
+            .chain(ctx.work.gy.iter_mut())
             .for_each(|g| *g *= s);
         ctx.project_gradients(Some(&p));
         ctx.forward_step(Update::Additive).map(Step::auto)

@@ -42,8 +42,8 @@ impl SearchMethod for Ialk {
             let det = a00 * a11 - a01 * a10;
             let (tx, ty) = (ctx.template_gx[i], ctx.template_gy[i]);
             // (tx, ty) A^-1 with A^-1 = [[a11, -a01], [-a10, a00]] / det.
-            ctx.gx[i] = (tx * a11 - ty * a10) / det;
-            ctx.gy[i] = (-tx * a01 + ty * a00) / det;
+            ctx.work.gx[i] = (tx * a11 - ty * a10) / det;
+            ctx.work.gy[i] = (-tx * a01 + ty * a00) / det;
         }
         ctx.project_gradients(Some(&p));
         ctx.forward_step(Update::Additive).map(Step::auto)

@@ -45,7 +45,8 @@ impl Iclk {
         };
         let template = std::mem::take(&mut ctx.template);
         // The AM's contract: the Hessian follows a gradient on the same patch.
-        ctx.am.gradient(Wrt::Template, &template, &mut ctx.grad);
+        ctx.am
+            .gradient(Wrt::Template, &template, &mut ctx.work.grad);
         ctx.am.hessian(
             Wrt::Template,
             kind,
@@ -83,12 +84,14 @@ impl SearchMethod for Iclk {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, false);
-        let f = ctx.am.gradient(Wrt::Template, &ctx.values, &mut ctx.grad);
+        let f = ctx
+            .am
+            .gradient(Wrt::Template, &ctx.work.values, &mut ctx.work.grad);
         if ctx.hessian == HessianKind::Newton {
             ctx.am.hessian(
                 Wrt::Template,
                 HessianKind::Newton,
-                &ctx.values,
+                &ctx.work.values,
                 &self.jac,
                 ctx.dof,
                 &mut self.hessian,

@@ -259,8 +259,9 @@ pub enum Update {
     ComposeInverse,
 }
 
-/// The state of one tracker shared by its search method and the driver: the models, the sampling
-/// grid and template, the parameters, and every per-iteration buffer.
+/// The registration problem of one tracker, shared by its search method and the driver: the
+/// models, the sampling grid, the template and the current parameters; the per-iteration
+/// buffers are apart, in [`Workspace`].
 #[derive(Debug)]
 pub struct Context {
     pub ssm: Box<dyn Ssm>,
@@ -272,8 +273,7 @@ pub struct Context {
     pub dof: usize,
     /// Image <-> normalised frame.
     pub norm: Normaliser,
-    /// The sampling grid: the centres of a `res x res` tiling of the unit square mapped onto the
-    /// initial quad, in normalised coordinates.
+    /// The sampling grid, in normalised coordinates (see [`crate::params::GridLayout`]).
     pub grid_x: Vec<f32>,
     pub grid_y: Vec<f32>,
     /// The initial quad in normalised coordinates.
@@ -286,7 +286,16 @@ pub struct Context {
     pub template_gy: Vec<f32>,
     /// `dw/dp` at the identity on the grid (layout of [`Ssm::jacobian`]).
     pub dwdp0: Vec<f32>,
-    /// Scratch: `dw/dp` at the current parameters.
+    /// Per-iteration buffers.
+    pub work: Workspace,
+}
+
+/// The buffers of one iteration (allocated once, with the grid): the warped grid, the sampled
+/// values and gradients, the AM's gradient and the pixel Jacobian. A search method's own state
+/// (ESM's mean Jacobian, NN's index, PF's particles) lives in the method.
+#[derive(Debug, Default)]
+pub struct Workspace {
+    /// `dw/dp` at the current parameters.
     pub dwdp: Vec<f32>,
     /// Warped grid in frame pixels.
     pub px: Vec<f32>,
@@ -327,14 +336,16 @@ impl Context {
             template_gx: z(n),
             template_gy: z(n),
             dwdp0: z(2 * n * dof),
-            dwdp: z(2 * n * dof),
-            px: z(n),
-            py: z(n),
-            values: z(n),
-            gx: z(n),
-            gy: z(n),
-            grad: z(n),
-            jac: z(n * dof),
+            work: Workspace {
+                dwdp: z(2 * n * dof),
+                px: z(n),
+                py: z(n),
+                values: z(n),
+                gx: z(n),
+                gy: z(n),
+                grad: z(n),
+                jac: z(n * dof),
+            },
         }
     }
 
@@ -369,8 +380,8 @@ impl Context {
         for i in 0..self.grid_x.len() {
             let (x, y) = (self.grid_x[i], self.grid_y[i]);
             let w = 1.0 / (m20 * x + m21 * y + m22);
-            self.px[i] = (m00 * x + m01 * y + m02) * w;
-            self.py[i] = (m10 * x + m11 * y + m12) * w;
+            self.work.px[i] = (m00 * x + m01 * y + m02) * w;
+            self.work.py[i] = (m10 * x + m11 * y + m12) * w;
         }
     }
 
@@ -379,14 +390,14 @@ impl Context {
         if gradients {
             sample_values_gradients(
                 img,
-                &self.px,
-                &self.py,
-                &mut self.values,
-                &mut self.gx,
-                &mut self.gy,
+                &self.work.px,
+                &self.work.py,
+                &mut self.work.values,
+                &mut self.work.gx,
+                &mut self.work.gy,
             );
         } else {
-            sample_values(img, &self.px, &self.py, &mut self.values);
+            sample_values(img, &self.work.px, &self.work.py, &mut self.work.values);
         }
     }
 
@@ -398,14 +409,14 @@ impl Context {
         for i in 0..self.grid_x.len() {
             let (x, y) = (self.grid_x[i], self.grid_y[i]);
             let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
-            let (u, v) = (self.px[i], self.py[i]);
+            let (u, v) = (self.work.px[i], self.work.py[i]);
             let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
             let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
             let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
             let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
-            let (gx, gy) = (self.gx[i], self.gy[i]);
-            self.gx[i] = gx * a00 + gy * a10;
-            self.gy[i] = gx * a01 + gy * a11;
+            let (gx, gy) = (self.work.gx[i], self.work.gy[i]);
+            self.work.gx[i] = gx * a00 + gy * a10;
+            self.work.gy[i] = gx * a01 + gy * a11;
         }
     }
 
@@ -430,35 +441,43 @@ impl Context {
         let dwdp = match at {
             Some(p) => {
                 self.ssm
-                    .jacobian(p, &self.grid_x, &self.grid_y, &mut self.dwdp);
-                &self.dwdp
+                    .jacobian(p, &self.grid_x, &self.grid_y, &mut self.work.dwdp);
+                &self.work.dwdp
             }
             None => &self.dwdp0,
         };
-        Self::project(&self.gx, &self.gy, dwdp, self.dof, &mut self.jac);
+        Self::project(
+            &self.work.gx,
+            &self.work.gy,
+            dwdp,
+            self.dof,
+            &mut self.work.jac,
+        );
     }
 
     /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
     /// current pixels `values`, through the pixel Jacobian `jac`; returns the similarity before
     /// the step.
     pub fn forward_step(&mut self, update: Update) -> Result<f64, LossReason> {
-        let f = self.am.gradient(Wrt::Current, &self.values, &mut self.grad);
+        let f = self
+            .am
+            .gradient(Wrt::Current, &self.work.values, &mut self.work.grad);
         let mut h = [0.0; MAX_DOF * MAX_DOF];
         self.am.hessian(
             Wrt::Current,
             self.hessian,
-            &self.values,
-            &self.jac,
+            &self.work.values,
+            &self.work.jac,
             self.dof,
             &mut h,
         );
-        let jac = std::mem::take(&mut self.jac);
+        let jac = std::mem::take(&mut self.work.jac);
         let r = self.step(&jac, &h, update);
-        self.jac = jac;
+        self.work.jac = jac;
         r.map(|_| f)
     }
 
-    /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.grad`) and
+    /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.work.grad`) and
     /// applies the step to the parameters.
     pub fn step(
         &mut self,
@@ -467,7 +486,7 @@ impl Context {
         update: Update,
     ) -> Result<(), LossReason> {
         let mut g = [0.0f64; MAX_DOF];
-        jt_times(jac, &self.grad, self.dof, &mut g);
+        jt_times(jac, &self.work.grad, self.dof, &mut g);
         let dp = if self.damping > 0.0 {
             // Levenberg-Marquardt: the diagonal scaled by 1 + lambda (a shorter, more
             // gradient-like step).
@@ -505,18 +524,27 @@ impl Context {
 
     /// Sets up the grid and the normaliser for the initial quad `q` (image coordinates), and
     /// resets the parameters to the identity.
-    pub fn set_region(&mut self, q: &Quad, res: usize) -> crate::Result<()> {
+    pub fn set_region(
+        &mut self,
+        q: &Quad,
+        res: usize,
+        layout: crate::params::GridLayout,
+    ) -> crate::Result<()> {
         q.validate()?;
         self.norm = Normaliser::of_quad(q);
         let nq = q.map(|p| self.norm.to_norm(p));
         let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
             .ok_or_else(|| crate::Error::InvalidRegion(format!("{q} has no homography")))?;
-        let step = 1.0 / res as f64;
+        // Centres: -0.5 + (k + 1/2) / res; border: -0.5 + k / (res - 1), corners included.
+        let (step, offset) = match layout {
+            crate::params::GridLayout::Border if res > 1 => (1.0 / (res - 1) as f64, 0.0),
+            _ => (1.0 / res as f64, 0.5),
+        };
         for r in 0..res {
             for c in 0..res {
                 let u = Point::new(
-                    -0.5 + (c as f64 + 0.5) * step,
-                    -0.5 + (r as f64 + 0.5) * step,
+                    -0.5 + (c as f64 + offset) * step,
+                    -0.5 + (r as f64 + offset) * step,
                 );
                 let p = crate::geometry::apply_homography(&h, u);
                 self.grid_x[r * res + c] = p.x as f32;
@@ -537,9 +565,48 @@ impl Context {
         self.warp_grid(&p);
         self.sample(img, true);
         self.warped_gradient(&p);
-        self.template.copy_from_slice(&self.values);
-        self.template_gx.copy_from_slice(&self.gx);
-        self.template_gy.copy_from_slice(&self.gy);
+        self.template.copy_from_slice(&self.work.values);
+        self.template_gx.copy_from_slice(&self.work.gx);
+        self.template_gy.copy_from_slice(&self.work.gy);
         self.am.set_template(&self.template);
+    }
+}
+
+#[cfg(test)]
+mod grid_tests {
+    use super::*;
+    use crate::params::GridLayout;
+
+    #[test]
+    fn the_grid_lies_inside_or_spans_the_target() {
+        let q = Quad::from_rect(10.0, 20.0, 40.0, 30.0);
+        for layout in [GridLayout::Centres, GridLayout::Border] {
+            let mut ctx = Context::new(
+                crate::ssm::build("homography").unwrap(),
+                crate::am::build("ssd").unwrap(),
+                HessianKind::Default,
+                5,
+            );
+            ctx.set_region(&q, 5, layout).unwrap();
+            let m = ctx.pixel_matrix(&ctx.params);
+            let px = |i: usize| {
+                crate::geometry::apply_homography(
+                    &m,
+                    Point::new(ctx.grid_x[i] as f64, ctx.grid_y[i] as f64),
+                )
+            };
+            let (first, last) = (px(0), px(24));
+            match layout {
+                // Cell centres: half a cell (4 x 3 px) inside the corners.
+                GridLayout::Centres => {
+                    assert!(first.dist(Point::new(14.0, 23.0)) < 1e-4, "{first:?}");
+                    assert!(last.dist(Point::new(46.0, 47.0)) < 1e-4, "{last:?}");
+                }
+                GridLayout::Border => {
+                    assert!(first.dist(q.0[0]) < 1e-4, "{first:?}");
+                    assert!(last.dist(q.0[2]) < 1e-4, "{last:?}");
+                }
+            }
+        }
     }
 }

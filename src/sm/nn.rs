@@ -377,9 +377,9 @@ impl SearchMethod for Nn {
             ctx.sample(img, false);
             let row = &mut self.data[k * n..(k + 1) * n];
             if self.scorer.is_some() {
-                row.copy_from_slice(&ctx.values);
+                row.copy_from_slice(&ctx.work.values);
             } else {
-                ctx.am.embed(&ctx.values, row);
+                ctx.am.embed(&ctx.work.values, row);
             }
             self.norms[k] = dot(row, row) as f32;
             self.inverse.push(inv);
@@ -424,11 +424,11 @@ impl SearchMethod for Nn {
         let p = ctx.params;
         ctx.warp_grid(&p);
         ctx.sample(img, false);
-        let f = ctx.am.similarity(&ctx.values);
+        let f = ctx.am.similarity(&ctx.work.values);
         if self.scorer.is_some() {
-            self.query.copy_from_slice(&ctx.values);
+            self.query.copy_from_slice(&ctx.work.values);
         } else {
-            ctx.am.embed(&ctx.values, &mut self.query);
+            ctx.am.embed(&ctx.work.values, &mut self.query);
         }
         let k = self.nearest();
         self.chosen = k;

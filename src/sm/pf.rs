@@ -158,7 +158,7 @@ impl SearchMethod for Pf {
             let s = self.states[i];
             ctx.warp_grid(&s);
             ctx.sample(img, false);
-            let f = ctx.am.similarity(&ctx.values);
+            let f = ctx.am.similarity(&ctx.work.values);
             self.sims[i] = if f.is_finite() { f } else { f64::NEG_INFINITY };
             best = best.max(self.sims[i]);
         }
@@ -214,7 +214,7 @@ impl SearchMethod for Pf {
         self.last = Some(estimate);
         ctx.warp_grid(&estimate);
         ctx.sample(img, false);
-        let f = ctx.am.similarity(&ctx.values);
+        let f = ctx.am.similarity(&ctx.work.values);
         Ok(if self.round >= self.rounds {
             Step::done(f)
         } else {

@@ -60,7 +60,13 @@ fn bench(c: &mut Criterion) {
     let mut jac = vec![0f32; ctx.len() * 8];
     g.bench_function("project", |b| {
         b.iter(|| {
-            regtrack::sm::Context::project(&ctx.gx, &ctx.gy, &ctx.dwdp0, 8, black_box(&mut jac))
+            regtrack::sm::Context::project(
+                &ctx.work.gx,
+                &ctx.work.gy,
+                &ctx.dwdp0,
+                8,
+                black_box(&mut jac),
+            )
         })
     });
     let mut h = [0.0; 64];
@@ -69,7 +75,7 @@ fn bench(c: &mut Criterion) {
             ctx.am.hessian(
                 regtrack::am::Wrt::Current,
                 regtrack::am::HessianKind::GaussNewton,
-                &ctx.values,
+                &ctx.work.values,
                 black_box(&jac),
                 8,
                 &mut h,
@@ -78,7 +84,7 @@ fn bench(c: &mut Criterion) {
     });
     let mut jg = [0.0; 8];
     g.bench_function("J^T g", |b| {
-        b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.grad, 8, &mut jg))
+        b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.work.grad, 8, &mut jg))
     });
     g.finish();
 

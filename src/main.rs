@@ -11,6 +11,18 @@ use regtrack::tracker::TrackerSpec;
 use regtrack::{am, bench, sm, ssm};
 use std::path::{Path, PathBuf};
 
+/// `regtrack inspect --help`: the keyboard shortcuts (the same table as the help overlay, F1).
+const INSPECT_KEYS: &str = "Keyboard (F1 or ? in the window shows this too):
+  Space                           play / pause
+  Right / Left                    next frame (tracks it if needed) / previous frame
+  Home / End                      start frame / last tracked frame
+  Ctrl+O / Ctrl+S                 open a sequence / save the session
+  Ctrl+Z / Ctrl+Shift+Z           undo / redo a ground-truth correction
+  ground-truth mode: 1-4, 0       pick a corner, the whole quad
+  ground-truth mode: arrows, +/-  nudge by the step, double / halve the step
+  ground-truth mode: N / P, J, O  next / previous frame, worst frame, mark occluded
+  ground-truth mode: Enter / Esc  accept / reject a propagation's proposal";
+
 #[derive(Parser)]
 #[command(
     name = "regtrack",
@@ -26,6 +38,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// The interactive inspector (the default).
+    #[command(after_help = INSPECT_KEYS)]
     Inspect {
         /// A saved session (sessions/*.toml).
         #[arg(long)]

@@ -82,6 +82,12 @@ pub struct Runtime {
     progress: Option<(String, usize, usize)>,
     tool: Tool,
     selected_iteration: Option<usize>,
+    /// The keyboard help overlay is open.
+    show_help: bool,
+    /// A loaded session's frame: the trackers run up to it once the sequence opened.
+    restore_frame: Option<usize>,
+    /// A frame that could not be read, and why (the view shows a placeholder for it).
+    bad_frame: Option<(usize, String)>,
     /// A sequence being opened (the session points to it once it opened).
     opening: Option<SequenceSource>,
     /// The ground-truth mode: corrections (journaled), drag, proposal, patches.
@@ -136,6 +142,9 @@ impl InspectorApp {
             tool: Tool::Navigate,
             selected_iteration: None,
             opening: None,
+            show_help: false,
+            restore_frame: None,
+            bad_frame: None,
             gt: gt_edit::GtRuntime::default(),
             path_input: String::new(),
             session_path: String::from("sessions/my_session.toml"),
@@ -174,9 +183,15 @@ impl InspectorApp {
         });
     }
 
-    /// Replaces the session.
+    /// The session file the session field shows (and *Save session* writes).
+    pub fn set_session_path(&mut self, p: &std::path::Path) {
+        self.rt.session_path = p.display().to_string();
+    }
+
+    /// Replaces the session (the trackers then run up to its saved frame).
     fn load_state(&mut self, state: State) {
         let src = state.sequence.clone();
+        self.rt.restore_frame = Some(state.frame);
         self.state = state;
         self.rt.results = vec![Vec::new(); self.state.trackers.len()];
         self.rt.gt_version += 1;
@@ -188,7 +203,9 @@ impl InspectorApp {
         self.rt.commands.push(c);
     }
 
+    /// Shows an error once: the same message again moves to the end instead of stacking.
     fn error(&mut self, e: String) {
+        self.rt.errors.retain(|x| *x != e);
         self.rt.errors.push(e);
         if self.rt.errors.len() > 5 {
             self.rt.errors.remove(0);
@@ -221,6 +238,11 @@ impl InspectorApp {
     /// Where an image point was drawn on screen in the last frame view.
     pub fn screen_pos(&self, p: Point) -> Option<egui::Pos2> {
         self.rt.transform.map(|t| t.to_screen(p))
+    }
+
+    /// The frame the view shows a "could not be read" placeholder for.
+    pub fn bad_frame(&self) -> Option<usize> {
+        self.rt.bad_frame.as_ref().map(|b| b.0)
     }
 
     /// The status line.
@@ -311,12 +333,31 @@ impl InspectorApp {
                         }
                         self.state.sequence = src;
                     }
+                    // Errors of an earlier attempt are stale now.
+                    self.rt.errors.clear();
+                    self.rt.bad_frame = None;
                     self.open_corrections(&seq);
+                    let restore = self.rt.restore_frame.take();
+                    let n = seq.len();
                     self.rt.sequence = Some(seq);
                     self.rt.texture_frame = None;
                     self.restart(start);
+                    // A session's saved frame: track up to it.
+                    if let Some(f) = restore.map(|f| f.min(n - 1)).filter(|&f| f > start)
+                        && self.rt.screenshot.is_none()
+                    {
+                        self.rt.playing = true;
+                        self.rt.worker.send(Job::Advance {
+                            generation: self.rt.generation,
+                            frames: Some(f - start),
+                            fps: 0.0,
+                        });
+                    }
                 }
                 Reply::Image(img) => {
+                    if self.rt.bad_frame.as_ref().is_some_and(|b| b.0 == img.index) {
+                        self.rt.bad_frame = None;
+                    }
                     if img.index == self.state.frame {
                         self.rt.pending_image = Some(img);
                     }
@@ -360,6 +401,11 @@ impl InspectorApp {
                     self.rt.progress = None;
                     self.rt.opening = None;
                     self.error(e);
+                }
+                Reply::FrameError { index, message } => {
+                    self.rt.progress = None;
+                    self.rt.bad_frame = Some((index, message.clone()));
+                    self.error(format!("frame {}: {message}", index + 1));
                 }
             }
         }
@@ -487,6 +533,7 @@ impl InspectorApp {
         self.poll_propagation();
         self.upload(&ctx);
         self.gt_keys(&ctx);
+        self.global_keys(&ctx);
         self.handle_dropped_files(&ctx);
         panels::top_bar(self, ui);
         panels::playback_bar(self, ui);
@@ -503,6 +550,9 @@ impl InspectorApp {
             self.rt.restart_due = false;
             self.restart(self.state.start_frame);
         }
+        if self.rt.show_help {
+            help_window(&ctx, &mut self.rt.show_help);
+        }
         self.poll_dialog();
         self.screenshot(&ctx);
         if self.rt.playing || self.rt.progress.is_some() {
@@ -516,6 +566,64 @@ impl InspectorApp {
             self.rt
                 .frame_times
                 .push((dt, built.elapsed().as_secs_f32()));
+        }
+    }
+
+    /// The shortcuts of the whole window (when no text field has the keyboard).
+    fn global_keys(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        let gt_mode = self.rt.tool == Tool::EditGroundTruth;
+        let (frame, n) = (self.state.frame, self.frame_count());
+        let mut cmds = Vec::new();
+        let mut dialog = false;
+        ctx.input(|i| {
+            if i.key_pressed(egui::Key::F1) || i.key_pressed(egui::Key::Questionmark) {
+                self.rt.show_help = !self.rt.show_help;
+            }
+            if i.modifiers.command && i.key_pressed(egui::Key::S) {
+                cmds.push(Command::SaveSession(PathBuf::from(
+                    self.rt.session_path.trim(),
+                )));
+            }
+            if i.modifiers.command && i.key_pressed(egui::Key::O) {
+                dialog = true;
+            }
+            if i.modifiers.command || n == 0 {
+                return;
+            }
+            if i.key_pressed(egui::Key::Space) {
+                cmds.push(if self.rt.playing {
+                    Command::Pause
+                } else {
+                    Command::Play
+                });
+            }
+            if !gt_mode {
+                if i.key_pressed(egui::Key::ArrowRight) {
+                    match self.rt.tracked_until {
+                        Some(t) if frame < t => cmds.push(Command::Seek(frame + 1)),
+                        _ if frame + 1 < n => cmds.push(Command::Step),
+                        _ => {}
+                    }
+                }
+                if i.key_pressed(egui::Key::ArrowLeft) && frame > 0 {
+                    cmds.push(Command::Seek(frame - 1));
+                }
+            }
+            if i.key_pressed(egui::Key::Home) {
+                cmds.push(Command::Seek(self.state.start_frame));
+            }
+            if i.key_pressed(egui::Key::End) {
+                cmds.push(Command::Seek(self.rt.tracked_until.unwrap_or(frame)));
+            }
+        });
+        for c in cmds {
+            self.send(c);
+        }
+        if dialog {
+            self.open_dialog(false);
         }
     }
 
@@ -631,6 +739,54 @@ impl InspectorApp {
     }
 }
 
+/// The keyboard shortcuts (the help overlay and `regtrack inspect --help` list them).
+pub const SHORTCUTS: &[(&str, &str)] = &[
+    ("Space", "play / pause"),
+    (
+        "Right / Left",
+        "next frame (tracks it if needed) / previous frame",
+    ),
+    ("Home / End", "start frame / last tracked frame"),
+    ("Ctrl+O", "open a sequence (file dialog)"),
+    ("Ctrl+S", "save the session to the session field's path"),
+    ("F1 or ?", "this help"),
+    (
+        "Ctrl+Z / Ctrl+Shift+Z",
+        "undo / redo a ground-truth correction",
+    ),
+    ("ground-truth mode: 1-4, 0", "pick a corner, the whole quad"),
+    (
+        "ground-truth mode: arrows, + / -",
+        "nudge by the step, double / halve the step",
+    ),
+    ("ground-truth mode: N / P", "next / previous frame"),
+    (
+        "ground-truth mode: J, O",
+        "jump to the worst frame, mark occluded",
+    ),
+    (
+        "ground-truth mode: Enter / Esc",
+        "accept / reject a proposal",
+    ),
+];
+
+fn help_window(ctx: &egui::Context, open: &mut bool) {
+    egui::Window::new("Keyboard shortcuts")
+        .open(open)
+        .collapsible(false)
+        .resizable(false)
+        .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO)
+        .show(ctx, |ui| {
+            egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
+                for (k, what) in SHORTCUTS {
+                    ui.strong(*k);
+                    ui.label(*what);
+                    ui.end_row();
+                }
+            });
+        });
+}
+
 /// The window's frame rate while the trackers ran, and the time the UI took to build a frame
 /// (what the app itself costs; the rest is rendering).
 fn frame_rate_summary(times: &[(f32, f32)]) -> String {
@@ -693,6 +849,7 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
         ..Default::default()
     };
     let shot = opts.screenshot.clone();
+    let session = opts.session.clone();
     let result: ShotResult = Arc::new(Mutex::new(None));
     let result2 = result.clone();
     eframe::run_native(
@@ -701,6 +858,9 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
         Box::new(move |cc| {
             let ctx = cc.egui_ctx.clone();
             let mut app = InspectorApp::new(state, move || ctx.request_repaint());
+            if let Some(p) = &session {
+                app.set_session_path(p);
+            }
             if let Some((frames, path)) = shot {
                 app.screenshot_after(frames, path, result2);
             }

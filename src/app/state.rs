@@ -144,10 +144,10 @@ impl State {
             let base = path.parent().unwrap_or(Path::new("."));
             state.sequence = SequenceSource::Path(base.join(p));
         }
-        for t in &state.trackers {
+        for (i, t) in state.trackers.iter().enumerate() {
             crate::tracker::Tracker::new(&t.spec).map_err(|e| Error::Parse {
                 path: path.to_path_buf(),
-                line: 0,
+                line: tracker_line(&text, i),
                 message: format!("tracker {}: {e}", t.spec.label()),
             })?;
         }
@@ -160,4 +160,13 @@ impl State {
             toml::to_string_pretty(self).map_err(|e| Error::InvalidParameter(e.to_string()))?;
         crate::dataset::write_atomic(path, text.as_bytes())
     }
+}
+
+/// The line (1-based) of the `i`-th `[[trackers]]` table of a session file (1 if not found).
+fn tracker_line(text: &str, i: usize) -> usize {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim() == "[[trackers]]")
+        .nth(i)
+        .map_or(1, |(n, _)| n + 1)
 }

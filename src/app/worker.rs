@@ -87,6 +87,11 @@ pub enum Reply {
         frame: usize,
     },
     Error(String),
+    /// A frame that cannot be read (the message names its file).
+    FrameError {
+        index: usize,
+        message: String,
+    },
 }
 
 /// The handle the UI keeps.
@@ -174,7 +179,10 @@ impl<W: Fn() + Sync> Thread<W> {
                 Job::Open(src) => self.open(src),
                 Job::Show(i) => match self.decode(i) {
                     Ok((_, img)) => self.reply(Reply::Image(img)),
-                    Err(e) => self.reply(Reply::Error(e)),
+                    Err(e) => self.reply(Reply::FrameError {
+                        index: i,
+                        message: e,
+                    }),
                 },
                 Job::Start {
                     generation,
@@ -336,7 +344,10 @@ impl<W: Fn() + Sync> Thread<W> {
             let (gray, image) = match self.decode(i) {
                 Ok(v) => v,
                 Err(e) => {
-                    self.reply(Reply::Error(e));
+                    self.reply(Reply::FrameError {
+                        index: i,
+                        message: e,
+                    });
                     break;
                 }
             };

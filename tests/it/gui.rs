@@ -422,3 +422,99 @@ fn nn_samples_reach_the_frame_view_and_method_parameters_the_panel() {
     // Older frames drop theirs (memory stays bounded).
     assert!(a.result(0, 3).unwrap().visual.is_none());
 }
+
+#[test]
+fn keyboard_sessions_and_errors_as_a_day_of_use_needs() {
+    let d = TempDir::new("gui-day");
+    let seq = small_sequence(d.path(), 10);
+    // A session saved at frame 5 reopens at frame 5, tracked up to there, with its name shown.
+    let mut state = state_on(&seq);
+    state.frame = 5;
+    let session = d.path().join("day.toml");
+    state.save(&session).unwrap();
+    let mut h = harness(State::load(&session).unwrap());
+    h.state_mut().set_session_path(&session);
+    step_until(&mut h, "the saved frame", |a| {
+        a.tracked_until() == Some(5) && !a.is_playing()
+    });
+    assert_eq!(h.state().state.frame, 5);
+    h.step();
+    assert!(
+        h.query_all_by_value(session.to_str().unwrap())
+            .next()
+            .is_some(),
+        "the session field names it"
+    );
+
+    // Keyboard: Left goes back, Right forward over tracked frames then tracks the next one,
+    // Home to the start, Space plays.
+    press(&mut h, egui::Key::ArrowLeft, egui::Modifiers::NONE);
+    assert_eq!(h.state().state.frame, 4);
+    press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+    press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+    step_until(&mut h, "one more tracked frame", |a| {
+        a.tracked_until() == Some(6)
+    });
+    press(&mut h, egui::Key::Home, egui::Modifiers::NONE);
+    assert_eq!(h.state().state.frame, 0);
+    press(&mut h, egui::Key::F1, egui::Modifiers::NONE);
+    assert!(
+        h.query_by_label("Keyboard shortcuts").is_some(),
+        "F1 opens the help"
+    );
+    press(&mut h, egui::Key::F1, egui::Modifiers::NONE);
+
+    // A corrupt frame: one error however often it is met, a placeholder instead of the previous
+    // image, and the error goes once the sequence opens again successfully.
+    let bad = std::fs::read_dir(seq.with_extension(""))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().unwrap().to_string_lossy().contains("00008"))
+        .next()
+        .unwrap();
+    std::fs::write(&bad, b"not an image").unwrap();
+    press(&mut h, egui::Key::Space, egui::Modifiers::NONE);
+    step_until(&mut h, "the corrupt frame", |a| {
+        !a.errors_shown().is_empty() && !a.is_playing()
+    });
+    for _ in 0..3 {
+        h.state_mut().send(Command::Seek(7));
+        h.run_steps(3);
+        h.state_mut().send(Command::Seek(6));
+        h.run_steps(3);
+    }
+    h.state_mut().send(Command::Seek(7));
+    step_until(&mut h, "the placeholder", |a| a.bad_frame() == Some(7));
+    assert_eq!(
+        h.state().errors_shown().len(),
+        1,
+        "{:?}",
+        h.state().errors_shown()
+    );
+    assert!(h.state().errors_shown()[0].contains("00008"));
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(seq.clone())));
+    step_until(&mut h, "the reopened sequence", |a| {
+        a.tracked_until() == Some(0)
+    });
+    assert!(h.state().errors_shown().is_empty(), "a stale error stays");
+}
+
+#[test]
+fn the_command_line_help_lists_the_shortcuts() {
+    let out = crate::cli::regtrack(&["inspect", "--help"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    for (keys, _) in regtrack::app::SHORTCUTS {
+        for k in keys
+            .trim_start_matches("ground-truth mode: ")
+            .split([' ', '/', ','])
+        {
+            if !k.is_empty() && k != "or" {
+                assert!(
+                    text.contains(k),
+                    "`{k}` missing from inspect --help:\n{text}"
+                );
+            }
+        }
+    }
+}

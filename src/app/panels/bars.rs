@@ -90,14 +90,18 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
         });
         let mut dismiss = None;
         for (i, e) in app.rt.errors.iter().enumerate() {
-            ui.horizontal(|ui| {
-                ui.colored_label(
-                    egui::Color32::from_rgb(255, 110, 110),
-                    format!("Error: {e}"),
-                );
+            // The dismiss button first, so that a long message wraps after it, never over it.
+            ui.horizontal_top(|ui| {
                 if ui.small_button("dismiss").clicked() {
                     dismiss = Some(i);
                 }
+                ui.add(
+                    egui::Label::new(
+                        egui::RichText::new(format!("Error: {e}"))
+                            .color(egui::Color32::from_rgb(255, 110, 110)),
+                    )
+                    .wrap(),
+                );
             });
         }
         if let Some(i) = dismiss {

@@ -113,12 +113,28 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
         t.to_screen(Point::new(-0.5, -0.5)),
         t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
     );
-    painter.image(
-        texture.id(),
-        img_rect,
-        Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
-        Color32::WHITE,
-    );
+    match app.rt.bad_frame.as_ref().filter(|b| b.0 == app.state.frame) {
+        // The frame could not be read: say so instead of showing the previous image under this
+        // frame's ground truth.
+        Some((_, message)) => {
+            painter.rect_filled(img_rect, 0.0, Color32::from_gray(40));
+            painter.text(
+                img_rect.center(),
+                egui::Align2::CENTER_CENTER,
+                format!("frame {} could not be read\n{message}", app.state.frame + 1),
+                egui::FontId::proportional(15.0),
+                Color32::from_rgb(255, 110, 110),
+            );
+        }
+        None => {
+            painter.image(
+                texture.id(),
+                img_rect,
+                Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+                Color32::WHITE,
+            );
+        }
+    }
 
     let frame = app.state.frame;
     let numbers = app.state.view.show_corner_numbers;
@@ -291,8 +307,11 @@ fn interact(
                 egui::FontId::proportional(15.0),
                 Color32::YELLOW,
             );
+            // From where the button went down, not where the drag was recognised (a few px on).
             if response.drag_started()
-                && let Some(pos) = response.interact_pointer_pos()
+                && let Some(pos) = ui
+                    .input(|i| i.pointer.press_origin())
+                    .or(response.interact_pointer_pos())
             {
                 app.send(Command::SetTool(Tool::DrawBox {
                     tracker,

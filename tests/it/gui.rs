@@ -469,8 +469,7 @@ fn keyboard_sessions_and_errors_as_a_day_of_use_needs() {
     let bad = std::fs::read_dir(seq.with_extension(""))
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| p.file_name().unwrap().to_string_lossy().contains("00008"))
-        .next()
+        .find(|p| p.file_name().unwrap().to_string_lossy().contains("00008"))
         .unwrap();
     std::fs::write(&bad, b"not an image").unwrap();
     press(&mut h, egui::Key::Space, egui::Modifiers::NONE);

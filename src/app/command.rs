@@ -110,7 +110,9 @@ impl InspectorApp {
                 entry.init = InitSource::GroundTruth;
                 self.state.trackers.push(entry);
                 self.rt.results.push(Vec::new());
-                self.restart(self.state.frame);
+                self.rt.starts.push(self.state.start_frame);
+                // Only the new tracker runs (up to where the others are).
+                self.rerun_tracker(n);
             }
             Command::RemoveTracker(i) => {
                 if i < self.state.trackers.len() {
@@ -118,11 +120,15 @@ impl InspectorApp {
                     if i < self.rt.results.len() {
                         self.rt.results.remove(i);
                     }
+                    if i < self.rt.starts.len() {
+                        self.rt.starts.remove(i);
+                    }
+                    self.rt.worker.send(Job::Remove { index: i });
+                    self.rt.results_version += 1;
                     self.state.selected_tracker = self
                         .state
                         .selected_tracker
                         .min(self.state.trackers.len().saturating_sub(1));
-                    self.restart(self.state.start_frame);
                 }
             }
             Command::SetTracker(i, entry) => {
@@ -131,15 +137,28 @@ impl InspectorApp {
                     *t = entry;
                     if rerun {
                         match crate::tracker::Tracker::new(&t.spec) {
-                            // Re-run once the pointer is released (not on every drag step).
-                            Ok(_) => self.rt.restart_due = true,
+                            // Re-run once the pointer is released (not on every drag step);
+                            // the other trackers keep their results.
+                            Ok(_) => {
+                                self.rt.rerun_due.insert(i);
+                            }
                             Err(e) => self.error(format!("tracker {}: {e}", i + 1)),
                         }
                     }
                 }
             }
             Command::Play => {
-                if self.rt.sequence.is_some() {
+                let n = self.frame_count();
+                let until = self.rt.tracked_until;
+                if n == 0 {
+                } else if until.is_some_and(|u| self.state.frame < u) {
+                    // Replay the stored results up to the last tracked frame, then go on.
+                    self.rt.replaying = Some(std::time::Instant::now());
+                } else if until.is_some_and(|u| u + 1 >= n) {
+                    self.rt.status = "at the end of the sequence: |< Start and Play replays, \
+                                      Re-run from here tracks again"
+                        .into();
+                } else {
                     self.rt.playing = true;
                     self.rt.worker.send(Job::Advance {
                         generation: self.rt.generation,
@@ -150,6 +169,7 @@ impl InspectorApp {
             }
             Command::Pause => {
                 self.rt.playing = false;
+                self.rt.replaying = None;
                 self.rt.worker.stop();
             }
             Command::Step => {
@@ -160,6 +180,7 @@ impl InspectorApp {
                 });
             }
             Command::Seek(i) => {
+                self.rt.replaying = None;
                 if self.rt.playing {
                     self.rt.playing = false;
                     self.rt.worker.stop();
@@ -172,11 +193,19 @@ impl InspectorApp {
                 }
             }
             Command::SetPlaybackFps(f) => self.state.playback_fps = f.max(0.0),
-            Command::RerunFrom(f) => self.restart(f),
+            Command::RerunFrom(f) => {
+                // Re-tracking from here, and playing on.
+                self.restart(f);
+                self.rt.play_after_start = true;
+            }
             Command::InitTracker(i, init) => {
                 if let Some(t) = self.state.trackers.get_mut(i) {
                     t.init = init;
-                    self.restart(self.state.frame);
+                    // This tracker starts on the shown frame; the others keep their results.
+                    if let Some(s) = self.rt.starts.get_mut(i) {
+                        *s = self.state.frame;
+                    }
+                    self.rerun_tracker(i);
                 }
             }
             Command::SelectTracker(i) => self.state.selected_tracker = i,

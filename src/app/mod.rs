@@ -56,9 +56,9 @@ pub struct ScreenshotPlan {
     pub result: ShotResult,
 }
 
-/// What a tracker's errors depend on: generation, last tracked frame, ground-truth version and
+/// What a tracker's errors depend on: generation, results received, ground-truth version and
 /// SSM, start frame.
-type ErrorsKey = (u64, Option<usize>, u64, String, usize);
+type ErrorsKey = (u64, u64, u64, String, usize);
 
 /// Per tracker, its errors and what they were computed from.
 type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
@@ -101,8 +101,16 @@ pub struct Runtime {
     screenshot: Option<ScreenshotPlan>,
     /// The frame view's image-to-screen mapping, as last drawn.
     transform: Option<panels::Transform>,
-    /// A tracker's settings changed: re-run once the pointer is released.
-    restart_due: bool,
+    /// Trackers whose settings changed: each re-runs alone once the pointer is released.
+    rerun_due: std::collections::BTreeSet<usize>,
+    /// Per tracker, the frame it was initialised on.
+    starts: Vec<usize>,
+    /// Bumped at every result received (invalidates the error cache).
+    results_version: u64,
+    /// Play once the trackers are initialised (after *Re-run from here*).
+    play_after_start: bool,
+    /// Playing back stored results (not tracking): when the shown frame last advanced.
+    replaying: Option<std::time::Instant>,
     /// Bumped at every ground-truth correction (invalidates the error cache).
     gt_version: u64,
     /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
@@ -153,7 +161,11 @@ impl InspectorApp {
             patches: BTreeMap::new(),
             screenshot: None,
             transform: None,
-            restart_due: false,
+            rerun_due: Default::default(),
+            starts: Vec::new(),
+            results_version: 0,
+            play_after_start: false,
+            replaying: None,
             gt_version: 0,
             errors_cache: Default::default(),
             dialog: None,
@@ -278,6 +290,9 @@ impl InspectorApp {
         self.rt.selected_iteration = None;
         self.state.start_frame = frame;
         self.state.frame = frame;
+        self.rt.replaying = None;
+        self.rt.starts = vec![frame; self.state.trackers.len()];
+        self.rt.results_version += 1;
         self.rt
             .results
             .resize(self.state.trackers.len(), Vec::new());
@@ -316,11 +331,111 @@ impl InspectorApp {
         });
     }
 
+    /// The frame tracker `t` was initialised on.
+    fn tracker_start(&self, t: usize) -> usize {
+        self.rt
+            .starts
+            .get(t)
+            .copied()
+            .unwrap_or(self.state.start_frame)
+    }
+
+    /// Re-runs tracker `i` alone, from its start frame up to the frame the others reached; the
+    /// view stays on its frame.
+    fn rerun_tracker(&mut self, i: usize) {
+        let Some(seq) = self.rt.sequence.clone() else {
+            return;
+        };
+        let Some(t) = self.state.trackers.get(i).cloned() else {
+            return;
+        };
+        if self.rt.playing {
+            self.rt.playing = false;
+            self.rt.worker.stop();
+        }
+        self.rt
+            .starts
+            .resize(self.state.trackers.len(), self.state.start_frame);
+        self.rt
+            .results
+            .resize(self.state.trackers.len(), Vec::new());
+        let from = self.rt.starts[i].min(seq.len().saturating_sub(1));
+        let until = self.rt.tracked_until.unwrap_or(from).max(from);
+        self.rt.results[i].clear();
+        self.rt.results_version += 1;
+        let tracker = if t.enabled {
+            let quad = match &t.init {
+                InitSource::Quad(q) => Some(*q),
+                InitSource::GroundTruth => self.ground_truth(from),
+            };
+            match quad {
+                Some(q) => Some(Box::new((t.spec.clone(), q))),
+                None => {
+                    self.error(format!(
+                        "no ground truth on frame {}: draw a quad or a box for tracker {}",
+                        from + 1,
+                        i + 1
+                    ));
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        self.rt.worker.send(Job::Rerun {
+            generation: self.rt.generation,
+            index: i,
+            tracker,
+            from,
+            until,
+        });
+    }
+
+    /// Plays back stored results (Play on a frame the trackers already passed): the shown frame
+    /// advances at the playback speed (30 fps when "as fast as the trackers go"), and tracking
+    /// goes on from the last tracked frame.
+    fn replay(&mut self, ctx: &egui::Context) {
+        let Some(last) = self.rt.replaying else {
+            return;
+        };
+        ctx.request_repaint();
+        let fps = if self.state.playback_fps > 0.0 {
+            self.state.playback_fps
+        } else {
+            30.0
+        };
+        if last.elapsed().as_secs_f32() < 1.0 / fps
+            || self.rt.texture_frame != Some(self.state.frame)
+        {
+            return;
+        }
+        let until = self.rt.tracked_until.unwrap_or(0);
+        if self.state.frame < until {
+            self.state.frame += 1;
+            self.rt.selected_iteration = None;
+            self.rt.replaying = Some(std::time::Instant::now());
+        } else {
+            self.rt.replaying = None;
+            if until + 1 < self.frame_count() {
+                self.send(Command::Play);
+            } else {
+                self.rt.status = "end of the sequence".into();
+            }
+        }
+    }
+
+    /// Whether stored results are being played back.
+    pub fn is_replaying(&self) -> bool {
+        self.rt.replaying.is_some()
+    }
+
     /// Handles the worker's replies.
     fn poll_worker(&mut self) {
         for r in self.rt.worker.poll() {
             match r {
-                Reply::Progress(what, d, t) => self.rt.progress = Some((what, d, t)),
+                Reply::Progress(what, d, t) => {
+                    self.rt.progress = (!what.is_empty()).then_some((what, d, t))
+                }
                 Reply::Opened(seq) => {
                     self.rt.progress = None;
                     self.rt.status = format!("{}: {} frames", seq.name, seq.len());
@@ -367,10 +482,12 @@ impl InspectorApp {
                     frame,
                     results,
                     image,
+                    catch_up,
                 } => {
                     if generation != self.rt.generation {
                         continue;
                     }
+                    self.rt.results_version += 1;
                     for r in results {
                         if let Some(v) = self.rt.results.get_mut(r.tracker) {
                             if v.len() <= frame {
@@ -385,9 +502,16 @@ impl InspectorApp {
                             v[frame] = Some(r);
                         }
                     }
+                    if catch_up {
+                        // One tracker re-run over frames the others reached: the view stays.
+                        continue;
+                    }
                     self.rt.tracked_until = Some(frame);
                     // Follow the trackers while they run.
                     self.state.frame = frame;
+                    if std::mem::take(&mut self.rt.play_after_start) {
+                        self.send(Command::Play);
+                    }
                     if let Some(img) = image {
                         self.rt.pending_image = Some(img);
                     }
@@ -453,7 +577,7 @@ impl InspectorApp {
     pub fn errors(&self, t: usize) -> Vec<(usize, f64)> {
         let key: ErrorsKey = (
             self.rt.generation,
-            self.rt.tracked_until,
+            self.rt.results_version,
             self.rt.gt_version,
             self.state.gt_ssm.clone(),
             self.state.start_frame,
@@ -481,7 +605,7 @@ impl InspectorApp {
         };
         v.iter()
             .enumerate()
-            .filter(|(f, r)| *f > self.state.start_frame && r.is_some())
+            .filter(|(f, r)| *f > self.tracker_start(t) && r.is_some())
             .filter_map(|(f, r)| {
                 let r = r.as_ref()?;
                 let gt = self.ground_truth(f)?;
@@ -503,7 +627,7 @@ impl InspectorApp {
         };
         v.iter()
             .enumerate()
-            .filter(|(f, _)| *f > self.state.start_frame)
+            .filter(|(f, _)| *f > self.tracker_start(t))
             .filter_map(|(_, r)| r.as_ref())
             .filter(|r| r.status == TrackStatus::Tracking)
             .fold((0, 0.0, 0.0, 0), |a, r| {
@@ -546,10 +670,12 @@ impl InspectorApp {
             panels::frame_view(self, ui)
         });
         self.apply_pending();
-        if self.rt.restart_due && !ctx.input(|i| i.pointer.any_down()) {
-            self.rt.restart_due = false;
-            self.restart(self.state.start_frame);
+        if !self.rt.rerun_due.is_empty() && !ctx.input(|i| i.pointer.any_down()) {
+            for i in std::mem::take(&mut self.rt.rerun_due) {
+                self.rerun_tracker(i);
+            }
         }
+        self.replay(&ctx);
         if self.rt.show_help {
             help_window(&ctx, &mut self.rt.show_help);
         }
@@ -594,7 +720,7 @@ impl InspectorApp {
                 return;
             }
             if i.key_pressed(egui::Key::Space) {
-                cmds.push(if self.rt.playing {
+                cmds.push(if self.rt.playing || self.rt.replaying.is_some() {
                     Command::Pause
                 } else {
                     Command::Play

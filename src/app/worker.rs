@@ -56,6 +56,17 @@ pub enum Job {
         frame: usize,
         trackers: Vec<(usize, TrackerSpec, Quad)>,
     },
+    /// (Re-)initialise one tracker `(index, spec, corners)` on `from` and track it up to
+    /// `until` (the frame the others reached), leaving the others as they are; `None` removes it.
+    Rerun {
+        generation: u64,
+        index: usize,
+        tracker: Option<Box<(TrackerSpec, Quad)>>,
+        from: usize,
+        until: usize,
+    },
+    /// Removes tracker `index`; the trackers after it move down by one.
+    Remove { index: usize },
     /// Track the next frames (`None`: to the end) at `fps` frames per second (0 = at once).
     Advance {
         generation: u64,
@@ -74,12 +85,14 @@ pub enum Reply {
     Progress(String, usize, usize),
     Opened(Arc<Sequence>),
     Image(FrameImage),
-    /// Results for a frame (initialisation or tracking) of a generation.
+    /// Results for a frame (initialisation or tracking) of a generation. `catch_up`: one
+    /// tracker re-run over frames the others already reached (the view does not follow it).
     Frame {
         generation: u64,
         frame: usize,
         results: Vec<TrackerFrame>,
         image: Option<FrameImage>,
+        catch_up: bool,
     },
     /// An advance ended (end of sequence, asked frames done, or stopped).
     Stopped {
@@ -189,6 +202,28 @@ impl<W: Fn() + Sync> Thread<W> {
                     frame,
                     trackers,
                 } => self.start(generation, frame, trackers),
+                Job::Rerun {
+                    generation,
+                    index,
+                    tracker,
+                    from,
+                    until,
+                } => {
+                    if generation == self.generation {
+                        self.rerun(index, tracker.map(|b| *b), from, until);
+                    }
+                }
+                Job::Remove { index } => {
+                    if let Some(k) = self.trackers.iter().position(|t| t.0 == index) {
+                        self.trackers.remove(k);
+                        self.templates.remove(k);
+                    }
+                    for t in &mut self.trackers {
+                        if t.0 > index {
+                            t.0 -= 1;
+                        }
+                    }
+                }
                 Job::Advance {
                     generation,
                     frames,
@@ -325,7 +360,115 @@ impl<W: Fn() + Sync> Thread<W> {
             frame,
             results,
             image: Some(image),
+            catch_up: false,
         });
+    }
+
+    /// Re-runs one tracker from `from` to `until` (see [`Job::Rerun`]); the others keep their
+    /// state, and the re-run one joins them for the next frames.
+    fn rerun(
+        &mut self,
+        index: usize,
+        tracker: Option<(TrackerSpec, Quad)>,
+        from: usize,
+        until: usize,
+    ) {
+        if let Some(k) = self.trackers.iter().position(|t| t.0 == index) {
+            self.trackers.remove(k);
+            self.templates.remove(k);
+        }
+        let Some((spec, quad)) = tracker else { return };
+        let Some(seq) = self.sequence.clone() else {
+            return;
+        };
+        let until = until.min(seq.len().saturating_sub(1)).max(from);
+        let gray = match self.decode(from) {
+            Ok(v) => v.0,
+            Err(e) => {
+                return self.reply(Reply::FrameError {
+                    index: from,
+                    message: e,
+                });
+            }
+        };
+        let mut t = match Tracker::new(&spec).and_then(|mut t| {
+            t.initialize(FrameInput::Gray8(&gray), &quad)?;
+            Ok(t)
+        }) {
+            Ok(t) => t,
+            Err(e) => return self.reply(Reply::Error(format!("{}: {e}", spec.label()))),
+        };
+        let template = Arc::new(
+            t.inspection()
+                .map(|i| i.template.to_vec())
+                .unwrap_or_default(),
+        );
+        self.reply(Reply::Frame {
+            generation: self.generation,
+            frame: from,
+            results: vec![TrackerFrame {
+                tracker: index,
+                status: t.status(),
+                corners: t.corners(),
+                iterations: Vec::new(),
+                visual: None,
+                start: None,
+                search_us: 0.0,
+                update_us: 0.0,
+                res: t.inspection().map(|i| i.res).unwrap_or(0),
+                patch: template.to_vec(),
+                template: template.clone(),
+            }],
+            image: None,
+            catch_up: true,
+        });
+        for i in from + 1..=until {
+            if i % 10 == 0 {
+                self.reply(Reply::Progress(
+                    format!("re-running tracker {}", index + 1),
+                    i - from,
+                    until - from,
+                ));
+            }
+            let gray = match self.decode(i) {
+                Ok(v) => v.0,
+                Err(e) => {
+                    self.reply(Reply::FrameError {
+                        index: i,
+                        message: e,
+                    });
+                    break;
+                }
+            };
+            let mut rec = Recorder {
+                visuals: i == until,
+                ..Recorder::default()
+            };
+            let out = t.update(FrameInput::Gray8(&gray), &mut rec);
+            let patch = t.inspection().map(|x| x.patch.to_vec()).unwrap_or_default();
+            self.reply(Reply::Frame {
+                generation: self.generation,
+                frame: i,
+                results: vec![TrackerFrame {
+                    tracker: index,
+                    status: out.status,
+                    corners: out.corners,
+                    iterations: rec.iterations.clone(),
+                    visual: rec.method_visuals.pop().map(Arc::new),
+                    start: rec.start,
+                    search_us: out.timing.search.as_secs_f64() * 1e6,
+                    update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
+                    res: t.inspection().map(|x| x.res).unwrap_or(0),
+                    template: template.clone(),
+                    patch,
+                }],
+                image: None,
+                catch_up: true,
+            });
+        }
+        self.reply(Reply::Progress(String::new(), 0, 0));
+        self.trackers.push((index, t));
+        self.templates.push(template);
     }
 
     fn advance(&mut self, frames: Option<usize>, fps: f32, epoch: u64) {
@@ -374,6 +517,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 frame: i,
                 results,
                 image: send_image.then_some(image),
+                catch_up: false,
             });
             if fps > 0.0 {
                 let due = started + Duration::from_secs_f32((i + 1 - first) as f32 / fps);

@@ -517,3 +517,68 @@ fn the_command_line_help_lists_the_shortcuts() {
         }
     }
 }
+
+#[test]
+fn only_the_changed_tracker_reruns_and_play_replays() {
+    let d = TempDir::new("gui-rerun");
+    let seq = small_sequence(d.path(), 10);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Play);
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(9) && !a.is_playing()
+    });
+    h.state_mut().send(Command::Seek(6));
+    h.run_steps(2);
+    let first: Vec<_> = (0..10)
+        .map(|f| h.state().result(0, f).unwrap().corners)
+        .collect();
+    // Tracker 2 changes its AM: only it re-runs (up to frame 10); tracker 1 keeps its results and
+    // the view stays on frame 7.
+    let mut entry = h.state().state.trackers[1].clone();
+    entry.spec.registration_mut().unwrap().am = "ncc".into();
+    h.state_mut().send(Command::SetTracker(1, entry));
+    step_until(&mut h, "tracker 2 re-run", |a| {
+        a.result(1, 9).is_some() && a.state.trackers[1].spec.registration().unwrap().am == "ncc"
+    });
+    assert_eq!(h.state().state.frame, 6, "the view stays");
+    assert_eq!(h.state().tracked_until(), Some(9));
+    for f in 0..10 {
+        assert_eq!(
+            h.state().result(0, f).unwrap().corners,
+            first[f],
+            "tracker 1, frame {f}"
+        );
+    }
+    // Adding a tracker runs it alone; removing tracker 1 keeps tracker 2's results.
+    h.state_mut().send(Command::AddTracker);
+    step_until(&mut h, "the new tracker", |a| a.result(2, 9).is_some());
+    let second = h.state().result(1, 9).unwrap().corners;
+    h.state_mut().send(Command::RemoveTracker(0));
+    h.run_steps(3);
+    assert_eq!(h.state().state.trackers.len(), 2);
+    assert_eq!(h.state().result(0, 9).unwrap().corners, second);
+    // Play after a finished run replays the stored results from the shown frame.
+    h.state_mut().send(Command::Seek(2));
+    h.run_steps(2);
+    h.state_mut().send(Command::Play);
+    h.run_steps(2);
+    assert!(h.state().is_replaying());
+    step_until(&mut h, "the replay's end", |a| !a.is_replaying());
+    assert_eq!(h.state().state.frame, 9);
+    assert_eq!(
+        h.state().result(0, 9).unwrap().corners,
+        second,
+        "replaying does not re-track"
+    );
+    assert!(
+        h.state().status().contains("end of the sequence"),
+        "{}",
+        h.state().status()
+    );
+    // Re-run from here re-tracks and plays.
+    h.state_mut().send(Command::RerunFrom(4));
+    step_until(&mut h, "the re-run to the end", |a| {
+        a.tracked_until() == Some(9) && !a.is_playing()
+    });
+}

@@ -122,11 +122,15 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             {
                 app.send(Command::Seek(app.state.start_frame));
             }
-            if app.is_playing() {
+            if app.is_playing() || app.is_replaying() {
                 if ui.button("Pause").clicked() {
                     app.send(Command::Pause);
                 }
-            } else if ui.add_enabled(n > 0, egui::Button::new("Play")).clicked() {
+            } else if ui
+                .add_enabled(n > 0, egui::Button::new("Play"))
+                .on_hover_text("Replays the tracked frames, then tracks on (Space)")
+                .clicked()
+            {
                 app.send(Command::Play);
             }
             if ui
@@ -146,7 +150,7 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             }
             if ui
                 .add_enabled(n > 0, egui::Button::new("Re-run from here"))
-                .on_hover_text("Re-initialise the trackers on this frame")
+                .on_hover_text("Re-initialise every tracker on this frame and play")
                 .clicked()
             {
                 app.send(Command::RerunFrom(app.state.frame));

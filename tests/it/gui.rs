@@ -543,10 +543,10 @@ fn only_the_changed_tracker_reruns_and_play_replays() {
     });
     assert_eq!(h.state().state.frame, 6, "the view stays");
     assert_eq!(h.state().tracked_until(), Some(9));
-    for f in 0..10 {
+    for (f, c) in first.iter().enumerate() {
         assert_eq!(
             h.state().result(0, f).unwrap().corners,
-            first[f],
+            *c,
             "tracker 1, frame {f}"
         );
     }

@@ -27,6 +27,9 @@ pub struct Iteration<'a> {
     pub step: f64,
     /// Time since the frame's update started.
     pub elapsed: Duration,
+    /// The patch sampled at the parameters after the iteration (pre-processed frame, `res x res`),
+    /// when the observer asked for it ([`Observer::wants_patches`]).
+    pub patch: Option<&'a [f32]>,
 }
 
 /// Sees every iteration.
@@ -40,6 +43,11 @@ pub trait Observer {
     /// Whether [`Observer::method_visual`] should be called (drawing a sampling method's state
     /// costs time, so only observers that show it ask).
     fn wants_method_visuals(&self) -> bool {
+        false
+    }
+    /// Whether [`Iteration::patch`] should be sampled (one more warp and sampling per iteration,
+    /// so only observers that show it ask).
+    fn wants_patches(&self) -> bool {
         false
     }
     /// What a sampling method shows after iteration `iteration` (NN's samples, PF's particles).
@@ -66,6 +74,9 @@ pub struct IterationRecord {
     pub similarity: f64,
     pub step: f64,
     pub elapsed_us: f64,
+    /// The patch after the iteration, as 8-bit (empty when not recorded).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub patch: Vec<u8>,
 }
 
 /// An owned copy of a [`MethodVisual`].
@@ -88,6 +99,8 @@ pub struct Recorder {
     pub iterations: Vec<IterationRecord>,
     /// Whether to keep method visuals.
     pub visuals: bool,
+    /// Whether to keep each iteration's patch.
+    pub patches: bool,
     pub method_visuals: Vec<VisualRecord>,
 }
 
@@ -108,7 +121,18 @@ impl Observer for Recorder {
             similarity: it.similarity,
             step: it.step,
             elapsed_us: it.elapsed.as_secs_f64() * 1e6,
+            patch: it
+                .patch
+                .map(|p| {
+                    p.iter()
+                        .map(|&v| v.round().clamp(0.0, 255.0) as u8)
+                        .collect()
+                })
+                .unwrap_or_default(),
         });
+    }
+    fn wants_patches(&self) -> bool {
+        self.patches
     }
     fn wants_method_visuals(&self) -> bool {
         self.visuals

@@ -618,6 +618,16 @@ impl RegistrationTracker {
             prev = corners;
             iterations = it + 1;
             similarity = f;
+            // The patch where this iteration ended, for observers that show it (the next
+            // iteration samples again, so the shared buffers may be used).
+            let patch = if observer.wants_patches() {
+                let p = ctx.params;
+                ctx.warp_grid(&p);
+                ctx.sample(view, false);
+                Some(&ctx.work.values[..])
+            } else {
+                None
+            };
             observer.iteration(&Iteration {
                 frame,
                 level,
@@ -627,6 +637,7 @@ impl RegistrationTracker {
                 similarity: f,
                 step,
                 elapsed: started.elapsed(),
+                patch,
             });
             if observer.wants_method_visuals()
                 && let Some(v) = sm.visual(ctx)

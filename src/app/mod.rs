@@ -118,7 +118,7 @@ pub struct Runtime {
     /// A file dialog running on its own thread, and where it puts its answer.
     dialog: Option<Arc<Mutex<Option<Option<PathBuf>>>>>,
     /// Per tracker, the (frame, generation) whose patches the textures show.
-    patch_keys: BTreeMap<usize, (usize, u64)>,
+    patch_keys: BTreeMap<usize, (usize, u64, Option<usize>, u64)>,
     /// Durations (s) of the window's frames, and of building the UI of each, while the
     /// trackers ran (the last 10 000).
     frame_times: Vec<(f32, f32)>,
@@ -493,11 +493,20 @@ impl InspectorApp {
                             if v.len() <= frame {
                                 v.resize(frame + 1, None);
                             }
-                            // Samples and particles are kept for the newest frame only.
+                            // Samples and particles are kept for the newest frame only, the
+                            // iterations' patches for the newest PATCH_FRAMES (memory stays
+                            // bounded on long sequences).
                             if let Some(Some(prev)) =
                                 frame.checked_sub(1).and_then(|p| v.get_mut(p))
                             {
                                 prev.visual = None;
+                            }
+                            if let Some(Some(old)) =
+                                frame.checked_sub(PATCH_FRAMES).and_then(|p| v.get_mut(p))
+                            {
+                                for it in &mut old.iterations {
+                                    it.patch = Vec::new();
+                                }
                             }
                             v[frame] = Some(r);
                         }
@@ -864,6 +873,9 @@ impl InspectorApp {
         });
     }
 }
+
+/// Per tracker, the iterations' patches are kept for this many of the newest tracked frames.
+pub const PATCH_FRAMES: usize = 300;
 
 /// The keyboard shortcuts (the help overlay and `regtrack inspect --help` list them).
 pub const SHORTCUTS: &[(&str, &str)] = &[

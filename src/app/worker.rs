@@ -442,6 +442,7 @@ impl<W: Fn() + Sync> Thread<W> {
             };
             let mut rec = Recorder {
                 visuals: i == until,
+                patches: true,
                 ..Recorder::default()
             };
             let out = t.update(FrameInput::Gray8(&gray), &mut rec);
@@ -498,6 +499,7 @@ impl<W: Fn() + Sync> Thread<W> {
             for k in 0..self.trackers.len() {
                 let mut rec = Recorder {
                     visuals: true,
+                    patches: true,
                     ..Recorder::default()
                 };
                 let out = self.trackers[k]

@@ -582,3 +582,35 @@ fn only_the_changed_tracker_reruns_and_play_replays() {
         a.tracked_until() == Some(9) && !a.is_playing()
     });
 }
+
+#[test]
+fn each_iteration_keeps_its_patch_for_the_convergence_view() {
+    let d = TempDir::new("gui-iter");
+    let seq = small_sequence(d.path(), 6);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Play);
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(5) && !a.is_playing()
+    });
+    let r = h.state().result(0, 3).unwrap().clone();
+    assert!(r.iterations.len() > 1, "{} iterations", r.iterations.len());
+    for it in &r.iterations {
+        assert_eq!(it.patch.len(), r.res * r.res);
+    }
+    // The first iteration starts off the target, the last ends on it: their patches differ, and
+    // the last is (to 8-bit rounding) the tracker's final patch.
+    let (first, last) = (&r.iterations[0].patch, &r.iterations.last().unwrap().patch);
+    assert_ne!(first, last);
+    let off: f32 = last
+        .iter()
+        .zip(&r.patch)
+        .map(|(&a, &b)| (a as f32 - b).abs())
+        .fold(0.0, f32::max);
+    assert!(off <= 0.5 + 1e-3, "{off}");
+    // The slider picks an iteration; the frame view and the panel follow it.
+    h.state_mut().send(Command::Seek(3));
+    h.state_mut().send(Command::SelectIteration(Some(0)));
+    h.run_steps(3);
+    assert!(h.query_by_label("warped patch, iteration 1").is_some());
+}

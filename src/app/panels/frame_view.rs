@@ -207,7 +207,25 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
         app.result(app.state.selected_tracker, frame),
     ) && let Some(rec) = r.iterations.get(it)
     {
-        draw_quad(&painter, &t, &rec.corners, Color32::YELLOW, true, false);
+        // In the inspected tracker's colour, lightened so that it stands out from its final quad.
+        let c = app
+            .state
+            .trackers
+            .get(app.state.selected_tracker)
+            .map_or(Color32::YELLOW, |t| color(t.color));
+        let light = Color32::from_rgb(
+            c.r().saturating_add(90),
+            c.g().saturating_add(90),
+            c.b().saturating_add(90),
+        );
+        draw_quad(&painter, &t, &rec.corners, light, true, false);
+        painter.text(
+            t.to_screen(rec.corners.0[0]) + Vec2::new(0.0, -16.0),
+            egui::Align2::LEFT_BOTTOM,
+            format!("iteration {}", it + 1),
+            egui::FontId::proportional(13.0),
+            light,
+        );
     }
     interact(app, ui, &response, &t, &painter);
 }

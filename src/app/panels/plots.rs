@@ -6,7 +6,23 @@ use super::color;
 use crate::app::InspectorApp;
 use crate::app::command::Command;
 use eframe::egui;
-use egui_plot::{Legend, Line, Plot, PlotPoints};
+use egui_plot::{AxisHints, Legend, Line, Plot, PlotPoints, VLine};
+
+/// Axes whose tick labels show even on short plots (egui_plot's defaults hide every label of a
+/// 150 px plot but the extremes).
+fn axes(plot: Plot<'static>, x: &str, y: &str) -> Plot<'static> {
+    plot.custom_x_axes(vec![
+        AxisHints::new_x()
+            .label(x.to_string())
+            .label_spacing(28.0..=45.0),
+    ])
+    .custom_y_axes(vec![
+        AxisHints::new_y()
+            .label(y.to_string())
+            .label_spacing(14.0..=22.0),
+    ])
+    .grid_spacing(6.0..=200.0)
+}
 
 pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
     egui::Panel::right("plots")
@@ -15,14 +31,13 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
         .show(ui, |ui| {
             egui::ScrollArea::vertical().show(ui, |ui| {
                 ui.heading("Success rate");
-                Plot::new("sr_plot")
+                axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
                     .height(190.0)
                     .legend(Legend::default())
                     .include_x(0.0)
                     .include_x(20.0)
                     .include_y(0.0)
                     .include_y(1.0)
-                    .x_axis_label("threshold t (px)")
                     .allow_scroll(false)
                     .show(ui, |p| {
                         for (i, t) in app.state.trackers.iter().enumerate() {
@@ -41,11 +56,13 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         }
                     });
                 ui.heading("Alignment error per frame");
-                Plot::new("error_plot")
+                let shown = app.state.frame;
+                let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
                     .height(150.0)
+                    .legend(Legend::default())
                     .include_y(0.0)
-                    .x_axis_label("frame")
                     .allow_scroll(false)
+                    .allow_drag(false)
                     .show(ui, |p| {
                         for (i, t) in app.state.trackers.iter().enumerate() {
                             let pts: Vec<[f64; 2]> = app
@@ -61,7 +78,21 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                                 );
                             }
                         }
+                        // The shown frame; a click seeks.
+                        p.vline(
+                            VLine::new("shown frame", (shown + 1) as f64)
+                                .color(egui::Color32::from_gray(160)),
+                        );
+                        p.set_auto_bounds(true);
+                        p.pointer_coordinate()
                     });
+                if r.response.clicked()
+                    && let Some(pt) = r.inner
+                    && app.frame_count() > 0
+                {
+                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
+                    app.send(Command::Seek(f));
+                }
                 speed_table(app, ui);
                 ui.separator();
                 convergence(app, ui);
@@ -132,21 +163,32 @@ fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
             .iter()
             .map(|it| [it.iteration as f64 + 1.0, it.step.max(1e-6).log10()])
             .collect();
+        let marker = app.rt.selected_iteration.map(|k| {
+            VLine::new("selected iteration", (k + 1) as f64).color(egui::Color32::from_gray(170))
+        });
         ui.columns(2, |cols| {
-            cols[0].label("similarity f");
-            Plot::new("cost_plot")
-                .height(120.0)
+            axes(Plot::new("cost_plot"), "iteration", "similarity f")
+                .height(130.0)
                 .allow_scroll(false)
                 .show(&mut cols[0], |p| {
                     p.line(Line::new("f", PlotPoints::from(cost)).color(c));
+                    if let Some(m) = marker.clone() {
+                        p.vline(m);
+                    }
                 });
-            cols[1].label("log10 corner change (px)");
-            Plot::new("step_plot")
-                .height(120.0)
-                .allow_scroll(false)
-                .show(&mut cols[1], |p| {
-                    p.line(Line::new("step", PlotPoints::from(step)).color(c));
-                });
+            axes(
+                Plot::new("step_plot"),
+                "iteration",
+                "log10 corner change (px)",
+            )
+            .height(130.0)
+            .allow_scroll(false)
+            .show(&mut cols[1], |p| {
+                p.line(Line::new("step", PlotPoints::from(step)).color(c));
+                if let Some(m) = marker.clone() {
+                    p.vline(m);
+                }
+            });
         });
         let mut sel = app.rt.selected_iteration.map_or(0, |s| s + 1);
         let changed = ui
@@ -171,6 +213,14 @@ fn patches(
     if r.template.len() != n || r.patch.len() != n || n == 0 {
         return;
     }
+    // The patch after the selected iteration (recorded per iteration), else the final one.
+    let selected = app.rt.selected_iteration;
+    let recorded: Option<Vec<f32>> = selected
+        .and_then(|k| r.iterations.get(k))
+        .filter(|it| it.patch.len() == n)
+        .map(|it| it.patch.iter().map(|&v| v as f32).collect());
+    let missing = selected.is_some() && recorded.is_none();
+    let current: &[f32] = recorded.as_deref().unwrap_or(&r.patch);
     let (lo, hi) = r
         .template
         .iter()
@@ -180,17 +230,17 @@ fn patches(
     let span = (hi - lo).max(1e-3);
     let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
     let template: Vec<u8> = r.template.iter().map(|&v| to8(v)).collect();
-    let patch: Vec<u8> = r.patch.iter().map(|&v| to8(v)).collect();
+    let patch: Vec<u8> = current.iter().map(|&v| to8(v)).collect();
     let error: Vec<u8> = r
         .template
         .iter()
-        .zip(&r.patch)
+        .zip(current)
         .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
         .collect();
     let ctx = ui.ctx().clone();
     let size = [r.res, r.res];
     let images = [template, patch, error].map(|g| egui::ColorImage::from_gray(size, &g));
-    let key = (frame, app.rt.generation);
+    let key = (frame, app.rt.generation, selected, app.rt.results_version);
     let unchanged = app.rt.patch_keys.get(&i) == Some(&key);
     app.rt.patch_keys.insert(i, key);
     let handles = match app.rt.patches.get_mut(&i) {
@@ -212,10 +262,23 @@ fn patches(
             h
         }
     };
+    let at = match selected {
+        Some(k) if !missing => format!("warped patch, iteration {}", k + 1),
+        _ => "warped patch (final)".into(),
+    };
+    if missing {
+        ui.label(
+            egui::RichText::new(format!(
+                "the iterations' patches are kept for the newest {} tracked frames",
+                crate::app::PATCH_FRAMES
+            ))
+            .small(),
+        );
+    }
     ui.horizontal(|ui| {
         for (h, label) in handles
             .iter()
-            .zip(["template", "warped patch", "|error| x4"])
+            .zip(["template".to_string(), at, "|error| x4".to_string()])
         {
             ui.vertical(|ui| {
                 ui.label(label);

@@ -17,6 +17,7 @@ const INSPECT_KEYS: &str = "Keyboard (F1 or ? in the window shows this too):
   Right / Left                    next frame (tracks it if needed) / previous frame
   Home / End                      start frame / last tracked frame
   Ctrl+O / Ctrl+S                 open a sequence / save the session
+  F2 / F3                         hide or show the trackers / plots panel
   Ctrl+Z / Ctrl+Shift+Z           undo / redo a ground-truth correction
   ground-truth mode: 1-4, 0       pick a corner, the whole quad
   ground-truth mode: arrows, +/-  nudge by the step, double / halve the step

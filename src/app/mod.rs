@@ -717,6 +717,15 @@ impl InspectorApp {
             if i.key_pressed(egui::Key::F1) || i.key_pressed(egui::Key::Questionmark) {
                 self.rt.show_help = !self.rt.show_help;
             }
+            if i.key_pressed(egui::Key::F2) || i.key_pressed(egui::Key::F3) {
+                let mut view = self.state.view.clone();
+                if i.key_pressed(egui::Key::F2) {
+                    view.show_trackers_panel = !view.show_trackers_panel;
+                } else {
+                    view.show_plots_panel = !view.show_plots_panel;
+                }
+                cmds.push(Command::SetView(view));
+            }
             if i.modifiers.command && i.key_pressed(egui::Key::S) {
                 cmds.push(Command::SaveSession(PathBuf::from(
                     self.rt.session_path.trim(),
@@ -888,6 +897,7 @@ pub const SHORTCUTS: &[(&str, &str)] = &[
     ("Ctrl+O", "open a sequence (file dialog)"),
     ("Ctrl+S", "save the session to the session field's path"),
     ("F1 or ?", "this help"),
+    ("F2 / F3", "hide or show the trackers / plots panel"),
     (
         "Ctrl+Z / Ctrl+Shift+Z",
         "undo / redo a ground-truth correction",

@@ -51,6 +51,16 @@ pub struct View {
     /// Draw the samples of NN and the particles of PF (newest frame).
     #[serde(default)]
     pub show_samples: bool,
+    /// The trackers panel (left) and the plots panel (right) are shown; hiding them gives the
+    /// frame the whole window.
+    #[serde(default = "yes")]
+    pub show_trackers_panel: bool,
+    #[serde(default = "yes")]
+    pub show_plots_panel: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl Default for View {
@@ -61,6 +71,8 @@ impl Default for View {
             show_ground_truth: true,
             show_corner_numbers: true,
             show_samples: false,
+            show_trackers_panel: true,
+            show_plots_panel: true,
         }
     }
 }

@@ -614,3 +614,32 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     h.run_steps(3);
     assert!(h.query_by_label("warped patch, iteration 1").is_some());
 }
+
+#[test]
+fn at_1000x700_the_frame_keeps_most_of_the_window() {
+    let d = TempDir::new("gui-small");
+    let seq = small_sequence(d.path(), 3);
+    let app = InspectorApp::new(state_on(&seq), || {});
+    let mut h = Harness::builder()
+        .with_size(egui::Vec2::new(1000.0, 700.0))
+        .with_max_steps(10_000)
+        .build_ui_state(|ui, app: &mut InspectorApp| app.ui(ui), app);
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.run_steps(3);
+    let width = |h: &Harness<'static, InspectorApp>| {
+        let a = h.state().screen_pos(Point::new(0.0, 0.0)).unwrap();
+        let b = h.state().screen_pos(Point::new(639.0, 0.0)).unwrap();
+        b.x - a.x
+    };
+    let with_panels = width(&h);
+    assert!(with_panels > 440.0, "the frame is {with_panels} px wide");
+    // F2 and F3 hide the panels: the frame gets nearly the whole width.
+    press(&mut h, egui::Key::F2, egui::Modifiers::NONE);
+    press(&mut h, egui::Key::F3, egui::Modifiers::NONE);
+    h.run_steps(3);
+    let alone = width(&h);
+    assert!(alone > 900.0 || alone > 1.4 * with_panels, "{alone} px");
+    assert!(!h.state().state.view.show_trackers_panel && !h.state().state.view.show_plots_panel);
+}

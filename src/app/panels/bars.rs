@@ -11,6 +11,15 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
     egui::Panel::top("top_bar").show(ui, |ui| {
         ui.horizontal_wrapped(|ui| {
             ui.strong("regtrack");
+            // Panels can be hidden so that the frame gets the window (F2, F3).
+            let mut view = app.state.view.clone();
+            ui.toggle_value(&mut view.show_trackers_panel, "Trackers")
+                .on_hover_text("Show or hide the trackers panel (F2)");
+            ui.toggle_value(&mut view.show_plots_panel, "Plots")
+                .on_hover_text("Show or hide the plots panel (F3)");
+            if view != app.state.view {
+                app.send(Command::SetView(view));
+            }
             ui.separator();
             if ui
                 .button("Open folder…")

@@ -25,78 +25,86 @@ fn axes(plot: Plot<'static>, x: &str, y: &str) -> Plot<'static> {
 }
 
 pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    if !app.state.view.show_plots_panel {
+        return;
+    }
+    let w = ui.ctx().content_rect().width();
+    let most = if w < 1200.0 { 0.28 } else { 0.38 };
     egui::Panel::right("plots")
         .resizable(true)
-        .default_size(430.0)
+        .default_size(430.0f32.min(w * 0.28))
+        .max_size((w * most).max(200.0))
         .show(ui, |ui| {
-            egui::ScrollArea::vertical().show(ui, |ui| {
-                ui.heading("Success rate");
-                axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
-                    .height(190.0)
-                    .legend(Legend::default())
-                    .include_x(0.0)
-                    .include_x(20.0)
-                    .include_y(0.0)
-                    .include_y(1.0)
-                    .allow_scroll(false)
-                    .show(ui, |p| {
-                        for (i, t) in app.state.trackers.iter().enumerate() {
-                            let curve = app.success_curve(i);
-                            if !curve.is_empty() {
-                                let pts: Vec<[f64; 2]> =
-                                    curve.iter().map(|(x, y)| [*x, *y]).collect();
-                                p.line(
-                                    Line::new(
-                                        format!("{} {}", i + 1, t.spec.label()),
-                                        PlotPoints::from(pts),
-                                    )
-                                    .color(color(t.color)),
-                                );
-                            }
-                        }
-                    });
-                ui.heading("Alignment error per frame");
-                let shown = app.state.frame;
-                let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
-                    .height(150.0)
-                    .legend(Legend::default())
-                    .include_y(0.0)
-                    .allow_scroll(false)
-                    .allow_drag(false)
-                    .show(ui, |p| {
-                        for (i, t) in app.state.trackers.iter().enumerate() {
-                            let pts: Vec<[f64; 2]> = app
-                                .errors(i)
-                                .into_iter()
-                                .filter(|(_, e)| e.is_finite())
-                                .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
-                                .collect();
-                            if !pts.is_empty() {
-                                p.line(
-                                    Line::new(format!("{}", i + 1), PlotPoints::from(pts))
+            egui::ScrollArea::both()
+                .auto_shrink([false, true])
+                .show(ui, |ui| {
+                    ui.heading("Success rate");
+                    axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
+                        .height(190.0)
+                        .legend(Legend::default())
+                        .include_x(0.0)
+                        .include_x(20.0)
+                        .include_y(0.0)
+                        .include_y(1.0)
+                        .allow_scroll(false)
+                        .show(ui, |p| {
+                            for (i, t) in app.state.trackers.iter().enumerate() {
+                                let curve = app.success_curve(i);
+                                if !curve.is_empty() {
+                                    let pts: Vec<[f64; 2]> =
+                                        curve.iter().map(|(x, y)| [*x, *y]).collect();
+                                    p.line(
+                                        Line::new(
+                                            format!("{} {}", i + 1, t.spec.label()),
+                                            PlotPoints::from(pts),
+                                        )
                                         .color(color(t.color)),
-                                );
+                                    );
+                                }
                             }
-                        }
-                        // The shown frame; a click seeks.
-                        p.vline(
-                            VLine::new("shown frame", (shown + 1) as f64)
-                                .color(egui::Color32::from_gray(160)),
-                        );
-                        p.set_auto_bounds(true);
-                        p.pointer_coordinate()
-                    });
-                if r.response.clicked()
-                    && let Some(pt) = r.inner
-                    && app.frame_count() > 0
-                {
-                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
-                    app.send(Command::Seek(f));
-                }
-                speed_table(app, ui);
-                ui.separator();
-                convergence(app, ui);
-            });
+                        });
+                    ui.heading("Alignment error per frame");
+                    let shown = app.state.frame;
+                    let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
+                        .height(150.0)
+                        .legend(Legend::default())
+                        .include_y(0.0)
+                        .allow_scroll(false)
+                        .allow_drag(false)
+                        .show(ui, |p| {
+                            for (i, t) in app.state.trackers.iter().enumerate() {
+                                let pts: Vec<[f64; 2]> = app
+                                    .errors(i)
+                                    .into_iter()
+                                    .filter(|(_, e)| e.is_finite())
+                                    .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
+                                    .collect();
+                                if !pts.is_empty() {
+                                    p.line(
+                                        Line::new(format!("{}", i + 1), PlotPoints::from(pts))
+                                            .color(color(t.color)),
+                                    );
+                                }
+                            }
+                            // The shown frame; a click seeks.
+                            p.vline(
+                                VLine::new("shown frame", (shown + 1) as f64)
+                                    .color(egui::Color32::from_gray(160)),
+                            );
+                            p.set_auto_bounds(true);
+                            p.pointer_coordinate()
+                        });
+                    if r.response.clicked()
+                        && let Some(pt) = r.inner
+                        && app.frame_count() > 0
+                    {
+                        let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
+                        app.send(Command::Seek(f));
+                    }
+                    speed_table(app, ui);
+                    ui.separator();
+                    convergence(app, ui);
+                });
         });
 }
 

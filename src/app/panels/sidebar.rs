@@ -31,7 +31,13 @@ fn method_combo<B>(
 }
 
 pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
-    egui::Panel::left("trackers").resizable(true).default_size(300.0).show(ui, |ui| {
+    if !app.state.view.show_trackers_panel {
+        return;
+    }
+    // A small part of a small window, so that the frame keeps most of it (F2 hides the panel).
+    let w = ui.ctx().content_rect().width();
+    let most = if w < 1200.0 { 0.22 } else { 0.3 };
+    egui::Panel::left("trackers").resizable(true).default_size(300.0f32.min(w * 0.22)).max_size((w * most).max(170.0)).show(ui, |ui| {
         egui::ScrollArea::vertical().show(ui, |ui| {
             ui.heading("Trackers");
             let n = app.state.trackers.len();

@@ -49,6 +49,7 @@ pub mod eval;
 pub mod geometry;
 pub mod gt;
 pub mod imaging;
+pub mod landscape;
 pub mod linalg;
 pub mod observe;
 pub mod params;

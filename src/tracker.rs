@@ -304,6 +304,16 @@ pub trait VisualTracker: Send + std::fmt::Debug {
     fn label(&self) -> String {
         self.spec().label()
     }
+    /// The similarity swept around the warp whose corners are `at`, on `input` (see
+    /// [`crate::landscape`]); `None` for trackers without a similarity over warps.
+    fn landscape(
+        &mut self,
+        _input: FrameInput<'_>,
+        _at: &Quad,
+        _spec: &crate::landscape::LandscapeSpec,
+    ) -> Option<Result<crate::landscape::Landscape>> {
+        None
+    }
 }
 
 /// A registry entry of a whole tracker: its parameters and its constructor.
@@ -497,6 +507,129 @@ impl RegistrationTracker {
             FrameInput::Smoothed(_) => pre_copy.level_view(level),
             _ => pre.level_view(level),
         }
+    }
+
+    /// See [`VisualTracker::landscape`].
+    fn sweep(
+        &mut self,
+        input: FrameInput<'_>,
+        at: &Quad,
+        spec: &crate::landscape::LandscapeSpec,
+    ) -> Result<crate::landscape::Landscape> {
+        use crate::am::{Wrt, jt_times};
+        if self.status == TrackStatus::Uninitialized {
+            return Err(Error::InvalidRegion(
+                "the tracker is not initialised".into(),
+            ));
+        }
+        let dof = self.ctx.dof;
+        if spec.axes.is_empty() || spec.axes.len() > 2 || spec.axes.iter().any(|&k| k >= dof) {
+            return Err(Error::InvalidParameter(format!(
+                "the landscape sweeps 1 or 2 of the {dof} parameters of {}",
+                self.ctx.ssm.name()
+            )));
+        }
+        at.validate()?;
+        let steps = (spec.steps.max(3) / 2) * 2 + 1;
+        let radius = spec.radius.abs().max(1e-3);
+        let target = at.map(|p| self.ctx.norm.to_norm(p));
+        let p0 = self
+            .ctx
+            .ssm
+            .fit(&self.ctx.template_corners.0, &target.0)
+            .ok_or_else(|| {
+                Error::InvalidRegion(format!("cannot fit {} to {at}", self.ctx.ssm.name()))
+            })?;
+        // Parameter change per px of mean corner motion, per axis.
+        let c0 = self.ctx.corners(&p0);
+        let mut deltas = Vec::new();
+        for &k in &spec.axes {
+            let h = 1e-6 * (1.0 + p0[k].abs());
+            let mut p = p0;
+            p[k] += h;
+            let moved = crate::geometry::alignment_error(&self.ctx.corners(&p), &c0) / h;
+            if !(moved > 0.0 && moved.is_finite()) {
+                return Err(Error::InvalidParameter(format!(
+                    "parameter {} does not move the corners",
+                    k + 1
+                )));
+            }
+            deltas.push(1.0 / moved);
+        }
+        // Pre-process a region that holds every swept warp.
+        let (x0, y0, x1, y1) = self.region_around(at);
+        let grow = 3.0 * radius + 8.0;
+        self.prepare(input, (x0 - grow, y0 - grow, x1 + grow, y1 + grow));
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        let saved = self.ctx.params;
+        let ctx = &mut self.ctx;
+        let f_at = |ctx: &mut Context, p: &crate::ssm::Params| {
+            ctx.warp_grid(p);
+            ctx.sample(&view, false);
+            ctx.am.similarity(&ctx.work.values)
+        };
+        let offsets: Vec<f64> = (0..steps)
+            .map(|i| -radius + 2.0 * radius * i as f64 / (steps - 1) as f64)
+            .collect();
+        let at_offsets = |u: &[f64]| {
+            let mut p = p0;
+            for (j, &k) in spec.axes.iter().enumerate() {
+                p[k] += u[j] * deltas[j];
+            }
+            p
+        };
+        let mut values = Vec::with_capacity(steps.pow(spec.axes.len() as u32));
+        if spec.axes.len() == 1 {
+            for &u in &offsets {
+                values.push(f_at(ctx, &at_offsets(&[u])));
+            }
+        } else {
+            for &v in &offsets {
+                for &u in &offsets {
+                    values.push(f_at(ctx, &at_offsets(&[u, v])));
+                }
+            }
+        }
+        // The analytic gradient at the centre, as FALK forms it: the AM's gradient with respect
+        // to the current pixels through dI/dp = grad I . dw/dp at p0.
+        ctx.warp_grid(&p0);
+        ctx.sample(&view, true);
+        let s = ctx.norm.scale as f32;
+        ctx.work.gx.iter_mut().for_each(|g| *g *= s);
+        ctx.work.gy.iter_mut().for_each(|g| *g *= s);
+        ctx.project_gradients(Some(&p0));
+        let center_value = ctx
+            .am
+            .gradient(Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
+        let mut g = [0.0f64; crate::linalg::MAX_DOF];
+        jt_times(&ctx.work.jac, &ctx.work.grad, dof, &mut g);
+        let analytic: Vec<f64> = spec
+            .axes
+            .iter()
+            .zip(&deltas)
+            .map(|(&k, &d)| g[k] * d)
+            .collect();
+        let h = 0.01;
+        let mut numeric = Vec::new();
+        for j in 0..spec.axes.len() {
+            let mut up = vec![0.0; spec.axes.len()];
+            let mut down = up.clone();
+            up[j] = h;
+            down[j] = -h;
+            let (a, b) = (f_at(ctx, &at_offsets(&up)), f_at(ctx, &at_offsets(&down)));
+            numeric.push((a - b) / (2.0 * h));
+        }
+        ctx.params = saved;
+        Ok(crate::landscape::Landscape {
+            axes: spec.axes.clone(),
+            deltas,
+            offsets,
+            values,
+            center: p0,
+            center_value,
+            analytic,
+            numeric,
+        })
     }
 
     /// The region to pre-process around `q`: its bounding box grown by the margin.
@@ -698,6 +831,14 @@ impl RegistrationTracker {
 }
 
 impl VisualTracker for RegistrationTracker {
+    fn landscape(
+        &mut self,
+        input: FrameInput<'_>,
+        at: &Quad,
+        spec: &crate::landscape::LandscapeSpec,
+    ) -> Option<Result<crate::landscape::Landscape>> {
+        Some(self.sweep(input, at, spec))
+    }
     /// The spec (with canonical names).
     fn spec(&self) -> &TrackerSpec {
         &self.spec

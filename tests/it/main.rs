@@ -8,6 +8,7 @@ mod evaluation;
 mod groundtruth;
 #[cfg(feature = "gui")]
 mod gui;
+mod landscape;
 mod recovery;
 mod report;
 mod robustness;

@@ -63,6 +63,36 @@ type ErrorsKey = (u64, u64, u64, String, usize);
 /// Per tracker, its errors and what they were computed from.
 type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
 
+/// The cost-landscape view's settings and state.
+pub struct LandscapeView {
+    pub open: bool,
+    /// The swept parameters (0-based); the second is optional (a curve or a map).
+    pub x: usize,
+    pub y: Option<usize>,
+    /// Half-width of the sweep, px of corner motion.
+    pub radius: f64,
+    /// Around the ground truth instead of the tracker's estimate.
+    pub around_truth: bool,
+    pub requested: Option<String>,
+    pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
+    pub texture: Option<(String, egui::TextureHandle)>,
+}
+
+impl Default for LandscapeView {
+    fn default() -> Self {
+        LandscapeView {
+            open: false,
+            x: 0,
+            y: None,
+            radius: 5.0,
+            around_truth: false,
+            requested: None,
+            result: None,
+            texture: None,
+        }
+    }
+}
+
 /// Runtime fields: never saved.
 pub struct Runtime {
     worker: Worker,
@@ -82,6 +112,8 @@ pub struct Runtime {
     progress: Option<(String, usize, usize)>,
     tool: Tool,
     selected_iteration: Option<usize>,
+    /// The cost-landscape view: its settings, the request in flight and the last result.
+    pub(crate) landscape: LandscapeView,
     /// The keyboard help overlay is open.
     show_help: bool,
     /// A loaded session's frame: the trackers run up to it once the sequence opened.
@@ -151,6 +183,7 @@ impl InspectorApp {
             selected_iteration: None,
             opening: None,
             show_help: false,
+            landscape: LandscapeView::default(),
             restore_frame: None,
             bad_frame: None,
             gt: gt_edit::GtRuntime::default(),
@@ -424,6 +457,73 @@ impl InspectorApp {
         }
     }
 
+    /// Asks the worker for the cost landscape of the inspected tracker on the shown frame when
+    /// the view is open and what it shows changed.
+    fn request_landscape(&mut self) {
+        if !self.rt.landscape.open {
+            return;
+        }
+        let (i, frame) = (self.state.selected_tracker, self.state.frame);
+        let Some(t) = self.state.trackers.get(i).cloned() else {
+            return;
+        };
+        let start = self.tracker_start(i);
+        let Some(r) = self.result(i, frame) else {
+            return;
+        };
+        let estimate = r.corners;
+        let init = match &t.init {
+            state::InitSource::Quad(q) => Some(*q),
+            state::InitSource::GroundTruth => self.ground_truth(start),
+        };
+        let at = if self.rt.landscape.around_truth {
+            self.ground_truth(frame)
+        } else {
+            Some(estimate)
+        };
+        let (Some(init), Some(at)) = (init, at) else {
+            return;
+        };
+        let v = &self.rt.landscape;
+        let mut axes = vec![v.x];
+        axes.extend(v.y.filter(|&y| y != v.x));
+        let sweep = crate::landscape::LandscapeSpec {
+            steps: if axes.len() == 1 { 81 } else { 41 },
+            axes,
+            radius: v.radius,
+        };
+        let key = format!("{:?}|{start}|{init}|{frame}|{at}|{sweep:?}", t.spec);
+        if v.requested.as_deref() == Some(key.as_str()) {
+            return;
+        }
+        self.rt.landscape.requested = Some(key.clone());
+        self.rt
+            .worker
+            .send(Job::Landscape(Box::new(worker::LandscapeJob {
+                key,
+                spec: t.spec,
+                start,
+                init,
+                frame,
+                at,
+                sweep,
+            })));
+    }
+
+    /// The cost landscape shown (the last one computed) and whether it is current.
+    pub fn landscape_shown(&self) -> Option<(&Result<crate::landscape::Landscape, String>, bool)> {
+        let (key, r) = self.rt.landscape.result.as_ref()?;
+        Some((
+            r,
+            self.rt.landscape.requested.as_deref() == Some(key.as_str()),
+        ))
+    }
+
+    /// Opens or closes the cost-landscape view.
+    pub fn show_landscape(&mut self, open: bool) {
+        self.rt.landscape.open = open;
+    }
+
     /// Whether stored results are being played back.
     pub fn is_replaying(&self) -> bool {
         self.rt.replaying.is_some()
@@ -534,6 +634,11 @@ impl InspectorApp {
                     self.rt.progress = None;
                     self.rt.opening = None;
                     self.error(e);
+                }
+                Reply::Landscape { key, result } => {
+                    if self.rt.landscape.requested.as_deref() == Some(key.as_str()) {
+                        self.rt.landscape.result = Some((key, result));
+                    }
                 }
                 Reply::FrameError { index, message } => {
                     self.rt.progress = None;
@@ -685,6 +790,9 @@ impl InspectorApp {
             }
         }
         self.replay(&ctx);
+        if !self.rt.playing {
+            self.request_landscape();
+        }
         if self.rt.show_help {
             help_window(&ctx, &mut self.rt.show_help);
         }

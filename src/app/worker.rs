@@ -65,6 +65,9 @@ pub enum Job {
         from: usize,
         until: usize,
     },
+    /// Sweeps a tracker's similarity around `at` on `frame` (the tracker built from `spec` and
+    /// initialised on `start` at `init`, as the run did); answered by [`Reply::Landscape`].
+    Landscape(Box<LandscapeJob>),
     /// Removes tracker `index`; the trackers after it move down by one.
     Remove { index: usize },
     /// Track the next frames (`None`: to the end) at `fps` frames per second (0 = at once).
@@ -73,6 +76,19 @@ pub enum Job {
         frames: Option<usize>,
         fps: f32,
     },
+}
+
+/// A cost landscape to compute.
+#[derive(Debug)]
+pub struct LandscapeJob {
+    /// Identifies the request (the reply carries it back).
+    pub key: String,
+    pub spec: TrackerSpec,
+    pub start: usize,
+    pub init: Quad,
+    pub frame: usize,
+    pub at: Quad,
+    pub sweep: crate::landscape::LandscapeSpec,
 }
 
 /// A job with the cancellation epoch it was sent in: an advance runs only while no stop,
@@ -104,6 +120,11 @@ pub enum Reply {
     FrameError {
         index: usize,
         message: String,
+    },
+    /// A cost landscape (for the request `key`).
+    Landscape {
+        key: String,
+        result: Result<crate::landscape::Landscape, String>,
     },
 }
 
@@ -212,6 +233,13 @@ impl<W: Fn() + Sync> Thread<W> {
                     if generation == self.generation {
                         self.rerun(index, tracker.map(|b| *b), from, until);
                     }
+                }
+                Job::Landscape(job) => {
+                    let result = self.landscape(&job);
+                    self.reply(Reply::Landscape {
+                        key: job.key.clone(),
+                        result,
+                    });
                 }
                 Job::Remove { index } => {
                     if let Some(k) = self.trackers.iter().position(|t| t.0 == index) {
@@ -362,6 +390,18 @@ impl<W: Fn() + Sync> Thread<W> {
             image: Some(image),
             catch_up: false,
         });
+    }
+
+    fn landscape(&self, job: &LandscapeJob) -> Result<crate::landscape::Landscape, String> {
+        let (start, _) = self.decode(job.start)?;
+        let mut t = Tracker::new(&job.spec).map_err(|e| e.to_string())?;
+        t.initialize(FrameInput::Gray8(&start), &job.init)
+            .map_err(|e| e.to_string())?;
+        let (img, _) = self.decode(job.frame)?;
+        match t.landscape(FrameInput::Gray8(&img), &job.at, &job.sweep) {
+            Some(r) => r.map_err(|e| e.to_string()),
+            None => Err(format!("{} has no similarity over warps", job.spec.label())),
+        }
     }
 
     /// Re-runs one tracker from `from` to `until` (see [`Job::Rerun`]); the others keep their

@@ -643,3 +643,26 @@ fn at_1000x700_the_frame_keeps_most_of_the_window() {
     assert!(alone > 900.0 || alone > 1.4 * with_panels, "{alone} px");
     assert!(!h.state().state.view.show_trackers_panel && !h.state().state.view.show_plots_panel);
 }
+
+#[test]
+fn the_cost_landscape_view_sweeps_the_inspected_tracker() {
+    let d = TempDir::new("gui-landscape");
+    let seq = small_sequence(d.path(), 5);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Play);
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(4) && !a.is_playing()
+    });
+    h.state_mut().show_landscape(true);
+    step_until(&mut h, "the curve", |a| {
+        matches!(a.landscape_shown(), Some((Ok(_), true)))
+    });
+    let Some((Ok(l), _)) = h.state().landscape_shown() else {
+        unreachable!()
+    };
+    assert_eq!(l.values.len(), 81);
+    // The tracker converged: the best sample is within a step of the estimate.
+    assert!(l.best()[0].abs() <= 0.25 + 1e-9, "{:?}", l.best());
+    assert!(h.query_by_label("Cost landscape").is_some());
+}

@@ -6,7 +6,9 @@ use super::color;
 use crate::app::InspectorApp;
 use crate::app::command::Command;
 use eframe::egui;
-use egui_plot::{AxisHints, Legend, Line, Plot, PlotPoints, VLine};
+use egui_plot::{
+    AxisHints, Legend, Line, LineStyle, Plot, PlotImage, PlotPoint, PlotPoints, Points, VLine,
+};
 
 /// Axes whose tick labels show even on short plots (egui_plot's defaults hide every label of a
 /// 150 px plot but the extremes).
@@ -14,7 +16,7 @@ fn axes(plot: Plot<'static>, x: &str, y: &str) -> Plot<'static> {
     plot.custom_x_axes(vec![
         AxisHints::new_x()
             .label(x.to_string())
-            .label_spacing(28.0..=45.0),
+            .label_spacing(22.0..=36.0),
     ])
     .custom_y_axes(vec![
         AxisHints::new_y()
@@ -104,6 +106,8 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                     speed_table(app, ui);
                     ui.separator();
                     convergence(app, ui);
+                    ui.separator();
+                    landscape(app, ui);
                 });
         });
 }
@@ -294,4 +298,280 @@ fn patches(
             });
         }
     });
+}
+
+/// A perceptual colour map (dark blue to yellow) for `t` in 0..1.
+fn colormap(t: f64) -> egui::Color32 {
+    const STOPS: [[f64; 3]; 5] = [
+        [68.0, 1.0, 84.0],
+        [59.0, 82.0, 139.0],
+        [33.0, 145.0, 140.0],
+        [94.0, 201.0, 98.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    } * 4.0;
+    let i = (t.floor() as usize).min(3);
+    let f = t - i as f64;
+    let c = |k: usize| (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f) as u8;
+    egui::Color32::from_rgb(c(0), c(1), c(2))
+}
+
+/// The cost landscape of the inspected tracker on the shown frame: the similarity swept along
+/// one parameter (a curve, with the analytic and numeric gradients drawn as tangents) or two (a
+/// map, with the path of the iterations), around the estimate or the ground truth.
+fn landscape(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let open = egui::CollapsingHeader::new("Cost landscape")
+        .id_salt("landscape")
+        .open(Some(app.rt.landscape.open))
+        .show(ui, |ui| {
+            let i = app.state.selected_tracker;
+            let dof = app
+                .state
+                .trackers
+                .get(i)
+                .and_then(|t| t.spec.registration())
+                .and_then(|r| crate::ssm::build(&r.ssm).ok())
+                .map_or(0, |m| m.dof());
+            if dof == 0 {
+                ui.label("the inspected tracker has no warp parameters");
+                return;
+            }
+            let v = &mut app.rt.landscape;
+            ui.horizontal(|ui| {
+                ui.label("x");
+                egui::ComboBox::from_id_salt("landscape_x")
+                    .selected_text(format!("p{}", v.x + 1))
+                    .show_ui(ui, |ui| {
+                        for k in 0..dof {
+                            ui.selectable_value(&mut v.x, k, format!("p{}", k + 1));
+                        }
+                    });
+                ui.label("y");
+                egui::ComboBox::from_id_salt("landscape_y")
+                    .selected_text(v.y.map_or("none".into(), |k| format!("p{}", k + 1)))
+                    .show_ui(ui, |ui| {
+                        ui.selectable_value(&mut v.y, None, "none");
+                        for k in 0..dof {
+                            ui.selectable_value(&mut v.y, Some(k), format!("p{}", k + 1));
+                        }
+                    });
+                v.x = v.x.min(dof - 1);
+                if v.y.is_some_and(|y| y >= dof) {
+                    v.y = None;
+                }
+                ui.add(
+                    egui::DragValue::new(&mut v.radius)
+                        .range(0.5..=100.0)
+                        .speed(0.1)
+                        .prefix("± ")
+                        .suffix(" px"),
+                )
+                .on_hover_text("Half-width of the sweep, in px of mean corner motion");
+            });
+            ui.horizontal(|ui| {
+                ui.radio_value(&mut v.around_truth, false, "around the estimate");
+                ui.radio_value(&mut v.around_truth, true, "around the ground truth");
+            });
+            let iterations: Vec<Vec<f64>> = app
+                .result(i, app.state.frame)
+                .map(|r| r.iterations.iter().map(|it| it.params.clone()).collect())
+                .unwrap_or_default();
+            let c = app
+                .state
+                .trackers
+                .get(i)
+                .map_or(egui::Color32::WHITE, |t| color(t.color));
+            let Some((result, current)) = app.landscape_shown() else {
+                ui.label("computing…");
+                return;
+            };
+            let l = match result {
+                Ok(l) => l.clone(),
+                Err(e) => {
+                    ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e);
+                    return;
+                }
+            };
+            if !current {
+                ui.label(egui::RichText::new("updating…").small().weak());
+            }
+            let grads: Vec<String> = l
+                .axes
+                .iter()
+                .zip(l.analytic.iter().zip(&l.numeric))
+                .map(|(k, (a, n))| format!("p{}: analytic {a:.4}, numeric {n:.4}", k + 1))
+                .collect();
+            ui.label(
+                egui::RichText::new(format!(
+                    "df/du at the centre (per px): {}",
+                    grads.join("; ")
+                ))
+                .small(),
+            );
+            let path: Vec<Vec<f64>> = iterations.iter().map(|p| l.offsets_of(p)).collect();
+            if l.axes.len() == 1 {
+                landscape_curve(ui, &l, &path, c);
+            } else {
+                landscape_map(app, ui, &l, &path);
+            }
+        });
+    if open.header_response.clicked() {
+        let now = !app.rt.landscape.open;
+        app.show_landscape(now);
+    }
+}
+
+fn landscape_curve(
+    ui: &mut egui::Ui,
+    l: &crate::landscape::Landscape,
+    path: &[Vec<f64>],
+    c: egui::Color32,
+) {
+    let pts: Vec<[f64; 2]> = l
+        .offsets
+        .iter()
+        .zip(&l.values)
+        .filter(|(_, v)| v.is_finite())
+        .map(|(u, v)| [*u, *v])
+        .collect();
+    let r = l.offsets.last().copied().unwrap_or(1.0);
+    let tangent = |slope: f64| -> Vec<[f64; 2]> {
+        [-r / 3.0, r / 3.0]
+            .iter()
+            .map(|&u| [u, l.center_value + slope * u])
+            .collect()
+    };
+    // f at an offset, interpolated along the sampled curve (for the iterations' marks).
+    let f_at = |u: f64| {
+        let step = l.offsets[1] - l.offsets[0];
+        let x = ((u - l.offsets[0]) / step).clamp(0.0, (l.offsets.len() - 1) as f64);
+        let (i, t) = (x.floor() as usize, x - x.floor());
+        let j = (i + 1).min(l.values.len() - 1);
+        l.values[i] * (1.0 - t) + l.values[j] * t
+    };
+    let marks: Vec<[f64; 2]> = path
+        .iter()
+        .filter_map(|o| o.first().copied())
+        .filter(|u| u.abs() <= r)
+        .map(|u| [u, f_at(u)])
+        .collect();
+    axes(
+        Plot::new("landscape_curve"),
+        &format!("p{} offset (px of corner motion)", l.axes[0] + 1),
+        "similarity f",
+    )
+    .height(170.0)
+    .legend(Legend::default().position(egui_plot::Corner::LeftBottom))
+    .allow_scroll(false)
+    .show(ui, |p| {
+        p.line(Line::new("f", PlotPoints::from(pts)).color(c));
+        p.line(
+            Line::new(
+                "analytic gradient",
+                PlotPoints::from(tangent(l.analytic[0])),
+            )
+            .color(egui::Color32::from_rgb(255, 160, 40))
+            .width(2.0),
+        );
+        p.line(
+            Line::new("numeric gradient", PlotPoints::from(tangent(l.numeric[0])))
+                .color(egui::Color32::from_rgb(120, 220, 120))
+                .style(LineStyle::dashed_loose()),
+        );
+        p.vline(VLine::new("centre", 0.0).color(egui::Color32::from_gray(150)));
+        if !marks.is_empty() {
+            p.points(
+                Points::new("iterations", marks)
+                    .radius(3.0)
+                    .color(egui::Color32::WHITE),
+            );
+        }
+    });
+}
+
+fn landscape_map(
+    app: &mut InspectorApp,
+    ui: &mut egui::Ui,
+    l: &crate::landscape::Landscape,
+    path: &[Vec<f64>],
+) {
+    let n = l.offsets.len();
+    let finite = l.values.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let span = (hi - lo).max(1e-12);
+    // Rows from the top: the largest second-axis offset first (the plot's y grows upwards).
+    let mut pixels = Vec::with_capacity(n * n);
+    for row in (0..n).rev() {
+        for col in 0..n {
+            pixels.push(colormap((l.values[row * n + col] - lo) / span));
+        }
+    }
+    let image = egui::ColorImage::new([n, n], pixels);
+    let key = format!("{:?}{:?}{}", l.axes, l.center, l.center_value);
+    let tex = match &mut app.rt.landscape.texture {
+        Some((k, t)) if *k == key => t.clone(),
+        Some((k, t)) => {
+            t.set(image, egui::TextureOptions::NEAREST);
+            *k = key;
+            t.clone()
+        }
+        None => {
+            let t = ui
+                .ctx()
+                .load_texture("landscape", image, egui::TextureOptions::NEAREST);
+            app.rt.landscape.texture = Some((key, t.clone()));
+            t
+        }
+    };
+    let r = l.offsets[n - 1];
+    let cell = 2.0 * r / (n - 1) as f64;
+    let line: Vec<[f64; 2]> = path
+        .iter()
+        .filter(|o| o.len() == 2)
+        .map(|o| [o[0], o[1]])
+        .collect();
+    let best = l.best();
+    axes(
+        Plot::new("landscape_map"),
+        &format!("p{} offset (px)", l.axes[0] + 1),
+        &format!("p{} offset (px)", l.axes[1] + 1),
+    )
+    .height(230.0)
+    .data_aspect(1.0)
+    .allow_scroll(false)
+    .show(ui, |p| {
+        p.image(PlotImage::new(
+            "similarity",
+            tex.id(),
+            PlotPoint::new(0.0, 0.0),
+            egui::Vec2::splat((2.0 * r + cell) as f32),
+        ));
+        if !line.is_empty() {
+            p.line(
+                Line::new("iterations", PlotPoints::from(line.clone())).color(egui::Color32::WHITE),
+            );
+            p.points(
+                Points::new("iterations", line)
+                    .radius(2.5)
+                    .color(egui::Color32::WHITE),
+            );
+        }
+        p.points(
+            Points::new("best sample", vec![[best[0], best[1]]])
+                .radius(4.0)
+                .color(egui::Color32::from_rgb(255, 80, 80)),
+        );
+    });
+    ui.label(
+        egui::RichText::new(format!(
+            "f from {lo:.4} (dark) to {hi:.4} (yellow); red: the best sample; white: the iterations"
+        ))
+        .small(),
+    );
 }

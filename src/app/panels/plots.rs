@@ -465,7 +465,6 @@ fn landscape_curve(
         "similarity f",
     )
     .height(170.0)
-    .legend(Legend::default().position(egui_plot::Corner::LeftBottom))
     .allow_scroll(false)
     .show(ui, |p| {
         p.line(Line::new("f", PlotPoints::from(pts)).color(c));

@@ -210,7 +210,13 @@ impl InspectorApp {
             }
             Command::SelectTracker(i) => self.state.selected_tracker = i,
             Command::SelectIteration(it) => self.rt.selected_iteration = it,
-            Command::SetTool(t) => self.rt.tool = t,
+            Command::SetTool(t) => {
+                if t == Tool::EditGroundTruth && self.rt.tool != t {
+                    // The ground-truth mode needs the gray frame: show the frame again.
+                    self.rt.texture_frame = None;
+                }
+                self.rt.tool = t;
+            }
             Command::SetView(v) => self.state.view = v,
             Command::SetGtSsm(name) => match ssm::build(&name) {
                 Ok(m) => self.state.gt_ssm = m.name().to_string(),

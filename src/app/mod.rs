@@ -663,14 +663,18 @@ impl InspectorApp {
             }
             self.rt.image_size = [img.width, img.height];
             self.rt.texture_frame = Some(img.index);
-            // The gray frame, for the ground-truth mode's patch view.
-            let gray: Vec<u8> = img
-                .rgba
-                .chunks_exact(4)
-                .map(|p| crate::imaging::luma(p[0], p[1], p[2]))
-                .collect();
-            self.rt.gt.frame_image = crate::imaging::GrayU8::from_vec(img.width, img.height, gray)
-                .map(|g| (img.index, g));
+            // The gray frame, for the ground-truth mode's patch view (only in that mode: it costs
+            // a pass over the frame).
+            if self.rt.tool == Tool::EditGroundTruth {
+                let gray: Vec<u8> = img
+                    .rgba
+                    .chunks_exact(4)
+                    .map(|p| crate::imaging::luma(p[0], p[1], p[2]))
+                    .collect();
+                self.rt.gt.frame_image =
+                    crate::imaging::GrayU8::from_vec(img.width, img.height, gray)
+                        .map(|g| (img.index, g));
+            }
         }
         if self.rt.texture_frame != Some(self.state.frame)
             && self.rt.sequence.is_some()

@@ -78,6 +78,127 @@ pub enum Job {
     },
 }
 
+/// Frames decoded ahead of the one asked for, at most this many (memory stays bounded whatever
+/// the sequence's length: about 4 x 1280 x 720 x 5 bytes).
+const AHEAD: usize = 4;
+
+/// Decodes frame `i`: grayscale for the trackers, RGBA for display.
+fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage), String> {
+    let path = seq
+        .frames
+        .get(i)
+        .ok_or_else(|| format!("frame {} is out of range (1..{})", i + 1, seq.len()))?;
+    let img = load_dynamic(path).map_err(|e| e.to_string())?;
+    let gray = gray_from_dynamic(&img);
+    let rgba = img.to_rgba8();
+    Ok((
+        gray,
+        FrameImage {
+            index: i,
+            width: rgba.width() as usize,
+            height: rgba.height() as usize,
+            rgba: rgba.into_raw(),
+        },
+    ))
+}
+
+type Decoded = Result<(GrayU8, FrameImage), String>;
+
+/// A thread that decodes the next frames while the worker tracks the current one.
+struct Ahead {
+    requests: Option<Sender<(Arc<Sequence>, usize)>>,
+    /// Decoded frames by (sequence identity, index); `pending` were asked for.
+    done: Arc<std::sync::Mutex<AheadState>>,
+}
+
+#[derive(Default)]
+struct AheadState {
+    frames: std::collections::BTreeMap<usize, Decoded>,
+    pending: std::collections::BTreeSet<usize>,
+    /// The sequence the frames belong to (its address).
+    sequence: usize,
+}
+
+impl Ahead {
+    fn spawn() -> Ahead {
+        let (tx, rx) = channel::<(Arc<Sequence>, usize)>();
+        let done = Arc::new(std::sync::Mutex::new(AheadState::default()));
+        let state = done.clone();
+        let spawned = std::thread::Builder::new()
+            .name("regtrack-decoder".into())
+            .spawn(move || {
+                while let Ok((seq, i)) = rx.recv() {
+                    let id = Arc::as_ptr(&seq) as usize;
+                    let wanted = state
+                        .lock()
+                        .map(|s| s.sequence == id && s.pending.contains(&i))
+                        .unwrap_or(false);
+                    if !wanted {
+                        continue;
+                    }
+                    let r = decode_frame(&seq, i);
+                    if let Ok(mut s) = state.lock()
+                        && s.sequence == id
+                        && s.pending.remove(&i)
+                    {
+                        s.frames.insert(i, r);
+                    }
+                }
+            });
+        Ahead {
+            // Without its thread every frame is decoded when asked.
+            requests: spawned.ok().map(|_| tx),
+            done,
+        }
+    }
+
+    /// Takes frame `i` if it was decoded ahead (waiting for it if it is being decoded); drops
+    /// every other frame behind it.
+    fn take(&self, seq: &Arc<Sequence>, i: usize) -> Option<Decoded> {
+        let id = Arc::as_ptr(seq) as usize;
+        for _ in 0..2000 {
+            let mut s = self.done.lock().ok()?;
+            if s.sequence != id {
+                *s = AheadState {
+                    sequence: id,
+                    ..AheadState::default()
+                };
+                return None;
+            }
+            if let Some(r) = s.frames.remove(&i) {
+                s.frames.retain(|&k, _| k > i);
+                return Some(r);
+            }
+            if !s.pending.contains(&i) {
+                s.frames.retain(|&k, _| k > i);
+                s.pending.retain(|&k| k > i);
+                return None;
+            }
+            drop(s);
+            std::thread::sleep(Duration::from_micros(500));
+        }
+        None
+    }
+
+    /// Asks for the frames in `range` not yet decoded or asked for.
+    fn request(&self, seq: &Arc<Sequence>, range: std::ops::Range<usize>) {
+        let Some(tx) = &self.requests else { return };
+        let id = Arc::as_ptr(seq) as usize;
+        let Ok(mut s) = self.done.lock() else { return };
+        if s.sequence != id {
+            *s = AheadState {
+                sequence: id,
+                ..AheadState::default()
+            };
+        }
+        for k in range {
+            if !s.frames.contains_key(&k) && s.pending.insert(k) {
+                let _ = tx.send((seq.clone(), k));
+            }
+        }
+    }
+}
+
 /// A cost landscape to compute.
 #[derive(Debug)]
 pub struct LandscapeJob {
@@ -182,6 +303,8 @@ struct Thread<W: Fn() + Sync> {
     epoch: Arc<AtomicU64>,
     wake: W,
     sequence: Option<Arc<Sequence>>,
+    /// Frames decoded ahead on their own thread.
+    ahead: Ahead,
     trackers: Vec<(usize, Tracker)>,
     templates: Vec<Arc<Vec<f32>>>,
     generation: u64,
@@ -195,6 +318,7 @@ impl<W: Fn() + Sync> Thread<W> {
             epoch,
             wake,
             sequence: None,
+            ahead: Ahead::spawn(),
             trackers: Vec::new(),
             templates: Vec::new(),
             generation: 0,
@@ -294,25 +418,17 @@ impl<W: Fn() + Sync> Thread<W> {
         }
     }
 
-    /// Decodes frame `i`: grayscale for the trackers, RGBA for display.
+    /// Frame `i`: from the frames decoded ahead, else decoded now; asks the decoder for the
+    /// next few frames (tracking and replay go forward).
     fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage), String> {
         let seq = self.sequence.as_ref().ok_or("no sequence is open")?;
-        let path = seq
-            .frames
-            .get(i)
-            .ok_or_else(|| format!("frame {} is out of range (1..{})", i + 1, seq.len()))?;
-        let img = load_dynamic(path).map_err(|e| e.to_string())?;
-        let gray = gray_from_dynamic(&img);
-        let rgba = img.to_rgba8();
-        Ok((
-            gray,
-            FrameImage {
-                index: i,
-                width: rgba.width() as usize,
-                height: rgba.height() as usize,
-                rgba: rgba.into_raw(),
-            },
-        ))
+        let ahead = self.ahead.take(seq, i);
+        self.ahead
+            .request(seq, i + 1..(i + 1 + AHEAD).min(seq.len()));
+        match ahead {
+            Some(r) => r,
+            None => decode_frame(seq, i),
+        }
     }
 
     fn snapshot(
@@ -572,5 +688,40 @@ impl<W: Fn() + Sync> Thread<W> {
             generation: self.generation,
             frame: self.frame,
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_decoded_ahead_are_the_frames_and_stay_few() {
+        let dir = std::env::temp_dir().join(format!("regtrack-ahead-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for k in 0..8u32 {
+            let img = image::GrayImage::from_fn(32, 24, |x, y| {
+                image::Luma([(x * 5 + y * 3 + k * 20) as u8])
+            });
+            img.save(dir.join(format!("f{k:02}.png"))).unwrap();
+        }
+        let seq = Arc::new(Sequence::from_parts("s", &dir, None).unwrap());
+        let ahead = Ahead::spawn();
+        for i in 0..8 {
+            let got = ahead.take(&seq, i).unwrap_or_else(|| decode_frame(&seq, i));
+            ahead.request(&seq, i + 1..(i + 1 + AHEAD).min(seq.len()));
+            let (gray, image) = got.unwrap();
+            let direct = decode_frame(&seq, i).unwrap();
+            assert_eq!(gray.data, direct.0.data, "frame {i}");
+            assert_eq!(image.index, i);
+            let s = ahead.done.lock().unwrap();
+            assert!(
+                s.frames.len() + s.pending.len() <= AHEAD,
+                "{} kept",
+                s.frames.len()
+            );
+            assert!(s.frames.keys().all(|&k| k > i));
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

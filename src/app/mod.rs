@@ -524,6 +524,33 @@ impl InspectorApp {
         self.rt.landscape.open = open;
     }
 
+    /// The frames where trackers `a` and `b` disagree most: the alignment error between their
+    /// corners (infinite where exactly one of them is lost), largest first.
+    pub fn disagreements(&self, a: usize, b: usize) -> Vec<(usize, f64)> {
+        let (Some(ra), Some(rb)) = (self.rt.results.get(a), self.rt.results.get(b)) else {
+            return Vec::new();
+        };
+        let mut v: Vec<(usize, f64)> = ra
+            .iter()
+            .zip(rb)
+            .enumerate()
+            .filter_map(|(f, (x, y))| {
+                let (x, y) = (x.as_ref()?, y.as_ref()?);
+                let (lx, ly) = (
+                    x.status != TrackStatus::Tracking,
+                    y.status != TrackStatus::Tracking,
+                );
+                match (lx, ly) {
+                    (false, false) => Some((f, alignment_error(&x.corners, &y.corners))),
+                    (true, true) => None,
+                    _ => Some((f, f64::INFINITY)),
+                }
+            })
+            .collect();
+        v.sort_by(|p, q| q.1.total_cmp(&p.1).then(p.0.cmp(&q.0)));
+        v
+    }
+
     /// Whether stored results are being played back.
     pub fn is_replaying(&self) -> bool {
         self.rt.replaying.is_some()

@@ -57,6 +57,10 @@ pub struct View {
     pub show_trackers_panel: bool,
     #[serde(default = "yes")]
     pub show_plots_panel: bool,
+    /// A/B mode: two trackers side by side (their indices), with the frames where they disagree
+    /// most listed.
+    #[serde(default)]
+    pub ab: Option<(usize, usize)>,
 }
 
 fn yes() -> bool {
@@ -73,6 +77,7 @@ impl Default for View {
             show_samples: false,
             show_trackers_panel: true,
             show_plots_panel: true,
+            ab: None,
         }
     }
 }

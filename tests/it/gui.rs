@@ -666,3 +666,38 @@ fn the_cost_landscape_view_sweeps_the_inspected_tracker() {
     assert!(l.best()[0].abs() <= 0.25 + 1e-9, "{:?}", l.best());
     assert!(h.query_by_label("Cost landscape").is_some());
 }
+
+#[test]
+fn ab_mode_lists_the_frames_where_two_trackers_disagree() {
+    let d = TempDir::new("gui-ab");
+    let seq = small_sequence(d.path(), 10);
+    let mut state = state_on(&seq);
+    // B is a weaker tracker (translation only) so that the two disagree.
+    state.trackers[1].spec.registration_mut().unwrap().ssm = "translation".into();
+    let mut h = harness(state);
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Play);
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(9) && !a.is_playing()
+    });
+    h.get_by_label("A/B").click();
+    h.run_steps(3);
+    assert_eq!(h.state().state.view.ab, Some((0, 1)));
+    let worst = h.state().disagreements(0, 1);
+    assert_eq!(worst.len(), 10);
+    assert!(
+        worst.windows(2).all(|w| w[0].1 >= w[1].1),
+        "sorted, largest first"
+    );
+    let (f, dist) = worst[0];
+    let expect = regtrack::geometry::alignment_error(
+        &h.state().result(0, f).unwrap().corners,
+        &h.state().result(1, f).unwrap().corners,
+    );
+    assert!((dist - expect).abs() < 1e-9);
+    // Its entry seeks to it.
+    let label = format!("frame {}: {dist:.1} px", f + 1);
+    h.get_by_label(&label).click();
+    h.run_steps(3);
+    assert_eq!(h.state().state.frame, f);
+}

@@ -91,7 +91,102 @@ fn draw_quad(
     }
 }
 
+/// A/B mode: the frame twice, tracker A's quad on the left and B's on the right (the ground truth
+/// on both), under the same zoom.
+fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
+    let rect = ui.available_rect_before_wrap();
+    let response = ui.allocate_rect(rect, Sense::click_and_drag());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 0.0, Color32::from_gray(24));
+    let Some(texture) = app.rt.texture.clone() else {
+        return;
+    };
+    let frame = app.state.frame;
+    let half = rect.width() / 2.0;
+    for (side, k) in [(0usize, a), (1, b)] {
+        let r = Rect::from_min_size(
+            rect.left_top() + Vec2::new(side as f32 * half, 0.0),
+            Vec2::new(half - 2.0, rect.height()),
+        );
+        let t = Transform::new(r, app.rt.image_size, &app.state.view);
+        let p = painter.with_clip_rect(r);
+        let [w, h] = app.rt.image_size;
+        let img_rect = Rect::from_min_max(
+            t.to_screen(Point::new(-0.5, -0.5)),
+            t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
+        );
+        p.image(
+            texture.id(),
+            img_rect,
+            Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+            Color32::WHITE,
+        );
+        if app.state.view.show_ground_truth
+            && let Some(gt) = app.ground_truth(frame)
+        {
+            draw_quad(&p, &t, &gt, GT_COLOR, true, false);
+        }
+        let Some(entry) = app.state.trackers.get(k) else {
+            continue;
+        };
+        let c = color(entry.color);
+        if let Some(res) = app.result(k, frame) {
+            let lost = res.status != TrackStatus::Tracking;
+            draw_quad(
+                &p,
+                &t,
+                &res.corners,
+                if lost { c.gamma_multiply(0.5) } else { c },
+                lost,
+                false,
+            );
+        }
+        p.text(
+            r.left_top() + Vec2::new(8.0, 8.0),
+            egui::Align2::LEFT_TOP,
+            format!("{} {}: {}", ["A", "B"][side], k + 1, entry.spec.label()),
+            egui::FontId::proportional(15.0),
+            c,
+        );
+    }
+    painter.line_segment(
+        [rect.center_top(), rect.center_bottom()],
+        Stroke::new(1.0, Color32::from_gray(90)),
+    );
+    // Scroll zooms both halves alike; double-click fits.
+    if let Some(pos) = response.hover_pos() {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            let r = if pos.x < rect.center().x {
+                Rect::from_min_size(rect.left_top(), Vec2::new(half - 2.0, rect.height()))
+            } else {
+                Rect::from_min_size(rect.center_top(), Vec2::new(half - 2.0, rect.height()))
+            };
+            let t = Transform::new(r, app.rt.image_size, &app.state.view);
+            let anchor = t.to_image(pos);
+            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
+            let d = pos - r.center();
+            let mut view = app.state.view.clone();
+            view.zoom = scale;
+            view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
+            app.send(Command::SetView(view));
+        }
+    }
+    if response.double_clicked() {
+        let mut view = app.state.view.clone();
+        view.zoom = 0.0;
+        app.send(Command::SetView(view));
+    }
+}
+
 pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    if let Some((a, b)) = app.state.view.ab
+        && a < app.state.trackers.len()
+        && b < app.state.trackers.len()
+        && app.rt.tool == Tool::Navigate
+    {
+        return ab_view(app, ui, a, b);
+    }
     let rect = ui.available_rect_before_wrap();
     let response = ui.allocate_rect(rect, Sense::click_and_drag());
     let painter = ui.painter_at(rect);

@@ -50,7 +50,12 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         .include_y(1.0)
                         .allow_scroll(false)
                         .show(ui, |p| {
+                            let ab = app.state.view.ab;
                             for (i, t) in app.state.trackers.iter().enumerate() {
+                                // In A/B mode, only A and B.
+                                if ab.is_some_and(|(a, b)| i != a && i != b) {
+                                    continue;
+                                }
                                 let curve = app.success_curve(i);
                                 if !curve.is_empty() {
                                     let pts: Vec<[f64; 2]> =
@@ -74,7 +79,11 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         .allow_scroll(false)
                         .allow_drag(false)
                         .show(ui, |p| {
+                            let ab = app.state.view.ab;
                             for (i, t) in app.state.trackers.iter().enumerate() {
+                                if ab.is_some_and(|(a, b)| i != a && i != b) {
+                                    continue;
+                                }
                                 let pts: Vec<[f64; 2]> = app
                                     .errors(i)
                                     .into_iter()
@@ -102,6 +111,9 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                     {
                         let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
                         app.send(Command::Seek(f));
+                    }
+                    if let Some((a, b)) = app.state.view.ab {
+                        disagreement(app, ui, a, b);
                     }
                     speed_table(app, ui);
                     ui.separator();
@@ -573,4 +585,30 @@ fn landscape_map(
         ))
         .small(),
     );
+}
+
+/// A/B mode: the frames where the two trackers disagree most, for a jump.
+fn disagreement(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
+    ui.heading(format!("Where {} and {} disagree most", a + 1, b + 1));
+    let worst = app.disagreements(a, b);
+    if worst.is_empty() {
+        ui.label("no frame tracked by both yet");
+        return;
+    }
+    ui.horizontal_wrapped(|ui| {
+        for (f, d) in worst.iter().take(12) {
+            let text = if d.is_finite() {
+                format!("frame {}: {d:.1} px", f + 1)
+            } else {
+                format!("frame {}: one lost", f + 1)
+            };
+            if ui
+                .selectable_label(app.state.frame == *f, text)
+                .on_hover_text("Show this frame")
+                .clicked()
+            {
+                app.send(Command::Seek(*f));
+            }
+        }
+    });
 }

@@ -92,6 +92,7 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             if ui.button("Add tracker").clicked() {
                 app.send(Command::AddTracker);
             }
+            ab_controls(app, ui);
             ui.separator();
             ui.heading("Ground truth");
             let mut view = app.state.view.clone();
@@ -115,6 +116,36 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             }
         });
     });
+}
+
+/// A/B mode: two trackers side by side.
+fn ab_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
+    let n = app.state.trackers.len();
+    let mut view = app.state.view.clone();
+    let mut on = view.ab.is_some();
+    ui.horizontal(|ui| {
+        ui.add_enabled(n >= 2, egui::Checkbox::new(&mut on, "A/B"))
+            .on_hover_text("Two trackers side by side, with the frames where they disagree most");
+        if on {
+            let (mut a, mut b) = view.ab.unwrap_or((0, 1.min(n.saturating_sub(1))));
+            for (label, v) in [("A", &mut a), ("B", &mut b)] {
+                egui::ComboBox::from_id_salt(format!("ab_{label}"))
+                    .selected_text(format!("{label}: {}", *v + 1))
+                    .width(60.0)
+                    .show_ui(ui, |ui| {
+                        for k in 0..n {
+                            ui.selectable_value(v, k, format!("{}", k + 1));
+                        }
+                    });
+            }
+            view.ab = Some((a.min(n - 1), b.min(n - 1)));
+        } else {
+            view.ab = None;
+        }
+    });
+    if view != app.state.view {
+        app.send(Command::SetView(view));
+    }
 }
 
 /// The ground-truth mode's controls: corner, step, undo/redo, occluded, propagate,

@@ -680,7 +680,8 @@ impl InspectorApp {
     fn upload(&mut self, ctx: &egui::Context) {
         if let Some(img) = self.rt.pending_image.take() {
             let color =
-                egui::ColorImage::from_rgba_unmultiplied([img.width, img.height], &img.rgba);
+                // Frames are opaque: premultiplied is the same bytes, without a pass over them.
+                egui::ColorImage::from_rgba_premultiplied([img.width, img.height], &img.rgba);
             match &mut self.rt.texture {
                 Some(t) => t.set(color, egui::TextureOptions::LINEAR),
                 None => {

@@ -366,32 +366,8 @@ impl InspectorApp {
                     vec![(frame, None)],
                 );
             }
-            Command::GtUndo => match self.rt.gt.corrections.undo() {
-                Ok(Some((label, frames))) => {
-                    self.rt.status = format!("undid: {label}");
-                    self.gt_changed();
-                    if let Some(&f) = frames.first()
-                        && !frames.contains(&self.state.frame)
-                    {
-                        self.apply(Command::Seek(f));
-                    }
-                }
-                Ok(None) => self.rt.status = "nothing to undo".into(),
-                Err(e) => self.error(format!("cannot undo: {e}")),
-            },
-            Command::GtRedo => match self.rt.gt.corrections.redo() {
-                Ok(Some((label, frames))) => {
-                    self.rt.status = format!("redid: {label}");
-                    self.gt_changed();
-                    if let Some(&f) = frames.first()
-                        && !frames.contains(&self.state.frame)
-                    {
-                        self.apply(Command::Seek(f));
-                    }
-                }
-                Ok(None) => self.rt.status = "nothing to redo".into(),
-                Err(e) => self.error(format!("cannot redo: {e}")),
-            },
+            Command::GtUndo => self.step_history(true),
+            Command::GtRedo => self.step_history(false),
             Command::GtExport => {
                 let Some(seq) = self.rt.sequence.clone() else {
                     return;
@@ -434,6 +410,29 @@ impl InspectorApp {
                 self.rt.status = "proposal rejected".into();
             }
             _ => {}
+        }
+    }
+
+    /// Undo or redo; the view goes to the frames the edit touched.
+    fn step_history(&mut self, undo: bool) {
+        let c = &mut self.rt.gt.corrections;
+        let (r, did, what) = if undo {
+            (c.undo(), "undid", "undo")
+        } else {
+            (c.redo(), "redid", "redo")
+        };
+        match r {
+            Ok(Some((label, frames))) => {
+                self.rt.status = format!("{did}: {label}");
+                self.gt_changed();
+                if let Some(&f) = frames.first()
+                    && !frames.contains(&self.state.frame)
+                {
+                    self.apply(Command::Seek(f));
+                }
+            }
+            Ok(None) => self.rt.status = format!("nothing to {what}"),
+            Err(e) => self.error(format!("cannot {what}: {e}")),
         }
     }
 

@@ -153,7 +153,7 @@ impl Ahead {
     }
 
     /// Takes frame `i` if it was decoded ahead (waiting for it if it is being decoded); drops
-    /// every other frame behind it.
+    /// every frame outside the `AHEAD` after it.
     fn take(&self, seq: &Arc<Sequence>, i: usize) -> Option<Decoded> {
         let id = Arc::as_ptr(seq) as usize;
         for _ in 0..2000 {
@@ -165,13 +165,16 @@ impl Ahead {
                 };
                 return None;
             }
+            // Only the frames just ahead of `i` are kept (a seek drops the others).
+            let window = |k: usize| k > i && k <= i + AHEAD;
             if let Some(r) = s.frames.remove(&i) {
-                s.frames.retain(|&k, _| k > i);
+                s.frames.retain(|&k, _| window(k));
+                s.pending.retain(|&k| window(k));
                 return Some(r);
             }
             if !s.pending.contains(&i) {
-                s.frames.retain(|&k, _| k > i);
-                s.pending.retain(|&k| k > i);
+                s.frames.retain(|&k, _| window(k));
+                s.pending.retain(|&k| window(k));
                 return None;
             }
             drop(s);
@@ -196,6 +199,23 @@ impl Ahead {
                 let _ = tx.send((seq.clone(), k));
             }
         }
+    }
+}
+
+/// A tracker's result on the frame it was initialised on (its patch is the template).
+fn initial_frame(index: usize, t: &Tracker, template: Arc<Vec<f32>>) -> TrackerFrame {
+    TrackerFrame {
+        tracker: index,
+        status: t.status(),
+        corners: t.corners(),
+        iterations: Vec::new(),
+        visual: None,
+        start: None,
+        search_us: 0.0,
+        update_us: 0.0,
+        res: t.inspection().map(|i| i.res).unwrap_or(0),
+        patch: template.to_vec(),
+        template,
     }
 }
 
@@ -478,23 +498,11 @@ impl<W: Fn() + Sync> Thread<W> {
                     ));
                     self.trackers.push((idx, t));
                     let k = self.trackers.len() - 1;
-                    let t = &self.trackers[k].1;
-                    // At initialisation the patch is the template.
-                    let template = self.templates[k].clone();
-                    let snap = TrackerFrame {
-                        tracker: idx,
-                        status: t.status(),
-                        corners: t.corners(),
-                        iterations: Vec::new(),
-                        visual: None,
-                        start: None,
-                        search_us: 0.0,
-                        update_us: 0.0,
-                        res: t.inspection().map(|i| i.res).unwrap_or(0),
-                        patch: template.to_vec(),
-                        template,
-                    };
-                    results.push(snap);
+                    results.push(initial_frame(
+                        idx,
+                        &self.trackers[k].1,
+                        self.templates[k].clone(),
+                    ));
                 }
                 Err(e) => self.reply(Reply::Error(format!("{}: {e}", spec.label()))),
             }
@@ -562,19 +570,7 @@ impl<W: Fn() + Sync> Thread<W> {
         self.reply(Reply::Frame {
             generation: self.generation,
             frame: from,
-            results: vec![TrackerFrame {
-                tracker: index,
-                status: t.status(),
-                corners: t.corners(),
-                iterations: Vec::new(),
-                visual: None,
-                start: None,
-                search_us: 0.0,
-                update_us: 0.0,
-                res: t.inspection().map(|i| i.res).unwrap_or(0),
-                patch: template.to_vec(),
-                template: template.clone(),
-            }],
+            results: vec![initial_frame(index, &t, template.clone())],
             image: None,
             catch_up: true,
         });
@@ -722,6 +718,17 @@ mod tests {
             );
             assert!(s.frames.keys().all(|&k| k > i));
         }
+        // A seek back keeps only the frames just after it.
+        ahead.request(&seq, 4..8);
+        std::thread::sleep(Duration::from_millis(50));
+        let _ = ahead.take(&seq, 0);
+        let s = ahead.done.lock().unwrap();
+        assert!(
+            s.frames
+                .keys()
+                .chain(s.pending.iter())
+                .all(|&k| (1..=AHEAD).contains(&k))
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

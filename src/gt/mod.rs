@@ -265,32 +265,41 @@ impl Corrections {
     /// Undoes the last edit; returns its label and the frames it touched (`None`: nothing to
     /// undo).
     pub fn undo(&mut self) -> Result<Option<(String, Vec<usize>)>> {
-        let Some(id) = self.done.last().map(|e| e.id) else {
-            return Ok(None);
-        };
-        self.log(&Record::Undo { id })?;
-        let Some(e) = self.done.pop() else {
-            return Ok(None);
-        };
-        self.set(&e, true);
-        let out = (e.label.clone(), e.changes.iter().map(|c| c.frame).collect());
-        self.undone.push(e);
-        self.since_export += 1;
-        Ok(Some(out))
+        self.step_history(true)
     }
 
     /// Redoes the last undone edit.
     pub fn redo(&mut self) -> Result<Option<(String, Vec<usize>)>> {
-        let Some(id) = self.undone.last().map(|e| e.id) else {
+        self.step_history(false)
+    }
+
+    /// Moves the last edit of one history (done for an undo, undone for a redo) to the other,
+    /// journaled first.
+    fn step_history(&mut self, undo: bool) -> Result<Option<(String, Vec<usize>)>> {
+        let from = if undo { &self.done } else { &self.undone };
+        let Some(id) = from.last().map(|e| e.id) else {
             return Ok(None);
         };
-        self.log(&Record::Redo { id })?;
-        let Some(e) = self.undone.pop() else {
+        self.log(&if undo {
+            Record::Undo { id }
+        } else {
+            Record::Redo { id }
+        })?;
+        let popped = if undo {
+            self.done.pop()
+        } else {
+            self.undone.pop()
+        };
+        let Some(e) = popped else {
             return Ok(None);
         };
-        self.set(&e, false);
+        self.set(&e, undo);
         let out = (e.label.clone(), e.changes.iter().map(|c| c.frame).collect());
-        self.done.push(e);
+        if undo {
+            self.undone.push(e);
+        } else {
+            self.done.push(e);
+        }
         self.since_export += 1;
         Ok(Some(out))
     }

@@ -73,8 +73,11 @@ fn pick_an_am_play_and_watch_the_plots_grow() {
     h.run_steps(3);
     h.get_by_label("ncc").click();
     h.run_steps(2);
+    // Only tracker 1 re-runs (on the worker): its start frame comes back on its own.
     step_until(&mut h, "re-initialisation", |a| {
-        a.state.trackers[0].spec.registration().unwrap().am == "ncc" && a.tracked_until() == Some(0)
+        a.state.trackers[0].spec.registration().unwrap().am == "ncc"
+            && a.tracked_until() == Some(0)
+            && a.result(0, 0).is_some()
     });
     let first = h.state().result(0, 0).unwrap().corners;
     h.get_by_label("Play").click();

@@ -202,6 +202,29 @@ impl Ahead {
     }
 }
 
+/// A tracker's result on a tracked frame, with what the recorder saw of its iterations.
+fn tracked_frame(
+    index: usize,
+    t: &Tracker,
+    rec: &mut Recorder,
+    out: &crate::tracker::FrameOutcome,
+    template: Arc<Vec<f32>>,
+) -> TrackerFrame {
+    TrackerFrame {
+        tracker: index,
+        status: out.status,
+        corners: out.corners,
+        iterations: rec.iterations.clone(),
+        visual: rec.method_visuals.pop().map(Arc::new),
+        start: rec.start,
+        search_us: out.timing.search.as_secs_f64() * 1e6,
+        update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
+        res: t.inspection().map(|i| i.res).unwrap_or(0),
+        template,
+        patch: t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default(),
+    }
+}
+
 /// A tracker's result on the frame it was initialised on (its patch is the template).
 fn initial_frame(index: usize, t: &Tracker, template: Arc<Vec<f32>>) -> TrackerFrame {
     TrackerFrame {
@@ -458,20 +481,7 @@ impl<W: Fn() + Sync> Thread<W> {
         rec: &mut Recorder,
         out: &crate::tracker::FrameOutcome,
     ) -> TrackerFrame {
-        let patch = t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default();
-        TrackerFrame {
-            tracker: self.trackers[k].0,
-            status: out.status,
-            corners: out.corners,
-            iterations: rec.iterations.clone(),
-            visual: rec.method_visuals.pop().map(Arc::new),
-            start: rec.start,
-            search_us: out.timing.search.as_secs_f64() * 1e6,
-            update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
-            res: t.inspection().map(|i| i.res).unwrap_or(0),
-            template: self.templates[k].clone(),
-            patch,
-        }
+        tracked_frame(self.trackers[k].0, t, rec, out, self.templates[k].clone())
     }
 
     fn start(&mut self, generation: u64, frame: usize, specs: Vec<(usize, TrackerSpec, Quad)>) {
@@ -598,23 +608,10 @@ impl<W: Fn() + Sync> Thread<W> {
                 ..Recorder::default()
             };
             let out = t.update(FrameInput::Gray8(&gray), &mut rec);
-            let patch = t.inspection().map(|x| x.patch.to_vec()).unwrap_or_default();
             self.reply(Reply::Frame {
                 generation: self.generation,
                 frame: i,
-                results: vec![TrackerFrame {
-                    tracker: index,
-                    status: out.status,
-                    corners: out.corners,
-                    iterations: rec.iterations.clone(),
-                    visual: rec.method_visuals.pop().map(Arc::new),
-                    start: rec.start,
-                    search_us: out.timing.search.as_secs_f64() * 1e6,
-                    update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
-                    res: t.inspection().map(|x| x.res).unwrap_or(0),
-                    template: template.clone(),
-                    patch,
-                }],
+                results: vec![tracked_frame(index, &t, &mut rec, &out, template.clone())],
                 image: None,
                 catch_up: true,
             });

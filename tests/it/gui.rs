@@ -128,6 +128,19 @@ fn sessions_load_and_every_bundled_session_is_valid() {
         a.state.trackers.len() == 1 && a.tracked_until() == Some(0)
     });
     assert_eq!(h.state().state.trackers[0].spec.label(), "fclk_ssd_affine");
+    // An unknown method is reported at its tracker's line.
+    let text = std::fs::read_to_string(&session).unwrap();
+    let line = text
+        .lines()
+        .position(|l| l.trim() == "[[trackers]]")
+        .unwrap()
+        + 1;
+    std::fs::write(&session, text.replace("\"fclk\"", "\"nosuch\"")).unwrap();
+    let e = State::load(&session).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("s.toml:{line}:")) && e.contains("nosuch"),
+        "{e}"
+    );
     // A broken session is reported, not a crash.
     std::fs::write(&session, "trackers = 3\n").unwrap();
     h.state_mut().send(Command::LoadSession(session));

@@ -717,3 +717,37 @@ fn ab_mode_lists_the_frames_where_two_trackers_disagree() {
     h.run_steps(3);
     assert_eq!(h.state().state.frame, f);
 }
+
+#[test]
+fn a_sequence_without_ground_truth_can_be_annotated_from_scratch() {
+    let d = TempDir::new("gui-annotate");
+    let dir = d.path().join("walk");
+    std::fs::create_dir_all(&dir).unwrap();
+    for k in 0..3u8 {
+        crate::common::write_png(&dir.join(format!("img{k}.png")), 320, 240, k * 9);
+    }
+    let mut h = harness(state_on(&dir));
+    step_until(&mut h, "the frame", |a| {
+        a.frame_count() == 3 && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    assert_eq!(h.state().gt_frame(0), Some(regtrack::gt::GtFrame::Missing));
+    h.state_mut().send(Command::DismissError(0));
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    let a = h.state().screen_pos(Point::new(100.0, 80.0)).unwrap();
+    let b = h.state().screen_pos(Point::new(180.0, 150.0)).unwrap();
+    drag(&mut h, a, b);
+    let q = h
+        .state()
+        .ground_truth(0)
+        .expect("the box is the frame's ground truth");
+    assert!(q.0[0].dist(Point::new(100.0, 80.0)) < 1.0, "{q}");
+    assert!(q.0[2].dist(Point::new(180.0, 150.0)) < 1.0, "{q}");
+    // Exported, it opens as the sequence with its ground truth.
+    h.get_by_label("Export ground truth*").click();
+    h.run_steps(2);
+    let exported = dir.join("walk_gt_homography.txt");
+    let seq = regtrack::dataset::Sequence::open(&exported).unwrap();
+    assert_eq!(seq.len(), 3);
+    assert!(seq.ground_truth(0).is_some() && seq.ground_truth(1).is_none());
+}

@@ -469,11 +469,14 @@ fn edit_ground_truth(
             if occluded {
                 "frame marked occluded (O unmarks it)"
             } else {
-                "no ground truth on this frame"
+                "no ground truth on this frame: drag a box to annotate it"
             },
             egui::FontId::proportional(15.0),
             Color32::YELLOW,
         );
+        if !occluded {
+            annotate_box(app, ui, response, t, painter, frame);
+        }
         return;
     };
     /// What a drag holds: the corner (or `None`: the whole quad), the press point, the quad then.
@@ -562,6 +565,51 @@ fn finish_drawing(app: &mut InspectorApp, tracker: usize, q: Quad) {
     match q.validate() {
         Ok(()) => app.send(Command::InitTracker(tracker, InitSource::Quad(q))),
         Err(e) => app.send(Command::ReportError(format!("not a usable quad: {e}"))),
+    }
+}
+
+/// The ground-truth mode on a frame without ground truth: a dragged box becomes its ground truth
+/// (one journaled edit), so that a sequence can be annotated from scratch.
+fn annotate_box(
+    app: &mut InspectorApp,
+    ui: &egui::Ui,
+    response: &egui::Response,
+    t: &Transform,
+    painter: &egui::Painter,
+    frame: usize,
+) {
+    let id = response.id.with("gt_box");
+    if response.drag_started()
+        && let Some(pos) = ui
+            .input(|i| i.pointer.press_origin())
+            .or(response.interact_pointer_pos())
+    {
+        ui.data_mut(|d| d.insert_temp(id, Some(t.to_image(pos))));
+    }
+    let start: Option<Point> = ui.data(|d| d.get_temp(id)).flatten();
+    if let (Some(a), Some(pos)) = (
+        start,
+        response.interact_pointer_pos().or(response.hover_pos()),
+    ) {
+        let b = t.to_image(pos);
+        let q = Quad::from_rect(
+            a.x.min(b.x),
+            a.y.min(b.y),
+            (a.x - b.x).abs(),
+            (a.y - b.y).abs(),
+        );
+        draw_quad(painter, t, &q, GT_COLOR, true, false);
+        if response.drag_stopped() {
+            ui.data_mut(|d| d.remove::<Option<Point>>(id));
+            match q.validate() {
+                Ok(()) => app.send(Command::GtCommit {
+                    frame,
+                    quad: q,
+                    label: "annotate".into(),
+                }),
+                Err(e) => app.send(Command::ReportError(format!("not a usable box: {e}"))),
+            }
+        }
     }
 }
 

@@ -371,37 +371,15 @@ impl Am for Kld {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::am::tests::smooth_patch;
     use crate::rng::Rng;
-
-    fn smooth_patch(rng: &mut Rng, res: usize, pad: usize) -> (Vec<f32>, usize) {
-        let side = res + 2 * pad;
-        let waves: Vec<(f32, f32, f32)> = (0..6)
-            .map(|_| {
-                (
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.05, 0.4) as f32,
-                    rng.range(0.0, std::f64::consts::TAU) as f32,
-                )
-            })
-            .collect();
-        let big = (0..side * side)
-            .map(|i| {
-                let (x, y) = ((i % side) as f32, (i / side) as f32);
-                let v: f32 = waves
-                    .iter()
-                    .map(|&(a, b, p)| (a * x + b * y + p).sin())
-                    .sum();
-                125.0 + 17.0 * v
-            })
-            .collect();
-        (big, side)
-    }
 
     #[test]
     fn non_positive_zero_at_identity_and_maximal_there_over_shifts() {
         let mut rng = Rng::new(43);
         let (res, pad) = (40, 4);
-        let (big, side) = smooth_patch(&mut rng, res, pad);
+        let side = res + 2 * pad;
+        let big = smooth_patch(&mut rng, side);
         let crop = |dx: usize, dy: usize| -> Vec<f32> {
             (0..res * res)
                 .map(|i| big[(i / res + dy) * side + i % res + dx])

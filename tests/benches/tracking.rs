@@ -18,18 +18,25 @@ fn bench(c: &mut Criterion) {
     let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
     let start = Quad::from_array([251.5, 149.0, 351.0, 151.2, 349.0, 250.8, 248.9, 249.0]);
     let smoothed = regtrack::imaging::gaussian_blur(&img, &gaussian_kernel(5, 3.0));
-    for sm in ["iclk", "fclk", "esm"] {
-        let mut spec = TrackerSpec::from_names(sm, "ssd", "homography").expect("spec");
-        spec.set_param("max_iters", "1").expect("param");
-        let mut t = Tracker::new(&spec).expect("tracker");
+    // One update limited to one iteration, from the same start each time.
+    let one_iteration = |c: &mut Criterion, spec: &TrackerSpec| {
+        let mut one = spec.clone();
+        one.set_param("max_iters", "1").expect("param");
+        let mut t = Tracker::new(&one).expect("tracker");
         t.initialize(FrameInput::Smoothed(&smoothed), &truth)
             .expect("init");
-        c.bench_function(&format!("{sm}_ssd_homography one iteration"), |b| {
+        c.bench_function(&format!("{} one iteration", one.label()), |b| {
             b.iter(|| {
                 t.set_corners(&start).expect("corners");
                 black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
             })
         });
+    };
+    for sm in ["iclk", "fclk", "esm"] {
+        one_iteration(
+            c,
+            &TrackerSpec::from_names(sm, "ssd", "homography").expect("spec"),
+        );
     }
     // The stages of one iteration, on the context of a built tracker.
     let spec = TrackerSpec::from_names("fclk", "ssd", "homography").expect("spec");
@@ -103,17 +110,7 @@ fn bench(c: &mut Criterion) {
                     .expect("init")
             })
         });
-        let mut one = spec.clone();
-        one.set_param("max_iters", "1").expect("param");
-        let mut t = Tracker::new(&one).expect("tracker");
-        t.initialize(FrameInput::Smoothed(&smoothed), &truth)
-            .expect("init");
-        c.bench_function(&format!("{sm}_ssd_homography one iteration"), |b| {
-            b.iter(|| {
-                t.set_corners(&start).expect("corners");
-                black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
-            })
-        });
+        one_iteration(c, &spec);
     }
 }
 

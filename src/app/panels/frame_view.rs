@@ -91,6 +91,67 @@ fn draw_quad(
     }
 }
 
+/// The frame's image under `t` (pixel centres on integer coordinates); returns where it lies.
+fn draw_frame(
+    painter: &egui::Painter,
+    t: &Transform,
+    texture: &egui::TextureHandle,
+    size: [usize; 2],
+) -> Rect {
+    let [w, h] = size;
+    let img_rect = Rect::from_min_max(
+        t.to_screen(Point::new(-0.5, -0.5)),
+        t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
+    );
+    painter.image(
+        texture.id(),
+        img_rect,
+        Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+        Color32::WHITE,
+    );
+    img_rect
+}
+
+/// A tracker's corners in its colour; a lost tracker's last corners dashed and faded.
+fn draw_tracker_quad(
+    painter: &egui::Painter,
+    t: &Transform,
+    r: &crate::app::worker::TrackerFrame,
+    c: Color32,
+    numbers: bool,
+) {
+    let lost = r.status != TrackStatus::Tracking;
+    draw_quad(
+        painter,
+        t,
+        &r.corners,
+        if lost { c.gamma_multiply(0.5) } else { c },
+        lost,
+        numbers && !lost,
+    );
+}
+
+/// Scroll zooms around the pointer (the image point under it stays); double-click fits.
+fn zoom(app: &mut InspectorApp, ui: &egui::Ui, response: &egui::Response, t: &Transform) {
+    if let Some(pos) = response.hover_pos() {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            let anchor = t.to_image(pos);
+            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
+            let d = pos - t.rect.center();
+            let mut view = app.state.view.clone();
+            view.zoom = scale;
+            view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
+            app.send(Command::SetView(view));
+        }
+    }
+    if response.double_clicked() && app.rt.tool == Tool::Navigate {
+        let mut view = app.state.view.clone();
+        view.zoom = 0.0;
+        app.send(Command::SetView(view));
+    }
+}
+
 /// A/B mode: the frame twice, tracker A's quad on the left and B's on the right (the ground truth
 /// on both), under the same zoom.
 fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
@@ -110,17 +171,7 @@ fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
         );
         let t = Transform::new(r, app.rt.image_size, &app.state.view);
         let p = painter.with_clip_rect(r);
-        let [w, h] = app.rt.image_size;
-        let img_rect = Rect::from_min_max(
-            t.to_screen(Point::new(-0.5, -0.5)),
-            t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
-        );
-        p.image(
-            texture.id(),
-            img_rect,
-            Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
-            Color32::WHITE,
-        );
+        draw_frame(&p, &t, &texture, app.rt.image_size);
         if app.state.view.show_ground_truth
             && let Some(gt) = app.ground_truth(frame)
         {
@@ -131,15 +182,7 @@ fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
         };
         let c = color(entry.color);
         if let Some(res) = app.result(k, frame) {
-            let lost = res.status != TrackStatus::Tracking;
-            draw_quad(
-                &p,
-                &t,
-                &res.corners,
-                if lost { c.gamma_multiply(0.5) } else { c },
-                lost,
-                false,
-            );
+            draw_tracker_quad(&p, &t, res, c, false);
         }
         p.text(
             r.left_top() + Vec2::new(8.0, 8.0),
@@ -153,29 +196,19 @@ fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
         [rect.center_top(), rect.center_bottom()],
         Stroke::new(1.0, Color32::from_gray(90)),
     );
-    // Scroll zooms both halves alike; double-click fits.
+    // Scroll zooms both halves alike (around the pointer, in the half it is over).
     if let Some(pos) = response.hover_pos() {
-        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-        if scroll != 0.0 {
-            let r = if pos.x < rect.center().x {
-                Rect::from_min_size(rect.left_top(), Vec2::new(half - 2.0, rect.height()))
-            } else {
-                Rect::from_min_size(rect.center_top(), Vec2::new(half - 2.0, rect.height()))
-            };
-            let t = Transform::new(r, app.rt.image_size, &app.state.view);
-            let anchor = t.to_image(pos);
-            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
-            let d = pos - r.center();
-            let mut view = app.state.view.clone();
-            view.zoom = scale;
-            view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
-            app.send(Command::SetView(view));
-        }
-    }
-    if response.double_clicked() {
-        let mut view = app.state.view.clone();
-        view.zoom = 0.0;
-        app.send(Command::SetView(view));
+        let side = if pos.x < rect.center().x { 0.0 } else { half };
+        let r = Rect::from_min_size(
+            rect.left_top() + Vec2::new(side, 0.0),
+            Vec2::new(half - 2.0, rect.height()),
+        );
+        zoom(
+            app,
+            ui,
+            &response,
+            &Transform::new(r, app.rt.image_size, &app.state.view),
+        );
     }
 }
 
@@ -204,14 +237,14 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     let t = Transform::new(rect, app.rt.image_size, &app.state.view);
     app.rt.transform = Some(t);
     let [w, h] = app.rt.image_size;
-    let img_rect = Rect::from_min_max(
-        t.to_screen(Point::new(-0.5, -0.5)),
-        t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
-    );
     match app.rt.bad_frame.as_ref().filter(|b| b.0 == app.state.frame) {
         // The frame could not be read: say so instead of showing the previous image under this
         // frame's ground truth.
         Some((_, message)) => {
+            let img_rect = Rect::from_min_max(
+                t.to_screen(Point::new(-0.5, -0.5)),
+                t.to_screen(Point::new(w as f64 - 0.5, h as f64 - 0.5)),
+            );
             painter.rect_filled(img_rect, 0.0, Color32::from_gray(40));
             painter.text(
                 img_rect.center(),
@@ -222,12 +255,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
             );
         }
         None => {
-            painter.image(
-                texture.id(),
-                img_rect,
-                Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
-                Color32::WHITE,
-            );
+            draw_frame(&painter, &t, &texture, app.rt.image_size);
         }
     }
 
@@ -273,16 +301,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     for (i, entry) in app.state.trackers.iter().enumerate() {
         if let Some(r) = app.result(i, frame) {
             let c = color(entry.color);
-            // A lost tracker's last corners, dashed and faded.
-            let lost = r.status != TrackStatus::Tracking;
-            draw_quad(
-                &painter,
-                &t,
-                &r.corners,
-                if lost { c.gamma_multiply(0.5) } else { c },
-                lost,
-                numbers && !lost,
-            );
+            draw_tracker_quad(&painter, &t, r, c, numbers);
             let label = match r.status {
                 TrackStatus::Lost(reason) => format!("{} lost: {reason}", i + 1),
                 _ => format!("{}", i + 1),
@@ -349,24 +368,7 @@ fn interact(
     painter: &egui::Painter,
 ) {
     let hover = response.hover_pos();
-    // Zoom around the pointer.
-    if let Some(pos) = hover {
-        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-        if scroll != 0.0 {
-            let anchor = t.to_image(pos);
-            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
-            let d = pos - t.rect.center();
-            let mut view = app.state.view.clone();
-            view.zoom = scale;
-            view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
-            app.send(Command::SetView(view));
-        }
-    }
-    if response.double_clicked() && app.rt.tool == Tool::Navigate {
-        let mut view = app.state.view.clone();
-        view.zoom = 0.0;
-        app.send(Command::SetView(view));
-    }
+    zoom(app, ui, response, t);
     match app.rt.tool.clone() {
         Tool::Navigate => {
             if response.dragged() {

@@ -596,18 +596,17 @@ impl InspectorApp {
         let editing = self.rt.tool == Tool::EditGroundTruth;
         let mut cmds = Vec::new();
         ctx.input(|i| {
-            let cmd = i.modifiers.command;
-            if cmd && i.key_pressed(egui::Key::Z) {
-                cmds.push(if i.modifiers.shift {
+            if let Some(m) = super::shortcut(i, egui::Key::Z) {
+                cmds.push(if m.shift {
                     Command::GtRedo
                 } else {
                     Command::GtUndo
                 });
             }
-            if cmd && i.key_pressed(egui::Key::Y) {
+            if super::shortcut(i, egui::Key::Y).is_some() {
                 cmds.push(Command::GtRedo);
             }
-            if !editing || cmd {
+            if !editing || i.modifiers.command {
                 return;
             }
             for (k, key) in [

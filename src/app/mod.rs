@@ -866,12 +866,12 @@ impl InspectorApp {
                 }
                 cmds.push(Command::SetView(view));
             }
-            if i.modifiers.command && i.key_pressed(egui::Key::S) {
+            if shortcut(i, egui::Key::S).is_some() {
                 cmds.push(Command::SaveSession(PathBuf::from(
                     self.rt.session_path.trim(),
                 )));
             }
-            if i.modifiers.command && i.key_pressed(egui::Key::O) {
+            if shortcut(i, egui::Key::O).is_some() {
                 dialog = true;
             }
             if i.modifiers.command || n == 0 {
@@ -1021,6 +1021,20 @@ impl InspectorApp {
             ctx2.request_repaint();
         });
     }
+}
+
+/// `Ctrl` (`Cmd` on macOS) + `key` pressed this frame, with the modifiers held *at that press*
+/// (a quick Ctrl+Z can press and release Ctrl within one frame, so the frame's modifiers miss it).
+fn shortcut(i: &egui::InputState, key: egui::Key) -> Option<egui::Modifiers> {
+    i.events.iter().find_map(|e| match e {
+        egui::Event::Key {
+            key: k,
+            pressed: true,
+            modifiers,
+            ..
+        } if *k == key && modifiers.command => Some(*modifiers),
+        _ => None,
+    })
 }
 
 /// Per tracker, the iterations' patches are kept for this many of the newest tracked frames.

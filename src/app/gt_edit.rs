@@ -22,8 +22,6 @@ pub(super) struct GtTable {
 /// Runtime state of the ground-truth mode (never saved: the corrections live in the journal).
 pub struct GtRuntime {
     pub(super) corrections: Corrections,
-    /// Bumped at every change of the corrections (invalidates caches).
-    pub(super) version: u64,
     pub(super) table: std::cell::RefCell<Option<Arc<GtTable>>>,
     /// The corner the keyboard moves (`None`: the whole quad).
     pub(super) corner: Option<usize>,
@@ -47,7 +45,6 @@ impl Default for GtRuntime {
     fn default() -> Self {
         GtRuntime {
             corrections: Corrections::in_memory(0),
-            version: 0,
             table: Default::default(),
             corner: Some(0),
             step: 1.0,
@@ -163,7 +160,7 @@ impl InspectorApp {
     /// The ground truth of every frame in the shown SSM (cached per corrections version).
     pub(super) fn gt_table(&self) -> Option<Arc<GtTable>> {
         let seq = self.rt.sequence.as_ref()?;
-        let key = (self.rt.gt.version, self.state.gt_ssm.clone());
+        let key = (self.rt.gt_version, self.state.gt_ssm.clone());
         if let Some(t) = self.rt.gt.table.borrow().as_ref().filter(|t| t.key == key) {
             return Some(t.clone());
         }
@@ -252,7 +249,6 @@ impl InspectorApp {
                 ));
             }
         }
-        self.rt.gt.version += 1;
         self.rt.gt_version += 1;
         // The template side of the patch view.
         if let Some(first) = (0..seq.len()).find(|&i| seq.ground_truth(i).is_some())
@@ -263,7 +259,6 @@ impl InspectorApp {
     }
 
     fn gt_changed(&mut self) {
-        self.rt.gt.version += 1;
         self.rt.gt_version += 1;
     }
 
@@ -675,7 +670,7 @@ impl InspectorApp {
     /// when the frame or its ground truth changes).
     pub(super) fn gt_patches(&mut self, ctx: &egui::Context) -> Option<[egui::TextureHandle; 2]> {
         let frame = self.state.frame;
-        let key = (frame, self.rt.gt.version, self.state.gt_ssm.clone());
+        let key = (frame, self.rt.gt_version, self.state.gt_ssm.clone());
         if self.rt.gt.patch_key.as_ref() == Some(&key) {
             return self.rt.gt.patch_textures.clone();
         }

@@ -143,7 +143,8 @@ pub struct Runtime {
     play_after_start: bool,
     /// Playing back stored results (not tracking): when the shown frame last advanced.
     replaying: Option<std::time::Instant>,
-    /// Bumped at every ground-truth correction (invalidates the error cache).
+    /// Bumped at every ground-truth correction or new sequence (invalidates the errors, the
+    /// ground-truth table and the ground-truth patches).
     gt_version: u64,
     /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
     errors_cache: ErrorsCache,

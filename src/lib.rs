@@ -60,6 +60,7 @@ pub mod sm;
 pub mod ssm;
 pub mod status;
 pub mod tracker;
+pub mod whole;
 
 pub use error::{Error, Result};
 pub use geometry::{Point, Quad};

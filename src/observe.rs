@@ -87,6 +87,18 @@ pub struct VisualRecord {
     pub quads: Vec<Quad>,
     pub weights: Vec<f32>,
     pub chosen: Option<usize>,
+    pub points: Vec<crate::geometry::Point>,
+    pub point_weights: Vec<f32>,
+    pub map: Option<MapRecord>,
+}
+
+/// An owned copy of a [`crate::sm::ResponseMap`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapRecord {
+    pub width: usize,
+    pub height: usize,
+    pub values: Vec<f32>,
+    pub at: Quad,
 }
 
 /// Keeps the iterations of the last frame (and the frame's starting corners), for the
@@ -144,6 +156,14 @@ impl Observer for Recorder {
             quads: v.quads.to_vec(),
             weights: v.weights.to_vec(),
             chosen: v.chosen,
+            points: v.points.to_vec(),
+            point_weights: v.point_weights.to_vec(),
+            map: v.map.map(|m| MapRecord {
+                width: m.width,
+                height: m.height,
+                values: m.values.to_vec(),
+                at: m.at,
+            }),
         });
     }
 }

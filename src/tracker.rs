@@ -325,7 +325,7 @@ pub struct WholeDef {
 
 /// Whole trackers (not decomposed into AM x SSM x SM): the learning-based trackers the paper
 /// compares with.
-pub const WHOLE_REGISTRY: &[Entry<WholeDef>] = &[];
+pub const WHOLE_REGISTRY: &[Entry<WholeDef>] = crate::whole::REGISTRY;
 
 /// A tracker of any kind built from a [`TrackerSpec`]; derefs to [`VisualTracker`].
 #[derive(Debug)]

@@ -8,7 +8,7 @@ use super::Sequence;
 use super::groundtruth::{read_ground_truth, write_corners};
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad, apply_homography, homography_from_points};
-use crate::imaging::load_dynamic;
+use crate::imaging::{GrayU8, load_dynamic};
 use crate::rng::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -460,6 +460,27 @@ impl Scene {
             }
         }
     }
+}
+
+/// Renders a sequence in memory: the 8-bit gray frames (luma of the rendered RGB; `jpeg_quality`
+/// is ignored) and the ground-truth quad of each.
+pub fn render_frames(cfg: &SynthConfig) -> Result<(Vec<GrayU8>, Vec<Quad>)> {
+    let scene = Scene::new(cfg)?;
+    let frames = (0..scene.quads.len())
+        .into_par_iter()
+        .map(|i| {
+            let rgb = scene.render(i);
+            GrayU8 {
+                width: scene.w,
+                height: scene.h,
+                data: rgb
+                    .chunks_exact(3)
+                    .map(|p| crate::imaging::luma(p[0], p[1], p[2]))
+                    .collect(),
+            }
+        })
+        .collect();
+    Ok((frames, scene.quads.clone()))
 }
 
 /// Renders a sequence into `<out_root>/<name>.txt` and `<out_root>/<name>/frame%05d.{jpg,png}`,

@@ -4,12 +4,16 @@
 //!
 //! Pixel `(i, j)` has its centre at the real coordinates `(i, j)`.
 
+pub mod fft;
 mod filter;
+pub mod hog;
+mod resample;
 mod sample;
 
 pub use filter::{
     GaussianKernel, Preprocessor, downsample_half, gaussian_blur, gaussian_kernel, pyramid,
 };
+pub use resample::resample_window;
 pub use sample::{Border, ImageView, sample_value, sample_values, sample_values_gradients};
 
 use crate::error::{Error, Result};

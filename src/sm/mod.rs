@@ -66,17 +66,53 @@ impl Step {
     }
 }
 
-/// What a sampling method shows of its state (NN's samples, PF's particles): the target's quad
-/// under each candidate warp, in frame pixels, and their weights.
+/// What a method shows of its state: a sampling method's candidates (NN's samples, PF's
+/// particles) as the target's quad under each candidate warp, in frame pixels, with their
+/// weights; a whole tracker's detections (quads), keypoints (points) and response map.
 #[derive(Clone, Copy, Debug)]
 pub struct MethodVisual<'a> {
-    /// What the points are ("samples", "particles").
+    /// What the quads are ("samples", "particles", "detections").
     pub label: &'static str,
     pub quads: &'a [Quad],
     /// One weight per quad in `0..=1` (the best is 1).
     pub weights: &'a [f32],
     /// The candidate the method chose, if any.
     pub chosen: Option<usize>,
+    /// Points (keypoints, flow points) with a weight each in `0..=1` (`points.len()` weights).
+    pub points: &'a [crate::geometry::Point],
+    pub point_weights: &'a [f32],
+    /// A map over a region of the frame (a correlation filter's response).
+    pub map: Option<ResponseMap<'a>>,
+}
+
+impl<'a> MethodVisual<'a> {
+    /// Quads and their weights only.
+    pub fn quads(
+        label: &'static str,
+        quads: &'a [Quad],
+        weights: &'a [f32],
+        chosen: Option<usize>,
+    ) -> Self {
+        MethodVisual {
+            label,
+            quads,
+            weights,
+            chosen,
+            points: &[],
+            point_weights: &[],
+            map: None,
+        }
+    }
+}
+
+/// A `width x height` map (row-major) laid over the quad `at` of the frame: value `(0, 0)` at its
+/// first corner, rows along its first side.
+#[derive(Clone, Copy, Debug)]
+pub struct ResponseMap<'a> {
+    pub width: usize,
+    pub height: usize,
+    pub values: &'a [f32],
+    pub at: Quad,
 }
 
 /// One search method. Object-safe; its per-pixel loops are concrete.

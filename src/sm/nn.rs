@@ -452,11 +452,11 @@ impl SearchMethod for Nn {
         self.vis_weights.clear();
         self.vis_weights
             .extend(self.dist.iter().map(|&d| (-(d - lo) / spread * 3.0).exp()));
-        Some(MethodVisual {
-            label: "samples",
-            quads: &self.vis_quads,
-            weights: &self.vis_weights,
-            chosen: Some(self.chosen),
-        })
+        Some(MethodVisual::quads(
+            "samples",
+            &self.vis_quads,
+            &self.vis_weights,
+            Some(self.chosen),
+        ))
     }
 }

@@ -222,11 +222,11 @@ impl SearchMethod for Pf {
         })
     }
     fn visual(&mut self, _ctx: &Context) -> Option<MethodVisual<'_>> {
-        Some(MethodVisual {
-            label: "particles",
-            quads: &self.vis_quads,
-            weights: &self.vis_weights,
-            chosen: None,
-        })
+        Some(MethodVisual::quads(
+            "particles",
+            &self.vis_quads,
+            &self.vis_weights,
+            None,
+        ))
     }
 }

@@ -12,6 +12,7 @@ mod landscape;
 mod recovery;
 mod report;
 mod robustness;
+mod whole;
 
 #[global_allocator]
 static ALLOCATOR: alloc::Counting = alloc::Counting;

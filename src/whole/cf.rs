@@ -1,0 +1,347 @@
+//! What the correlation-filter trackers (KCF, DSST) share: the feature window around the target
+//! (HOG cells or raw pixels, under a Hann window), the Gaussian label, the kernel correlation in
+//! the Fourier domain and the sub-pixel peak of a response.
+
+use crate::imaging::fft::{C32, Fft2};
+use crate::imaging::hog::{FHOG_CHANNELS, FeatureMap, fhog};
+use crate::imaging::{GrayF32, resample_window};
+
+/// Which features a filter sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Features {
+    /// 31-channel HOG cells ([`fhog`]).
+    Hog,
+    /// The gray levels, scaled to `-0.5..0.5` (one channel, one pixel per cell).
+    Raw,
+}
+
+impl Features {
+    /// `hog` = 0, `raw` = 1 (the order of the `features` parameter's choices).
+    pub fn from_index(i: f64) -> Self {
+        if i as usize == 1 {
+            Features::Raw
+        } else {
+            Features::Hog
+        }
+    }
+    pub fn channels(self) -> usize {
+        match self {
+            Features::Hog => FHOG_CHANNELS,
+            Features::Raw => 1,
+        }
+    }
+}
+
+/// The window a filter reads: `pw x ph` resampled pixels (a whole number of cells) covering
+/// `pw * px x ph * px` frame pixels around the target.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Window {
+    pub pw: usize,
+    pub ph: usize,
+    pub cell: usize,
+    /// Frame pixels per window pixel at scale 1.
+    pub px: f64,
+    pub features: Features,
+}
+
+impl Window {
+    /// The window for a `tw x th` target padded by `padding` (1.5 = 2.5 times the target's
+    /// size), resampled so that its area is at most `template_size^2` pixels.
+    pub fn new(
+        tw: f64,
+        th: f64,
+        padding: f64,
+        template_size: usize,
+        features: Features,
+        cell: usize,
+    ) -> Self {
+        let cell = if features == Features::Raw {
+            1
+        } else {
+            cell.max(1)
+        };
+        let (ww, wh) = (tw * (1.0 + padding), th * (1.0 + padding));
+        let px = ((ww * wh).sqrt() / template_size as f64).max(1.0);
+        // A whole, even number of cells, at least 4 a side.
+        let cells = |len: f64| (((len / px / cell as f64) / 2.0).round() as usize * 2).max(4);
+        Window {
+            pw: cells(ww) * cell,
+            ph: cells(wh) * cell,
+            cell,
+            px,
+            features,
+        }
+    }
+
+    /// Cells across and down (the size of the filter).
+    pub fn cells(&self) -> (usize, usize) {
+        (self.pw / self.cell, self.ph / self.cell)
+    }
+
+    /// Frame pixels per cell at `scale`.
+    pub fn cell_px(&self, scale: f64) -> f64 {
+        self.px * self.cell as f64 * scale
+    }
+
+    /// The features of the window centred at `(cx, cy)` at `scale`, each channel multiplied by
+    /// `hann` (`cells` long). `buf` is scratch.
+    pub fn extract(
+        &self,
+        img: &GrayF32,
+        cx: f64,
+        cy: f64,
+        scale: f64,
+        hann: &[f32],
+        buf: &mut Vec<f32>,
+    ) -> FeatureMap {
+        let (sw, sh) = (
+            self.pw as f64 * self.px * scale,
+            self.ph as f64 * self.px * scale,
+        );
+        resample_window(img, cx, cy, sw, sh, self.pw, self.ph, buf);
+        let mut f = match self.features {
+            Features::Hog => fhog(buf, self.pw, self.ph, self.cell),
+            Features::Raw => FeatureMap {
+                width: self.pw,
+                height: self.ph,
+                channels: 1,
+                data: buf.iter().map(|v| v / 255.0 - 0.5).collect(),
+            },
+        };
+        for c in 0..f.channels {
+            for (v, w) in f.channel_mut(c).iter_mut().zip(hann) {
+                *v *= w;
+            }
+        }
+        f
+    }
+}
+
+/// The 2-D Hann window of `w x h` cells.
+pub fn hann2(w: usize, h: usize) -> Vec<f32> {
+    let hann = |n: usize| -> Vec<f32> {
+        (0..n)
+            .map(|i| {
+                0.5 - 0.5
+                    * (2.0 * std::f32::consts::PI * i as f32 / (n as f32 - 1.0).max(1.0)).cos()
+            })
+            .collect()
+    };
+    let (hx, hy) = (hann(w), hann(h));
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            out.push(hx[x] * hy[y]);
+        }
+    }
+    out
+}
+
+/// The desired response: a Gaussian of `sigma` cells with its peak at `(0, 0)`, wrapped around
+/// (a shift of `d` cells reads at index `d mod size`).
+pub fn gaussian_label(w: usize, h: usize, sigma: f64) -> Vec<f32> {
+    let wrap = |i: usize, n: usize| {
+        let i = i as f64;
+        if i >= n as f64 / 2.0 { i - n as f64 } else { i }
+    };
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let (dx, dy) = (wrap(x, w), wrap(y, h));
+            out.push((-0.5 * (dx * dx + dy * dy) / (sigma * sigma)).exp() as f32);
+        }
+    }
+    out
+}
+
+/// The transform of every channel of `f`, channel after channel.
+pub fn transform(fft: &mut Fft2, f: &FeatureMap, out: &mut Vec<C32>) {
+    let n = f.width * f.height;
+    out.clear();
+    out.extend(f.data.iter().map(|&v| C32::new(v, 0.0)));
+    for c in 0..f.channels {
+        fft.forward(&mut out[c * n..(c + 1) * n]);
+    }
+}
+
+/// Which kernel compares two feature windows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Kernel {
+    /// `exp(-|x - z|^2 / (sigma^2 N))`, `N` the number of feature values.
+    Gaussian { sigma: f64 },
+    /// `x . z / N`.
+    Linear,
+}
+
+/// The transform of the kernel correlation `k(x, z)[d] = kernel(x, z shifted by d)` (`z(p + d)`
+/// against `x(p)`, cyclic) of all cyclic shifts `d`, from the transforms `xf`, `zf` of the
+/// channels (`channels` of `n = w h`) with one inverse and one forward transform.
+pub fn kernel_correlation(
+    fft: &mut Fft2,
+    kernel: Kernel,
+    xf: &[C32],
+    zf: &[C32],
+    channels: usize,
+    out: &mut Vec<C32>,
+) {
+    let (w, h) = fft.size();
+    let n = w * h;
+    out.clear();
+    out.resize(n, C32::default());
+    let (mut xx, mut zz) = (0f64, 0f64);
+    for c in 0..channels {
+        let (xc, zc) = (&xf[c * n..(c + 1) * n], &zf[c * n..(c + 1) * n]);
+        for i in 0..n {
+            out[i] += xc[i].conj() * zc[i];
+            xx += xc[i].norm_sqr() as f64;
+            zz += zc[i].norm_sqr() as f64;
+        }
+    }
+    // Parseval: the transform's energy is n times the signal's.
+    let (xx, zz) = (xx / n as f64, zz / n as f64);
+    fft.inverse(out);
+    let count = (n * channels) as f64;
+    match kernel {
+        Kernel::Gaussian { sigma } => {
+            let k = 1.0 / (sigma * sigma * count);
+            for v in out.iter_mut() {
+                let d2 = (xx + zz - 2.0 * v.re as f64).max(0.0);
+                *v = C32::new((-d2 * k).exp() as f32, 0.0);
+            }
+        }
+        Kernel::Linear => {
+            for v in out.iter_mut() {
+                *v = C32::new((v.re as f64 / count) as f32, 0.0);
+            }
+        }
+    }
+    fft.forward(out);
+}
+
+/// The peak of a wrapped `w x h` response: its shift `(dx, dy)` in cells (sub-cell by a parabola
+/// through the neighbours along each axis) and its value.
+pub fn peak(response: &[f32], w: usize, h: usize) -> (f64, f64, f64) {
+    let mut best = 0;
+    for (i, v) in response.iter().enumerate() {
+        if *v > response[best] {
+            best = i;
+        }
+    }
+    let (x, y) = (best % w, best / w);
+    let at = |x: usize, y: usize| response[y * w + x] as f64;
+    let sub = |l: f64, c: f64, r: f64| {
+        let den = l - 2.0 * c + r;
+        if den < -1e-12 {
+            (0.5 * (l - r) / den).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        }
+    };
+    let c = at(x, y);
+    let ox = sub(at((x + w - 1) % w, y), c, at((x + 1) % w, y));
+    let oy = sub(at(x, (y + h - 1) % h), c, at(x, (y + 1) % h));
+    let wrap = |i: usize, n: usize| {
+        if i as f64 > n as f64 / 2.0 {
+            i as f64 - n as f64
+        } else {
+            i as f64
+        }
+    };
+    (wrap(x, w) + ox, wrap(y, h) + oy, c)
+}
+
+/// `response` re-ordered so that shift `(0, 0)` is at the centre of the map (for display).
+pub fn centred(response: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            out[((y + h / 2) % h) * w + (x + w / 2) % w] = response[y * w + x];
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn random_map(w: usize, h: usize, channels: usize, seed: u64) -> FeatureMap {
+        let mut rng = Rng::new(seed);
+        FeatureMap {
+            width: w,
+            height: h,
+            channels,
+            data: (0..w * h * channels).map(|_| rng.normal() as f32).collect(),
+        }
+    }
+
+    /// The kernel correlation through the Fourier domain equals the kernel evaluated directly
+    /// on every cyclic shift.
+    #[test]
+    fn the_fourier_kernel_correlation_equals_the_direct_one() {
+        let (w, h, ch) = (10, 8, 3);
+        let x = random_map(w, h, ch, 1);
+        let z = random_map(w, h, ch, 2);
+        let mut fft = Fft2::new(w, h);
+        let (mut xf, mut zf, mut kf) = (Vec::new(), Vec::new(), Vec::new());
+        transform(&mut fft, &x, &mut xf);
+        transform(&mut fft, &z, &mut zf);
+        for kernel in [Kernel::Gaussian { sigma: 0.7 }, Kernel::Linear] {
+            kernel_correlation(&mut fft, kernel, &xf, &zf, ch, &mut kf);
+            fft.inverse(&mut kf);
+            let n = (w * h * ch) as f64;
+            for (dx, dy) in [(0, 0), (3, 1), (9, 7), (5, 4)] {
+                let (mut d2, mut dot) = (0.0, 0.0);
+                for c in 0..ch {
+                    for y in 0..h {
+                        for xx in 0..w {
+                            let a = x.channel(c)[y * w + xx] as f64;
+                            let b = z.channel(c)[((y + dy) % h) * w + (xx + dx) % w] as f64;
+                            d2 += (a - b) * (a - b);
+                            dot += a * b;
+                        }
+                    }
+                }
+                let direct = match kernel {
+                    Kernel::Gaussian { sigma } => (-d2 / (sigma * sigma * n)).exp(),
+                    Kernel::Linear => dot / n,
+                };
+                let got = kf[dy * w + dx];
+                assert!(
+                    (got.re as f64 - direct).abs() < 1e-4 * (1.0 + direct.abs()),
+                    "{kernel:?} at ({dx}, {dy}): {} vs {direct}",
+                    got.re
+                );
+                assert!(got.im.abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn the_peak_of_a_shifted_label_is_its_shift() {
+        let (w, h) = (16, 12);
+        let y = gaussian_label(w, h, 2.0);
+        assert_eq!(y[0], 1.0);
+        // Shift the label by (-3, 2) cells plus a third of a cell along x (sampled analytically).
+        let wrap = |i: usize, n: usize| {
+            let i = i as f64;
+            if i >= n as f64 / 2.0 { i - n as f64 } else { i }
+        };
+        let mut r = vec![0f32; w * h];
+        for yy in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (wrap(x, w) + 3.0 - 0.3, wrap(yy, h) - 2.0);
+                r[yy * w + x] = (-0.5 * (dx * dx + dy * dy) / 4.0).exp() as f32;
+            }
+        }
+        let (px, py, v) = peak(&r, w, h);
+        assert!(
+            (px - -2.7).abs() < 0.05 && (py - 2.0).abs() < 1e-9,
+            "{px} {py}"
+        );
+        assert!(v > 0.9);
+        let c = centred(&r, w, h);
+        assert_eq!(c[(h / 2 + 2) * w + w / 2 - 3], r[2 * w + (w - 3)]);
+    }
+}

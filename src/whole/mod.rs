@@ -1,0 +1,311 @@
+//! Whole trackers: the learning-based trackers the paper compares the registration trackers with
+//! (KCF, DSST, RCT, TLD, CMT), each one file and one entry of [`REGISTRY`]. They track a box (and
+//! CMT a rotated one): the output quad is the initial quad moved by a similarity (translation,
+//! scale, rotation about its centre), so they are compared with the registration trackers
+//! against translation ground truth, as in the paper.
+
+pub(crate) mod cf;
+pub mod dsst;
+pub mod kcf;
+pub mod rct;
+
+use crate::error::{Error, Result};
+use crate::geometry::{Point, Quad};
+use crate::imaging::GrayF32;
+use crate::observe::{Iteration, Observer};
+use crate::registry::Entry;
+use crate::sm::MethodVisual;
+use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
+use crate::tracker::{FrameInput, TrackerSpec, WholeDef, WholeSpec};
+use std::borrow::Cow;
+use std::time::{Duration, Instant};
+
+/// The whole trackers.
+pub const REGISTRY: &[Entry<WholeDef>] = &[
+    Entry {
+        name: "kcf",
+        aliases: &[],
+        description: "kernelised correlation filter (Henriques et al. 2015): Gaussian kernel, HOG or raw pixels, translation",
+        build: WholeDef {
+            params: kcf::PARAMS,
+            build: kcf::build,
+        },
+    },
+    Entry {
+        name: "dsst",
+        aliases: &[],
+        description: "discriminative scale space tracker (Danelljan et al. 2014): translation filter plus a 1-D scale filter",
+        build: WholeDef {
+            params: dsst::PARAMS,
+            build: dsst::build,
+        },
+    },
+    Entry {
+        name: "rct",
+        aliases: &["ct"],
+        description: "real-time compressive tracker (Zhang et al. 2012): random Haar-like projections, online naive Bayes, translation",
+        build: WholeDef {
+            params: rct::PARAMS,
+            build: rct::build,
+        },
+    },
+];
+
+/// Where a whole tracker puts its target: the initial quad moved by a similarity about its
+/// centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// The target's centre in the frame.
+    pub cx: f64,
+    pub cy: f64,
+    /// Size relative to the initial quad.
+    pub scale: f64,
+    /// Rotation from the initial quad (radians, image axes).
+    pub angle: f64,
+}
+
+/// What every whole tracker keeps: its spec, the initial quad, the pose, the status.
+#[derive(Clone, Debug)]
+pub(crate) struct Base {
+    pub spec: TrackerSpec,
+    pub init: Quad,
+    pub c0: Point,
+    /// The target's width and height (mean of opposite sides of the initial quad).
+    pub size0: (f64, f64),
+    pub pose: Pose,
+    pub status: TrackStatus,
+    pub frame: usize,
+}
+
+impl Base {
+    pub fn new(spec: &WholeSpec) -> Self {
+        Base {
+            spec: TrackerSpec::Whole(spec.clone()),
+            init: Quad::default(),
+            c0: Point::default(),
+            size0: (0.0, 0.0),
+            pose: Pose {
+                cx: 0.0,
+                cy: 0.0,
+                scale: 1.0,
+                angle: 0.0,
+            },
+            status: TrackStatus::Uninitialized,
+            frame: 0,
+        }
+    }
+
+    /// Starts on `quad` (checked), at frame 0. The target must be at least `min_side` pixels
+    /// a side.
+    pub fn start(&mut self, quad: &Quad, min_side: f64) -> Result<()> {
+        quad.validate()?;
+        let p = quad.0;
+        let w = 0.5 * (p[0].dist(p[1]) + p[3].dist(p[2]));
+        let h = 0.5 * (p[0].dist(p[3]) + p[1].dist(p[2]));
+        if w < min_side || h < min_side {
+            return Err(Error::InvalidRegion(format!(
+                "{}: the target must be at least {min_side} px a side, got {w:.1} x {h:.1}",
+                self.spec.label()
+            )));
+        }
+        self.init = *quad;
+        self.c0 = quad.centroid();
+        self.size0 = (w, h);
+        self.pose = Pose {
+            cx: self.c0.x,
+            cy: self.c0.y,
+            scale: 1.0,
+            angle: 0.0,
+        };
+        self.status = TrackStatus::Tracking;
+        self.frame = 0;
+        Ok(())
+    }
+
+    /// The quad at `pose`.
+    pub fn quad_at(&self, pose: &Pose) -> Quad {
+        let (s, c) = pose.angle.sin_cos();
+        self.init.map(|p| {
+            let (dx, dy) = (p.x - self.c0.x, p.y - self.c0.y);
+            Point {
+                x: pose.cx + pose.scale * (c * dx - s * dy),
+                y: pose.cy + pose.scale * (s * dx + c * dy),
+            }
+        })
+    }
+
+    /// The current quad.
+    pub fn quad(&self) -> Quad {
+        self.quad_at(&self.pose)
+    }
+
+    /// The pose closest to `quad`: its centre, the square root of the area ratio, the mean
+    /// rotation of its sides.
+    pub fn pose_of(&self, quad: &Quad) -> Pose {
+        let c = quad.centroid();
+        let a0 = self.init.signed_area().abs().max(1e-9);
+        let scale = (quad.signed_area().abs() / a0).sqrt();
+        let (mut sx, mut sy) = (0.0, 0.0);
+        for k in 0..4 {
+            let (a, b) = (self.init.0[k], self.init.0[(k + 1) % 4]);
+            let (p, q) = (quad.0[k], quad.0[(k + 1) % 4]);
+            let angle = (q.y - p.y).atan2(q.x - p.x) - (b.y - a.y).atan2(b.x - a.x);
+            sx += angle.cos();
+            sy += angle.sin();
+        }
+        Pose {
+            cx: c.x,
+            cy: c.y,
+            scale,
+            angle: sy.atan2(sx),
+        }
+    }
+
+    /// Moves to `quad` (checked) and resumes tracking.
+    pub fn set_corners(&mut self, quad: &Quad) -> Result<()> {
+        if self.status == TrackStatus::Uninitialized {
+            return Err(Error::InvalidParameter(format!(
+                "{}: initialise before setting the corners",
+                self.spec.label()
+            )));
+        }
+        quad.validate()?;
+        self.pose = self.pose_of(quad);
+        self.status = TrackStatus::Tracking;
+        Ok(())
+    }
+
+    /// The outcome of a frame on which the tracker does not run (not initialised, or lost).
+    pub fn idle(&self) -> FrameOutcome {
+        FrameOutcome {
+            frame: self.frame,
+            status: self.status,
+            corners: self.quad(),
+            iterations: 0,
+            converged: false,
+            similarity: f64::NAN,
+            timing: FrameTiming::default(),
+        }
+    }
+
+    /// Ends a frame: checks the new pose (finite, a scale within 1/20..20 of the initial size,
+    /// the centre within half a frame of the frame), updates the status, reports one iteration
+    /// (parameters `cx, cy, scale, angle`), the method's visual and the outcome to the observer.
+    #[allow(clippy::too_many_arguments)]
+    pub fn finish(
+        &mut self,
+        found: std::result::Result<(Pose, f64), LossReason>,
+        frame_size: (usize, usize),
+        started: Instant,
+        preprocess: Duration,
+        observer: &mut dyn Observer,
+        visual: Option<MethodVisual<'_>>,
+    ) -> FrameOutcome {
+        let start = self.quad();
+        let checked = found.and_then(|(pose, sim)| {
+            let ok = [pose.cx, pose.cy, pose.scale, pose.angle, sim]
+                .iter()
+                .all(|v| v.is_finite());
+            if !ok {
+                return Err(LossReason::NonFinite);
+            }
+            if !(0.05..=20.0).contains(&pose.scale) {
+                return Err(LossReason::Degenerate);
+            }
+            let (w, h) = (frame_size.0 as f64, frame_size.1 as f64);
+            if pose.cx < -0.5 * w || pose.cx > 1.5 * w || pose.cy < -0.5 * h || pose.cy > 1.5 * h {
+                return Err(LossReason::OutOfFrame);
+            }
+            Ok((pose, sim))
+        });
+        let (status, similarity) = match checked {
+            Ok((pose, sim)) => {
+                self.pose = pose;
+                (TrackStatus::Tracking, sim)
+            }
+            Err(r) => (TrackStatus::Lost(r), f64::NAN),
+        };
+        self.status = status;
+        let corners = self.quad();
+        let elapsed = started.elapsed();
+        if status == TrackStatus::Tracking {
+            let p = self.pose;
+            observer.iteration(&Iteration {
+                frame: self.frame,
+                level: 0,
+                iteration: 0,
+                params: &[p.cx, p.cy, p.scale, p.angle],
+                corners,
+                similarity,
+                step: corners.change_norm(&start),
+                elapsed,
+                patch: None,
+            });
+        }
+        if let Some(v) = visual
+            && observer.wants_method_visuals()
+        {
+            observer.method_visual(self.frame, 0, &v);
+        }
+        let outcome = FrameOutcome {
+            frame: self.frame,
+            status,
+            corners,
+            iterations: usize::from(status == TrackStatus::Tracking),
+            converged: status == TrackStatus::Tracking,
+            similarity,
+            timing: FrameTiming {
+                preprocess,
+                search: elapsed.saturating_sub(preprocess),
+            },
+        };
+        observer.frame_finished(self.frame, &outcome);
+        outcome
+    }
+}
+
+/// The frame as floats (8-bit frames are converted; float frames are used as they are).
+pub(crate) fn frame_f32(input: FrameInput<'_>) -> Cow<'_, GrayF32> {
+    match input {
+        FrameInput::Gray8(i) => Cow::Owned(GrayF32 {
+            width: i.width,
+            height: i.height,
+            data: i.data.iter().map(|&v| v as f32).collect(),
+        }),
+        FrameInput::Gray32(i) | FrameInput::Smoothed(i) => Cow::Borrowed(i),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::MethodParams;
+
+    #[test]
+    fn a_pose_maps_the_initial_quad_and_is_recovered_from_its_quad() {
+        let mut b = Base::new(&WholeSpec {
+            tracker: "kcf".into(),
+            method: MethodParams::default(),
+        });
+        let q = Quad::from_rect(10.0, 20.0, 40.0, 30.0);
+        b.start(&q, 4.0).unwrap();
+        assert_eq!(b.quad(), q);
+        let pose = Pose {
+            cx: 100.0,
+            cy: 80.0,
+            scale: 1.5,
+            angle: 0.3,
+        };
+        let moved = b.quad_at(&pose);
+        let back = b.pose_of(&moved);
+        for (a, e) in [
+            (back.cx, pose.cx),
+            (back.cy, pose.cy),
+            (back.scale, pose.scale),
+            (back.angle, pose.angle),
+        ] {
+            assert!((a - e).abs() < 1e-9, "{a} vs {e}");
+        }
+        assert!(b.start(&Quad::from_rect(0.0, 0.0, 2.0, 30.0), 4.0).is_err());
+    }
+}

@@ -16,6 +16,9 @@ pub enum LossReason {
     Degenerate,
     /// The quad's centre left the frame by more than half a frame.
     OutOfFrame,
+    /// A tracker with its own detector found the target neither by tracking nor by detection
+    /// (it keeps searching and reports `Tracking` again when it finds it).
+    NotFound,
 }
 
 impl std::fmt::Display for LossReason {
@@ -25,6 +28,7 @@ impl std::fmt::Display for LossReason {
             LossReason::Singular => "singular system",
             LossReason::Degenerate => "degenerate quad",
             LossReason::OutOfFrame => "out of frame",
+            LossReason::NotFound => "not found",
         })
     }
 }

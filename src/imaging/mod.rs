@@ -6,6 +6,7 @@
 
 pub mod fft;
 mod filter;
+pub mod flow;
 pub mod hog;
 mod resample;
 mod sample;

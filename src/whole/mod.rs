@@ -8,6 +8,7 @@ pub(crate) mod cf;
 pub mod dsst;
 pub mod kcf;
 pub mod rct;
+pub mod tld;
 
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad};
@@ -47,6 +48,15 @@ pub const REGISTRY: &[Entry<WholeDef>] = &[
         build: WholeDef {
             params: rct::PARAMS,
             build: rct::build,
+        },
+    },
+    Entry {
+        name: "tld",
+        aliases: &["tracking_learning_detection"],
+        description: "tracking-learning-detection (Kalal et al. 2012): median flow, a fern and nearest-neighbour detector, P-N learning; re-detects after a loss",
+        build: WholeDef {
+            params: tld::PARAMS,
+            build: tld::build,
         },
     },
 ];

@@ -98,7 +98,12 @@ fn whole_trackers_follow_a_translating_target() {
     let p = d.path().join("translation.txt");
     write_profile(&p, &synthetic(120, |_| 1.0));
     let (frames, truth) = render(&p, Some((480, 360)));
-    check(&["kcf", "dsst", "rct"], &frames, &truth, "translation");
+    check(
+        &["kcf", "dsst", "rct", "tld"],
+        &frames,
+        &truth,
+        "translation",
+    );
 }
 
 #[test]
@@ -108,7 +113,7 @@ fn dsst_follows_a_target_that_changes_scale() {
     // 1 -> 1.5 -> 0.7 times the size, about 1% a frame at most.
     write_profile(&p, &synthetic(150, |t| 1.1 + 0.4 * (t / 24.0).sin()));
     let (frames, truth) = render(&p, Some((560, 420)));
-    check(&["dsst"], &frames, &truth, "scale change");
+    check(&["dsst", "tld"], &frames, &truth, "scale change");
 }
 
 /// The UCSB profiles over a photograph (as the real sequences were filmed in a room). Over the
@@ -119,9 +124,9 @@ fn dsst_follows_a_target_that_changes_scale() {
 fn whole_trackers_follow_the_ucsb_profiles_within_their_model() {
     let m = root().join("assets/motion");
     for (profile, trackers) in [
-        ("ucsb_bricks_m1.txt", &["kcf", "dsst", "rct"][..]),
-        ("ucsb_bricks_m3.txt", &["kcf", "dsst", "rct"][..]),
-        ("ucsb_bricks_zm.txt", &["dsst"][..]),
+        ("ucsb_bricks_m1.txt", &["kcf", "dsst", "rct", "tld"][..]),
+        ("ucsb_bricks_m3.txt", &["kcf", "dsst", "rct", "tld"][..]),
+        ("ucsb_bricks_zm.txt", &["dsst", "tld"][..]),
     ] {
         let (frames, truth) = render_on(&m.join(profile), None, "skimage_coffee.png");
         check(trackers, &frames, &truth, profile);
@@ -154,7 +159,7 @@ fn debug_whole() {
     let mut t = Tracker::new(&spec).unwrap();
     t.initialize(FrameInput::Gray8(&frames[0]), &truth[0])
         .unwrap();
-    for (i, (f, q)) in frames[1..].iter().zip(&truth[1..]).enumerate().take(30) {
+    for (i, (f, q)) in frames[1..].iter().zip(&truth[1..]).enumerate().take(60) {
         let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
         let c = out.corners.centroid();
         let g = q.centroid();
@@ -169,4 +174,48 @@ fn debug_whole() {
             out.similarity
         );
     }
+}
+
+/// TLD reports the target lost while it is gone (a covered camera) and re-detects it where it
+/// comes back, 30 frames of motion later.
+#[test]
+fn tld_loses_the_target_while_it_is_gone_and_redetects_it() {
+    let d = TempDir::new("whole-tld");
+    let p = d.path().join("translation.txt");
+    write_profile(&p, &synthetic(120, |_| 1.0));
+    let (frames, truth) = render(&p, Some((480, 360)));
+    let blank = GrayU8 {
+        width: 480,
+        height: 360,
+        data: vec![90; 480 * 360],
+    };
+    let spec = TrackerSpec::whole("tld").unwrap();
+    let mut t = Tracker::new(&spec).unwrap();
+    t.initialize(FrameInput::Gray8(&frames[0]), &truth[0])
+        .unwrap();
+    for f in &frames[1..40] {
+        assert_eq!(
+            t.update(FrameInput::Gray8(f), &mut NoObserver).status,
+            TrackStatus::Tracking
+        );
+    }
+    for _ in 0..10 {
+        let out = t.update(FrameInput::Gray8(&blank), &mut NoObserver);
+        assert!(
+            matches!(out.status, TrackStatus::Lost(_)),
+            "{:?}",
+            out.status
+        );
+        assert!(out.corners.is_finite());
+    }
+    let jump = truth[70].centroid().dist(truth[39].centroid());
+    assert!(jump > 30.0, "the target comes back {jump:.0} px away");
+    let mut good = 0;
+    for (f, q) in frames[70..].iter().zip(&truth[70..]) {
+        let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
+        if out.status == TrackStatus::Tracking && out.corners.centroid().dist(q.centroid()) < 5.0 {
+            good += 1;
+        }
+    }
+    assert!(good >= 45, "{good} of 50 frames found after the return");
 }

@@ -8,6 +8,7 @@ pub mod fft;
 mod filter;
 pub mod flow;
 pub mod hog;
+pub mod keypoints;
 mod resample;
 mod sample;
 

@@ -5,6 +5,7 @@
 //! against translation ground truth, as in the paper.
 
 pub(crate) mod cf;
+pub mod cmt;
 pub mod dsst;
 pub mod kcf;
 pub mod rct;
@@ -57,6 +58,15 @@ pub const REGISTRY: &[Entry<WholeDef>] = &[
         build: WholeDef {
             params: tld::PARAMS,
             build: tld::build,
+        },
+    },
+    Entry {
+        name: "cmt",
+        aliases: &[],
+        description: "consensus-based matching and tracking of keypoints (Nebehay and Pflugfelder 2014): FAST and binary descriptors, optical flow, votes; translation, scale and rotation",
+        build: WholeDef {
+            params: cmt::PARAMS,
+            build: cmt::build,
         },
     },
 ];

@@ -107,13 +107,13 @@ fn whole_trackers_follow_a_translating_target() {
 }
 
 #[test]
-fn dsst_follows_a_target_that_changes_scale() {
+fn scale_trackers_follow_a_target_that_changes_scale() {
     let d = TempDir::new("whole-sc");
     let p = d.path().join("scale.txt");
     // 1 -> 1.5 -> 0.7 times the size, about 1% a frame at most.
     write_profile(&p, &synthetic(150, |t| 1.1 + 0.4 * (t / 24.0).sin()));
     let (frames, truth) = render(&p, Some((560, 420)));
-    check(&["dsst", "tld"], &frames, &truth, "scale change");
+    check(&["dsst", "tld", "cmt"], &frames, &truth, "scale change");
 }
 
 /// The UCSB profiles over a photograph (as the real sequences were filmed in a room). Over the
@@ -124,55 +124,19 @@ fn dsst_follows_a_target_that_changes_scale() {
 fn whole_trackers_follow_the_ucsb_profiles_within_their_model() {
     let m = root().join("assets/motion");
     for (profile, trackers) in [
-        ("ucsb_bricks_m1.txt", &["kcf", "dsst", "rct", "tld"][..]),
-        ("ucsb_bricks_m3.txt", &["kcf", "dsst", "rct", "tld"][..]),
-        ("ucsb_bricks_zm.txt", &["dsst", "tld"][..]),
+        (
+            "ucsb_bricks_m1.txt",
+            &["kcf", "dsst", "rct", "tld", "cmt"][..],
+        ),
+        (
+            "ucsb_bricks_m3.txt",
+            &["kcf", "dsst", "rct", "tld", "cmt"][..],
+        ),
+        ("ucsb_bricks_zm.txt", &["dsst", "tld", "cmt"][..]),
+        ("ucsb_bricks_rt.txt", &["cmt"][..]),
     ] {
         let (frames, truth) = render_on(&m.join(profile), None, "skimage_coffee.png");
         check(trackers, &frames, &truth, profile);
-    }
-}
-
-#[test]
-#[ignore]
-fn debug_whole() {
-    let m = root().join("assets/motion");
-    let name = std::env::var("W").unwrap_or("kcf".into());
-    let prof = std::env::var("P").unwrap_or("ucsb_bricks_m1.txt".into());
-    let bg = std::env::var("BG").unwrap_or("skimage_grass.png".into());
-    let (frames, truth) = render_on(&m.join(prof), None, &bg);
-    if let Ok(path) = std::env::var("DUMP") {
-        let f = &frames[0];
-        image::GrayImage::from_raw(f.width as u32, f.height as u32, f.data.clone())
-            .unwrap()
-            .save(path)
-            .unwrap();
-    }
-    let mut spec = TrackerSpec::whole(&name).unwrap();
-    for kv in std::env::var("PARAMS")
-        .unwrap_or_default()
-        .split_whitespace()
-    {
-        let (k, v) = kv.split_once('=').unwrap();
-        spec.set_param(k, v).unwrap();
-    }
-    let mut t = Tracker::new(&spec).unwrap();
-    t.initialize(FrameInput::Gray8(&frames[0]), &truth[0])
-        .unwrap();
-    for (i, (f, q)) in frames[1..].iter().zip(&truth[1..]).enumerate().take(60) {
-        let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
-        let c = out.corners.centroid();
-        let g = q.centroid();
-        eprintln!(
-            "{} {:?} est ({:.1},{:.1}) gt ({:.1},{:.1}) sim {:.3}",
-            i + 1,
-            out.status,
-            c.x,
-            c.y,
-            g.x,
-            g.y,
-            out.similarity
-        );
     }
 }
 

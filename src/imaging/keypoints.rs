@@ -1,0 +1,292 @@
+//! Keypoints for the keypoint-based trackers (CMT): the FAST-9 corner detector of Rosten and
+//! Drummond with non-maximum suppression, the intensity-centroid orientation, and oriented
+//! binary (BRIEF-style) descriptors compared by Hamming distance.
+
+use super::GrayF32;
+use crate::geometry::Point;
+use crate::rng::Rng;
+
+/// A detected corner.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Keypoint {
+    pub x: f64,
+    pub y: f64,
+    /// FAST score: the summed contrast of the circle's pixels beyond the threshold.
+    pub score: f32,
+}
+
+impl Keypoint {
+    pub fn point(&self) -> Point {
+        Point {
+            x: self.x,
+            y: self.y,
+        }
+    }
+}
+
+/// The 16 pixels of the Bresenham circle of radius 3, clockwise from the top.
+const CIRCLE: [(i32, i32); 16] = [
+    (0, -3),
+    (1, -3),
+    (2, -2),
+    (3, -1),
+    (3, 0),
+    (3, 1),
+    (2, 2),
+    (1, 3),
+    (0, 3),
+    (-1, 3),
+    (-2, 2),
+    (-3, 1),
+    (-3, 0),
+    (-3, -1),
+    (-2, -2),
+    (-1, -3),
+];
+
+/// FAST-9 corners of `img` at least `border` pixels from its edges: pixels with 9 contiguous
+/// circle pixels all brighter than it by more than `threshold` or all darker, kept where their
+/// score is the largest of their 3 x 3 neighbourhood; the `max` best by score.
+pub fn fast(img: &GrayF32, threshold: f32, border: usize, max: usize) -> Vec<Keypoint> {
+    let (w, h) = (img.width, img.height);
+    let b = border.max(3);
+    if w <= 2 * b || h <= 2 * b {
+        return Vec::new();
+    }
+    let offs: Vec<isize> = CIRCLE
+        .iter()
+        .map(|&(dx, dy)| dy as isize * w as isize + dx as isize)
+        .collect();
+    let mut score = vec![0f32; w * h];
+    let d = &img.data;
+    for y in b..h - b {
+        for x in b..w - b {
+            let i = y * w + x;
+            let p = d[i];
+            let (hi, lo) = (p + threshold, p - threshold);
+            let at = |k: usize| d[(i as isize + offs[k]) as usize];
+            // Quick rejection: 9 contiguous pixels include at least two of the four compass
+            // points... at least 2 of 1, 5, 9, 13 (0-based 0, 4, 8, 12) on the same side.
+            let c = [at(0), at(4), at(8), at(12)];
+            let bright = c.iter().filter(|&&v| v > hi).count();
+            let dark = c.iter().filter(|&&v| v < lo).count();
+            if bright < 2 && dark < 2 {
+                continue;
+            }
+            let mut best = 0f32;
+            for sign in [1f32, -1.0] {
+                let mut run = 0;
+                let mut sum = 0f32;
+                let mut best_run_sum = 0f32;
+                for k in 0..32 {
+                    let v = at(k % 16);
+                    let diff = sign * (v - p) - threshold;
+                    if diff > 0.0 {
+                        run += 1;
+                        sum += diff;
+                        if run >= 9 {
+                            best_run_sum = best_run_sum.max(sum);
+                        }
+                        if run >= 16 {
+                            break;
+                        }
+                    } else {
+                        run = 0;
+                        sum = 0.0;
+                    }
+                }
+                best = best.max(best_run_sum);
+            }
+            score[i] = best;
+        }
+    }
+    let mut out = Vec::new();
+    for y in b..h - b {
+        for x in b..w - b {
+            let s = score[y * w + x];
+            if s <= 0.0 {
+                continue;
+            }
+            let mut is_max = true;
+            'n: for dy in -1i32..=1 {
+                for dx in -1i32..=1 {
+                    if (dx, dy) == (0, 0) {
+                        continue;
+                    }
+                    let j = ((y as i32 + dy) as usize) * w + (x as i32 + dx) as usize;
+                    // Ties go to the first in scan order.
+                    if score[j] > s || (score[j] == s && (dy < 0 || (dy == 0 && dx < 0))) {
+                        is_max = false;
+                        break 'n;
+                    }
+                }
+            }
+            if is_max {
+                out.push(Keypoint {
+                    x: x as f64,
+                    y: y as f64,
+                    score: s,
+                });
+            }
+        }
+    }
+    out.sort_by(|a, b| b.score.total_cmp(&a.score));
+    out.truncate(max);
+    out
+}
+
+/// The orientation of the patch of `radius` around `(x, y)` by its intensity centroid (radians).
+pub fn orientation(img: &GrayF32, x: usize, y: usize, radius: i32) -> f64 {
+    let (mut m10, mut m01) = (0f64, 0f64);
+    let (w, h) = (img.width as i32, img.height as i32);
+    for dy in -radius..=radius {
+        for dx in -radius..=radius {
+            if dx * dx + dy * dy > radius * radius {
+                continue;
+            }
+            let (u, v) = (x as i32 + dx, y as i32 + dy);
+            if u < 0 || v < 0 || u >= w || v >= h {
+                continue;
+            }
+            let val = img.data[(v * w + u) as usize] as f64;
+            m10 += dx as f64 * val;
+            m01 += dy as f64 * val;
+        }
+    }
+    m01.atan2(m10)
+}
+
+/// A 256-bit binary descriptor.
+pub type Descriptor = [u64; 4];
+
+/// Hamming distance between two descriptors.
+#[inline]
+pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
+    (a[0] ^ b[0]).count_ones()
+        + (a[1] ^ b[1]).count_ones()
+        + (a[2] ^ b[2]).count_ones()
+        + (a[3] ^ b[3]).count_ones()
+}
+
+/// Oriented binary tests: 256 pairs of points in a disc of radius 15, drawn from an isotropic
+/// Gaussian (seeded), rotated by the keypoint's orientation; each bit says whether the first
+/// point of its pair is darker than the second (on a smoothed image).
+#[derive(Clone, Debug)]
+pub struct Brief {
+    pairs: Vec<[f32; 4]>,
+}
+
+/// Pixels a keypoint must keep from the image's edges to be described.
+pub const BRIEF_BORDER: usize = 18;
+
+impl Brief {
+    pub fn new(seed: u64) -> Self {
+        let mut rng = Rng::new(seed);
+        let mut pt = || loop {
+            let (x, y) = (rng.normal() * 31.0 / 5.0, rng.normal() * 31.0 / 5.0);
+            if x * x + y * y <= 15.0 * 15.0 {
+                return (x as f32, y as f32);
+            }
+        };
+        Brief {
+            pairs: (0..256)
+                .map(|_| {
+                    let (a, b) = (pt(), pt());
+                    [a.0, a.1, b.0, b.1]
+                })
+                .collect(),
+        }
+    }
+
+    /// The descriptor of `smoothed` at keypoint `(x, y)` turned by `angle`; `None` too close to
+    /// the edges.
+    pub fn describe(&self, smoothed: &GrayF32, x: f64, y: f64, angle: f64) -> Option<Descriptor> {
+        let (w, h) = (smoothed.width as f64, smoothed.height as f64);
+        let b = BRIEF_BORDER as f64;
+        if x < b || y < b || x >= w - b || y >= h - b {
+            return None;
+        }
+        let (s, c) = (angle.sin() as f32, angle.cos() as f32);
+        let (x, y) = (x as f32, y as f32);
+        let px = |u: f32, v: f32| {
+            let (xx, yy) = ((x + c * u - s * v).round(), (y + s * u + c * v).round());
+            smoothed.data[yy as usize * smoothed.width + xx as usize]
+        };
+        let mut d = [0u64; 4];
+        for (k, p) in self.pairs.iter().enumerate() {
+            if px(p[0], p[1]) < px(p[2], p[3]) {
+                d[k / 64] |= 1 << (k % 64);
+            }
+        }
+        Some(d)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::imaging::{gaussian_blur, gaussian_kernel};
+
+    #[test]
+    fn fast_finds_the_corners_of_a_square_and_nothing_on_its_sides() {
+        let mut img = GrayF32::new(80, 80);
+        for y in 0..80 {
+            for x in 0..80 {
+                let inside = (20..50).contains(&x) && (25..55).contains(&y);
+                img.set(x, y, if inside { 200.0 } else { 40.0 });
+            }
+        }
+        let kps = fast(&img, 20.0, 3, 100);
+        assert_eq!(kps.len(), 4, "{kps:?}");
+        for k in &kps {
+            let near = [(20.0, 25.0), (49.0, 25.0), (20.0, 54.0), (49.0, 54.0)]
+                .iter()
+                .any(|&(cx, cy): &(f64, f64)| (k.x - cx).abs() <= 1.0 && (k.y - cy).abs() <= 1.0);
+            assert!(near, "{k:?}");
+        }
+    }
+
+    /// An oriented descriptor of a rotated image matches the original's (few differing bits),
+    /// and differs from another place's.
+    #[test]
+    fn oriented_descriptors_survive_a_rotation() {
+        let n = 120;
+        let pattern = |u: f64, v: f64| {
+            128.0
+                + 60.0 * (u / 4.0).sin() * (v / 6.0).cos()
+                + 40.0 * ((0.7 * u - v) / 5.0).sin()
+                + 30.0 * (-(u - 4.0).powi(2) / 40.0 - (v + 3.0).powi(2) / 60.0).exp()
+        };
+        let mut a = GrayF32::new(n, n);
+        let mut b = GrayF32::new(n, n);
+        let th = 0.9f64;
+        let c = 60.0;
+        for y in 0..n {
+            for x in 0..n {
+                let (u, v) = (x as f64 - c, y as f64 - c);
+                a.set(x, y, pattern(u, v) as f32);
+                // b = a rotated by th about the centre.
+                let (ru, rv) = (th.cos() * u + th.sin() * v, -th.sin() * u + th.cos() * v);
+                b.set(x, y, pattern(ru, rv) as f32);
+            }
+        }
+        let k = gaussian_kernel(5, 2.0);
+        let (sa, sb) = (gaussian_blur(&a, &k), gaussian_blur(&b, &k));
+        let brief = Brief::new(7);
+        let oa = orientation(&sa, 60, 60, 15);
+        let ob = orientation(&sb, 60, 60, 15);
+        let diff = (ob - oa - th).rem_euclid(2.0 * std::f64::consts::PI);
+        assert!(
+            diff.min(2.0 * std::f64::consts::PI - diff) < 0.1,
+            "{oa} {ob}"
+        );
+        let da = brief.describe(&sa, 60.0, 60.0, oa).unwrap();
+        let db = brief.describe(&sb, 60.0, 60.0, ob).unwrap();
+        let other = brief
+            .describe(&sa, 80.0, 45.0, orientation(&sa, 80, 45, 15))
+            .unwrap();
+        let (same, diff) = (hamming(&da, &db), hamming(&da, &other));
+        assert!(same < 40 && diff > 2 * same, "{same} {diff}");
+        assert!(brief.describe(&sa, 5.0, 60.0, 0.0).is_none());
+    }
+}

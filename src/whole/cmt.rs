@@ -1,0 +1,574 @@
+//! CMT, consensus-based matching and tracking of keypoints (Nebehay and Pflugfelder, WACV 2014 /
+//! CVPR 2015): the target's keypoints, found at initialisation, are followed by optical flow and
+//! matched again by their descriptors on every frame; each keypoint then votes for the target's
+//! centre given the scale and rotation agreed by all pairs, and the largest cluster of votes
+//! decides. Outputs a rotated and scaled quad.
+
+use super::{Base, Pose, frame_f32};
+use crate::error::Result;
+use crate::geometry::{Point, Quad};
+use crate::imaging::flow::{LkParams, Pyramid, track_forward_backward};
+use crate::imaging::keypoints::{BRIEF_BORDER, Brief, Descriptor, fast, hamming, orientation};
+use crate::imaging::{GrayF32, gaussian_blur, gaussian_kernel, resample_window};
+use crate::observe::Observer;
+use crate::params::ParamDef;
+use crate::sm::MethodVisual;
+use crate::status::{FrameOutcome, LossReason, TrackStatus};
+use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use std::time::Instant;
+
+/// CMT's parameters (the paper's values where it gives them).
+pub const PARAMS: &[ParamDef] = &[
+    ParamDef::float(
+        "fast_threshold",
+        "FAST corner contrast threshold (gray levels)",
+        1.0,
+        100.0,
+        20.0,
+    ),
+    ParamDef::int(
+        "max_keypoints",
+        "most keypoints kept per frame away from the target (all near it are kept)",
+        50.0,
+        10000.0,
+        1000.0,
+    ),
+    ParamDef::float(
+        "ratio",
+        "a match must be this much closer than the second best (Lowe's ratio test)",
+        0.1,
+        1.0,
+        0.8,
+    ),
+    ParamDef::float(
+        "max_distance",
+        "largest descriptor distance of a match, as a fraction of its 256 bits",
+        0.05,
+        0.5,
+        0.25,
+    ),
+    ParamDef::float(
+        "cluster_threshold",
+        "votes closer than this (px) are clustered together",
+        1.0,
+        100.0,
+        20.0,
+    ),
+    ParamDef::float(
+        "max_fb",
+        "forward-backward error (px) above which a tracked keypoint is dropped",
+        0.1,
+        50.0,
+        4.0,
+    ),
+    ParamDef::float(
+        "min_inliers",
+        "fewest inliers to keep the target, as a fraction of the model's keypoints (at least 3)",
+        0.0,
+        1.0,
+        0.05,
+    ),
+    ParamDef::choice("scale", "estimate the scale", &["on", "off"]),
+    ParamDef::choice("rotation", "estimate the rotation", &["on", "off"]),
+    ParamDef::int("seed", "seed of the descriptor's tests", 0.0, 1e9, 0.0),
+];
+
+/// The scales at which the target's region is also described at initialisation.
+const MODEL_SCALES: [f64; 4] = [0.8, 0.64, 0.5, 1.25];
+/// Pixels around the target's bounding box in those views.
+const MARGIN: f64 = 20.0;
+
+/// Builds a CMT tracker.
+pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
+    let g = |name: &str| {
+        PARAMS
+            .iter()
+            .find(|d| d.name == name)
+            .map(|d| spec.method.get(d))
+            .unwrap_or(0.0)
+    };
+    Ok(Box::new(Cmt {
+        base: Base::new(spec),
+        fast_threshold: g("fast_threshold") as f32,
+        max_keypoints: g("max_keypoints") as usize,
+        ratio: g("ratio"),
+        max_distance: (g("max_distance") * 256.0) as u32,
+        cluster_threshold: g("cluster_threshold"),
+        max_fb: g("max_fb"),
+        min_inliers: g("min_inliers"),
+        est_scale: g("scale") == 0.0,
+        est_rotation: g("rotation") == 0.0,
+        brief: Brief::new(g("seed") as u64),
+        lk: LkParams::default(),
+        model: None,
+        vis_points: Vec::new(),
+        vis_weights: Vec::new(),
+    }))
+}
+
+/// What the votes agree on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Consensus {
+    pub centre: Point,
+    pub scale: f64,
+    pub angle: f64,
+    /// Indices (into the keypoints given) of the votes in the largest cluster.
+    pub inliers: Vec<usize>,
+}
+
+/// The consensus of keypoints `pts[i]` whose model offsets from the target's centre are
+/// `offsets[model[i]]`: the scale is the median ratio of pairwise distances (now / model), the
+/// rotation the median change of pairwise angles; each keypoint votes for the centre
+/// `p - s R(a) offset`; the votes are clustered by single linkage at `threshold` px and the
+/// largest cluster's median is the centre. `None` with fewer than two keypoints.
+pub fn consensus(
+    pts: &[Point],
+    model: &[usize],
+    offsets: &[Point],
+    threshold: f64,
+    est_scale: bool,
+    est_rotation: bool,
+) -> Option<Consensus> {
+    let n = pts.len();
+    if n < 2 {
+        return None;
+    }
+    let mut scales = Vec::with_capacity(n * (n - 1) / 2);
+    let mut angles = Vec::with_capacity(n * (n - 1) / 2);
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b) = (offsets[model[i]], offsets[model[j]]);
+            let (mx, my) = (b.x - a.x, b.y - a.y);
+            let (px, py) = (pts[j].x - pts[i].x, pts[j].y - pts[i].y);
+            let dm = (mx * mx + my * my).sqrt();
+            if dm < 1e-9 {
+                continue;
+            }
+            scales.push((px * px + py * py).sqrt() / dm);
+            let d = py.atan2(px) - my.atan2(mx);
+            angles.push(
+                (d + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+                    - std::f64::consts::PI,
+            );
+        }
+    }
+    let scale = if est_scale && !scales.is_empty() {
+        super::tld::median(scales)
+    } else {
+        1.0
+    };
+    let angle = if est_rotation && !angles.is_empty() {
+        super::tld::median(angles)
+    } else {
+        0.0
+    };
+    let (s, c) = angle.sin_cos();
+    let votes: Vec<Point> = (0..n)
+        .map(|i| {
+            let o = offsets[model[i]];
+            Point {
+                x: pts[i].x - scale * (c * o.x - s * o.y),
+                y: pts[i].y - scale * (s * o.x + c * o.y),
+            }
+        })
+        .collect();
+    // Single linkage: connected components of the "closer than threshold" graph.
+    let mut label: Vec<usize> = (0..n).collect();
+    fn find(l: &mut [usize], i: usize) -> usize {
+        let mut r = i;
+        while l[r] != r {
+            r = l[r];
+        }
+        l[i] = r;
+        r
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            if votes[i].dist(votes[j]) < threshold {
+                let (a, b) = (find(&mut label, i), find(&mut label, j));
+                label[a] = b;
+            }
+        }
+    }
+    let mut count = vec![0usize; n];
+    for i in 0..n {
+        let r = find(&mut label, i);
+        count[r] += 1;
+    }
+    let best = (0..n).max_by_key(|&r| count[r])?;
+    let inliers: Vec<usize> = (0..n).filter(|&i| find(&mut label, i) == best).collect();
+    // The component-wise median of the cluster's votes: a few keypoints matched to a
+    // neighbouring copy of a repeated texture stay within the cluster threshold but do not bias
+    // the centre as they would the mean.
+    let centre = Point {
+        x: super::tld::median(inliers.iter().map(|&i| votes[i].x).collect()),
+        y: super::tld::median(inliers.iter().map(|&i| votes[i].y).collect()),
+    };
+    Some(Consensus {
+        centre,
+        scale,
+        angle,
+        inliers,
+    })
+}
+
+#[derive(Debug)]
+struct Model {
+    /// The target's keypoints: descriptors and offsets from the initial centre.
+    fg: Vec<Descriptor>,
+    offsets: Vec<Point>,
+    /// How many model points were found at the initial scale.
+    native: usize,
+    /// Background keypoints' descriptors (matches to them are rejected).
+    bg: Vec<Descriptor>,
+    /// The keypoints followed now, with their model index.
+    active: Vec<(Point, usize)>,
+    prev: Option<Pyramid>,
+}
+
+/// A CMT tracker.
+#[derive(Debug)]
+pub struct Cmt {
+    base: Base,
+    fast_threshold: f32,
+    max_keypoints: usize,
+    ratio: f64,
+    max_distance: u32,
+    cluster_threshold: f64,
+    max_fb: f64,
+    min_inliers: f64,
+    est_scale: bool,
+    est_rotation: bool,
+    brief: Brief,
+    lk: LkParams,
+    model: Option<Model>,
+    vis_points: Vec<Point>,
+    vis_weights: Vec<f32>,
+}
+
+/// Keypoints of a frame with their descriptors: every corner whose point `near` accepts (the
+/// target's surroundings) and the `max` strongest of the others. A strongly textured
+/// background would otherwise take every place from a weakly textured target.
+fn describe_frame(
+    img: &GrayF32,
+    brief: &Brief,
+    threshold: f32,
+    max: usize,
+    near: impl Fn(Point) -> bool,
+) -> Vec<(Point, Descriptor)> {
+    let smoothed = gaussian_blur(img, &gaussian_kernel(5, 2.0));
+    let mut others = 0;
+    fast(img, threshold, BRIEF_BORDER, usize::MAX)
+        .into_iter()
+        .filter(|k| {
+            near(k.point()) || {
+                others += 1;
+                others <= max
+            }
+        })
+        .filter_map(|k| {
+            let a = orientation(&smoothed, k.x as usize, k.y as usize, 15);
+            brief
+                .describe(&smoothed, k.x, k.y, a)
+                .map(|d| (k.point(), d))
+        })
+        .collect()
+}
+
+impl VisualTracker for Cmt {
+    fn spec(&self) -> &TrackerSpec {
+        &self.base.spec
+    }
+
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+        self.base.start(quad, 8.0)?;
+        let img = frame_f32(input);
+        let inside = |p: Point| point_in_quad(quad, p);
+        let kps = describe_frame(
+            &img,
+            &self.brief,
+            self.fast_threshold,
+            self.max_keypoints,
+            inside,
+        );
+        let c = self.base.c0;
+        let (mut fg, mut offsets, mut bg, mut active) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (p, d) in kps {
+            if inside(p) {
+                active.push((p, fg.len()));
+                fg.push(d);
+                offsets.push(Point {
+                    x: p.x - c.x,
+                    y: p.y - c.y,
+                });
+            } else {
+                bg.push(d);
+            }
+        }
+        // The target seen smaller and larger (its region resampled): descriptors are not
+        // scale-invariant, so these views let matching find the target again after a zoom.
+        // They are extra model points whose offsets are in the initial frame's pixels.
+        let (x0, y0, x1, y1) = quad.bbox();
+        let (bw, bh) = (x1 - x0 + 2.0 * MARGIN, y1 - y0 + 2.0 * MARGIN);
+        let (bx, by) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+        let mut buf = Vec::new();
+        for f in MODEL_SCALES {
+            let (ow, oh) = ((bw * f).round() as usize, (bh * f).round() as usize);
+            resample_window(&img, bx, by, bw, bh, ow, oh, &mut buf);
+            let view = GrayF32 {
+                width: ow,
+                height: oh,
+                data: std::mem::take(&mut buf),
+            };
+            let to_frame = |p: Point| Point {
+                x: bx + (p.x + 0.5 - 0.5 * ow as f64) * (bw / ow as f64),
+                y: by + (p.y + 0.5 - 0.5 * oh as f64) * (bh / oh as f64),
+            };
+            for (p, d) in describe_frame(&view, &self.brief, self.fast_threshold, 0, |p| {
+                inside(to_frame(p))
+            }) {
+                let q = to_frame(p);
+                fg.push(d);
+                offsets.push(Point {
+                    x: q.x - c.x,
+                    y: q.y - c.y,
+                });
+            }
+            buf = view.data;
+        }
+        if active.len() < 3 {
+            return Err(crate::Error::InvalidRegion(format!(
+                "cmt: only {} keypoints in the target (at least 3 are needed); lower fast_threshold",
+                active.len()
+            )));
+        }
+        self.model = Some(Model {
+            native: active.len(),
+            fg,
+            offsets,
+            bg,
+            active,
+            prev: Some(Pyramid::new(&img, self.lk.levels)),
+        });
+        Ok(())
+    }
+
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+        if self.base.status == TrackStatus::Uninitialized {
+            return self.base.idle();
+        }
+        let Some(m) = self.model.as_mut() else {
+            return self.base.idle();
+        };
+        let started = Instant::now();
+        self.base.frame += 1;
+        observer.frame_started(self.base.frame, &self.base.quad());
+        let img = frame_f32(input);
+        let pyr = Pyramid::new(&img, self.lk.levels);
+        let preprocess = started.elapsed();
+        // Optical flow of the active keypoints.
+        let mut fused: Vec<(Point, usize)> = Vec::new();
+        if let Some(prev) = &m.prev {
+            let pts: Vec<Point> = m.active.iter().map(|a| a.0).collect();
+            for (a, t) in m
+                .active
+                .iter()
+                .zip(track_forward_backward(prev, &pyr, &pts, &self.lk))
+            {
+                if let Some((q, fb)) = t
+                    && fb <= self.max_fb
+                {
+                    fused.push((q, a.1));
+                }
+            }
+        }
+        // Global matching against the target's and the background's descriptors.
+        // Around the last position (within twice the target's size), everywhere once lost.
+        let lost = m.active.is_empty();
+        let (c, r) = (
+            Point {
+                x: self.base.pose.cx,
+                y: self.base.pose.cy,
+            },
+            self.base.pose.scale * self.base.size0.0.max(self.base.size0.1),
+        );
+        let kps = describe_frame(
+            &img,
+            &self.brief,
+            self.fast_threshold,
+            self.max_keypoints,
+            |p| lost || ((p.x - c.x).abs() < r && (p.y - c.y).abs() < r),
+        );
+        let nfg = m.fg.len();
+        for (p, d) in &kps {
+            let (mut best, mut idx) = (u32::MAX, usize::MAX);
+            for (i, e) in m.fg.iter().chain(&m.bg).enumerate() {
+                let h = hamming(d, e);
+                if h < best {
+                    best = h;
+                    idx = i;
+                }
+            }
+            // The second best is another place: the same model point described at another
+            // scale (within 3 px of it) is no rival.
+            let same_place =
+                |i: usize| idx < nfg && i < nfg && m.offsets[i].dist(m.offsets[idx]) < 3.0;
+            let second =
+                m.fg.iter()
+                    .chain(&m.bg)
+                    .enumerate()
+                    .filter(|&(i, _)| i != idx && !same_place(i))
+                    .map(|(_, e)| hamming(d, e))
+                    .min()
+                    .unwrap_or(u32::MAX);
+            let good = idx < nfg
+                && best <= self.max_distance
+                && (best as f64) < self.ratio * second as f64;
+            // A match adds a model point that is not tracked (one lost, or found again); a
+            // tracked point passed the forward-backward check and is kept (on a repeated
+            // texture a match may be a neighbouring copy).
+            if good && !fused.iter().any(|f| f.1 == idx) {
+                fused.push((*p, idx));
+            }
+        }
+        let pts: Vec<Point> = fused.iter().map(|f| f.0).collect();
+        let model_idx: Vec<usize> = fused.iter().map(|f| f.1).collect();
+        let cons = consensus(
+            &pts,
+            &model_idx,
+            &m.offsets,
+            self.cluster_threshold,
+            self.est_scale,
+            self.est_rotation,
+        );
+        let need = ((self.min_inliers * m.native as f64).ceil() as usize).max(3);
+        let found = match &cons {
+            Some(c) if c.inliers.len() >= need => Ok((
+                Pose {
+                    cx: c.centre.x,
+                    cy: c.centre.y,
+                    scale: c.scale,
+                    angle: c.angle,
+                },
+                (c.inliers.len() as f64 / m.native as f64).min(1.0),
+            )),
+            _ => Err(LossReason::NotFound),
+        };
+        m.active = match &cons {
+            Some(c) if found.is_ok() => c.inliers.iter().map(|&i| fused[i]).collect(),
+            _ => Vec::new(),
+        };
+        m.prev = Some(pyr);
+        let want = observer.wants_method_visuals();
+        if want {
+            let inl: std::collections::HashSet<usize> = cons
+                .as_ref()
+                .map(|c| c.inliers.iter().copied().collect())
+                .unwrap_or_default();
+            self.vis_points = pts;
+            self.vis_weights = (0..fused.len())
+                .map(|i| if inl.contains(&i) { 1.0 } else { 0.15 })
+                .collect();
+        }
+        let visual = want.then(|| MethodVisual {
+            points: &self.vis_points,
+            point_weights: &self.vis_weights,
+            ..MethodVisual::quads("keypoints", &[], &[], None)
+        });
+        self.base
+            .finish(found, input.size(), started, preprocess, observer, visual)
+    }
+
+    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
+        self.base.set_corners(quad)?;
+        // The active keypoints belong to the old position: matching finds them again.
+        if let Some(m) = self.model.as_mut() {
+            m.active.clear();
+        }
+        Ok(())
+    }
+
+    fn status(&self) -> TrackStatus {
+        self.base.status
+    }
+
+    fn corners(&self) -> Quad {
+        self.base.quad()
+    }
+}
+
+/// Whether `p` is inside the convex quad `q` (either orientation).
+fn point_in_quad(q: &Quad, p: Point) -> bool {
+    let mut sign = 0.0;
+    for k in 0..4 {
+        let (a, b) = (q.0[k], q.0[(k + 1) % 4]);
+        let cross = (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+        if cross != 0.0 {
+            if sign != 0.0 && cross.signum() != sign {
+                return false;
+            }
+            sign = cross.signum();
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// Keypoints moved by a similarity (scale 1.3, rotation 0.4, centre (200, 150)) plus a few
+    /// outliers: the consensus recovers the similarity and leaves the outliers out.
+    #[test]
+    fn the_consensus_recovers_a_similarity_and_rejects_outliers() {
+        let mut rng = Rng::new(4);
+        let offsets: Vec<Point> = (0..30)
+            .map(|_| Point {
+                x: rng.range(-40.0, 40.0),
+                y: rng.range(-30.0, 30.0),
+            })
+            .collect();
+        let (s, a, cx, cy) = (1.3f64, 0.4f64, 200.0, 150.0);
+        let mut pts: Vec<Point> = offsets
+            .iter()
+            .map(|o| Point {
+                x: cx + s * (a.cos() * o.x - a.sin() * o.y) + 0.3 * rng.normal(),
+                y: cy + s * (a.sin() * o.x + a.cos() * o.y) + 0.3 * rng.normal(),
+            })
+            .collect();
+        let mut model: Vec<usize> = (0..30).collect();
+        // Four keypoints matched to the wrong place.
+        for k in 0..4 {
+            pts.push(Point {
+                x: 50.0 + 60.0 * k as f64,
+                y: 300.0,
+            });
+            model.push(k * 5);
+        }
+        let c = consensus(&pts, &model, &offsets, 20.0, true, true).expect("consensus");
+        assert!(
+            (c.scale - s).abs() < 0.02 && (c.angle - a).abs() < 0.02,
+            "{c:?}"
+        );
+        assert!(
+            c.centre.dist(Point { x: cx, y: cy }) < 0.5,
+            "{:?}",
+            c.centre
+        );
+        assert_eq!(c.inliers, (0..30).collect::<Vec<_>>());
+        // Without the rotation estimate, a rotated target's votes spread out (by up to
+        // 2 sin(0.2) * 50 px): single linkage at 5 px splits them.
+        let c = consensus(&pts, &model, &offsets, 5.0, true, false).unwrap();
+        assert!(c.inliers.len() < 30, "{}", c.inliers.len());
+        assert!(consensus(&pts[..1], &model[..1], &offsets, 20.0, true, true).is_none());
+    }
+
+    #[test]
+    fn points_inside_a_quad() {
+        let q = Quad::from_rect(0.0, 0.0, 10.0, 5.0);
+        assert!(point_in_quad(&q, Point { x: 5.0, y: 2.0 }));
+        assert!(!point_in_quad(&q, Point { x: 11.0, y: 2.0 }));
+    }
+}

@@ -71,14 +71,27 @@ pub fn bench_tracker(
     frames: &LoadedFrames,
     repeats: usize,
 ) -> Result<BenchRow> {
-    // A whole tracker's own pre-processing is its business: it gets the default smoothing.
-    let p = spec.params().cloned().unwrap_or_default();
-    let kernel = gaussian_kernel(p.blur_size, p.blur_sigma);
-    let smoothed: Vec<GrayF32> = frames
-        .gray
-        .iter()
-        .map(|g| gaussian_blur(g, &kernel))
-        .collect();
+    // A registration tracker's tracker-only input is the frame smoothed as it would smooth it;
+    // a whole tracker's pre-processing is its own business (timed): it gets the frame as floats.
+    let smoothed: Vec<GrayF32> = match spec.params() {
+        Some(p) => {
+            let kernel = gaussian_kernel(p.blur_size, p.blur_sigma);
+            frames
+                .gray
+                .iter()
+                .map(|g| gaussian_blur(g, &kernel))
+                .collect()
+        }
+        None => frames
+            .gray
+            .iter()
+            .map(|g| GrayF32 {
+                width: g.width,
+                height: g.height,
+                data: g.data.iter().map(|&v| v as f32).collect(),
+            })
+            .collect(),
+    };
     let (mut fps_t, mut fps_l, mut ipf, mut upi) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut init_ms = Vec::new();
     let mut tracked = 0;

@@ -87,16 +87,17 @@ enum Command {
         /// Sequences (default: all).
         #[arg(long, value_delimiter = ',')]
         seqs: Option<Vec<String>>,
-        /// Search methods.
-        #[arg(long, value_delimiter = ',', default_value = "esm")]
-        sm: Vec<String>,
-        /// Appearance models.
-        #[arg(long, value_delimiter = ',', default_value = "ssd")]
-        am: Vec<String>,
-        /// State space models.
-        #[arg(long, value_delimiter = ',', default_value = "homography")]
-        ssm: Vec<String>,
-        /// Whole trackers, evaluated beside the registration trackers.
+        /// Search methods [default: esm; none when only --tracker is given].
+        #[arg(long, value_delimiter = ',')]
+        sm: Option<Vec<String>>,
+        /// Appearance models [default: ssd].
+        #[arg(long, value_delimiter = ',')]
+        am: Option<Vec<String>>,
+        /// State space models [default: homography].
+        #[arg(long, value_delimiter = ',')]
+        ssm: Option<Vec<String>>,
+        /// Whole trackers (kcf, dsst, rct, tld, cmt), evaluated beside the registration trackers
+        /// (alone when no --sm, --am or --ssm is given).
         #[arg(long, value_delimiter = ',')]
         tracker: Vec<String>,
         #[command(flatten)]
@@ -179,13 +180,17 @@ enum Command {
         /// Sequence (default: the demo).
         #[arg(long)]
         seq: Option<PathBuf>,
-        #[arg(long, value_delimiter = ',', default_value = "iclk,fclk,esm")]
-        sm: Vec<String>,
-        #[arg(long, value_delimiter = ',', default_value = "ssd,zncc")]
-        am: Vec<String>,
-        #[arg(long, value_delimiter = ',', default_value = "homography")]
-        ssm: Vec<String>,
-        /// Whole trackers, benchmarked beside the registration trackers.
+        /// Search methods [default: iclk,fclk,esm; none when only --tracker is given].
+        #[arg(long, value_delimiter = ',')]
+        sm: Option<Vec<String>>,
+        /// Appearance models [default: ssd,zncc].
+        #[arg(long, value_delimiter = ',')]
+        am: Option<Vec<String>>,
+        /// State space models [default: homography].
+        #[arg(long, value_delimiter = ',')]
+        ssm: Option<Vec<String>>,
+        /// Whole trackers (kcf, dsst, rct, tld, cmt), benchmarked beside the registration
+        /// trackers (alone when no --sm, --am or --ssm is given).
         #[arg(long, value_delimiter = ',')]
         tracker: Vec<String>,
         #[command(flatten)]
@@ -257,7 +262,8 @@ struct ParamArgs {
 
 impl ParamArgs {
     /// Sets every given parameter on `spec` (checked against its definition).
-    fn apply(&self, spec: &mut TrackerSpec) -> Result<()> {
+    /// Every assignment given (the flags, then `--param`), in order.
+    fn assignments(&self) -> Result<Vec<(String, String)>> {
         let flags = [
             ("res", &self.res),
             ("max_iters", &self.max_iters),
@@ -269,18 +275,73 @@ impl ParamArgs {
             ("roi_margin", &self.roi_margin),
             ("seed", &self.seed),
         ];
-        for (name, v) in flags {
-            if let Some(v) = v {
-                spec.set_param(name, v)?;
-            }
-        }
+        let mut out: Vec<(String, String)> = flags
+            .iter()
+            .filter_map(|(n, v)| v.as_ref().map(|v| (n.to_string(), v.clone())))
+            .collect();
         for a in &self.param {
             let (name, v) = regtrack::params::split_assignment(a)?;
-            spec.set_param(name, v)?;
+            out.push((name.to_string(), v.to_string()));
+        }
+        Ok(out)
+    }
+
+    /// Sets every parameter on `spec` (an unknown one is an error naming the known ones).
+    fn apply(&self, spec: &mut TrackerSpec) -> Result<()> {
+        for (name, v) in self.assignments()? {
+            spec.set_param(&name, &v)?;
         }
         spec.check()?;
         Ok(())
     }
+
+    /// Sets each parameter on the trackers that have it (`--seed` reaches the sampling search
+    /// methods and the whole trackers that draw random numbers, `--res` only the registration
+    /// trackers); a parameter none of them has is an error.
+    fn apply_all(&self, specs: &mut [TrackerSpec]) -> Result<()> {
+        for (name, v) in self.assignments()? {
+            let mut taken = false;
+            for spec in specs.iter_mut() {
+                let has = spec.params().is_some()
+                    && regtrack::tracker::TrackerParams::def(&name).is_some()
+                    || spec.method_defs()?.iter().any(|d| d.name == name);
+                if has {
+                    spec.set_param(&name, &v)?;
+                    taken = true;
+                }
+            }
+            if !taken && let Some(first) = specs.first_mut() {
+                // The error lists what the first tracker has.
+                first.set_param(&name, &v)?;
+            }
+        }
+        for spec in specs.iter() {
+            spec.check()?;
+        }
+        Ok(())
+    }
+}
+
+/// The registration trackers' method lists: each as given, or its default; none at all when
+/// only whole trackers are asked for (`--tracker` without `--sm`, `--am` or `--ssm`).
+fn registration_lists(
+    sm: Option<Vec<String>>,
+    am: Option<Vec<String>>,
+    ssm: Option<Vec<String>>,
+    whole: &[String],
+    defaults: [&str; 3],
+) -> [Vec<String>; 3] {
+    if sm.is_none() && am.is_none() && ssm.is_none() && !whole.is_empty() {
+        return [Vec::new(), Vec::new(), Vec::new()];
+    }
+    let list = |v: Option<Vec<String>>, d: &str| {
+        v.unwrap_or_else(|| d.split(',').map(str::to_string).collect())
+    };
+    [
+        list(sm, defaults[0]),
+        list(am, defaults[1]),
+        list(ssm, defaults[2]),
+    ]
 }
 
 #[derive(Args)]
@@ -375,25 +436,29 @@ fn main() -> Result<()> {
             gt_ssm,
             error,
             no_resume,
-        } => run_eval(
-            &dataset,
-            seqs,
-            &sm,
-            &am,
-            &ssm,
-            &tracker,
-            &params,
-            &out,
-            jobs,
-            shard.as_deref(),
-            EvalOptions {
-                reinit,
-                gt_ssm,
-                error: eval::ErrorKind::parse(&error)?,
-                ..EvalOptions::default()
-            },
-            !no_resume,
-        ),
+        } => {
+            let [sm, am, ssm] =
+                registration_lists(sm, am, ssm, &tracker, ["esm", "ssd", "homography"]);
+            run_eval(
+                &dataset,
+                seqs,
+                &sm,
+                &am,
+                &ssm,
+                &tracker,
+                &params,
+                &out,
+                jobs,
+                shard.as_deref(),
+                EvalOptions {
+                    reinit,
+                    gt_ssm,
+                    error: eval::ErrorKind::parse(&error)?,
+                    ..EvalOptions::default()
+                },
+                !no_resume,
+            )
+        }
         Command::GtFit {
             dataset,
             seqs,
@@ -433,17 +498,26 @@ fn main() -> Result<()> {
             repeats,
             frames,
             json,
-        } => run_bench(
-            seq.as_deref(),
-            &sm,
-            &am,
-            &ssm,
-            &tracker,
-            &params,
-            repeats,
-            frames,
-            json.as_deref(),
-        ),
+        } => {
+            let [sm, am, ssm] = registration_lists(
+                sm,
+                am,
+                ssm,
+                &tracker,
+                ["iclk,fclk,esm", "ssd,zncc", "homography"],
+            );
+            run_bench(
+                seq.as_deref(),
+                &sm,
+                &am,
+                &ssm,
+                &tracker,
+                &params,
+                repeats,
+                frames,
+                json.as_deref(),
+            )
+        }
     }
 }
 
@@ -512,17 +586,14 @@ fn specs(
     for s in sms {
         for a in ams {
             for m in ssms {
-                let mut spec = TrackerSpec::from_names(s, a, m)?;
-                params.apply(&mut spec)?;
-                out.push(spec);
+                out.push(TrackerSpec::from_names(s, a, m)?);
             }
         }
     }
     for t in whole {
-        let mut spec = TrackerSpec::whole(t)?;
-        params.apply(&mut spec)?;
-        out.push(spec);
+        out.push(TrackerSpec::whole(t)?);
     }
+    params.apply_all(&mut out)?;
     Ok(out)
 }
 
@@ -836,9 +907,6 @@ fn print_list() {
         }
     }
     println!("whole trackers (--tracker):");
-    if regtrack::tracker::WHOLE_REGISTRY.is_empty() {
-        println!("  (none yet)");
-    }
     for e in regtrack::tracker::WHOLE_REGISTRY {
         row(e.name, e.aliases, e.description);
         for d in e.build.params {

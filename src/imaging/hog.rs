@@ -51,7 +51,7 @@ pub fn fhog(img: &[f32], w: usize, h: usize, cell: usize) -> FeatureMap {
             if mag <= 0.0 {
                 continue;
             }
-            let mut a = gy.atan2(gx);
+            let mut a = atan2_approx(gy, gx);
             if a < 0.0 {
                 a += 2.0 * std::f32::consts::PI;
             }
@@ -138,9 +138,47 @@ pub fn fhog(img: &[f32], w: usize, h: usize, cell: usize) -> FeatureMap {
     out
 }
 
+/// `atan2(y, x)` within 1e-4 rad (a minimax polynomial for the arctangent on [0, 1]), several
+/// times faster than the library's; the orientation bins are 20 degrees wide.
+#[inline(always)]
+pub fn atan2_approx(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
+    if mx == 0.0 {
+        return 0.0;
+    }
+    let t = mn / mx;
+    let t2 = t * t;
+    let mut r = t
+        * (0.999_866
+            + t2 * (-0.330_299_5 + t2 * (0.180_141 + t2 * (-0.085_133 + t2 * 0.020_835_1))));
+    if ay > ax {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_approximate_arctangent_is_within_a_tenth_of_a_milliradian() {
+        for k in 0..3600 {
+            let a = k as f32 * 0.1f32.to_radians() - std::f32::consts::PI;
+            for r in [0.01f32, 1.0, 300.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                let d = atan2_approx(y, x) - y.atan2(x);
+                let d = (d + std::f32::consts::PI).rem_euclid(2.0 * std::f32::consts::PI)
+                    - std::f32::consts::PI;
+                assert!(d.abs() < 1e-4, "{a}: {d}");
+            }
+        }
+    }
 
     #[test]
     fn a_flat_image_has_no_features_and_an_edge_votes_for_its_orientation() {

@@ -11,7 +11,8 @@ use crate::rng::Rng;
 pub struct Keypoint {
     pub x: f64,
     pub y: f64,
-    /// FAST score: the summed contrast of the circle's pixels beyond the threshold.
+    /// FAST score: the summed contrast beyond the threshold of the circle's pixels on the
+    /// corner's side.
     pub score: f32,
 }
 
@@ -48,9 +49,25 @@ const CIRCLE: [(i32, i32); 16] = [
 /// circle pixels all brighter than it by more than `threshold` or all darker, kept where their
 /// score is the largest of their 3 x 3 neighbourhood; the `max` best by score.
 pub fn fast(img: &GrayF32, threshold: f32, border: usize, max: usize) -> Vec<Keypoint> {
+    fast_in(img, threshold, border, max, (0, 0, img.width, img.height))
+}
+
+/// [`fast`] within the pixels `x0..x1, y0..y1` of `region` only.
+pub fn fast_in(
+    img: &GrayF32,
+    threshold: f32,
+    border: usize,
+    max: usize,
+    region: (usize, usize, usize, usize),
+) -> Vec<Keypoint> {
     let (w, h) = (img.width, img.height);
     let b = border.max(3);
     if w <= 2 * b || h <= 2 * b {
+        return Vec::new();
+    }
+    let (rx0, ry0) = (region.0.max(b), region.1.max(b));
+    let (rx1, ry1) = (region.2.min(w - b), region.3.min(h - b));
+    if rx0 >= rx1 || ry0 >= ry1 {
         return Vec::new();
     }
     let offs: Vec<isize> = CIRCLE
@@ -59,8 +76,8 @@ pub fn fast(img: &GrayF32, threshold: f32, border: usize, max: usize) -> Vec<Key
         .collect();
     let mut score = vec![0f32; w * h];
     let d = &img.data;
-    for y in b..h - b {
-        for x in b..w - b {
+    for y in ry0..ry1 {
+        for x in rx0..rx1 {
             let i = y * w + x;
             let p = d[i];
             let (hi, lo) = (p + threshold, p - threshold);
@@ -73,36 +90,40 @@ pub fn fast(img: &GrayF32, threshold: f32, border: usize, max: usize) -> Vec<Key
             if bright < 2 && dark < 2 {
                 continue;
             }
-            let mut best = 0f32;
-            for sign in [1f32, -1.0] {
-                let mut run = 0;
-                let mut sum = 0f32;
-                let mut best_run_sum = 0f32;
-                for k in 0..32 {
-                    let v = at(k % 16);
-                    let diff = sign * (v - p) - threshold;
-                    if diff > 0.0 {
-                        run += 1;
-                        sum += diff;
-                        if run >= 9 {
-                            best_run_sum = best_run_sum.max(sum);
-                        }
-                        if run >= 16 {
-                            break;
-                        }
-                    } else {
-                        run = 0;
-                        sum = 0.0;
-                    }
+            // Masks of the circle pixels beyond the threshold on each side; a corner has 9
+            // contiguous bits (the mask is doubled so that runs can wrap around).
+            let (mut bm, mut dm) = (0u32, 0u32);
+            let (mut bs, mut ds) = (0f32, 0f32);
+            for k in 0..16 {
+                let v = at(k);
+                if v > hi {
+                    bm |= 1 << k;
+                    bs += v - hi;
+                } else if v < lo {
+                    dm |= 1 << k;
+                    ds += lo - v;
                 }
-                best = best.max(best_run_sum);
             }
+            let run9 = |m: u32| {
+                let mut r = m | (m << 16);
+                for _ in 0..8 {
+                    r &= r >> 1;
+                }
+                r != 0
+            };
+            // The score: the summed contrast beyond the threshold on the corner's side.
+            let best = match (run9(bm), run9(dm)) {
+                (true, true) => bs.max(ds),
+                (true, false) => bs,
+                (false, true) => ds,
+                (false, false) => 0.0,
+            };
             score[i] = best;
         }
     }
     let mut out = Vec::new();
-    for y in b..h - b {
-        for x in b..w - b {
+    for y in ry0..ry1 {
+        for x in rx0..rx1 {
             let s = score[y * w + x];
             if s <= 0.0 {
                 continue;

@@ -1,7 +1,7 @@
 //! Resampling an axis-aligned window of a frame to a fixed size (the trackers that work on
 //! boxes: correlation filters, their scale pyramids, the detectors' normalised patches).
 
-use super::{GrayF32, ImageView, sample_value};
+use super::GrayF32;
 
 /// Fills `out` (`out_w x out_h`, row-major) with the window of `src_w x src_h` frame pixels
 /// centred at `(cx, cy)`, resampled bilinearly; outside the frame the edge is replicated. When a
@@ -23,26 +23,51 @@ pub fn resample_window(
     if img.data.is_empty() || out_w == 0 || out_h == 0 {
         return;
     }
-    let view: ImageView = img.view();
     let sx = src_w / out_w as f64;
     let sy = src_h / out_h as f64;
-    let k = sx.max(sy).ceil().clamp(1.0, 8.0) as usize;
-    let k = if sx.max(sy) > 1.5 { k } else { 1 };
-    let (hw, hh) = (0.5 * out_w as f64, 0.5 * out_h as f64);
-    let inv = 1.0 / (k * k) as f32;
-    for j in 0..out_h {
-        for i in 0..out_w {
-            let mut s = 0.0;
-            for b in 0..k {
+    let k = if sx.max(sy) > 1.5 {
+        sx.max(sy).ceil().clamp(1.0, 8.0) as usize
+    } else {
+        1
+    };
+    // Sampling is separable: the `k` sample columns of each output column and the `k` sample
+    // rows of each output row, as (first pixel, weight of the second) with the edge replicated.
+    let taps = |c: f64, s: f64, n: usize, len: usize| -> Vec<(usize, usize, f32)> {
+        let half = 0.5 * n as f64;
+        let mut v = Vec::with_capacity(n * k);
+        for i in 0..n {
+            for a in 0..k {
                 // Window pixel i spans [i, i + 1) in window units; the window's centre is at
-                // out_w / 2, placed on (cx, cy) (pixel centres are at whole coordinates).
-                let fy = cy + sy * (j as f64 + (b as f64 + 0.5) / k as f64 - hh);
-                for a in 0..k {
-                    let fx = cx + sx * (i as f64 + (a as f64 + 0.5) / k as f64 - hw);
-                    s += sample_value(&view, fx as f32, fy as f32);
-                }
+                // n / 2, placed on c (pixel centres are at whole coordinates).
+                let f = (c + s * (i as f64 + (a as f64 + 0.5) / k as f64 - half))
+                    .clamp(0.0, (len - 1) as f64);
+                let i0 = f.floor() as usize;
+                let i1 = (i0 + 1).min(len - 1);
+                v.push((i0, i1, (f - i0 as f64) as f32));
             }
-            out[j * out_w + i] = s * inv;
+        }
+        v
+    };
+    let xt = taps(cx, sx, out_w, img.width);
+    let yt = taps(cy, sy, out_h, img.height);
+    let inv = 1.0 / (k * k) as f32;
+    let w = img.width;
+    for j in 0..out_h {
+        let row = &mut out[j * out_w..(j + 1) * out_w];
+        for &(y0, y1, wy) in &yt[j * k..(j + 1) * k] {
+            let (r0, r1) = (
+                &img.data[y0 * w..(y0 + 1) * w],
+                &img.data[y1 * w..(y1 + 1) * w],
+            );
+            for (i, o) in row.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for &(x0, x1, wx) in &xt[i * k..(i + 1) * k] {
+                    let top = r0[x0] + wx * (r0[x1] - r0[x0]);
+                    let bot = r1[x0] + wx * (r1[x1] - r1[x0]);
+                    s += top + wy * (bot - top);
+                }
+                *o += s * inv;
+            }
         }
     }
 }

@@ -8,8 +8,8 @@ use super::{Base, Pose, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, track_forward_backward};
-use crate::imaging::keypoints::{BRIEF_BORDER, Brief, Descriptor, fast, hamming, orientation};
-use crate::imaging::{GrayF32, gaussian_blur, gaussian_kernel, resample_window};
+use crate::imaging::keypoints::{BRIEF_BORDER, Brief, Descriptor, fast_in, hamming, orientation};
+use crate::imaging::{GrayF32, Preprocessor, gaussian_blur, gaussian_kernel, resample_window};
 use crate::observe::Observer;
 use crate::params::ParamDef;
 use crate::sm::MethodVisual;
@@ -246,22 +246,46 @@ pub struct Cmt {
     vis_weights: Vec<f32>,
 }
 
-/// Keypoints of a frame with their descriptors: every corner whose point `near` accepts (the
-/// target's surroundings) and the `max` strongest of the others. A strongly textured
-/// background would otherwise take every place from a weakly textured target.
+/// Keypoints of a frame (of `region` of it, `x0, y0, x1, y1`, if given) with their
+/// descriptors: every corner `keep` accepts and the `max` strongest of the others. A strongly
+/// textured background would otherwise take every place from a weakly textured target.
 fn describe_frame(
     img: &GrayF32,
     brief: &Brief,
     threshold: f32,
     max: usize,
-    near: impl Fn(Point) -> bool,
+    region: Option<(f64, f64, f64, f64)>,
+    keep: impl Fn(Point) -> bool,
 ) -> Vec<(Point, Descriptor)> {
-    let smoothed = gaussian_blur(img, &gaussian_kernel(5, 2.0));
+    let (w, h) = (img.width, img.height);
+    let r = region.map_or((0, 0, w, h), |(x0, y0, x1, y1)| {
+        let c = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
+        (c(x0, w), c(y0, h), c(x1, w), c(y1, h))
+    });
+    // Only the region (plus the descriptors' reach) is smoothed.
+    let pad = BRIEF_BORDER + 3;
+    let (sx0, sy0) = (r.0.saturating_sub(pad), r.1.saturating_sub(pad));
+    let (sx1, sy1) = ((r.2 + pad).min(w), (r.3 + pad).min(h));
+    let smoothed = if (sx0, sy0, sx1, sy1) == (0, 0, w, h) {
+        gaussian_blur(img, &gaussian_kernel(5, 2.0))
+    } else {
+        let mut pre = Preprocessor::new(gaussian_kernel(5, 2.0));
+        pre.process(img, sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64);
+        let (x0, y0, x1, y1) = pre.region();
+        let mut full = GrayF32::new(w, h);
+        let v = pre.view();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                full.set(x, y, crate::imaging::sample_value(&v, x as f32, y as f32));
+            }
+        }
+        full
+    };
     let mut others = 0;
-    fast(img, threshold, BRIEF_BORDER, usize::MAX)
+    fast_in(img, threshold, BRIEF_BORDER, usize::MAX, r)
         .into_iter()
         .filter(|k| {
-            near(k.point()) || {
+            keep(k.point()) || {
                 others += 1;
                 others <= max
             }
@@ -289,6 +313,7 @@ impl VisualTracker for Cmt {
             &self.brief,
             self.fast_threshold,
             self.max_keypoints,
+            None,
             inside,
         );
         let c = self.base.c0;
@@ -325,7 +350,7 @@ impl VisualTracker for Cmt {
                 x: bx + (p.x + 0.5 - 0.5 * ow as f64) * (bw / ow as f64),
                 y: by + (p.y + 0.5 - 0.5 * oh as f64) * (bh / oh as f64),
             };
-            for (p, d) in describe_frame(&view, &self.brief, self.fast_threshold, 0, |p| {
+            for (p, d) in describe_frame(&view, &self.brief, self.fast_threshold, 0, None, |p| {
                 inside(to_frame(p))
             }) {
                 let q = to_frame(p);
@@ -384,7 +409,6 @@ impl VisualTracker for Cmt {
             }
         }
         // Global matching against the target's and the background's descriptors.
-        // Around the last position (within twice the target's size), everywhere once lost.
         let lost = m.active.is_empty();
         let (c, r) = (
             Point {
@@ -393,12 +417,16 @@ impl VisualTracker for Cmt {
             },
             self.base.pose.scale * self.base.size0.0.max(self.base.size0.1),
         );
+        // Tracking: the keypoints within twice the target's size of its last position; lost:
+        // the whole frame (every keypoint, for the global matching to find the target again).
+        let region = (!lost).then_some((c.x - r, c.y - r, c.x + r, c.y + r));
         let kps = describe_frame(
             &img,
             &self.brief,
             self.fast_threshold,
             self.max_keypoints,
-            |p| lost || ((p.x - c.x).abs() < r && (p.y - c.y).abs() < r),
+            region,
+            |_| true,
         );
         let nfg = m.fg.len();
         for (p, d) in &kps {

@@ -39,4 +39,8 @@ ams=ssd,zncc,ncc,scv,rscv,lscv,mi,ccre
 # 3. The translation grid with NN and PF, against 2-DOF ground truth as the paper does.
 "$bin" eval --dataset "$data" --sm iclk,esm,nn1k,pf --am ssd,zncc --ssm translation \
     --gt-ssm translation --jobs 2 --reinit --out "$out/grid_translation"
-"$bin" report "$out/grid_am_sm" "$out/grid_nn" "$out/grid_ssm" "$out/grid_translation" --out docs/report
+# 4. The learning-based trackers, against the same 2-DOF ground truth as grid 3.
+"$bin" eval --dataset "$data" --tracker kcf,dsst,rct,tld,cmt --gt-ssm translation \
+    --jobs 2 --reinit --out "$out/grid_learning"
+"$bin" report "$out/grid_am_sm" "$out/grid_nn" "$out/grid_ssm" "$out/grid_translation" \
+    "$out/grid_learning" --out docs/report

@@ -69,6 +69,9 @@ pub enum FigureKind {
     AmsPerSm,
     /// The SSMs, for one SM and AM.
     Ssms,
+    /// The whole (learning-based) trackers beside the best registration trackers scored against
+    /// translation ground truth (the paper's comparison).
+    Learning,
     /// The trackers that are in none of the other figures.
     Others,
 }
@@ -288,6 +291,33 @@ pub fn sr_figures(trackers: &[TrackerResult]) -> Vec<Figure> {
             format!("State space models with SM {sm} and AM {am}"),
             members.iter().map(|t| curve(t, &t.summary.ssm)).collect(),
         );
+    }
+    // The learning-based trackers beside the best registration trackers scored, as they are,
+    // against translation ground truth.
+    let whole: Vec<&TrackerResult> = trackers.iter().filter(|t| !t.is_registration()).collect();
+    if !whole.is_empty() {
+        let mut best: Vec<&TrackerResult> = reg
+            .iter()
+            .copied()
+            .filter(|t| t.summary.gt == "translation")
+            .collect();
+        best.sort_by(|a, b| by_mean_sr(&a.summary, &b.summary));
+        best.truncate(MAX_CURVES.saturating_sub(whole.len()).min(6));
+        let members: Vec<Curve> = whole
+            .iter()
+            .chain(&best)
+            .map(|t| curve(t, &t.summary.tracker))
+            .collect();
+        if members.len() >= 2 && !best.is_empty() {
+            shown.extend(whole.iter().map(|t| t.summary.tracker.as_str()));
+            group(
+                FigureKind::Learning,
+                "sr_learning".to_string(),
+                "Learning-based and the best registration trackers (translation ground truth)"
+                    .to_string(),
+                members,
+            );
+        }
     }
     let others: Vec<Curve> = trackers
         .iter()
@@ -895,6 +925,10 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
             "Appearance models, for each search method",
         ),
         (FigureKind::Ssms, "State space models"),
+        (
+            FigureKind::Learning,
+            "Learning-based trackers beside the registration trackers",
+        ),
         (FigureKind::Others, "Other trackers"),
     ];
     for (kind, heading) in sections {

@@ -194,8 +194,13 @@ pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
 /// point of its pair is darker than the second (on a smoothed image).
 #[derive(Clone, Debug)]
 pub struct Brief {
-    pairs: Vec<[f32; 4]>,
+    /// The pairs turned to each of [`ANGLES`] orientations, rounded to whole pixels (as ORB's
+    /// lookup table: a keypoint's orientation picks the nearest).
+    rotated: Vec<Vec<[i32; 4]>>,
 }
+
+/// Orientations of the precomputed patterns (12 degrees apart).
+pub const ANGLES: usize = 30;
 
 /// Pixels a keypoint must keep from the image's edges to be described.
 pub const BRIEF_BORDER: usize = 18;
@@ -206,17 +211,35 @@ impl Brief {
         let mut pt = || loop {
             let (x, y) = (rng.normal() * 31.0 / 5.0, rng.normal() * 31.0 / 5.0);
             if x * x + y * y <= 15.0 * 15.0 {
-                return (x as f32, y as f32);
+                return (x, y);
             }
         };
-        Brief {
-            pairs: (0..256)
-                .map(|_| {
-                    let (a, b) = (pt(), pt());
-                    [a.0, a.1, b.0, b.1]
-                })
-                .collect(),
-        }
+        let pairs: Vec<[f64; 4]> = (0..256)
+            .map(|_| {
+                let (a, b) = (pt(), pt());
+                [a.0, a.1, b.0, b.1]
+            })
+            .collect();
+        let rotated = (0..ANGLES)
+            .map(|k| {
+                let t = 2.0 * std::f64::consts::PI * k as f64 / ANGLES as f64;
+                let (s, c) = t.sin_cos();
+                let r = |u: f64, v: f64| {
+                    (
+                        (c * u - s * v).round() as i32,
+                        (s * u + c * v).round() as i32,
+                    )
+                };
+                pairs
+                    .iter()
+                    .map(|p| {
+                        let (a, b) = (r(p[0], p[1]), r(p[2], p[3]));
+                        [a.0, a.1, b.0, b.1]
+                    })
+                    .collect()
+            })
+            .collect();
+        Brief { rotated }
     }
 
     /// The descriptor of `smoothed` at keypoint `(x, y)` turned by `angle`; `None` too close to
@@ -224,19 +247,19 @@ impl Brief {
     pub fn describe(&self, smoothed: &GrayF32, x: f64, y: f64, angle: f64) -> Option<Descriptor> {
         let (w, h) = (smoothed.width as f64, smoothed.height as f64);
         let b = BRIEF_BORDER as f64;
-        if x < b || y < b || x >= w - b || y >= h - b {
+        if !(x >= b && y >= b && x < w - b && y < h - b) || !angle.is_finite() {
             return None;
         }
-        let (s, c) = (angle.sin() as f32, angle.cos() as f32);
-        let (x, y) = (x as f32, y as f32);
-        let px = |u: f32, v: f32| {
-            let (xx, yy) = ((x + c * u - s * v).round(), (y + s * u + c * v).round());
-            smoothed.data[yy as usize * smoothed.width + xx as usize]
-        };
+        let step = 2.0 * std::f64::consts::PI / ANGLES as f64;
+        let k = (angle / step).round().rem_euclid(ANGLES as f64) as usize % ANGLES;
+        let (cx, cy) = (x.round() as i64, y.round() as i64);
+        let width = smoothed.width as i64;
+        let base = cy * width + cx;
+        let px = |dx: i32, dy: i32| smoothed.data[(base + dy as i64 * width + dx as i64) as usize];
         let mut d = [0u64; 4];
-        for (k, p) in self.pairs.iter().enumerate() {
+        for (i, p) in self.rotated[k].iter().enumerate() {
             if px(p[0], p[1]) < px(p[2], p[3]) {
-                d[k / 64] |= 1 << (k % 64);
+                d[i / 64] |= 1 << (i % 64);
             }
         }
         Some(d)

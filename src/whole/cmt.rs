@@ -28,10 +28,17 @@ pub const PARAMS: &[ParamDef] = &[
     ),
     ParamDef::int(
         "max_keypoints",
-        "most keypoints kept per frame away from the target (all near it are kept)",
+        "most keypoints matched per frame (the strongest around the target, or anywhere when lost)",
         50.0,
         10000.0,
         1000.0,
+    ),
+    ParamDef::int(
+        "model_keypoints",
+        "most keypoints of the target's model (the strongest corners), per view",
+        10.0,
+        10000.0,
+        500.0,
     ),
     ParamDef::float(
         "ratio",
@@ -91,6 +98,7 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
         base: Base::new(spec),
         fast_threshold: g("fast_threshold") as f32,
         max_keypoints: g("max_keypoints") as usize,
+        model_keypoints: g("model_keypoints") as usize,
         ratio: g("ratio"),
         max_distance: (g("max_distance") * 256.0) as u32,
         cluster_threshold: g("cluster_threshold"),
@@ -219,6 +227,9 @@ struct Model {
     offsets: Vec<Point>,
     /// How many model points were found at the initial scale.
     native: usize,
+    /// Each model point's place: points of the scaled views within 3 px of an earlier point
+    /// share its place.
+    place: Vec<usize>,
     /// Background keypoints' descriptors (matches to them are rejected).
     bg: Vec<Descriptor>,
     /// The keypoints followed now, with their model index.
@@ -232,6 +243,7 @@ pub struct Cmt {
     base: Base,
     fast_threshold: f32,
     max_keypoints: usize,
+    model_keypoints: usize,
     ratio: f64,
     max_distance: u32,
     cluster_threshold: f64,
@@ -321,6 +333,10 @@ impl VisualTracker for Cmt {
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for (p, d) in kps {
             if inside(p) {
+                // The strongest corners come first: the model keeps the best ones.
+                if active.len() >= self.model_keypoints {
+                    continue;
+                }
                 active.push((p, fg.len()));
                 fg.push(d);
                 offsets.push(Point {
@@ -350,9 +366,13 @@ impl VisualTracker for Cmt {
                 x: bx + (p.x + 0.5 - 0.5 * ow as f64) * (bw / ow as f64),
                 y: by + (p.y + 0.5 - 0.5 * oh as f64) * (bh / oh as f64),
             };
+            let cap = self.model_keypoints;
             for (p, d) in describe_frame(&view, &self.brief, self.fast_threshold, 0, None, |p| {
                 inside(to_frame(p))
-            }) {
+            })
+            .into_iter()
+            .take(cap)
+            {
                 let q = to_frame(p);
                 fg.push(d);
                 offsets.push(Point {
@@ -368,8 +388,14 @@ impl VisualTracker for Cmt {
                 active.len()
             )));
         }
+        let mut place: Vec<usize> = Vec::with_capacity(offsets.len());
+        for i in 0..offsets.len() {
+            let same = (0..i).find(|&j| offsets[j].dist(offsets[i]) < 3.0);
+            place.push(same.map_or(i, |j| place[j]));
+        }
         self.model = Some(Model {
             native: active.len(),
+            place,
             fg,
             offsets,
             bg,
@@ -417,8 +443,8 @@ impl VisualTracker for Cmt {
             },
             self.base.pose.scale * self.base.size0.0.max(self.base.size0.1),
         );
-        // Tracking: the keypoints within twice the target's size of its last position; lost:
-        // the whole frame (every keypoint, for the global matching to find the target again).
+        // The `max_keypoints` strongest within twice the target's size of its last position, or
+        // of the whole frame once lost (for the global matching to find the target again).
         let region = (!lost).then_some((c.x - r, c.y - r, c.x + r, c.y + r));
         let kps = describe_frame(
             &img,
@@ -426,37 +452,48 @@ impl VisualTracker for Cmt {
             self.fast_threshold,
             self.max_keypoints,
             region,
-            |_| true,
+            |_| false,
         );
         let nfg = m.fg.len();
+        let mut taken = vec![false; nfg];
+        for f in &fused {
+            taken[f.1] = true;
+        }
         for (p, d) in &kps {
-            let (mut best, mut idx) = (u32::MAX, usize::MAX);
+            // The best and the second best of another place in one pass: a model point
+            // described at another scale is the same place (no rival in the ratio test); each
+            // background keypoint is a place of its own.
+            let (mut best, mut idx, mut place) = (u32::MAX, usize::MAX, usize::MAX);
+            let mut second = u32::MAX;
             for (i, e) in m.fg.iter().chain(&m.bg).enumerate() {
                 let h = hamming(d, e);
-                if h < best {
+                let pl = if i < nfg {
+                    m.place[i]
+                } else {
+                    usize::MAX - 1 - i
+                };
+                if pl == place {
+                    if h < best {
+                        best = h;
+                        idx = i;
+                    }
+                } else if h < best {
+                    second = best;
                     best = h;
                     idx = i;
+                    place = pl;
+                } else if h < second {
+                    second = h;
                 }
             }
-            // The second best is another place: the same model point described at another
-            // scale (within 3 px of it) is no rival.
-            let same_place =
-                |i: usize| idx < nfg && i < nfg && m.offsets[i].dist(m.offsets[idx]) < 3.0;
-            let second =
-                m.fg.iter()
-                    .chain(&m.bg)
-                    .enumerate()
-                    .filter(|&(i, _)| i != idx && !same_place(i))
-                    .map(|(_, e)| hamming(d, e))
-                    .min()
-                    .unwrap_or(u32::MAX);
             let good = idx < nfg
                 && best <= self.max_distance
                 && (best as f64) < self.ratio * second as f64;
             // A match adds a model point that is not tracked (one lost, or found again); a
             // tracked point passed the forward-backward check and is kept (on a repeated
             // texture a match may be a neighbouring copy).
-            if good && !fused.iter().any(|f| f.1 == idx) {
+            if good && !taken[idx] {
+                taken[idx] = true;
                 fused.push((*p, idx));
             }
         }

@@ -208,12 +208,15 @@ pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
+    // Selection, not a sort: CMT takes medians over every pair of its keypoints.
+    let (m, odd) = (v.len() / 2, v.len() % 2 == 1);
+    let (lower, mid, _) = v.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+    let mid = *mid;
+    if odd {
+        mid
     } else {
-        0.5 * (v[m - 1] + v[m])
+        let below = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (below + mid)
     }
 }
 

@@ -751,3 +751,44 @@ fn a_sequence_without_ground_truth_can_be_annotated_from_scratch() {
     assert_eq!(seq.len(), 3);
     assert!(seq.ground_truth(0).is_some() && seq.ground_truth(1).is_none());
 }
+
+/// A whole tracker picked from the tracker dropdown hides the AM/SSM/SM dropdowns, shows its
+/// own parameters, tracks, and shows its internals (KCF's response map).
+#[test]
+fn a_whole_tracker_from_the_dropdown_tracks_and_shows_its_response_map() {
+    let d = TempDir::new("gui-whole");
+    let seq = small_sequence(d.path(), 6);
+    let mut state = state_on(&seq);
+    state.trackers.truncate(1);
+    state.view.show_samples = true;
+    let mut h = harness(state);
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.get_by_label("AM 1");
+    h.get_by_label("Type 1").click();
+    h.run_steps(3);
+    h.get_by_label("kcf").click();
+    h.run_steps(2);
+    step_until(&mut h, "KCF on the first frame", |a| {
+        a.state.trackers[0].spec.label() == "kcf" && a.result(0, 0).is_some()
+    });
+    assert!(
+        h.query_by_label("AM 1").is_none(),
+        "no AM dropdown for a whole tracker"
+    );
+    h.get_by_label("Parameters 1").click();
+    h.run_steps(3);
+    h.get_by_label("padding");
+    h.get_by_label("Play").click();
+    step_until(&mut h, "the end of the sequence", |a| {
+        a.tracked_until() == Some(5)
+    });
+    let a = h.state();
+    let v = a
+        .result(0, 5)
+        .and_then(|r| r.visual.clone())
+        .expect("the response of the newest frame");
+    let m = v.map.as_ref().expect("a response map");
+    assert_eq!(m.values.len(), m.width * m.height);
+    assert!(m.width >= 8 && m.height >= 8);
+    assert_eq!(a.errors(0).len(), 5);
+}

@@ -310,3 +310,43 @@ fn trackers_are_grouped_by_module() {
     let err = report::draw_sr_figure(&d.path().join("x.pdf"), &figs[0], (900, 600)).unwrap_err();
     assert!(err.to_string().contains("x.pdf"), "{err}");
 }
+
+/// The learning-based trackers get their own figure beside the best registration trackers
+/// scored against translation ground truth (as in the paper); registration trackers scored
+/// against the full ground truth are not compared with them.
+#[test]
+fn learning_trackers_are_drawn_beside_the_best_translation_trackers() {
+    let translation = |sm: &str, am: &str, sr: f64| {
+        let mut t = tracker(sm, am, "translation", sr);
+        t.summary.gt = "translation".into();
+        t
+    };
+    let ts: Vec<TrackerResult> = (0..8)
+        .map(|i| translation(&format!("sm{i}"), "ssd", 0.3 + 0.05 * i as f64))
+        .chain(["kcf", "dsst", "tld"].map(|w| tracker(w, "", "", 0.5)))
+        .chain([tracker("esm", "ssd", "homography", 0.99)])
+        .collect();
+    let figs = report::sr_figures(&ts);
+    let learning: Vec<&report::Figure> = figs
+        .iter()
+        .filter(|f| f.kind == FigureKind::Learning)
+        .collect();
+    assert_eq!(learning.len(), 1);
+    let names: Vec<&str> = learning[0].curves.iter().map(|c| c.name.as_str()).collect();
+    // The three whole trackers and the six best translation trackers, best first.
+    assert_eq!(names.len(), 9, "{names:?}");
+    for w in ["kcf", "dsst", "tld"] {
+        assert!(names.contains(&w));
+    }
+    assert!(names.contains(&"sm7_ssd_translation") && !names.contains(&"sm1_ssd_translation"));
+    assert!(!names.contains(&"esm_ssd_homography"));
+    // The whole trackers are in no other figure.
+    assert!(
+        figs.iter()
+            .filter(|f| f.kind != FigureKind::Learning)
+            .all(|f| f
+                .curves
+                .iter()
+                .all(|c| !["kcf", "dsst", "tld"].contains(&c.name.as_str())))
+    );
+}

@@ -344,19 +344,79 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     interact(app, ui, &response, &t, &painter);
 }
 
-/// A sampling method's candidates: the corners of the target under each, faint when unlike the
-/// template, bright when like it; the chosen one outlined.
+/// What a method shows: a response map under everything (blue to yellow, translucent), a
+/// sampling method's candidates as the corners of the target under each (faint when unlike the
+/// template, bright when like it) or a detector's boxes, the chosen one outlined, and points
+/// (keypoints; bright when they count).
 fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
+    if let Some(m) = &v.map
+        && m.width > 0
+        && m.height > 0
+        && m.values.len() == m.width * m.height
+    {
+        let (lo, hi) = m
+            .values
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        let span = (hi - lo).max(1e-12);
+        // The map's cells, along its quad's sides (an axis-aligned box for the filters).
+        let q = m.at.0;
+        let at = |u: f64, w: f64| crate::geometry::Point {
+            x: q[0].x + u * (q[1].x - q[0].x) + w * (q[3].x - q[0].x),
+            y: q[0].y + u * (q[1].y - q[0].y) + w * (q[3].y - q[0].y),
+        };
+        let mut mesh = egui::Mesh::default();
+        for j in 0..m.height {
+            for i in 0..m.width {
+                let v = ((m.values[j * m.width + i] - lo) / span).clamp(0.0, 1.0);
+                let col = Color32::from_rgba_unmultiplied(
+                    (255.0 * v) as u8,
+                    (200.0 * v + 40.0 * (1.0 - v)) as u8,
+                    (160.0 * (1.0 - v)) as u8,
+                    (40.0 + 120.0 * v) as u8,
+                );
+                let (u0, u1) = (i as f64 / m.width as f64, (i + 1) as f64 / m.width as f64);
+                let (w0, w1) = (j as f64 / m.height as f64, (j + 1) as f64 / m.height as f64);
+                let base = mesh.vertices.len() as u32;
+                for (u, w) in [(u0, w0), (u1, w0), (u1, w1), (u0, w1)] {
+                    mesh.colored_vertex(t.to_screen(at(u, w)), col);
+                }
+                mesh.add_triangle(base, base + 1, base + 2);
+                mesh.add_triangle(base, base + 2, base + 3);
+            }
+        }
+        painter.add(Shape::mesh(mesh));
+    }
+    let boxes = v.label == "detections";
     for (q, &w) in v.quads.iter().zip(&v.weights) {
         let w = w.clamp(0.0, 1.0);
         let col = c.gamma_multiply(0.12 + 0.88 * w);
-        for p in q.0 {
-            painter.circle_filled(t.to_screen(p), 0.8 + 1.4 * w, col);
+        if boxes {
+            painter.add(Shape::closed_line(quad_points(t, q), Stroke::new(1.0, col)));
+        } else {
+            for p in q.0 {
+                painter.circle_filled(t.to_screen(p), 0.8 + 1.4 * w, col);
+            }
         }
     }
     if let Some(q) = v.chosen.and_then(|k| v.quads.get(k)) {
         let pts = quad_points(t, q);
         painter.add(Shape::closed_line(pts, Stroke::new(1.5, Color32::WHITE)));
+    }
+    for (k, p) in v.points.iter().enumerate() {
+        let w = v
+            .point_weights
+            .get(k)
+            .copied()
+            .unwrap_or(1.0)
+            .clamp(0.0, 1.0);
+        painter.circle_stroke(
+            t.to_screen(*p),
+            2.5,
+            Stroke::new(1.2, c.gamma_multiply(0.2 + 0.8 * w)),
+        );
     }
 }
 

@@ -53,6 +53,9 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                             app.send(Command::SelectTracker(i));
                         }
                     });
+                    if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
+                        next.spec = kind;
+                    }
                     if let Some(r) = next.spec.registration_mut() {
                         if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
                             r.sm = v;
@@ -98,8 +101,8 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             let mut view = app.state.view.clone();
             ui.checkbox(&mut view.show_ground_truth, "show ground truth");
             ui.checkbox(&mut view.show_corner_numbers, "number the corners");
-            ui.checkbox(&mut view.show_samples, "show NN samples / PF particles")
-                .on_hover_text("Where a sampling search method looked on the newest frame, brighter = more similar");
+            ui.checkbox(&mut view.show_samples, "show method internals")
+                .on_hover_text("On the newest frame: where NN and PF looked (brighter = more similar), KCF's and DSST's response map, TLD's detections and flow points, CMT's keypoints (inliers bright), RCT's candidates");
             if view != app.state.view {
                 app.send(Command::SetView(view));
             }
@@ -116,6 +119,36 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             }
         });
     });
+}
+
+/// The kind of tracker: a registration tracker (AM x SSM x SM, chosen below) or one of the
+/// whole trackers; returns the new spec when it changed (a whole tracker with its defaults, or
+/// ESM + SSD + homography).
+fn tracker_kind_combo(ui: &mut egui::Ui, i: usize, spec: &TrackerSpec) -> Option<TrackerSpec> {
+    const REGISTRATION: &str = "registration (AM x SSM x SM)";
+    let current = match spec {
+        TrackerSpec::Registration(_) => REGISTRATION.to_string(),
+        TrackerSpec::Whole(w) => w.tracker.clone(),
+    };
+    let mut chosen = current.clone();
+    egui::ComboBox::from_label(format!("Type {}", i + 1))
+        .selected_text(&current)
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut chosen, REGISTRATION.to_string(), REGISTRATION)
+                .on_hover_text("An appearance model, a state space model and a search method");
+            for e in crate::tracker::WHOLE_REGISTRY {
+                ui.selectable_value(&mut chosen, e.name.to_string(), e.name)
+                    .on_hover_text(e.description);
+            }
+        });
+    if chosen == current {
+        return None;
+    }
+    if chosen == REGISTRATION {
+        TrackerSpec::from_names("esm", "ssd", "homography").ok()
+    } else {
+        TrackerSpec::whole(&chosen).ok()
+    }
 }
 
 /// A/B mode: two trackers side by side.

@@ -247,7 +247,7 @@ impl Brief {
     pub fn describe(&self, smoothed: &GrayF32, x: f64, y: f64, angle: f64) -> Option<Descriptor> {
         let (w, h) = (smoothed.width as f64, smoothed.height as f64);
         let b = BRIEF_BORDER as f64;
-        if !(x >= b && y >= b && x < w - b && y < h - b) || !angle.is_finite() {
+        if !(x >= b && y >= b && x < w - b && y < h - b && angle.is_finite()) {
             return None;
         }
         let step = 2.0 * std::f64::consts::PI / ANGLES as f64;

@@ -766,8 +766,13 @@ impl VisualTracker for Tld {
                     // One confident detection away from the tracker: re-initialise to it.
                     Some(clusters[better[0]].0)
                 } else {
-                    // The tracker, averaged with the detections close to it (weight 10).
-                    let close: Vec<&BBox> = boxes.iter().filter(|d| d.overlap(&t) > 0.7).collect();
+                    // The tracker, averaged with the detections close to it (weight 10):
+                    // overlapping it and of about its size (the grid's scales are 1.2 apart, a
+                    // detection a scale step away would pull the box's size).
+                    let close: Vec<&BBox> = boxes
+                        .iter()
+                        .filter(|d| d.overlap(&t) > 0.7 && (d.w / t.w).ln().abs() < 0.05)
+                        .collect();
                     let k = 10.0 + close.len() as f64;
                     let mut m = BBox {
                         x: 10.0 * t.x,

@@ -11,7 +11,8 @@ use crate::imaging::{GrayF32, resample_window};
 pub enum Features {
     /// 31-channel HOG cells ([`fhog`]).
     Hog,
-    /// The gray levels, scaled to `-0.5..0.5` (one channel, one pixel per cell).
+    /// The gray levels less their mean over the window, over 255 (one channel, one pixel per
+    /// cell).
     Raw,
 }
 
@@ -101,12 +102,16 @@ impl Window {
         resample_window(img, cx, cy, sw, sh, self.pw, self.ph, buf);
         let mut f = match self.features {
             Features::Hog => fhog(buf, self.pw, self.ph, self.cell),
-            Features::Raw => FeatureMap {
-                width: self.pw,
-                height: self.ph,
-                channels: 1,
-                data: buf.iter().map(|v| v / 255.0 - 0.5).collect(),
-            },
+            Features::Raw => {
+                // Zero mean before the window, as the KCF paper's code does.
+                let mean = buf.iter().sum::<f32>() / buf.len().max(1) as f32;
+                FeatureMap {
+                    width: self.pw,
+                    height: self.ph,
+                    channels: 1,
+                    data: buf.iter().map(|v| (v - mean) / 255.0).collect(),
+                }
+            }
         };
         for c in 0..f.channels {
             for (v, w) in f.channel_mut(c).iter_mut().zip(hann) {

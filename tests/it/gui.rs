@@ -764,7 +764,8 @@ fn a_whole_tracker_from_the_dropdown_tracks_and_shows_its_response_map() {
     let mut h = harness(state);
     step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
     h.get_by_label("AM 1");
-    h.get_by_label("Type 1").click();
+    // The type dropdown sits in the tracker's header, showing the current type.
+    h.get_by_value("AM x SSM x SM").click();
     h.run_steps(3);
     h.get_by_label("kcf").click();
     h.run_steps(2);

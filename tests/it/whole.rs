@@ -183,3 +183,27 @@ fn tld_loses_the_target_while_it_is_gone_and_redetects_it() {
     }
     assert!(good >= 45, "{good} of 50 frames found after the return");
 }
+
+/// The random trackers are reproducible from their seed, and the seed matters.
+#[test]
+fn seeded_trackers_repeat_themselves() {
+    let d = TempDir::new("whole-seed");
+    let p = d.path().join("translation.txt");
+    write_profile(&p, &synthetic(40, |_| 1.0));
+    let (frames, truth) = render(&p, Some((480, 360)));
+    let run = |name: &str, seed: &str| -> Vec<Quad> {
+        let mut spec = TrackerSpec::whole(name).unwrap();
+        spec.set_param("seed", seed).unwrap();
+        let mut t = Tracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&frames[0]), &truth[0])
+            .unwrap();
+        frames[1..]
+            .iter()
+            .map(|f| t.update(FrameInput::Gray8(f), &mut NoObserver).corners)
+            .collect()
+    };
+    for name in ["rct", "tld", "cmt"] {
+        assert_eq!(run(name, "3"), run(name, "3"), "{name}");
+    }
+    assert_ne!(run("rct", "3"), run("rct", "4"));
+}

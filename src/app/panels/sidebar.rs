@@ -52,10 +52,10 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         if ui.radio(app.state.selected_tracker == i, "inspect").on_hover_text("Show its iterations").clicked() {
                             app.send(Command::SelectTracker(i));
                         }
+                        if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
+                            next.spec = kind;
+                        }
                     });
-                    if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
-                        next.spec = kind;
-                    }
                     if let Some(r) = next.spec.registration_mut() {
                         if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
                             r.sm = v;
@@ -121,26 +121,33 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
     });
 }
 
-/// The kind of tracker: a registration tracker (AM x SSM x SM, chosen below) or one of the
-/// whole trackers; returns the new spec when it changed (a whole tracker with its defaults, or
-/// ESM + SSD + homography).
+/// The kind of tracker, in the tracker's header: a registration tracker (AM x SSM x SM, chosen
+/// below) or one of the whole trackers; returns the new spec when it changed (a whole tracker
+/// with its defaults, or ESM + SSD + homography).
 fn tracker_kind_combo(ui: &mut egui::Ui, i: usize, spec: &TrackerSpec) -> Option<TrackerSpec> {
-    const REGISTRATION: &str = "registration (AM x SSM x SM)";
+    const REGISTRATION: &str = "AM x SSM x SM";
     let current = match spec {
         TrackerSpec::Registration(_) => REGISTRATION.to_string(),
         TrackerSpec::Whole(w) => w.tracker.clone(),
     };
     let mut chosen = current.clone();
-    egui::ComboBox::from_label(format!("Type {}", i + 1))
+    egui::ComboBox::from_id_salt(("type", i))
         .selected_text(&current)
         .show_ui(ui, |ui| {
             ui.selectable_value(&mut chosen, REGISTRATION.to_string(), REGISTRATION)
-                .on_hover_text("An appearance model, a state space model and a search method");
+                .on_hover_text(
+                    "A registration tracker: an appearance model, a state space model and a search method",
+                );
             for e in crate::tracker::WHOLE_REGISTRY {
                 ui.selectable_value(&mut chosen, e.name.to_string(), e.name)
                     .on_hover_text(e.description);
             }
-        });
+        })
+        .response
+        .on_hover_text(format!(
+            "Type of tracker {}: a registration tracker or a learning-based one",
+            i + 1
+        ));
     if chosen == current {
         return None;
     }

@@ -172,6 +172,27 @@ fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
         .get(i)
         .map_or(egui::Color32::WHITE, |t| color(t.color));
     let n = r.iterations.len();
+    let whole = app.state.trackers.get(i).and_then(|t| match &t.spec {
+        crate::tracker::TrackerSpec::Whole(w) => Some(w.tracker.clone()),
+        crate::tracker::TrackerSpec::Registration(_) => None,
+    });
+    if let Some(name) = whole {
+        // A whole tracker makes one update per frame: no iterations to plot.
+        ui.label(format!(
+            "{name}: one update per frame · {:?} · {:.0} µs · score {:.3}",
+            r.status,
+            r.search_us,
+            r.iterations.last().map_or(f64::NAN, |it| it.similarity)
+        ));
+        ui.label(
+            egui::RichText::new(
+                "Its internals (response map, detections, keypoints) are drawn on the frame with \
+                 \"show method internals\" (trackers panel).",
+            )
+            .small(),
+        );
+        return;
+    }
     ui.label(format!(
         "{n} iterations · {:?} · {:.0} µs",
         r.status, r.search_us

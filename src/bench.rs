@@ -6,6 +6,7 @@
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::imaging::{GrayF32, GrayU8, gaussian_blur, gaussian_kernel};
+use crate::linalg::median;
 use crate::observe::IterationCounter;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use serde::{Deserialize, Serialize};
@@ -50,19 +51,6 @@ pub fn load_frames(seq: &Sequence, max_frames: Option<usize>) -> Result<LoadedFr
         .map(|i| seq.load_gray(i))
         .collect::<Result<Vec<_>>>()?;
     Ok(LoadedFrames { gray, init })
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
 }
 
 /// Benchmarks one tracker on loaded frames, `repeats` times.

@@ -1,5 +1,6 @@
 //! Small dense linear algebra on stack arrays: the `S x S` (S <= 8) Newton systems of the search
-//! methods, and the matrix exponential and logarithm used by the SL3 state space model.
+//! methods, and the matrix exponential and logarithm used by the SL3 state space model; and the
+//! median of a sample.
 
 use nalgebra::{Matrix3, SMatrix};
 
@@ -184,6 +185,23 @@ pub fn expm3_frechet(a: &Matrix3<f64>, e: &Matrix3<f64>) -> Matrix3<f64> {
     big.fixed_view_mut::<3, 3>(0, 3).copy_from(e);
     let ex = expm(&big);
     ex.fixed_view::<3, 3>(0, 3).into_owned()
+}
+
+/// The median (the mean of the two middle values for an even count).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    // Selection, not a sort: CMT takes medians over every pair of its keypoints.
+    let (m, odd) = (v.len() / 2, v.len() % 2 == 1);
+    let (lower, mid, _) = v.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+    let mid = *mid;
+    if odd {
+        mid
+    } else {
+        let below = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (below + mid)
+    }
 }
 
 #[cfg(test)]

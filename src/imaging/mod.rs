@@ -8,6 +8,7 @@ pub mod fft;
 mod filter;
 pub mod flow;
 pub mod hog;
+mod integral;
 pub mod keypoints;
 mod resample;
 mod sample;
@@ -15,6 +16,7 @@ mod sample;
 pub use filter::{
     GaussianKernel, Preprocessor, downsample_half, gaussian_blur, gaussian_kernel, pyramid,
 };
+pub use integral::Integral;
 pub use resample::resample_window;
 pub use sample::{Border, ImageView, sample_value, sample_values, sample_values_gradients};
 

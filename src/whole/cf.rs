@@ -2,9 +2,11 @@
 //! (HOG cells or raw pixels, under a Hann window), the Gaussian label, the kernel correlation in
 //! the Fourier domain and the sub-pixel peak of a response.
 
+use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
 use crate::imaging::hog::{FHOG_CHANNELS, FeatureMap, fhog};
 use crate::imaging::{GrayF32, resample_window};
+use crate::sm::{MethodVisual, ResponseMap};
 
 /// Which features a filter sees.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -253,6 +255,31 @@ pub fn peak(response: &[f32], w: usize, h: usize) -> (f64, f64, f64) {
         }
     };
     (wrap(x, w) + ox, wrap(y, h) + oy, c)
+}
+
+/// What a filter shows: its centred response (`w x h` cells of `cp` frame pixels, see
+/// [`centred`]) over the window whose shift 0 is at `(cx, cy)`.
+pub fn response_visual<'a>(
+    win: &Window,
+    response: &'a [f32],
+    cx: f64,
+    cy: f64,
+    cp: f64,
+) -> MethodVisual<'a> {
+    let (w, h) = win.cells();
+    let (x0, y0) = (
+        cx - ((w / 2) as f64 + 0.5) * cp,
+        cy - ((h / 2) as f64 + 0.5) * cp,
+    );
+    MethodVisual {
+        map: Some(ResponseMap {
+            width: w,
+            height: h,
+            values: response,
+            at: Quad::from_rect(x0, y0, w as f64 * cp, h as f64 * cp),
+        }),
+        ..MethodVisual::quads("response", &[], &[], None)
+    }
 }
 
 /// `response` re-ordered so that shift `(0, 0)` is at the centre of the map (for display).

@@ -9,13 +9,13 @@ use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, track_forward_backward};
 use crate::imaging::keypoints::{BRIEF_BORDER, Brief, Descriptor, fast_in, hamming, orientation};
-use crate::imaging::{GrayF32, Preprocessor, gaussian_blur, gaussian_kernel, resample_window};
+use crate::imaging::{GrayF32, gaussian_blur, gaussian_kernel, resample_window};
+use crate::linalg::median;
 use crate::observe::Observer;
 use crate::params::ParamDef;
 use crate::sm::MethodVisual;
 use crate::status::{FrameOutcome, LossReason, TrackStatus};
 use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
-use std::time::Instant;
 
 /// CMT's parameters (the paper's values where it gives them).
 pub const PARAMS: &[ParamDef] = &[
@@ -87,13 +87,7 @@ const MARGIN: f64 = 20.0;
 
 /// Builds a CMT tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
-    let g = |name: &str| {
-        PARAMS
-            .iter()
-            .find(|d| d.name == name)
-            .map(|d| spec.method.get(d))
-            .unwrap_or(0.0)
-    };
+    let g = |name: &str| super::param(spec, PARAMS, name);
     Ok(Box::new(Cmt {
         base: Base::new(spec),
         fast_threshold: g("fast_threshold") as f32,
@@ -161,12 +155,12 @@ pub fn consensus(
         }
     }
     let scale = if est_scale && !scales.is_empty() {
-        super::tld::median(scales)
+        median(scales)
     } else {
         1.0
     };
     let angle = if est_rotation && !angles.is_empty() {
-        super::tld::median(angles)
+        median(angles)
     } else {
         0.0
     };
@@ -181,36 +175,19 @@ pub fn consensus(
         })
         .collect();
     // Single linkage: connected components of the "closer than threshold" graph.
-    let mut label: Vec<usize> = (0..n).collect();
-    fn find(l: &mut [usize], i: usize) -> usize {
-        let mut r = i;
-        while l[r] != r {
-            r = l[r];
-        }
-        l[i] = r;
-        r
-    }
-    for i in 0..n {
-        for j in i + 1..n {
-            if votes[i].dist(votes[j]) < threshold {
-                let (a, b) = (find(&mut label, i), find(&mut label, j));
-                label[a] = b;
-            }
-        }
-    }
+    let label = super::components(n, |i, j| votes[i].dist(votes[j]) < threshold);
     let mut count = vec![0usize; n];
-    for i in 0..n {
-        let r = find(&mut label, i);
+    for &r in &label {
         count[r] += 1;
     }
     let best = (0..n).max_by_key(|&r| count[r])?;
-    let inliers: Vec<usize> = (0..n).filter(|&i| find(&mut label, i) == best).collect();
+    let inliers: Vec<usize> = (0..n).filter(|&i| label[i] == best).collect();
     // The component-wise median of the cluster's votes: a few keypoints matched to a
     // neighbouring copy of a repeated texture stay within the cluster threshold but do not bias
     // the centre as they would the mean.
     let centre = Point {
-        x: super::tld::median(inliers.iter().map(|&i| votes[i].x).collect()),
-        y: super::tld::median(inliers.iter().map(|&i| votes[i].y).collect()),
+        x: median(inliers.iter().map(|&i| votes[i].x).collect()),
+        y: median(inliers.iter().map(|&i| votes[i].y).collect()),
     };
     Some(Consensus {
         centre,
@@ -278,21 +255,14 @@ fn describe_frame(
     let pad = BRIEF_BORDER + 3;
     let (sx0, sy0) = (r.0.saturating_sub(pad), r.1.saturating_sub(pad));
     let (sx1, sy1) = ((r.2 + pad).min(w), (r.3 + pad).min(h));
-    let smoothed = if (sx0, sy0, sx1, sy1) == (0, 0, w, h) {
-        gaussian_blur(img, &gaussian_kernel(5, 2.0))
-    } else {
-        let mut pre = Preprocessor::new(gaussian_kernel(5, 2.0));
-        pre.process(img, sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64);
-        let (x0, y0, x1, y1) = pre.region();
-        let mut full = GrayF32::new(w, h);
-        let v = pre.view();
-        for y in y0..y1 {
-            for x in x0..x1 {
-                full.set(x, y, crate::imaging::sample_value(&v, x as f32, y as f32));
-            }
-        }
-        full
+    let crop = GrayF32 {
+        width: sx1 - sx0,
+        height: sy1 - sy0,
+        data: (sy0..sy1)
+            .flat_map(|y| img.data[y * w + sx0..y * w + sx1].iter().copied())
+            .collect(),
     };
+    let smoothed = gaussian_blur(&crop, &gaussian_kernel(5, 2.0));
     let mut others = 0;
     fast_in(img, threshold, BRIEF_BORDER, usize::MAX, r)
         .into_iter()
@@ -303,10 +273,10 @@ fn describe_frame(
             }
         })
         .filter_map(|k| {
-            let a = orientation(&smoothed, k.x as usize, k.y as usize, 15);
-            brief
-                .describe(&smoothed, k.x, k.y, a)
-                .map(|d| (k.point(), d))
+            // In the smoothed crop's pixels.
+            let (x, y) = (k.x - sx0 as f64, k.y - sy0 as f64);
+            let a = orientation(&smoothed, x as usize, y as usize, 15);
+            brief.describe(&smoothed, x, y, a).map(|d| (k.point(), d))
         })
         .collect()
 }
@@ -412,9 +382,7 @@ impl VisualTracker for Cmt {
         let Some(m) = self.model.as_mut() else {
             return self.base.idle();
         };
-        let started = Instant::now();
-        self.base.frame += 1;
-        observer.frame_started(self.base.frame, &self.base.quad());
+        let started = self.base.begin(observer);
         let img = frame_f32(input);
         let pyr = Pyramid::new(&img, self.lk.levels);
         let preprocess = started.elapsed();

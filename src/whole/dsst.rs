@@ -4,7 +4,6 @@
 //! numerator and denominator updated as running averages).
 
 use super::cf::{self, Features, Window};
-use super::kcf::map_quad;
 use super::{Base, Pose, frame_f32};
 use crate::error::Result;
 use crate::geometry::Quad;
@@ -13,10 +12,8 @@ use crate::imaging::hog::fhog;
 use crate::imaging::{GrayF32, resample_window};
 use crate::observe::Observer;
 use crate::params::ParamDef;
-use crate::sm::{MethodVisual, ResponseMap};
 use crate::status::{FrameOutcome, TrackStatus};
 use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
-use std::time::Instant;
 
 /// DSST's parameters (the paper's values by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -82,13 +79,7 @@ pub const PARAMS: &[ParamDef] = &[
 
 /// Builds a DSST tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
-    let g = |name: &str| {
-        PARAMS
-            .iter()
-            .find(|d| d.name == name)
-            .map(|d| spec.method.get(d))
-            .unwrap_or(0.0)
-    };
+    let g = |name: &str| super::param(spec, PARAMS, name);
     Ok(Box::new(Dsst {
         base: Base::new(spec),
         padding: g("padding"),
@@ -372,9 +363,7 @@ impl VisualTracker for Dsst {
         if self.base.status != TrackStatus::Tracking {
             return self.base.idle();
         }
-        let started = Instant::now();
-        self.base.frame += 1;
-        observer.frame_started(self.base.frame, &self.base.quad());
+        let started = self.base.begin(observer);
         let img = frame_f32(input);
         let preprocess = started.elapsed();
         let Pose { cx, cy, scale, .. } = self.base.pose;
@@ -404,16 +393,7 @@ impl VisualTracker for Dsst {
             st.scale.sample(&img, nx, ny, ns);
             st.scale.learn(self.interp);
         }
-        let (w, h) = st.win.cells();
-        let visual = want.then(|| MethodVisual {
-            map: Some(ResponseMap {
-                width: w,
-                height: h,
-                values: &st.response,
-                at: map_quad(cx, cy, w, h, cp),
-            }),
-            ..MethodVisual::quads("response", &[], &[], None)
-        });
+        let visual = want.then(|| cf::response_visual(&st.win, &st.response, cx, cy, cp));
         self.base.finish(
             Ok((pose, value)),
             input.size(),

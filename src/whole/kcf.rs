@@ -9,10 +9,8 @@ use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
 use crate::observe::Observer;
 use crate::params::ParamDef;
-use crate::sm::{MethodVisual, ResponseMap};
 use crate::status::{FrameOutcome, TrackStatus};
 use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
-use std::time::Instant;
 
 /// KCF's parameters (the paper's values for HOG by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -73,13 +71,7 @@ pub const PARAMS: &[ParamDef] = &[
 
 /// Builds a KCF tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
-    let g = |name: &str| {
-        PARAMS
-            .iter()
-            .find(|d| d.name == name)
-            .map(|d| spec.method.get(d))
-            .unwrap_or(0.0)
-    };
+    let g = |name: &str| super::param(spec, PARAMS, name);
     let kernel = if g("kernel") as usize == 1 {
         Kernel::Linear
     } else {
@@ -237,9 +229,7 @@ impl VisualTracker for Kcf {
         if self.base.status != TrackStatus::Tracking {
             return self.base.idle();
         }
-        let started = Instant::now();
-        self.base.frame += 1;
-        observer.frame_started(self.base.frame, &self.base.quad());
+        let started = self.base.begin(observer);
         let img = frame_f32(input);
         let preprocess = started.elapsed();
         let Pose { cx, cy, .. } = self.base.pose;
@@ -260,16 +250,7 @@ impl VisualTracker for Kcf {
             st.features(&img, pose.cx, pose.cy);
             st.learn(self.kernel, self.lambda, self.interp);
         }
-        let (w, h) = st.win.cells();
-        let visual = want.then(|| MethodVisual {
-            map: Some(ResponseMap {
-                width: w,
-                height: h,
-                values: &st.response,
-                at: map_quad(cx, cy, w, h, cp),
-            }),
-            ..MethodVisual::quads("response", &[], &[], None)
-        });
+        let visual = want.then(|| cf::response_visual(&st.win, &st.response, cx, cy, cp));
         self.base.finish(
             Ok((pose, value)),
             input.size(),
@@ -295,14 +276,4 @@ impl VisualTracker for Kcf {
     fn corners(&self) -> Quad {
         self.base.quad()
     }
-}
-
-/// Where a centred `w x h` response of cells of `cp` frame pixels lies when shift 0 is at
-/// `(cx, cy)`.
-pub(crate) fn map_quad(cx: f64, cy: f64, w: usize, h: usize, cp: f64) -> Quad {
-    let (x0, y0) = (
-        cx - ((w / 2) as f64 + 0.5) * cp,
-        cy - ((h / 2) as f64 + 0.5) * cp,
-    );
-    Quad::from_rect(x0, y0, w as f64 * cp, h as f64 * cp)
 }

@@ -15,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad};
 use crate::imaging::GrayF32;
 use crate::observe::{Iteration, Observer};
+use crate::params::ParamDef;
 use crate::registry::Entry;
 use crate::sm::MethodVisual;
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
@@ -195,6 +196,14 @@ impl Base {
         Ok(())
     }
 
+    /// Starts a frame: the clock, the frame count and the observer's `frame_started`.
+    pub fn begin(&mut self, observer: &mut dyn Observer) -> Instant {
+        let started = Instant::now();
+        self.frame += 1;
+        observer.frame_started(self.frame, &self.quad());
+        started
+    }
+
     /// The outcome of a frame on which the tracker does not run (not initialised, or lost).
     pub fn idle(&self) -> FrameOutcome {
         FrameOutcome {
@@ -282,6 +291,37 @@ impl Base {
         observer.frame_finished(self.frame, &outcome);
         outcome
     }
+}
+
+/// The value of parameter `name` (one of `defs`) in `spec`: its set value or its default.
+pub(crate) fn param(spec: &WholeSpec, defs: &[ParamDef], name: &str) -> f64 {
+    defs.iter()
+        .find(|d| d.name == name)
+        .map(|d| spec.method.get(d))
+        .unwrap_or(0.0)
+}
+
+/// Single linkage: the connected components of `0..n` under `linked(i, j)` (tested for
+/// `i < j`), as one label per item (items of a component share it).
+pub(crate) fn components(n: usize, linked: impl Fn(usize, usize) -> bool) -> Vec<usize> {
+    fn root(l: &mut [usize], i: usize) -> usize {
+        let mut r = i;
+        while l[r] != r {
+            r = l[r];
+        }
+        l[i] = r;
+        r
+    }
+    let mut label: Vec<usize> = (0..n).collect();
+    for i in 0..n {
+        for j in i + 1..n {
+            if linked(i, j) {
+                let (a, b) = (root(&mut label, i), root(&mut label, j));
+                label[a] = b;
+            }
+        }
+    }
+    (0..n).map(|i| root(&mut label, i)).collect()
 }
 
 /// The frame as floats (8-bit frames are converted; float frames are used as they are).

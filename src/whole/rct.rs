@@ -7,14 +7,13 @@
 use super::{Base, Pose, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
-use crate::imaging::GrayF32;
+use crate::imaging::Integral;
 use crate::observe::Observer;
 use crate::params::ParamDef;
 use crate::rng::Rng;
 use crate::sm::MethodVisual;
 use crate::status::{FrameOutcome, TrackStatus};
 use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
-use std::time::Instant;
 
 /// RCT's parameters (the paper's values by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -93,13 +92,7 @@ pub const PARAMS: &[ParamDef] = &[
 
 /// Builds an RCT tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
-    let g = |name: &str| {
-        PARAMS
-            .iter()
-            .find(|d| d.name == name)
-            .map(|d| spec.method.get(d))
-            .unwrap_or(0.0)
-    };
+    let g = |name: &str| super::param(spec, PARAMS, name);
     let (lo, hi) = (g("min_rects") as usize, g("max_rects") as usize);
     let (inner, outer) = (g("negative_inner"), g("negative_outer"));
     if lo > hi || inner >= outer {
@@ -206,39 +199,6 @@ pub struct Rct {
     model: Option<Model>,
     vis_quads: Vec<Quad>,
     vis_weights: Vec<f32>,
-}
-
-/// The integral image, one row and column larger (`ii[y][x]` = sum of pixels above-left).
-pub(crate) struct Integral {
-    pub w: usize,
-    pub h: usize,
-    pub data: Vec<f64>,
-}
-
-impl Integral {
-    pub fn new(img: &GrayF32) -> Self {
-        let (w, h) = (img.width, img.height);
-        let mut data = vec![0.0; (w + 1) * (h + 1)];
-        for y in 0..h {
-            let mut row = 0.0;
-            for x in 0..w {
-                row += img.data[y * w + x] as f64;
-                data[(y + 1) * (w + 1) + x + 1] = data[y * (w + 1) + x + 1] + row;
-            }
-        }
-        Integral { w, h, data }
-    }
-
-    /// The sum over `x0..x1, y0..y1`, clipped to the image.
-    #[inline]
-    pub fn sum(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> f64 {
-        let cx = |v: i64| v.clamp(0, self.w as i64) as usize;
-        let cy = |v: i64| v.clamp(0, self.h as i64) as usize;
-        let (x0, x1, y0, y1) = (cx(x0), cx(x1), cy(y0), cy(y1));
-        let s = self.w + 1;
-        self.data[y1 * s + x1] - self.data[y0 * s + x1] - self.data[y1 * s + x0]
-            + self.data[y0 * s + x0]
-    }
 }
 
 impl Model {
@@ -368,9 +328,7 @@ impl VisualTracker for Rct {
         if self.base.status != TrackStatus::Tracking || self.model.is_none() {
             return self.base.idle();
         }
-        let started = Instant::now();
-        self.base.frame += 1;
-        observer.frame_started(self.base.frame, &self.base.quad());
+        let started = self.base.begin(observer);
         let img = frame_f32(input);
         let ii = Integral::new(&img);
         let preprocess = started.elapsed();
@@ -503,20 +461,5 @@ mod tests {
         assert!(c.score(&[9.0, 11.0, 10.0]) > 0.0 && c.score(&[1.0, -1.0, 0.0]) < 0.0);
         // Equidistant from both means with equal spreads: no preference.
         assert!(c.score(&[5.0, 5.0, 5.0]).abs() < 1e-9);
-    }
-
-    #[test]
-    fn integral_sums_match_direct_sums_and_clip() {
-        let img = GrayF32 {
-            width: 5,
-            height: 4,
-            data: (0..20).map(|v| v as f32).collect(),
-        };
-        let ii = Integral::new(&img);
-        let direct: f64 = (1..4)
-            .flat_map(|x| (1..3).map(move |y| (y * 5 + x) as f64))
-            .sum();
-        assert_eq!(ii.sum(1, 1, 4, 3), direct);
-        assert_eq!(ii.sum(-3, -3, 10, 10), (0..20).sum::<i32>() as f64);
     }
 }

@@ -9,14 +9,14 @@ use super::{Base, Pose, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, ncc, track_forward_backward, window_ncc};
-use crate::imaging::{GrayF32, gaussian_blur, gaussian_kernel, resample_window};
+use crate::imaging::{GrayF32, Integral, gaussian_blur, gaussian_kernel, resample_window};
+use crate::linalg::median;
 use crate::observe::Observer;
 use crate::params::ParamDef;
 use crate::rng::Rng;
 use crate::sm::MethodVisual;
 use crate::status::{FrameOutcome, LossReason, TrackStatus};
 use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
-use std::time::Instant;
 
 /// TLD's parameters (the paper's values by default; fewer scales, for speed).
 pub const PARAMS: &[ParamDef] = &[
@@ -75,13 +75,7 @@ pub const PARAMS: &[ParamDef] = &[
 
 /// Builds a TLD tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
-    let g = |name: &str| {
-        PARAMS
-            .iter()
-            .find(|d| d.name == name)
-            .map(|d| spec.method.get(d))
-            .unwrap_or(0.0)
-    };
+    let g = |name: &str| super::param(spec, PARAMS, name);
     Ok(Box::new(Tld {
         base: Base::new(spec),
         n_ferns: g("ferns") as usize,
@@ -201,23 +195,6 @@ pub fn median_flow(
         h,
     };
     Some((out, med_fb, kept.iter().map(|o| o.1).collect()))
-}
-
-/// The median (the mean of the two middle values for an even count).
-pub fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    // Selection, not a sort: CMT takes medians over every pair of its keypoints.
-    let (m, odd) = (v.len() / 2, v.len() % 2 == 1);
-    let (lower, mid, _) = v.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
-    let mid = *mid;
-    if odd {
-        mid
-    } else {
-        let below = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        0.5 * (below + mid)
-    }
 }
 
 /// The ensemble of ferns: each fern compares `tests` pairs of pixels of a (smoothed) patch, the
@@ -353,44 +330,31 @@ fn patch(img: &GrayF32, b: &BBox, buf: &mut Vec<f32>) -> Vec<f64> {
     buf.iter().map(|&v| v as f64 - m).collect()
 }
 
-/// Sums and squared sums, for the variance of any box.
+/// Sums and squared sums, for the variance of any box; made once per frame.
 struct Moments {
-    w: usize,
-    s: Vec<f64>,
-    s2: Vec<f64>,
+    s: Integral,
+    s2: Integral,
 }
 
 impl Moments {
     fn new(img: &GrayF32) -> Self {
-        let (w, h) = (img.width, img.height);
-        let mut s = vec![0.0; (w + 1) * (h + 1)];
-        let mut s2 = vec![0.0; (w + 1) * (h + 1)];
-        for y in 0..h {
-            let (mut r, mut r2) = (0.0, 0.0);
-            for x in 0..w {
-                let v = img.data[y * w + x] as f64;
-                r += v;
-                r2 += v * v;
-                s[(y + 1) * (w + 1) + x + 1] = s[y * (w + 1) + x + 1] + r;
-                s2[(y + 1) * (w + 1) + x + 1] = s2[y * (w + 1) + x + 1] + r2;
-            }
+        Moments {
+            s: Integral::new(img),
+            s2: Integral::squares(img),
         }
-        Moments { w: w + 1, s, s2 }
     }
 
-    /// The variance of the pixels of a grid box (inside the frame).
+    /// The variance of the pixels of a grid box.
     fn variance(&self, b: &GridBox) -> f64 {
         let (x0, y0, x1, y1) = (
-            b.x as usize,
-            b.y as usize,
-            (b.x + b.w) as usize,
-            (b.y + b.h) as usize,
+            b.x as i64,
+            b.y as i64,
+            (b.x + b.w) as i64,
+            (b.y + b.h) as i64,
         );
-        let at = |t: &Vec<f64>, x: usize, y: usize| t[y * self.w + x];
-        let sum = |t| at(t, x1, y1) - at(t, x0, y1) - at(t, x1, y0) + at(t, x0, y0);
         let n = ((x1 - x0) * (y1 - y0)).max(1) as f64;
-        let m = sum(&self.s) / n;
-        sum(&self.s2) / n - m * m
+        let m = self.s.sum(x0, y0, x1, y1) / n;
+        self.s2.sum(x0, y0, x1, y1) / n - m * m
     }
 }
 
@@ -485,7 +449,15 @@ impl Tld {
     /// it most (warped `warps` times), fern negatives from the far boxes the ensemble accepted
     /// (all far boxes at initialisation, subsampled), NN positives and negatives where the
     /// classifier was wrong.
-    fn learn(&mut self, img: &GrayF32, blurred: &GrayF32, b: &BBox, warps: usize, first: bool) {
+    fn learn(
+        &mut self,
+        img: &GrayF32,
+        blurred: &GrayF32,
+        mims: &Moments,
+        b: &BBox,
+        warps: usize,
+        first: bool,
+    ) {
         let Some(m) = self.model.as_mut() else {
             return;
         };
@@ -524,7 +496,6 @@ impl Tld {
         }
         // Negatives: far boxes with enough texture that the ensemble accepts (all of a sample
         // at initialisation).
-        let mims = Moments::new(img);
         let mut neg_patches = Vec::new();
         for i in 0..m.grid.len() {
             let g = m.grid[i];
@@ -578,11 +549,15 @@ impl Tld {
     /// The detector cascade over the grid: boxes that pass the variance filter, the ensemble
     /// (mean posterior > 0.5; the best 100) and the nearest-neighbour classifier. Returns the
     /// accepted boxes with their relative and conservative similarity.
-    fn detect(&mut self, img: &GrayF32, blurred: &GrayF32) -> Vec<(BBox, f64, f64)> {
+    fn detect(
+        &mut self,
+        img: &GrayF32,
+        blurred: &GrayF32,
+        mims: &Moments,
+    ) -> Vec<(BBox, f64, f64)> {
         let Some(m) = self.model.as_mut() else {
             return Vec::new();
         };
-        let mims = Moments::new(img);
         let mut codes = Vec::new();
         let mut passed: Vec<(f64, BBox)> = Vec::new();
         for g in &m.grid {
@@ -612,27 +587,9 @@ impl Tld {
 /// Groups boxes that overlap by more than half (single linkage); each group's mean box and its
 /// members' indices.
 fn cluster(boxes: &[BBox]) -> Vec<(BBox, Vec<usize>)> {
-    let n = boxes.len();
-    let mut label: Vec<usize> = (0..n).collect();
-    fn find(l: &mut [usize], i: usize) -> usize {
-        let mut r = i;
-        while l[r] != r {
-            r = l[r];
-        }
-        l[i] = r;
-        r
-    }
-    for i in 0..n {
-        for j in i + 1..n {
-            if boxes[i].overlap(&boxes[j]) > 0.5 {
-                let (a, b) = (find(&mut label, i), find(&mut label, j));
-                label[a] = b;
-            }
-        }
-    }
+    let label = super::components(boxes.len(), |i, j| boxes[i].overlap(&boxes[j]) > 0.5);
     let mut groups: Vec<(usize, Vec<usize>)> = Vec::new();
-    for i in 0..n {
-        let r = find(&mut label, i);
+    for (i, &r) in label.iter().enumerate() {
         match groups.iter_mut().find(|g| g.0 == r) {
             Some(g) => g.1.push(i),
             None => groups.push((r, vec![i])),
@@ -696,7 +653,7 @@ impl VisualTracker for Tld {
             prev: None,
             bbox: Some(b),
         });
-        self.learn(&img, &blurred, &b, 20, true);
+        self.learn(&img, &blurred, &mims, &b, 20, true);
         if let Some(m) = self.model.as_mut() {
             m.prev = Some((img, pyr));
         }
@@ -707,12 +664,11 @@ impl VisualTracker for Tld {
         if self.base.status == TrackStatus::Uninitialized || self.model.is_none() {
             return self.base.idle();
         }
-        let started = Instant::now();
-        self.base.frame += 1;
-        observer.frame_started(self.base.frame, &self.base.quad());
+        let started = self.base.begin(observer);
         let img = frame_f32(input).into_owned();
         let pyr = Pyramid::new(&img, self.lk.levels);
         let blurred = fern_image(&img);
+        let mims = Moments::new(&img);
         let preprocess = started.elapsed();
         let want = observer.wants_method_visuals();
         // Tracking.
@@ -742,7 +698,7 @@ impl VisualTracker for Tld {
                 .unwrap_or((0.0, 0.0))
         });
         // Detection.
-        let detections = self.detect(&img, &blurred);
+        let detections = self.detect(&img, &blurred, &mims);
         let boxes: Vec<BBox> = detections.iter().map(|d| d.0).collect();
         let clusters = cluster(&boxes);
         let cluster_conf: Vec<(f64, f64)> = clusters
@@ -801,7 +757,7 @@ impl VisualTracker for Tld {
             }
         };
         if learn_ok && let Some(b) = result {
-            self.learn(&img, &blurred, &b, 1, false);
+            self.learn(&img, &blurred, &mims, &b, 1, false);
         }
         if want {
             self.vis_quads = boxes.iter().map(|b| b.quad()).collect();

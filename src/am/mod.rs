@@ -22,6 +22,7 @@ mod lscv;
 mod mi;
 mod ncc;
 mod ngf;
+mod nssd;
 mod parzen;
 mod riu;
 mod rscv;
@@ -210,6 +211,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     riu::ENTRY,
     ngf::ENTRY,
     sad::ENTRY,
+    nssd::ENTRY,
 ];
 
 /// Models with a file but no [`REGISTRY`] line yet; the generic derivative tests cover them too.

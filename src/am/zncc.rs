@@ -9,8 +9,7 @@ use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "zncc",
-    // MTF's NSSD (SSD of zero-mean, unit-variance patches) is N (rho - 1): this model exactly.
-    aliases: &["nssd"],
+    aliases: &[],
     description: "zero-mean normalised cross-correlation (SSD of z-scores)",
     build: || Box::new(Zncc(Correlation::new(true))),
 };

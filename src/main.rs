@@ -881,7 +881,7 @@ fn print_list() {
         let c = (e.build)().capabilities();
         let mut tags = Vec::new();
         if !c.derivatives {
-            tags.push("no derivatives");
+            tags.push("no gradient search");
         }
         if c.distance {
             tags.push("NN");

@@ -13,10 +13,6 @@
 mod ccre;
 mod correlation;
 mod intensity_map;
-// Not registered (yet): under 6- and 8-DOF warps the gradient search methods stop about 0.12 px
-// from the truth, which the recovery test rejects (see the header of `kld.rs`); only the generic
-// derivative checks and its own tests run it.
-#[cfg_attr(not(test), allow(dead_code))]
 mod kld;
 mod lscv;
 mod mi;
@@ -77,7 +73,9 @@ impl HessianKind {
 /// without it when the tracker is built.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Capabilities {
-    /// Has analytic derivatives (the gradient-based search methods need them).
+    /// Has analytic derivatives that a gradient search converges with (the gradient-based search
+    /// methods need them). A model may have exact derivatives and still not offer them, when its
+    /// optimum is too flat for a Newton step to find (see [`Am::exact_derivatives`]).
     pub derivatives: bool,
     /// Has an embedding ([`Am::embed`]) in which the squared L2 distance ranks patches as the
     /// similarity does (nearest-neighbour search).
@@ -94,7 +92,7 @@ impl Capabilities {
     /// What `need` asks for that `self` lacks, in words (`None` when nothing is missing).
     pub fn missing(&self, need: &Capabilities) -> Option<&'static str> {
         if need.derivatives && !self.derivatives {
-            Some("analytic derivatives")
+            Some("analytic derivatives that a gradient search converges with")
         } else if need.distance && !self.distance {
             Some("a patch embedding for nearest-neighbour search")
         } else {
@@ -120,6 +118,12 @@ pub trait Am: Send + Sync + std::fmt::Debug {
             derivatives: true,
             distance: true,
         }
+    }
+    /// Whether [`Am::gradient`] and [`Am::hessian`] are exact (the finite-difference tests check
+    /// them): the models that offer [`Capabilities::derivatives`], and those that have them but do
+    /// not offer them to the search methods.
+    fn exact_derivatives(&self) -> bool {
+        self.capabilities().derivatives
     }
     /// The Hessian a search method gets when it asks for [`HessianKind::Default`].
     fn default_hessian(&self) -> HessianKind {
@@ -212,11 +216,8 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     ngf::ENTRY,
     sad::ENTRY,
     nssd::ENTRY,
+    kld::ENTRY,
 ];
-
-/// Models with a file but no [`REGISTRY`] line yet; the generic derivative tests cover them too.
-#[cfg(test)]
-const UNREGISTERED: &[Entry<AmBuilder>] = &[kld::ENTRY];
 
 /// The AM called `name` (or one of its aliases).
 pub fn build(name: &str) -> crate::Result<Box<dyn Am>> {

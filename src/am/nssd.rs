@@ -109,7 +109,11 @@ mod tests {
         let (mut et, mut ec) = (vec![0.0; 100], vec![0.0; 100]);
         nssd.embed(&t, &mut et);
         nssd.embed(&c, &mut ec);
-        let d: f64 = et.iter().zip(&ec).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+        let d: f64 = et
+            .iter()
+            .zip(&ec)
+            .map(|(x, y)| ((x - y) as f64).powi(2))
+            .sum();
         assert!((d + 2.0 * a).abs() < 1e-4, "{d} {a}");
     }
 }

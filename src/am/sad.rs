@@ -9,8 +9,8 @@
 //! (`e_k(x) = [x > k]`, `k = 0..254`: `sum_k (e_k(a) - e_k(b))^2 = |a - b|` for integer grey
 //! levels), but [`Am::embed`] writes as many values as the patch has, 255 times too few, so
 //! `Capabilities::distance` is false. SAD can thus only be used by search methods that only
-//! evaluate the similarity (the particle filter); the tracker builder refuses the others with
-//! the reason.
+//! evaluate the similarity (the particle filter, and NN, which then ranks by the similarity
+//! itself); the tracker builder refuses the others with the reason.
 //!
 //! [`Am::gradient`] still returns a subgradient (`sign(I*_i - I_i)` with respect to the current
 //! pixels, its negative with respect to the template, 0 at ties) and [`Am::hessian`] returns 0
@@ -24,7 +24,7 @@ use crate::registry::Entry;
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "sad",
     aliases: &[],
-    description: "sum of absolute differences (similarity only: particle filter)",
+    description: "sum of absolute differences (similarity only: NN, particle filter)",
     build: || Box::new(Sad::default()),
 };
 

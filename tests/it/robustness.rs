@@ -336,7 +336,12 @@ fn from_truth(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad) -> Vec<f64> {
 fn without_light_changes_nothing_drifts() {
     // The same marks, JPEG and noise, but constant light: every method stays within 0.15 px.
     let (frames, truth) = sparse_lit_sequence(61, 1, true, false, false);
-    for (sm, am) in [("esm", "ssd"), ("esm", "zncc"), ("iclk", "ssd"), ("fclk", "zncc")] {
+    for (sm, am) in [
+        ("esm", "ssd"),
+        ("esm", "zncc"),
+        ("iclk", "ssd"),
+        ("fclk", "zncc"),
+    ] {
         let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
         let e = worst(&run(&spec, &frames, &truth), 60);
         assert!(e < 0.15, "{sm}-{am}: {e}");

@@ -878,7 +878,7 @@ fn print_list() {
     };
     println!("appearance models (--am):");
     for e in am::REGISTRY {
-        let c = (e.build)().capabilities();
+        let c = e.build.default_model().capabilities();
         let mut tags = Vec::new();
         if !c.derivatives {
             tags.push("no gradient search");
@@ -892,6 +892,9 @@ fn print_list() {
             format!(" [{}]", tags.join(", "))
         };
         row(e.name, e.aliases, &format!("{}{tags}", e.description));
+        for d in e.build.params {
+            println!("  {:<12}   --param {}", "", d.describe());
+        }
     }
     println!("state space models (--ssm):");
     for e in ssm::REGISTRY {

@@ -172,6 +172,28 @@ impl MethodParams {
         self.0.get(def.name).copied().unwrap_or(def.default)
     }
 
+    /// The values whose names `defs` has.
+    pub fn only(&self, defs: &[&ParamDef]) -> MethodParams {
+        MethodParams(
+            self.0
+                .iter()
+                .filter(|(k, _)| defs.iter().any(|d| d.name == k.as_str()))
+                .map(|(k, &v)| (k.clone(), v))
+                .collect(),
+        )
+    }
+
+    /// The values whose names `defs` does not have.
+    pub fn except(&self, defs: &[&ParamDef]) -> MethodParams {
+        MethodParams(
+            self.0
+                .iter()
+                .filter(|(k, _)| !defs.iter().any(|d| d.name == k.as_str()))
+                .map(|(k, &v)| (k.clone(), v))
+                .collect(),
+        )
+    }
+
     /// Sets a value.
     pub fn set(&mut self, name: &str, v: f64) {
         self.0.insert(name.to_string(), v);

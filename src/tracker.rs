@@ -28,6 +28,21 @@ pub struct RegistrationSpec {
     pub method: MethodParams,
 }
 
+impl RegistrationSpec {
+    /// Drops the method parameters that neither the search method nor the appearance model
+    /// has (after either was changed); all of them when a name is unknown.
+    pub fn keep_known_params(&mut self) {
+        let defs = sm::param_defs(&self.sm).and_then(|mut d| {
+            d.extend(am::param_defs(&self.am)?);
+            Ok(d)
+        });
+        self.method = match defs {
+            Ok(defs) => self.method.only(&defs),
+            Err(_) => MethodParams::default(),
+        };
+    }
+}
+
 /// A whole tracker by name (one entry of [`WHOLE_REGISTRY`]) with its parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WholeSpec {
@@ -183,10 +198,15 @@ impl TrackerSpec {
         }
     }
 
-    /// The definitions of the method's own parameters (the SM's, or the whole tracker's).
+    /// The definitions of the method's own parameters (the SM's and the AM's, or the whole
+    /// tracker's).
     pub fn method_defs(&self) -> Result<Vec<&'static ParamDef>> {
         match self {
-            TrackerSpec::Registration(r) => sm::param_defs(&r.sm),
+            TrackerSpec::Registration(r) => {
+                let mut defs = sm::param_defs(&r.sm)?;
+                defs.extend(am::param_defs(&r.am)?);
+                Ok(defs)
+            }
             TrackerSpec::Whole(w) => Ok(registry::lookup(WHOLE_REGISTRY, "tracker", &w.tracker)?
                 .build
                 .params
@@ -392,9 +412,12 @@ impl RegistrationTracker {
     pub fn new(spec: &RegistrationSpec) -> Result<Self> {
         spec.params.validate()?;
         let ssm = ssm::build(&spec.ssm)?;
-        let am = am::build(&spec.am)?;
+        let am = am::build_with(&spec.am, &spec.method)?;
+        // The AM takes its own parameters; the search method gets (and checks) the others.
+        let am_defs: Vec<&ParamDef> = am::param_defs(&spec.am)?.iter().collect();
+        let sm_method = spec.method.except(&am_defs);
         let cfg = SmConfig {
-            method: &spec.method,
+            method: &sm_method,
             tracker: &spec.params,
         };
         let sm = sm::build(&spec.sm, &cfg)?;
@@ -407,7 +430,12 @@ impl RegistrationTracker {
                 am.name(),
                 am::REGISTRY
                     .iter()
-                    .filter(|e| (e.build)().capabilities().missing(&need).is_none())
+                    .filter(|e| e
+                        .build
+                        .default_model()
+                        .capabilities()
+                        .missing(&need)
+                        .is_none())
                     .map(|e| e.name)
                     .collect::<Vec<_>>()
                     .join(", ")

@@ -21,7 +21,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ccre",
     aliases: &[],
     description: "cross cumulative residual entropy (cumulative B-spline Parzen joint histogram)",
-    build: || Box::new(Ccre(Parzen::new(Measure::Ccre))),
+    build: AmBuilder::plain(|_| Box::new(Ccre(Parzen::new(Measure::Ccre)))),
 };
 
 #[derive(Debug, Clone)]

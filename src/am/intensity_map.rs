@@ -230,8 +230,9 @@ impl Regions {
     /// `side x side` regions if `n` is a square of a side of at least `2 side`, else one.
     pub fn new(n: usize, side: usize) -> Self {
         let res = (n as f64).sqrt().round() as usize;
-        let side = if side > 1 && res * res == n && res >= 2 * side {
-            side
+        // At least two samples per region a side (fewer regions on a coarse grid).
+        let side = if res * res == n {
+            side.min(res / 2).max(1)
         } else {
             1
         };

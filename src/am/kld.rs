@@ -92,7 +92,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "kld",
     aliases: &[],
     description: "Kullback-Leibler (alpha-skew) divergence of the joint histogram from the template's (similarity only: NN, particle filter)",
-    build: || Box::new(Kld::default()),
+    build: AmBuilder::plain(|_| Box::new(Kld::default())),
 };
 
 const ALPHA: f64 = 0.1;

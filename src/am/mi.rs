@@ -19,7 +19,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "mi",
     aliases: &[],
     description: "mutual information (cubic B-spline Parzen joint histogram, 8 bins)",
-    build: || Box::new(Mi(Parzen::new(Measure::Mi))),
+    build: AmBuilder::plain(|_| Box::new(Mi(Parzen::new(Measure::Mi)))),
 };
 
 #[derive(Debug, Clone)]

@@ -30,6 +30,7 @@ mod ssim;
 mod zncc;
 
 use crate::linalg::MAX_DOF;
+use crate::params::{MethodParams, ParamDef};
 use crate::registry::{self, Entry};
 use serde::{Deserialize, Serialize};
 
@@ -197,8 +198,25 @@ macro_rules! forward_to_engine {
 }
 use forward_to_engine;
 
-/// Builds an AM.
-pub type AmBuilder = fn() -> Box<dyn Am>;
+/// How to build an AM: its parameters (most have none) and its constructor, which gets them
+/// validated, unset ones at their defaults.
+#[derive(Clone, Copy)]
+pub struct AmBuilder {
+    pub params: &'static [ParamDef],
+    pub build: fn(&MethodParams) -> Box<dyn Am>,
+}
+
+impl AmBuilder {
+    /// A model without parameters.
+    pub const fn plain(build: fn(&MethodParams) -> Box<dyn Am>) -> Self {
+        AmBuilder { params: &[], build }
+    }
+
+    /// The model with its default parameters.
+    pub fn default_model(&self) -> Box<dyn Am> {
+        (self.build)(&MethodParams::default())
+    }
+}
 
 /// Every appearance model.
 pub const REGISTRY: &[Entry<AmBuilder>] = &[
@@ -219,9 +237,26 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     kld::ENTRY,
 ];
 
-/// The AM called `name` (or one of its aliases).
+/// The AM called `name` (or one of its aliases), with its default parameters.
 pub fn build(name: &str) -> crate::Result<Box<dyn Am>> {
-    Ok((registry::lookup(REGISTRY, "appearance model", name)?.build)())
+    build_with(name, &MethodParams::default())
+}
+
+/// The AM called `name` with `params`: those among them that the model has (the others belong
+/// to the search method) are checked against its definitions.
+pub fn build_with(name: &str, params: &MethodParams) -> crate::Result<Box<dyn Am>> {
+    let entry = registry::lookup(REGISTRY, "appearance model", name)?;
+    let defs: Vec<&ParamDef> = entry.build.params.iter().collect();
+    let own = params.only(&defs);
+    own.validate(&format!("appearance model '{}'", entry.name), &defs)?;
+    Ok((entry.build.build)(&own))
+}
+
+/// The parameters of the AM called `name`.
+pub fn param_defs(name: &str) -> crate::Result<&'static [ParamDef]> {
+    Ok(registry::lookup(REGISTRY, "appearance model", name)?
+        .build
+        .params)
 }
 
 /// `out = -J^T J` (row-major `dof x dof`), the Gauss-Newton Hessian of SSD.

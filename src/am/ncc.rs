@@ -11,7 +11,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ncc",
     aliases: &[],
     description: "normalised cross-correlation",
-    build: || Box::new(Ncc(Correlation::new(false))),
+    build: AmBuilder::plain(|_| Box::new(Ncc(Correlation::new(false)))),
 };
 
 #[derive(Debug, Clone)]

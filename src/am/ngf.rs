@@ -61,7 +61,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ngf",
     aliases: &[],
     description: "normalised gradient fields (SSD form; gradients by differences on the grid)",
-    build: || Box::new(Ngf::default()),
+    build: AmBuilder::plain(|_| Box::new(Ngf::default())),
 };
 
 const ETA: f64 = 32.0;

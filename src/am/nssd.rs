@@ -14,7 +14,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "nssd",
     aliases: &[],
     description: "normalised SSD (intensities mapped from 0..255 onto 0..1, as MTF)",
-    build: || Box::new(Nssd::default()),
+    build: AmBuilder::plain(|_| Box::new(Nssd::default())),
 };
 
 /// The scale of the intensity mapping.

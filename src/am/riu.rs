@@ -50,7 +50,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "riu",
     aliases: &[],
     description: "ratio image uniformity (negated squared coefficient of variation of I / I*)",
-    build: || Box::new(Riu::default()),
+    build: AmBuilder::plain(|_| Box::new(Riu::default())),
 };
 
 const EPS: f32 = 64.0;

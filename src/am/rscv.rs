@@ -25,7 +25,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "rscv",
     aliases: &[],
     description: "reversed SCV (current patch mapped by E[I* | I], updated per frame)",
-    build: || Box::new(Rscv::default()),
+    build: AmBuilder::plain(|_| Box::new(Rscv::default())),
 };
 
 #[derive(Debug, Clone)]

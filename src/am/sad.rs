@@ -25,7 +25,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "sad",
     aliases: &[],
     description: "sum of absolute differences (similarity only: NN, particle filter)",
-    build: || Box::new(Sad::default()),
+    build: AmBuilder::plain(|_| Box::new(Sad::default())),
 };
 
 #[derive(Debug, Default, Clone)]

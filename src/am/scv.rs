@@ -33,7 +33,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "scv",
     aliases: &[],
     description: "sum of conditional variance (template mapped by E[I | I*], updated per frame)",
-    build: || Box::new(Scv::new(ENTRY.name, 1)),
+    build: AmBuilder::plain(|_| Box::new(Scv::new(ENTRY.name, 1))),
 };
 
 /// SCV with `side x side` localised maps (1: SCV proper).

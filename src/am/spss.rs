@@ -39,7 +39,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "spss",
     aliases: &[],
     description: "sum of pixel-wise structural similarity",
-    build: || Box::new(Spss::default()),
+    build: AmBuilder::plain(|_| Box::new(Spss::default())),
 };
 
 const C: f32 = (0.2 * 255.0) * (0.2 * 255.0);

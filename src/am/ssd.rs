@@ -8,7 +8,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ssd",
     aliases: &[],
     description: "sum of squared differences",
-    build: || Box::new(Ssd::default()),
+    build: AmBuilder::plain(|_| Box::new(Ssd::default())),
 };
 
 #[derive(Debug, Default, Clone)]

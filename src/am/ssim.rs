@@ -50,7 +50,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ssim",
     aliases: &[],
     description: "structural similarity over the whole patch",
-    build: || Box::new(Ssim::default()),
+    build: AmBuilder::plain(|_| Box::new(Ssim::default())),
 };
 
 const C1: f64 = (0.01 * 255.0) * (0.01 * 255.0);

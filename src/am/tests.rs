@@ -65,7 +65,7 @@ proptest::proptest! {
         let n = t.len();
         let c: Vec<f32> = t.iter().zip(&noise).map(|(&v, &e)| gain * v + bias + e).collect();
         for e in REGISTRY.iter() {
-            let mut am = (e.build)();
+            let mut am = e.build.default_model();
             if !am.exact_derivatives() {
                 continue;
             }
@@ -98,7 +98,7 @@ fn hessians_match_finite_differences() {
     let mut rng = Rng::new(5);
     let (n, s) = (60, 3);
     for e in REGISTRY.iter() {
-        let mut am = (e.build)();
+        let mut am = e.build.default_model();
         let t = patch(&mut rng, n);
         let c: Vec<f32> = t
             .iter()
@@ -168,7 +168,7 @@ fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
     let mut rng = Rng::new(9);
     let (n, s) = (50, 4);
     for e in REGISTRY.iter() {
-        let mut am = (e.build)();
+        let mut am = e.build.default_model();
         let t = patch(&mut rng, n);
         let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
         if !am.exact_derivatives() {
@@ -238,4 +238,62 @@ fn correlation_models_are_invariant_to_gain_and_zncc_to_bias() {
     ssd.set_template(&t);
     assert_eq!(ssd.similarity(&t), 0.0);
     assert!(ssd.similarity(&gain) < -1000.0);
+}
+
+#[test]
+fn am_parameter_names_are_not_taken_by_search_methods_or_the_tracker() {
+    // A registration tracker's method parameters are one bag: the AM takes its own names and
+    // the search method the rest, so a name must belong to one of them only.
+    for e in REGISTRY {
+        for d in e.build.params {
+            assert!(
+                !crate::params::TRACKER_PARAMS
+                    .iter()
+                    .any(|t| t.name == d.name),
+                "{}: '{}' is a tracker parameter",
+                e.name,
+                d.name
+            );
+            for s in crate::sm::REGISTRY {
+                assert!(
+                    !s.build.params.iter().any(|p| p.name == d.name),
+                    "{}: '{}' is a parameter of {}",
+                    e.name,
+                    d.name,
+                    s.name
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn am_parameters_reach_the_model_and_are_checked() {
+    use crate::params::MethodParams;
+    let mut p = MethodParams::default();
+    p.set("regions", 2.0);
+    // A search method's parameter in the same bag is left to it.
+    p.set("samples", 500.0);
+    assert!(build_with("lscv", &p).is_ok());
+    // One region is SCV; the default (6x6) follows light that varies across the patch better.
+    let mut rng = Rng::new(31);
+    let t = patch(&mut rng, 36 * 36);
+    let lit: Vec<f32> = t
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| v * (0.6 + 0.8 * (i % 36) as f32 / 36.0))
+        .collect();
+    let fit = |am: &mut Box<dyn Am>| {
+        am.set_template(&t);
+        am.update_model(&lit);
+        am.similarity(&lit)
+    };
+    p.set("regions", 1.0);
+    let one = fit(&mut build_with("lscv", &p).unwrap());
+    assert_eq!(one, fit(&mut build("scv").unwrap()));
+    assert!(fit(&mut build("lscv").unwrap()) > 0.5 * one, "{one}");
+    p.set("regions", 40.0);
+    let e = build_with("lscv", &p).unwrap_err().to_string();
+    assert!(e.contains("regions") && e.contains("lscv"), "{e}");
+    assert_eq!(param_defs("ssd").unwrap().len(), 0);
 }

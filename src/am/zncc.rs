@@ -11,7 +11,7 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "zncc",
     aliases: &[],
     description: "zero-mean normalised cross-correlation (SSD of z-scores)",
-    build: || Box::new(Zncc(Correlation::new(true))),
+    build: AmBuilder::plain(|_| Box::new(Zncc(Correlation::new(true)))),
 };
 
 #[derive(Debug, Clone)]

@@ -60,10 +60,11 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
                             r.sm = v;
                             // Another method has other parameters.
-                            r.method = Default::default();
+                            r.keep_known_params();
                         }
                         if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &r.am, am::REGISTRY) {
                             r.am = v;
+                            r.keep_known_params();
                         }
                         if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &r.ssm, ssm::REGISTRY) {
                             r.ssm = v;

@@ -414,6 +414,9 @@ fn nn_samples_reach_the_frame_view_and_method_parameters_the_panel() {
     let r = state.trackers[0].spec.registration_mut().unwrap();
     r.sm = "nn1k".into();
     r.method.set("samples", 200.0);
+    // The AM's parameters share the bag and the panel, under their own heading.
+    r.am = "lscv".into();
+    r.method.set("regions", 2.0);
     state.trackers.truncate(1);
     state.view.show_samples = true;
     let mut h = harness(state);
@@ -423,6 +426,9 @@ fn nn_samples_reach_the_frame_view_and_method_parameters_the_panel() {
     h.run_steps(3);
     h.get_by_label("samples");
     h.get_by_label("candidates");
+    h.get_by_label("search method");
+    h.get_by_label("appearance model");
+    h.get_by_label("regions");
     h.get_by_label("Play").click();
     step_until(&mut h, "the end of the sequence", |a| {
         a.tracked_until() == Some(5)

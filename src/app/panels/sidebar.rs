@@ -399,18 +399,33 @@ fn param_grid(ui: &mut egui::Ui, i: usize, spec: &mut TrackerSpec) {
                     }
                 }
             }
-            let defs = spec.method_defs().unwrap_or_default();
-            if !defs.is_empty() {
-                ui.label(egui::RichText::new("method").strong());
-                ui.end_row();
-            }
-            for d in defs {
-                let old = spec.method_params().get(d);
-                let v = param_widget(ui, (i, d.name), d, old);
-                if v != old {
-                    match spec {
-                        TrackerSpec::Registration(r) => r.method.set(d.name, v),
-                        TrackerSpec::Whole(w) => w.method.set(d.name, v),
+            // The search method's and the appearance model's own (one bag, under two headings),
+            // or the whole tracker's.
+            let groups: Vec<(&str, Vec<&'static ParamDef>)> = match &*spec {
+                TrackerSpec::Registration(r) => vec![
+                    ("search method", sm::param_defs(&r.sm).unwrap_or_default()),
+                    (
+                        "appearance model",
+                        am::param_defs(&r.am)
+                            .map(|d| d.iter().collect())
+                            .unwrap_or_default(),
+                    ),
+                ],
+                TrackerSpec::Whole(_) => vec![("method", spec.method_defs().unwrap_or_default())],
+            };
+            for (heading, defs) in groups {
+                if !defs.is_empty() {
+                    ui.label(egui::RichText::new(heading).strong());
+                    ui.end_row();
+                }
+                for d in defs {
+                    let old = spec.method_params().get(d);
+                    let v = param_widget(ui, (i, d.name), d, old);
+                    if v != old {
+                        match spec {
+                            TrackerSpec::Registration(r) => r.method.set(d.name, v),
+                            TrackerSpec::Whole(w) => w.method.set(d.name, v),
+                        }
                     }
                 }
             }

@@ -34,7 +34,8 @@
 //! both extra terms vanish on affine maps, an affine relation `Y = a X + b` is recovered exactly
 //! (up to `eps`): SCV is exactly invariant to a global gain and bias, which the bin-mean estimator
 //! is not. `lambda` is 1% of the mean data weight of a node (bias small where there is data).
-//! The normal equations are a `K x K` pentadiagonal SPD system, solved by Cholesky once a frame.
+//! The normal equations are a `K x K` pentadiagonal SPD system, solved by a banded Cholesky
+//! factorisation (`O(K)`) at each update.
 
 use super::dot;
 use crate::linalg::MAX_DOF;
@@ -116,75 +117,90 @@ impl MapFit {
         self.weight += w;
     }
 
-    /// Solves for the map; `dense` is a `NODES x NODES` scratch. Leaves `map` unchanged when
-    /// there is no data.
-    pub fn solve(&self, map: &mut PlMap, dense: &mut [f64]) {
+    /// The normal matrix, pentadiagonal: `(d0, d1, d2)` its diagonal and the two above it
+    /// (`d1[k] = A[k][k + 1]`, `d2[k] = A[k][k + 2]`), and the right-hand side.
+    fn system(&self) -> ([f64; NODES], [f64; NODES], [f64; NODES], [f64; NODES]) {
+        let unit = self.weight / NODES as f64;
+        let (lambda, eps) = (LAMBDA_REL * unit, EPS_REL * unit);
+        let (mut d0, mut d1, mut d2, mut b) =
+            ([0.0; NODES], [0.0; NODES], [0.0; NODES], [0.0; NODES]);
+        for k in 0..NODES {
+            d0[k] = self.diag[k] + eps;
+            d1[k] = self.off[k];
+            b[k] = self.rhs[k] + eps * k as f64 * STEP;
+        }
+        // lambda D^T D with D the second differences (rows (1, -2, 1) at r, r + 1, r + 2).
+        const D: [f64; 3] = [1.0, -2.0, 1.0];
+        for r in 0..NODES - 2 {
+            for i in 0..3 {
+                d0[r + i] += lambda * D[i] * D[i];
+            }
+            for i in 0..2 {
+                d1[r + i] += lambda * D[i] * D[i + 1];
+            }
+            d2[r] += lambda * D[0] * D[2];
+        }
+        (d0, d1, d2, b)
+    }
+
+    /// Solves for the map (a banded Cholesky factorisation of the pentadiagonal normal
+    /// equations: `O(NODES)` per fit, so that many regions stay cheap). Leaves `map` unchanged
+    /// when there is no data.
+    pub fn solve(&self, map: &mut PlMap) {
         if self.weight <= 1e-12 {
             return;
         }
-        let unit = self.weight / NODES as f64;
-        let (lambda, eps) = (LAMBDA_REL * unit, EPS_REL * unit);
-        let a = &mut dense[..NODES * NODES];
-        a.fill(0.0);
-        let mut b = [0.0f64; NODES];
-        for k in 0..NODES {
-            a[k * NODES + k] = self.diag[k] + eps;
-            b[k] = self.rhs[k] + eps * k as f64 * STEP;
-            if k + 1 < NODES {
-                a[k * NODES + k + 1] = self.off[k];
-                a[(k + 1) * NODES + k] = self.off[k];
-            }
-        }
-        // lambda D^T D with D the second differences (rows (1, -2, 1) at k, k+1, k+2).
-        for r in 0..NODES - 2 {
-            let d = [1.0, -2.0, 1.0];
-            for i in 0..3 {
-                for j in 0..3 {
-                    a[(r + i) * NODES + r + j] += lambda * d[i] * d[j];
-                }
-            }
-        }
-        if cholesky_solve(a, &mut b) {
+        let (d0, d1, d2, mut b) = self.system();
+        if banded_cholesky_solve(&d0, &d1, &d2, &mut b) {
             map.0 = b;
         }
     }
 }
 
-/// Solves `A x = b` in place (`A` SPD, `NODES x NODES`, overwritten by its Cholesky factor);
-/// false if `A` is not positive definite.
-fn cholesky_solve(a: &mut [f64], b: &mut [f64; NODES]) -> bool {
-    let n = NODES;
-    for j in 0..n {
-        let mut d = a[j * n + j];
-        for k in 0..j {
-            d -= a[j * n + k] * a[j * n + k];
-        }
+/// Solves `A x = b` in place for a symmetric positive definite pentadiagonal `A` given by its
+/// diagonal `d0` and the two diagonals above it (`d1[k] = A[k][k + 1]`, `d2[k] = A[k][k + 2]`);
+/// false if `A` is not positive definite. The Cholesky factor `L` keeps the band: row `j` has
+/// `L[j][j - 2]`, `L[j][j - 1]`, `L[j][j]`.
+fn banded_cholesky_solve(
+    d0: &[f64; NODES],
+    d1: &[f64; NODES],
+    d2: &[f64; NODES],
+    b: &mut [f64; NODES],
+) -> bool {
+    // (L[j][j - 2], L[j][j - 1], L[j][j]) per row.
+    let mut l = [[0.0f64; 3]; NODES];
+    for j in 0..NODES {
+        let l2 = if j >= 2 { d2[j - 2] / l[j - 2][2] } else { 0.0 };
+        let l1 = if j >= 1 {
+            (d1[j - 1] - l2 * l[j - 1][1]) / l[j - 1][2]
+        } else {
+            0.0
+        };
+        let d = d0[j] - l1 * l1 - l2 * l2;
         if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return false;
         }
-        let d = d.sqrt();
-        a[j * n + j] = d;
-        for i in j + 1..n {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / d;
-        }
+        l[j] = [l2, l1, d.sqrt()];
     }
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[i * n + k] * b[k];
+    for j in 0..NODES {
+        let mut s = b[j];
+        if j >= 1 {
+            s -= l[j][1] * b[j - 1];
         }
-        b[i] = s / a[i * n + i];
+        if j >= 2 {
+            s -= l[j][0] * b[j - 2];
+        }
+        b[j] = s / l[j][2];
     }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= a[k * n + i] * b[k];
+    for j in (0..NODES).rev() {
+        let mut s = b[j];
+        if j + 1 < NODES {
+            s -= l[j + 1][1] * b[j + 1];
         }
-        b[i] = s / a[i * n + i];
+        if j + 2 < NODES {
+            s -= l[j + 2][0] * b[j + 2];
+        }
+        b[j] = s / l[j][2];
     }
     true
 }
@@ -286,16 +302,65 @@ mod tests {
     }
 
     #[test]
+    fn the_banded_solve_matches_a_dense_one() {
+        // The same normal equations assembled densely and solved by Gaussian elimination.
+        let mut rng = crate::rng::Rng::new(3);
+        let mut fit = MapFit::default();
+        for _ in 0..300 {
+            let x = rng.range(40.0, 140.0);
+            fit.add(
+                x,
+                0.8 * x + 10.0 + rng.range(-15.0, 15.0),
+                rng.range(0.2, 1.0),
+            );
+        }
+        let (d0, d1, d2, b) = fit.system();
+        let mut a = vec![vec![0.0f64; NODES + 1]; NODES];
+        for k in 0..NODES {
+            a[k][k] = d0[k];
+            a[k][NODES] = b[k];
+            if k + 1 < NODES {
+                (a[k][k + 1], a[k + 1][k]) = (d1[k], d1[k]);
+            }
+            if k + 2 < NODES {
+                (a[k][k + 2], a[k + 2][k]) = (d2[k], d2[k]);
+            }
+        }
+        for c in 0..NODES {
+            for r in c + 1..NODES {
+                let f = a[r][c] / a[c][c];
+                for k in c..=NODES {
+                    a[r][k] -= f * a[c][k];
+                }
+            }
+        }
+        let mut x = [0.0f64; NODES];
+        for r in (0..NODES).rev() {
+            let s: f64 = (r + 1..NODES).map(|k| a[r][k] * x[k]).sum();
+            x[r] = (a[r][NODES] - s) / a[r][r];
+        }
+        let mut map = PlMap::identity();
+        fit.solve(&mut map);
+        for k in 0..NODES {
+            assert!(
+                (map.0[k] - x[k]).abs() < 1e-8 * (1.0 + x[k].abs()),
+                "{k}: {} {}",
+                map.0[k],
+                x[k]
+            );
+        }
+    }
+
+    #[test]
     fn fit_recovers_affine_maps_exactly_and_bridges_gaps() {
         let mut fit = MapFit::default();
         let mut map = PlMap::identity();
-        let mut dense = vec![0.0; NODES * NODES];
         // Data only in 30..90 and 160..220: the map is affine everywhere.
         for i in 0..400 {
             let x = if i % 2 == 0 { 30.0 } else { 160.0 } + (i as f64 * 0.37) % 60.0;
             fit.add(x, 0.6 * x + 25.0, 1.0);
         }
-        fit.solve(&mut map, &mut dense);
+        fit.solve(&mut map);
         for x in [-10.0, 0.0, 50.0, 120.0, 200.0, 255.0, 280.0] {
             let (v, s) = map.eval(x);
             assert!((v - (0.6 * x + 25.0)).abs() < 1e-3, "{x}: {v}");
@@ -307,7 +372,7 @@ mod tests {
             let x = (i as f64 * 0.1277) % 255.0;
             fit.add(x, 255.0 * (x / 255.0).powf(0.5), 1.0);
         }
-        fit.solve(&mut map, &mut dense);
+        fit.solve(&mut map);
         for x in [20.0, 64.0, 128.0, 250.0] {
             let want = 255.0 * (x / 255.0f64).powf(0.5);
             assert!((map.eval(x).0 - want).abs() < 1.5, "{x}: {}", map.eval(x).0);

@@ -16,7 +16,7 @@
 //! when the map is the identity stays valid as the map follows the appearance (the reason Dick
 //! et al. reversed SCV).
 
-use super::intensity_map::{MapFit, NODES, PlMap, jt_diag_j};
+use super::intensity_map::{MapFit, PlMap, jt_diag_j};
 use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
@@ -34,7 +34,6 @@ pub struct Rscv {
     map: PlMap,
     identity: bool,
     fit: MapFit,
-    dense: Vec<f64>,
     /// Scratch: `m'(x)^2` per pixel, and a product buffer.
     slope_sq: Vec<f32>,
     tmp: Vec<f32>,
@@ -47,7 +46,6 @@ impl Default for Rscv {
             map: PlMap::identity(),
             identity: true,
             fit: MapFit::default(),
-            dense: vec![0.0; NODES * NODES],
             slope_sq: Vec::new(),
             tmp: Vec::new(),
         }
@@ -143,7 +141,7 @@ impl Am for Rscv {
         for (&t, &c) in self.template.iter().zip(current) {
             self.fit.add(c as f64, t as f64, 1.0);
         }
-        self.fit.solve(&mut self.map, &mut self.dense);
+        self.fit.solve(&mut self.map);
         self.identity = false;
     }
 }

@@ -24,7 +24,7 @@
 //! Embedding for nearest-neighbour search: the patch itself (a sample index cannot follow a map
 //! that changes every frame: nearest-neighbour search ranks by SSD to the unmapped template).
 
-use super::intensity_map::{MapFit, NODES, PlMap, Regions, jt_diag_j};
+use super::intensity_map::{MapFit, PlMap, Regions, jt_diag_j};
 use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
@@ -45,7 +45,6 @@ pub struct Scv {
     regions: Regions,
     maps: Vec<PlMap>,
     fits: Vec<MapFit>,
-    dense: Vec<f64>,
     /// `m(I*)` per pixel.
     mapped: Vec<f32>,
     /// `m'(I*)^2` per pixel, and whether it is 1 everywhere (identity map).
@@ -65,7 +64,6 @@ impl Scv {
             regions: Regions::default(),
             maps: Vec::new(),
             fits: Vec::new(),
-            dense: vec![0.0; NODES * NODES],
             mapped: Vec::new(),
             slope_sq: Vec::new(),
             unit_slope: true,
@@ -184,7 +182,7 @@ impl Am for Scv {
             }
         }
         for (fit, map) in self.fits.iter().zip(self.maps.iter_mut()) {
-            fit.solve(map, &mut self.dense);
+            fit.solve(map);
         }
         self.apply_maps();
     }

@@ -172,26 +172,17 @@ impl MethodParams {
         self.0.get(def.name).copied().unwrap_or(def.default)
     }
 
-    /// The values whose names `defs` has.
-    pub fn only(&self, defs: &[&ParamDef]) -> MethodParams {
-        MethodParams(
-            self.0
-                .iter()
-                .filter(|(k, _)| defs.iter().any(|d| d.name == k.as_str()))
-                .map(|(k, &v)| (k.clone(), v))
-                .collect(),
-        )
-    }
-
-    /// The values whose names `defs` does not have.
-    pub fn except(&self, defs: &[&ParamDef]) -> MethodParams {
-        MethodParams(
-            self.0
-                .iter()
-                .filter(|(k, _)| !defs.iter().any(|d| d.name == k.as_str()))
-                .map(|(k, &v)| (k.clone(), v))
-                .collect(),
-        )
+    /// The values whose names `defs` has, and the others.
+    pub fn split(&self, defs: &[&ParamDef]) -> (MethodParams, MethodParams) {
+        let (mut inside, mut outside) = (MethodParams::default(), MethodParams::default());
+        for (k, &v) in &self.0 {
+            if defs.iter().any(|d| d.name == k.as_str()) {
+                inside.set(k, v);
+            } else {
+                outside.set(k, v);
+            }
+        }
+        (inside, outside)
     }
 
     /// Sets a value.

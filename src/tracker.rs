@@ -37,7 +37,7 @@ impl RegistrationSpec {
             Ok(d)
         });
         self.method = match defs {
-            Ok(defs) => self.method.only(&defs),
+            Ok(defs) => self.method.split(&defs).0,
             Err(_) => MethodParams::default(),
         };
     }
@@ -415,7 +415,7 @@ impl RegistrationTracker {
         let am = am::build_with(&spec.am, &spec.method)?;
         // The AM takes its own parameters; the search method gets (and checks) the others.
         let am_defs: Vec<&ParamDef> = am::param_defs(&spec.am)?.iter().collect();
-        let sm_method = spec.method.except(&am_defs);
+        let sm_method = spec.method.split(&am_defs).1;
         let cfg = SmConfig {
             method: &sm_method,
             tracker: &spec.params,

@@ -247,7 +247,7 @@ pub fn build(name: &str) -> crate::Result<Box<dyn Am>> {
 pub fn build_with(name: &str, params: &MethodParams) -> crate::Result<Box<dyn Am>> {
     let entry = registry::lookup(REGISTRY, "appearance model", name)?;
     let defs: Vec<&ParamDef> = entry.build.params.iter().collect();
-    let own = params.only(&defs);
+    let own = params.split(&defs).0;
     own.validate(&format!("appearance model '{}'", entry.name), &defs)?;
     Ok((entry.build.build)(&own))
 }

@@ -58,7 +58,7 @@ pub const PARAMS: [ParamDef; 1] = [ParamDef::int(
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "lscv",
     aliases: &[],
-    description: "localised SCV (sub-region intensity maps blended bilinearly; 6x6 regions)",
+    description: "localised SCV (sub-region intensity maps blended bilinearly)",
     build: AmBuilder {
         params: &PARAMS,
         build: |p| Box::new(Scv::new(ENTRY.name, p.get(&PARAMS[0]) as usize)),

@@ -498,6 +498,12 @@ impl Context {
         let f = self
             .am
             .gradient(Wrt::Current, &self.work.values, &mut self.work.grad);
+        self.forward_step_from_gradient(update).map(|_| f)
+    }
+
+    /// [`Context::forward_step`] once the AM's gradient with respect to the current pixels is
+    /// in `self.work.grad` (for `self.work.values`): the Hessian, the Newton system, the update.
+    pub fn forward_step_from_gradient(&mut self, update: Update) -> Result<(), LossReason> {
         let mut h = [0.0; MAX_DOF * MAX_DOF];
         self.am.hessian(
             Wrt::Current,
@@ -510,7 +516,7 @@ impl Context {
         let jac = std::mem::take(&mut self.work.jac);
         let r = self.step(&jac, &h, update);
         self.work.jac = jac;
-        r.map(|_| f)
+        r
     }
 
     /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.work.grad`) and

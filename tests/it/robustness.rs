@@ -12,6 +12,11 @@ use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 /// dark background, under a global gain swing of +-35% and a broad light blob (+60 gray levels at
 /// its centre, about 120 px wide) that crosses the target, with noise and 8-bit quantisation.
 pub fn lit_static_sequence(frames: usize, seed: u64) -> (Vec<GrayU8>, Quad) {
+    lit_sequence_with_contrast(frames, seed, 0.25)
+}
+
+/// [`lit_static_sequence`] with the target's texture at `contrast` of the brick's (0.25 there).
+pub fn lit_sequence_with_contrast(frames: usize, seed: u64, contrast: f64) -> (Vec<GrayU8>, Quad) {
     let tex = texture("skimage_brick.png");
     let (w, h) = (480usize, 360usize);
     let target = Quad::from_rect(170.0, 110.0, 140.0, 140.0);
@@ -32,7 +37,7 @@ pub fn lit_static_sequence(frames: usize, seed: u64) -> (Vec<GrayU8>, Quad) {
                 let base = if inside {
                     let (u, v) = ((x - 170) * 2, (y - 110) * 2);
                     let s = tex.data[(v % tex.height) * tex.width + (u % tex.width)] as f64;
-                    25.0 + 0.25 * s
+                    25.0 + contrast * s
                 } else {
                     30.0
                 };
@@ -282,8 +287,10 @@ fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
     // each frame, the homography ends 2-3.6 px off at worst, the translation 0.2-0.5 px: the
     // extra DOF are weakly pinned by sparse marks), but nothing in the search adds a drift of
     // its own: tracked frame to frame, each frame ends where the search started from the truth
-    // ends (within 0.01 px, measured). A bias of 0.02 px per frame in the search would add
-    // 2.4 px by the end.
+    // ends (within 0.01 px for FCLK and ICLK; ESM, which ends a frame at its best point when its
+    // steps keep lowering the similarity, differs by up to 0.52 px on single frames, 0.05 px on
+    // average over the last 20). A bias of 0.02 px per frame in the search would add 2.4 px by
+    // the end.
     let (frames, truth) = sparse_lit_sequence(121, 1, true, true, true);
     let mut report = Vec::new();
     for (sm, am, ssm) in [
@@ -297,18 +304,21 @@ fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
         let spec = TrackerSpec::from_names(sm, am, ssm).unwrap();
         let tracked = run(&spec, &frames, &truth);
         let cost = from_truth(&spec, &frames, &truth);
-        let extra = tracked
-            .iter()
-            .zip(&cost)
-            .map(|(t, c)| t - c)
-            .fold(f64::NEG_INFINITY, f64::max);
+        // Per frame, the tracked error beyond the from-truth one; and over the last 20 frames on
+        // average, where a drift of the search's own would have accumulated.
+        let extra: Vec<f64> = tracked.iter().zip(&cost).map(|(t, c)| t - c).collect();
+        let most = extra.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let late = extra[100..].iter().sum::<f64>() / 20.0;
         let held = worst(&tracked, 120);
         report.push(format!(
-            "{sm}-{am}-{ssm}: worst {held:.2}, from the truth {:.2}, extra {extra:.2}",
+            "{sm}-{am}-{ssm}: worst {held:.2}, from the truth {:.2}, extra {most:.2} (last 20 frames {late:.3})",
             worst(&cost, 120)
         ));
         let bound = if ssm == "translation" { 1.0 } else { 5.0 };
-        assert!(extra < 0.1 && held < bound, "{report:#?}");
+        assert!(
+            most < 1.0 && late.abs() < 0.1 && held < bound,
+            "{report:#?}"
+        );
     }
     eprintln!("{report:#?}");
 }
@@ -366,4 +376,24 @@ fn lscv_holds_a_static_target_under_moving_light_for_200_frames() {
     // The default is 6x6.
     let spec = TrackerSpec::from_names("esm", "lscv", "homography").unwrap();
     assert_eq!(worst(&run(&spec, &frames, &truth), 200), default);
+}
+
+#[test]
+fn esm_does_not_run_away_when_its_steps_lower_the_similarity() {
+    // The same light over the brick at half and full contrast. Classic ESM (`max_falls=0`) has
+    // no fixed point near the optimum on some frames and slides away while the similarity falls
+    // (ZNCC at half contrast, SSD at full contrast: lost by frame 80); ending the frame at the
+    // best point after three falls in a row holds both over 120 frames, as FCLK-ZNCC does.
+    for (contrast, am) in [(0.5, "zncc"), (1.0, "ssd")] {
+        let (frames, truth) = lit_sequence_with_contrast(121, 1, contrast);
+        let held = |falls: &str| {
+            let mut spec = TrackerSpec::from_names("esm", am, "homography").unwrap();
+            spec.set_param("max_falls", falls).unwrap();
+            worst(&run(&spec, &frames, &truth), 120)
+        };
+        let (classic, default) = (held("0"), held("3"));
+        eprintln!("contrast {contrast}, esm-{am}: classic {classic:.2}, max_falls=3 {default:.2}");
+        assert!(classic > 20.0, "{am}: classic {classic}");
+        assert!(default < 5.0, "{am}: max_falls=3 {default}");
+    }
 }

@@ -29,14 +29,17 @@ pub struct RegistrationSpec {
 }
 
 impl RegistrationSpec {
+    /// The definitions of the search method's and the appearance model's own parameters.
+    pub fn method_defs(&self) -> Result<Vec<&'static ParamDef>> {
+        let mut defs = sm::param_defs(&self.sm)?;
+        defs.extend(am::param_defs(&self.am)?);
+        Ok(defs)
+    }
+
     /// Drops the method parameters that neither the search method nor the appearance model
     /// has (after either was changed); all of them when a name is unknown.
     pub fn keep_known_params(&mut self) {
-        let defs = sm::param_defs(&self.sm).and_then(|mut d| {
-            d.extend(am::param_defs(&self.am)?);
-            Ok(d)
-        });
-        self.method = match defs {
+        self.method = match self.method_defs() {
             Ok(defs) => self.method.split(&defs).0,
             Err(_) => MethodParams::default(),
         };
@@ -202,11 +205,7 @@ impl TrackerSpec {
     /// tracker's).
     pub fn method_defs(&self) -> Result<Vec<&'static ParamDef>> {
         match self {
-            TrackerSpec::Registration(r) => {
-                let mut defs = sm::param_defs(&r.sm)?;
-                defs.extend(am::param_defs(&r.am)?);
-                Ok(defs)
-            }
+            TrackerSpec::Registration(r) => r.method_defs(),
             TrackerSpec::Whole(w) => Ok(registry::lookup(WHOLE_REGISTRY, "tracker", &w.tracker)?
                 .build
                 .params

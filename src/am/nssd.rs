@@ -6,6 +6,7 @@
 //! similarity threshold reads (an SSD of 1 on this scale is a difference of 255 gray levels).
 //! Not to be confused with the SSD of z-scores, which is ZNCC.
 
+use super::ssd::Ssd;
 use super::{Am, AmBuilder, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
@@ -19,68 +20,42 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
 
 /// The scale of the intensity mapping.
 const SCALE: f32 = 1.0 / 255.0;
+/// What the scale does to `f` and its derivatives with respect to the intensities.
+const SCALE_SQ: f64 = (SCALE as f64) * (SCALE as f64);
 
+/// SSD's value and derivatives, times `s^2`.
 #[derive(Debug, Default, Clone)]
-pub struct Nssd {
-    template: Vec<f32>,
-}
-
-impl Nssd {
-    fn value(&self, current: &[f32]) -> f64 {
-        let mut total = 0.0f64;
-        for (ct, cc) in self.template.chunks(256).zip(current.chunks(256)) {
-            let s: f32 = ct
-                .iter()
-                .zip(cc)
-                .map(|(t, c)| {
-                    let d = SCALE * (t - c);
-                    d * d
-                })
-                .sum();
-            total += s as f64;
-        }
-        -0.5 * total
-    }
-}
+pub struct Nssd(Ssd);
 
 impl Am for Nssd {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
     fn set_template(&mut self, template: &[f32]) {
-        self.template.clear();
-        self.template.extend_from_slice(template);
+        self.0.set_template(template)
     }
     fn template(&self) -> &[f32] {
-        &self.template
+        self.0.template()
     }
     fn similarity(&mut self, current: &[f32]) -> f64 {
-        self.value(current)
+        SCALE_SQ * self.0.similarity(current)
     }
     fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
-        // df/dI_i = s^2 (I*_i - I_i); the template's is its negative.
-        let k = match wrt {
-            Wrt::Current => SCALE * SCALE,
-            Wrt::Template => -SCALE * SCALE,
-        };
-        for ((g, &t), &c) in grad.iter_mut().zip(&self.template).zip(current) {
-            *g = k * (t - c);
-        }
-        self.value(current)
+        let f = self.0.gradient(wrt, current, grad);
+        grad.iter_mut().for_each(|g| *g *= SCALE_SQ as f32);
+        SCALE_SQ * f
     }
     fn hessian(
         &mut self,
-        _wrt: Wrt,
-        _kind: HessianKind,
-        _current: &[f32],
+        wrt: Wrt,
+        kind: HessianKind,
+        current: &[f32],
         jac: &[f32],
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
-        // d2f/dI2 = -s^2 Id for both arguments and every kind.
-        super::minus_jtj(jac, dof, out);
-        let k = (SCALE * SCALE) as f64;
-        out[..dof * dof].iter_mut().for_each(|v| *v *= k);
+        self.0.hessian(wrt, kind, current, jac, dof, out);
+        out[..dof * dof].iter_mut().for_each(|v| *v *= SCALE_SQ);
     }
     fn embed(&self, patch: &[f32], out: &mut [f32]) {
         for (o, &p) in out.iter_mut().zip(patch) {

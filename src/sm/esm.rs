@@ -16,8 +16,8 @@
 //!
 //! So when `max_falls` iterations in a row (default 3) have each lowered the similarity, the
 //! frame ends at the best point it visited. A single lower step is allowed, since ESM's path
-//! need not be monotone on the way to its optimum. With an unchanged appearance the rule never
-//! fires before convergence; `max_falls = 0` is the classic ESM. It costs nothing: the test
+//! need not be monotone on the way to its optimum. With an unchanged appearance every ESM
+//! combination still passes the generic recovery test; `max_falls = 0` is the classic ESM. It costs nothing: the test
 //! reuses the similarity that each step computes anyway. Measured (`regtrack eval --sm esm
 //! --reinit` on the seven sequences of `docs/evidence.sh`, mean success rate, classic ESM ->
 //! `max_falls = 3`): SSD 0.714 -> 0.724, NCC 0.719 -> 0.720, SCV 0.713 -> 0.717, LSCV 0.715 ->

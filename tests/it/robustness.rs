@@ -58,11 +58,26 @@ pub fn lit_sequence_with_contrast(frames: usize, seed: u64, contrast: f64) -> (V
 
 /// Tracks the frames; returns the error per frame (infinite once lost).
 fn run(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad) -> Vec<f64> {
+    errors(spec, frames, truth, false)
+}
+
+/// The error per frame of the search started from the truth on that frame: where the cost's
+/// optimum lies, whatever happened before.
+fn from_truth(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad) -> Vec<f64> {
+    errors(spec, frames, truth, true)
+}
+
+/// The error per frame (infinite once lost), each frame's search started from the previous
+/// estimate or, with `restart`, from the truth.
+fn errors(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad, restart: bool) -> Vec<f64> {
     let mut t = Tracker::new(spec).unwrap();
     t.initialize(FrameInput::Gray8(&frames[0]), truth).unwrap();
     frames[1..]
         .iter()
         .map(|f| {
+            if restart {
+                t.set_corners(truth).unwrap();
+            }
             let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
             if out.status == TrackStatus::Tracking {
                 alignment_error(&out.corners, truth)
@@ -321,25 +336,6 @@ fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
         );
     }
     eprintln!("{report:#?}");
-}
-
-/// The error per frame of the search started from the truth on that frame: where the cost's
-/// optimum lies, whatever happened before.
-fn from_truth(spec: &TrackerSpec, frames: &[GrayU8], truth: &Quad) -> Vec<f64> {
-    let mut t = Tracker::new(spec).unwrap();
-    t.initialize(FrameInput::Gray8(&frames[0]), truth).unwrap();
-    frames[1..]
-        .iter()
-        .map(|f| {
-            t.set_corners(truth).unwrap();
-            let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
-            if out.status == TrackStatus::Tracking {
-                alignment_error(&out.corners, truth)
-            } else {
-                f64::INFINITY
-            }
-        })
-        .collect()
 }
 
 #[test]

@@ -393,3 +393,37 @@ fn esm_does_not_run_away_when_its_steps_lower_the_similarity() {
         assert!(default < 5.0, "{am}: max_falls=3 {default}");
     }
 }
+
+/// Not a test: writes the light sequences above to disk in the MTF layout (PNG frames), for
+/// `regtrack eval` and for older builds (docs/robustness.md compares the code the issue measured
+/// with today's on them): `REGTRACK_LIT_OUT=/tmp/lit cargo test --test it
+/// write_the_lit_sequences -- --ignored`.
+#[test]
+#[ignore]
+fn write_the_lit_sequences() {
+    let Ok(out) = std::env::var("REGTRACK_LIT_OUT") else {
+        eprintln!("set REGTRACK_LIT_OUT to the output folder");
+        return;
+    };
+    let root = std::path::Path::new(&out);
+    let mut seqs: Vec<(String, Vec<GrayU8>, Quad)> = Vec::new();
+    let (f, q) = sparse_lit_sequence(121, 1, true, true, true);
+    seqs.push(("sparse".into(), f, q));
+    for c in [0.25, 0.5, 1.0] {
+        let (f, q) = lit_sequence_with_contrast(121, 1, c);
+        seqs.push((format!("brick{}", (c * 100.0) as i32), f, q));
+    }
+    for (name, frames, q) in seqs {
+        let dir = root.join(&name);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (i, fr) in frames.iter().enumerate() {
+            image::GrayImage::from_raw(fr.width as u32, fr.height as u32, fr.data.clone())
+                .unwrap()
+                .save(dir.join(format!("frame{:05}.png", i + 1)))
+                .unwrap();
+        }
+        let corners = vec![Some(q); frames.len()];
+        regtrack::dataset::write_corners(&root.join(format!("{name}.txt")), &corners, "png")
+            .unwrap();
+    }
+}

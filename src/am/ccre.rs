@@ -2,8 +2,8 @@
 //! al. 2012): MI's construction with the joint probability replaced by the cumulative joint
 //! distribution of the template intensity,
 //! `f = sum_{a,b} P(a, b) log(P(a, b) / (P_t(a) p_c(b)))`, `P(a, b) = P(I* <= a, I = b)`,
-//! `P_t(a) = P(I* <= a)`, over the same cubic B-spline Parzen histogram as MI (8 bins plus
-//! padding). The exact gradient and Hessian with respect to either patch are derived in
+//! `P_t(a) = P(I* <= a)`, over the same cubic B-spline Parzen histogram as MI (`bins` bins,
+//! default 16, plus padding). The exact gradient and Hessian with respect to either patch are derived in
 //! [`super::parzen`] (by the chain rule through `G = df/dp`, which for CCRE gathers the
 //! logarithms of every cumulative cell above a cell, and the quadratic form of `d2f/dp2` on the
 //! cumulative sums of the projected cell derivatives).
@@ -12,17 +12,24 @@
 //! the one after convergence; Gauss-Newton is the negative semi-definite part of the Newton
 //! Hessian, as for MI. No embedding.
 
-use super::parzen::{Measure, Parzen};
+use super::parzen::{BINS_PARAM, Measure, Parzen};
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::params::ParamDef;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "ccre",
     aliases: &[],
     description: "cross cumulative residual entropy (cumulative B-spline Parzen joint histogram)",
-    build: AmBuilder::plain(|_| Box::new(Ccre(Parzen::new(Measure::Ccre)))),
+    build: AmBuilder {
+        params: &PARAMS,
+        build: |p| Box::new(Ccre(Parzen::new(Measure::Ccre, p.get(&PARAMS[0]) as usize))),
+    },
 };
+
+/// The parameters: the histogram's bins.
+pub const PARAMS: [ParamDef; 1] = [BINS_PARAM];
 
 #[derive(Debug, Clone)]
 pub struct Ccre(Parzen);
@@ -58,7 +65,7 @@ mod tests {
                 .collect()
         };
         let t = crop(4, 4);
-        let mut am = Ccre(Parzen::new(Measure::Ccre));
+        let mut am = Ccre(Parzen::new(Measure::Ccre, crate::am::parzen::DEFAULT_BINS));
         am.set_template(&t);
         let at = am.similarity(&t);
         assert!(at > 0.0);

@@ -1,6 +1,7 @@
 //! Mutual information (Dowson and Bowden; Dame and Marchand) with a cubic B-spline Parzen
 //! window: `f = sum_{a,b} p(a, b) log(p(a, b) / (p_t(a) p_c(b)))` in nats, `p` the joint
-//! probability of the template and current intensities over 8 bins (plus padding bins). The
+//! probability of the template and current intensities over `bins` bins (default 16, the paper's
+//! 8 with `bins=8`; see [`super::parzen::BINS_PARAM`]) plus padding bins. The
 //! estimator and the derivation of the exact gradient and Hessian (with respect to either patch)
 //! are in [`super::parzen`]. With respect to the current pixels the gradient reduces to Dame and
 //! Marchand's `sum_ab dp(a, b)/dc_j log(p(a, b) / p_c(b))`, since `p_t` does not move.
@@ -10,17 +11,24 @@
 //! Hessian (the first-order term of MI is positive semi-definite, so there is no least-squares
 //! Gauss-Newton). No embedding: MI is not a distance between independently embedded patches.
 
-use super::parzen::{Measure, Parzen};
+use super::parzen::{BINS_PARAM, Measure, Parzen};
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::params::ParamDef;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
     name: "mi",
     aliases: &[],
-    description: "mutual information (cubic B-spline Parzen joint histogram, 8 bins)",
-    build: AmBuilder::plain(|_| Box::new(Mi(Parzen::new(Measure::Mi)))),
+    description: "mutual information (cubic B-spline Parzen joint histogram, 16 bins by default)",
+    build: AmBuilder {
+        params: &PARAMS,
+        build: |p| Box::new(Mi(Parzen::new(Measure::Mi, p.get(&PARAMS[0]) as usize))),
+    },
 };
+
+/// The parameters: the histogram's bins.
+pub const PARAMS: [ParamDef; 1] = [BINS_PARAM];
 
 #[derive(Debug, Clone)]
 pub struct Mi(Parzen);
@@ -49,7 +57,7 @@ mod tests {
     fn invariant_to_gain_and_bias_and_to_an_inversion() {
         let mut rng = Rng::new(31);
         let t = smooth_patch(&mut rng, 30);
-        let mut mi = Mi(Parzen::new(Measure::Mi));
+        let mut mi = Mi(Parzen::new(Measure::Mi, crate::am::parzen::DEFAULT_BINS));
         mi.set_template(&t);
         let at = mi.similarity(&t);
         assert!(at > 0.5, "{at}");
@@ -79,7 +87,7 @@ mod tests {
                 .collect()
         };
         let t = crop(4, 4);
-        let mut mi = Mi(Parzen::new(Measure::Mi));
+        let mut mi = Mi(Parzen::new(Measure::Mi, crate::am::parzen::DEFAULT_BINS));
         mi.set_template(&t);
         let at = mi.similarity(&t);
         for dy in 0..9 {
@@ -99,7 +107,7 @@ mod tests {
             .iter()
             .map(|&v| 0.5 * v + 60.0 + rng.range(-30.0, 30.0) as f32)
             .collect();
-        let mut m = Mi(Parzen::new(Measure::Mi));
+        let mut m = Mi(Parzen::new(Measure::Mi, crate::am::parzen::DEFAULT_BINS));
         m.set_template(&a);
         let (mut ga, mut gb) = (vec![0f32; 300], vec![0f32; 300]);
         let f1 = m.gradient(Wrt::Current, &b, &mut gb);

@@ -32,6 +32,31 @@ pub(super) fn smooth_patch(rng: &mut Rng, res: usize) -> Vec<f32> {
         .collect()
 }
 
+/// Every AM with its default parameters, and the histogram models (MI, CCRE) also with few and
+/// many bins: the derivative checks below run on each. With each, the finite-difference step
+/// (grey levels) for the gradient check: a fraction of a bin, since the B-spline window's third
+/// derivative jumps at the bins' edges (at 32 bins a bin is 8 grey levels wide).
+fn models() -> Vec<(String, Box<dyn Am>, f32)> {
+    let mut out = Vec::new();
+    for e in REGISTRY.iter() {
+        out.push((e.name.to_string(), e.build.default_model(), 1.0));
+        if e.build.params.iter().any(|d| d.name == "bins") {
+            for bins in [4.0, 32.0] {
+                let mut p = crate::params::MethodParams::default();
+                p.set("bins", bins);
+                if let Ok(am) = build_with(e.name, &p) {
+                    out.push((
+                        format!("{} bins={bins}", e.name),
+                        am,
+                        (8.0 / bins as f32).min(1.0),
+                    ));
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Similarity with the `wrt` argument replaced by `x`.
 fn f_at(am: &mut dyn Am, wrt: Wrt, template: &[f32], current: &[f32], x: &[f32]) -> f64 {
     match wrt {
@@ -64,8 +89,7 @@ proptest::proptest! {
     ) {
         let n = t.len();
         let c: Vec<f32> = t.iter().zip(&noise).map(|(&v, &e)| gain * v + bias + e).collect();
-        for e in REGISTRY.iter() {
-            let mut am = e.build.default_model();
+        for (name, mut am, step) in models() {
             if !am.exact_derivatives() {
                 continue;
             }
@@ -73,18 +97,18 @@ proptest::proptest! {
                 am.set_template(&t);
                 let mut g = vec![0f32; n];
                 let f = am.gradient(wrt, &c, &mut g);
-                proptest::prop_assert!((f - am.similarity(&c)).abs() <= 1e-6 * (1.0 + f.abs()), "{} value", e.name);
+                proptest::prop_assert!((f - am.similarity(&c)).abs() <= 1e-6 * (1.0 + f.abs()), "{} value", name);
                 let x0 = if wrt == Wrt::Current { c.clone() } else { t.clone() };
                 let scale = g.iter().fold(0f32, |m, v| m.max(v.abs())) as f64;
                 for i in 0..n {
-                    let h = 1.0;
+                    let h = step;
                     let (mut xp, mut xm) = (x0.clone(), x0.clone());
                     xp[i] += h;
                     xm[i] -= h;
                     let fd = (f_at(&mut *am, wrt, &t, &c, &xp) - f_at(&mut *am, wrt, &t, &c, &xm)) / (2.0 * h as f64);
                     proptest::prop_assert!(
                         (fd - g[i] as f64).abs() <= 2e-3 * scale + 1e-9,
-                        "{} {:?} pixel {}: analytic {} vs fd {}", e.name, wrt, i, g[i], fd
+                        "{} {:?} pixel {}: analytic {} vs fd {}", name, wrt, i, g[i], fd
                     );
                 }
             }
@@ -97,8 +121,7 @@ fn hessians_match_finite_differences() {
     // d/dd [J^T g(x + J d)] at d = 0 is J^T (d2f/dI2) J: compare with the Newton Hessian.
     let mut rng = Rng::new(5);
     let (n, s) = (60, 3);
-    for e in REGISTRY.iter() {
-        let mut am = e.build.default_model();
+    for (name, mut am, _) in models() {
         let t = patch(&mut rng, n);
         let c: Vec<f32> = t
             .iter()
@@ -150,7 +173,7 @@ fn hessians_match_finite_differences() {
                     assert!(
                         (fd - h[i * s + k]).abs() <= 5e-3 * scale,
                         "{} {:?} H[{},{}]: analytic {} vs fd {}",
-                        e.name,
+                        name,
                         wrt,
                         i,
                         k,
@@ -167,8 +190,7 @@ fn hessians_match_finite_differences() {
 fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
     let mut rng = Rng::new(9);
     let (n, s) = (50, 4);
-    for e in REGISTRY.iter() {
-        let mut am = e.build.default_model();
+    for (name, mut am, _) in models() {
         let t = patch(&mut rng, n);
         let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
         if !am.exact_derivatives() {
@@ -197,12 +219,12 @@ fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
             assert!(
                 (hn[i] - hg[i]).abs() <= 1e-4 * scale,
                 "{}: Newton vs GN at convergence",
-                e.name
+                name
             );
             assert!(
                 (hn[i] - ha[i]).abs() <= 1e-4 * scale,
                 "{}: Newton vs after-convergence",
-                e.name
+                name
             );
         }
         // Gauss-Newton away from convergence: -H is positive semi-definite (x^T H x <= 0).
@@ -215,7 +237,7 @@ fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
             assert!(
                 q <= 1e-9 * scale,
                 "{}: GN Hessian not negative semi-definite",
-                e.name
+                name
             );
         }
     }

@@ -34,24 +34,25 @@ pub(super) fn smooth_patch(rng: &mut Rng, res: usize) -> Vec<f32> {
 
 /// Every AM with its default parameters, and the histogram models (MI, CCRE) also with few and
 /// many bins: the derivative checks below run on each. With each, the finite-difference step
-/// (grey levels) for the gradient check: a fraction of a bin, since the B-spline window's third
-/// derivative jumps at the bins' edges (at 32 bins a bin is 8 grey levels wide).
+/// (grey levels) for the gradient check: for the histogram models a small fraction of a bin (1
+/// grey level at 8 bins, 36 wide; 0.25 at 32, 8 wide), since the B-spline window's third
+/// derivative jumps at the bins' edges.
 fn models() -> Vec<(String, Box<dyn Am>, f32)> {
+    let step = |bins: f64| (8.0 / bins as f32).min(1.0);
     let mut out = Vec::new();
     for e in REGISTRY.iter() {
-        out.push((e.name.to_string(), e.build.default_model(), 1.0));
-        if e.build.params.iter().any(|d| d.name == "bins") {
-            for bins in [4.0, 32.0] {
-                let mut p = crate::params::MethodParams::default();
-                p.set("bins", bins);
-                if let Ok(am) = build_with(e.name, &p) {
-                    out.push((
-                        format!("{} bins={bins}", e.name),
-                        am,
-                        (8.0 / bins as f32).min(1.0),
-                    ));
+        match e.build.params.iter().find(|d| d.name == "bins") {
+            Some(d) => {
+                out.push((e.name.to_string(), e.build.default_model(), step(d.default)));
+                for bins in [4.0, 32.0] {
+                    let mut p = crate::params::MethodParams::default();
+                    p.set("bins", bins);
+                    if let Ok(am) = build_with(e.name, &p) {
+                        out.push((format!("{} bins={bins}", e.name), am, step(bins)));
+                    }
                 }
             }
+            None => out.push((e.name.to_string(), e.build.default_model(), 1.0)),
         }
     }
     out

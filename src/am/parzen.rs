@@ -351,6 +351,8 @@ pub(crate) struct Parzen {
     self_valid: bool,
     /// Scratch: `V` (`side x side x MAX_DOF`), per-pixel diagonal terms, a product buffer.
     v: Vec<f64>,
+    /// Scratch: one `dof`-vector per histogram row or column.
+    lines: Vec<[f64; MAX_DOF]>,
     diag: Vec<f32>,
     tmp: Vec<f32>,
 }
@@ -370,6 +372,7 @@ impl Parzen {
             self_stats: Stats::new(bins.side),
             self_valid: false,
             v: vec![0.0; bins.side * bins.side * MAX_DOF],
+            lines: vec![[0.0; MAX_DOF]; bins.side],
             diag: Vec::new(),
             tmp: Vec::new(),
         }
@@ -462,6 +465,7 @@ impl Parzen {
             jac,
             dof,
             &mut self.v,
+            &mut self.lines,
             &mut self.diag,
             &mut self.tmp,
             out,
@@ -485,6 +489,7 @@ fn newton(
     jac: &[f32],
     dof: usize,
     v: &mut [f64],
+    lines: &mut [[f64; MAX_DOF]],
     diag: &mut [f32],
     tmp: &mut Vec<f32>,
     out: &mut [f64; MAX_DOF * MAX_DOF],
@@ -546,7 +551,8 @@ fn newton(
     };
     match measure {
         Measure::Mi => {
-            let mut col = vec![[0.0f64; MAX_DOF]; side];
+            let col = lines;
+            col.fill([0.0; MAX_DOF]);
             for a in r0..r1 {
                 let mut row = [0.0f64; MAX_DOF];
                 for b in c0..c1 {
@@ -571,7 +577,8 @@ fn newton(
             }
         }
         Measure::Ccre => {
-            let mut rows = vec![[0.0f64; MAX_DOF]; side];
+            let rows = lines;
+            rows.fill([0.0; MAX_DOF]);
             for b in c0..c1 {
                 let (mut u, mut x, mut w) = ([0.0f64; MAX_DOF], [0.0f64; MAX_DOF], [0.0; MAX_DOF]);
                 for a in r0..r1 {

@@ -1,12 +1,11 @@
-//! Cross cumulative residual entropy (CCRE; Wang and Vemuri, in the tracking form of Richa et
-//! al. 2012): MI's construction with the joint probability replaced by the cumulative joint
-//! distribution of the template intensity,
-//! `f = sum_{a,b} P(a, b) log(P(a, b) / (P_t(a) p_c(b)))`, `P(a, b) = P(I* <= a, I = b)`,
-//! `P_t(a) = P(I* <= a)`, over the same cubic B-spline Parzen histogram as MI (`bins` bins,
-//! default 16, plus padding). The exact gradient and Hessian with respect to either patch are derived in
-//! [`super::parzen`] (by the chain rule through `G = df/dp`, which for CCRE gathers the
-//! logarithms of every cumulative cell above a cell, and the quadratic form of `d2f/dp2` on the
-//! cumulative sums of the projected cell derivatives).
+//! Cross cumulative residual entropy (CCRE; Wang and Vemuri, in the tracking form of Richa et al.
+//! 2012): MI's construction with the joint probability replaced by the cumulative joint
+//! distribution of the template intensity, `f = sum_{a,b} P(a, b) log(P(a, b) / (P_t(a) p_c(b)))`,
+//! `P(a, b) = P(I* <= a, I = b)`, `P_t(a) = P(I* <= a)`, over the same cubic B-spline Parzen
+//! histogram as MI (`bins` bins, default 16, plus padding). The exact gradient and Hessian with
+//! respect to either patch are derived in [`super::parzen`] (by the chain rule through `G = df/dp`,
+//! which for CCRE gathers the logarithms of every cumulative cell above a cell, and the quadratic
+//! form of `d2f/dp2` on the cumulative sums of the projected cell derivatives).
 //!
 //! Not symmetric in its arguments (only the template side is cumulated). The default Hessian is
 //! the one after convergence; Gauss-Newton is the negative semi-definite part of the Newton

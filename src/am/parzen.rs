@@ -6,10 +6,11 @@
 //!
 //! An intensity `v` is scaled to bin units `s = v (B - 1) / 255` with `B` bins (the parameter
 //! `bins` of MI and CCRE, default 16; KLD uses 8; with 8, `0..255` spans `0..7`); the cubic
-//! B-spline `beta` (support `(-2, 2)`, C2, a partition of unity: `sum_a beta(a - s) = 1` for
-//! every `s`) spreads it over the four bins `floor(s) - 1 .. floor(s) + 2`, Dame and Marchand's "B bins + 3 padding bins" for grey levels in `0..255`.
-//! Values outside `0..255` simply use further padding bins (the similarity does not depend on how
-//! many empty bins there are), up to `-255..510`, beyond which they are clamped (zero derivative).
+//! B-spline `beta` (support `(-2, 2)`, C2, a partition of unity: `sum_a beta(a - s) = 1` for every
+//! `s`) spreads it over the four bins `floor(s) - 1 .. floor(s) + 2`, Dame and Marchand's "B bins +
+//! 3 padding bins" for grey levels in `0..255`. Values outside `0..255` simply use further padding
+//! bins (the similarity does not depend on how many empty bins there are), up to `-255..510`,
+//! beyond which they are clamped (zero derivative).
 //! With `t_i`, `c_i` the scaled template and current intensities:
 //!
 //! `p(a, b) = 1/N sum_i beta(a - t_i) beta(b - c_i)`, `p_t(a) = sum_b p(a, b)`,

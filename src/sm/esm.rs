@@ -18,16 +18,16 @@
 //! ends at the best point it visited. A single lower step is allowed, since ESM's path need not be
 //! monotone on the way to its optimum. With an unchanged appearance every ESM combination still
 //! passes the generic recovery test; `max_falls = 0` is the classic ESM. It costs nothing: the test
-//! reuses the similarity that each step computes anyway. Measured (`regtrack eval --sm esm
-//! --reinit` on the seven sequences of `docs/evidence.sh`, mean success rate, classic ESM ->
-//! `max_falls = 3`): SSD 0.714 -> 0.724, NCC 0.719 -> 0.720, SCV 0.713 -> 0.717, LSCV 0.715 ->
-//! 0.718, MI (8 bins) 0.522 -> 0.554, ZNCC 0.689 -> 0.687. Ending at the first fall
-//! (`max_falls = 1`) cut frames short on the way to the optimum (SR@5 of SSD 0.693 -> 0.679);
-//! 2 and 5 were within 0.01 of 3. Undoing the step and going on with forward (FCLK) steps instead, whose fixed points
-//! are the similarity's own maxima, gave 0.706, 0.715, 0.704, 0.710, 0.523 and 0.690, and lost
-//! ESM-SSD on the sparse target under moving light where the classic ESM holds: under a gain change
-//! SSD's own maximum is not where the target is, and the template's half of ESM's Jacobian, which
-//! no light reaches, kept it closer.
+//! reuses the similarity that each step computes anyway. Measured
+//! (`regtrack eval --sm esm --reinit` on the seven sequences of `docs/evidence.sh`, mean success
+//! rate, classic ESM -> `max_falls = 3`): SSD 0.714 -> 0.724, NCC 0.719 -> 0.720, SCV 0.713 ->
+//! 0.717, LSCV 0.715 -> 0.718, MI (8 bins) 0.522 -> 0.554, ZNCC 0.689 -> 0.687. Ending at the first
+//! fall (`max_falls = 1`) cut frames short on the way to the optimum (SR@5 of SSD 0.693 -> 0.679);
+//! 2 and 5 were within 0.01 of 3. Undoing the step and going on with forward (FCLK) steps instead,
+//! whose fixed points are the similarity's own maxima, gave 0.706, 0.715, 0.704, 0.710, 0.523 and
+//! 0.690, and lost ESM-SSD on the sparse target under moving light where the classic ESM holds:
+//! under a gain change SSD's own maximum is not where the target is, and the template's half of
+//! ESM's Jacobian, which no light reaches, kept it closer.
 
 use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
 use crate::am::Wrt;

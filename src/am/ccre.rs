@@ -11,10 +11,9 @@
 //! the one after convergence; Gauss-Newton is the negative semi-definite part of the Newton
 //! Hessian, as for MI. No embedding.
 
-use super::parzen::{BINS_PARAM, Measure, Parzen};
+use super::parzen::{Measure, PARAMS, Parzen};
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
-use crate::params::ParamDef;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
@@ -23,12 +22,9 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     description: "cross cumulative residual entropy (cumulative B-spline Parzen joint histogram)",
     build: AmBuilder {
         params: &PARAMS,
-        build: |p| Box::new(Ccre(Parzen::new(Measure::Ccre, p.get(&PARAMS[0]) as usize))),
+        build: |p| Box::new(Ccre(Parzen::from_params(Measure::Ccre, p))),
     },
 };
-
-/// The parameters: the histogram's bins.
-pub const PARAMS: [ParamDef; 1] = [BINS_PARAM];
 
 #[derive(Debug, Clone)]
 pub struct Ccre(Parzen);

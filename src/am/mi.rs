@@ -11,10 +11,9 @@
 //! Hessian (the first-order term of MI is positive semi-definite, so there is no least-squares
 //! Gauss-Newton). No embedding: MI is not a distance between independently embedded patches.
 
-use super::parzen::{BINS_PARAM, Measure, Parzen};
+use super::parzen::{Measure, PARAMS, Parzen};
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
-use crate::params::ParamDef;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
@@ -23,12 +22,9 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
     description: "mutual information (cubic B-spline Parzen joint histogram, 16 bins by default)",
     build: AmBuilder {
         params: &PARAMS,
-        build: |p| Box::new(Mi(Parzen::new(Measure::Mi, p.get(&PARAMS[0]) as usize))),
+        build: |p| Box::new(Mi(Parzen::from_params(Measure::Mi, p))),
     },
 };
-
-/// The parameters: the histogram's bins.
-pub const PARAMS: [ParamDef; 1] = [BINS_PARAM];
 
 #[derive(Debug, Clone)]
 pub struct Mi(Parzen);

@@ -99,6 +99,9 @@ pub(crate) const BINS_PARAM: crate::params::ParamDef = crate::params::ParamDef::
     16.0,
 );
 
+/// The parameters of MI and CCRE: the histogram's bins.
+pub(crate) const PARAMS: [crate::params::ParamDef; 1] = [BINS_PARAM];
+
 /// The binning: `B` bins spanning grey levels `0..255`, bin coordinates clamped to
 /// `-(B - 1)..2 (B - 1)` (grey levels `-255..510`), histogram index `floor(s) - 1 + B` of the
 /// first of a value's four bins, `3 B + 1` histogram cells per side.
@@ -377,6 +380,11 @@ impl Parzen {
             diag: Vec::new(),
             tmp: Vec::new(),
         }
+    }
+
+    /// The model with the bins of `params` (see [`PARAMS`]).
+    pub fn from_params(measure: Measure, params: &crate::params::MethodParams) -> Self {
+        Parzen::new(measure, params.get(&BINS_PARAM) as usize)
     }
 
     pub fn set_template(&mut self, template: &[f32]) {

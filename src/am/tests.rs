@@ -47,9 +47,8 @@ fn models() -> Vec<(String, Box<dyn Am>, f32)> {
                 for bins in [4.0, 32.0] {
                     let mut p = crate::params::MethodParams::default();
                     p.set("bins", bins);
-                    if let Ok(am) = build_with(e.name, &p) {
-                        out.push((format!("{} bins={bins}", e.name), am, step(bins)));
-                    }
+                    let am = build_with(e.name, &p).expect("bins in range");
+                    out.push((format!("{} bins={bins}", e.name), am, step(bins)));
                 }
             }
             None => out.push((e.name.to_string(), e.build.default_model(), 1.0)),

@@ -28,6 +28,29 @@ pub struct BenchRow {
     pub lost_at: Option<usize>,
 }
 
+impl BenchRow {
+    /// The column names of [`BenchRow::line`].
+    pub const HEADER: &'static str =
+        "tracker                     frames it/frame  us/iter  tracker FPS   live FPS   init ms";
+
+    /// The row as `regtrack bench` prints it, under [`BenchRow::HEADER`].
+    pub fn line(&self) -> String {
+        format!(
+            "{:<26} {:>7} {:>8.2} {:>8.1} {:>12.0} {:>10.0} {:>9.1}{}",
+            self.tracker,
+            self.frames,
+            self.iterations_per_frame,
+            self.us_per_iteration,
+            self.tracker_fps,
+            self.live_fps,
+            self.init_ms,
+            self.lost_at
+                .map(|f| format!("  (lost at frame {f})"))
+                .unwrap_or_default()
+        )
+    }
+}
+
 /// Frames of a sequence loaded in memory.
 pub struct LoadedFrames {
     pub gray: Vec<GrayU8>,

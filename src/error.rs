@@ -52,9 +52,20 @@ pub enum Error {
     /// A report that cannot be made: a folder without runs, a figure that cannot be drawn.
     #[error("{}: {message}", path.display())]
     Report { path: PathBuf, message: String },
+    /// The worker threads of a batch could not be started.
+    #[error("cannot start {threads} worker threads: {message}")]
+    Threads { threads: usize, message: String },
 }
 
 impl Error {
+    /// A report or result folder that cannot be used, with the path it concerns.
+    pub fn report(path: &std::path::Path, message: impl Into<String>) -> Self {
+        Error::Report {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+
     /// Wraps an I/O error with the path it concerns.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         let path = path.into();

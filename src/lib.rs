@@ -43,23 +43,28 @@ pub mod am;
 #[cfg(feature = "gui")]
 pub mod app;
 pub mod bench;
+pub mod catalogue;
 pub mod dataset;
 pub mod error;
 pub mod eval;
 pub mod geometry;
 pub mod gt;
 pub mod imaging;
+pub mod keys;
 pub mod landscape;
 pub mod linalg;
 pub mod observe;
 pub mod params;
+pub mod registration;
 pub mod registry;
 pub mod report;
 pub mod rng;
 pub mod sm;
+pub mod spec;
 pub mod ssm;
 pub mod status;
 pub mod tracker;
+pub mod visual_tracker;
 pub mod whole;
 
 pub use error::{Error, Result};

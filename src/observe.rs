@@ -2,11 +2,59 @@
 //! inspector's convergence plot and step-through view are built on [`Recorder`]; benchmarks use
 //! [`NoObserver`].
 
-use crate::geometry::Quad;
-use crate::sm::MethodVisual;
+use crate::geometry::{Point, Quad};
 use crate::status::FrameOutcome;
 use serde::{Deserialize, Serialize};
 use std::time::Duration;
+
+/// What a method shows of its state: a sampling method's candidates (NN's samples, PF's
+/// particles) as the target's quad under each candidate warp, in frame pixels, with their
+/// weights; a whole tracker's detections (quads), keypoints (points) and response map.
+#[derive(Clone, Copy, Debug)]
+pub struct MethodVisual<'a> {
+    /// What the quads are ("samples", "particles", "detections").
+    pub label: &'static str,
+    pub quads: &'a [Quad],
+    /// One weight per quad in `0..=1` (the best is 1).
+    pub weights: &'a [f32],
+    /// The candidate the method chose, if any.
+    pub chosen: Option<usize>,
+    /// Points (keypoints, flow points) with a weight each in `0..=1` (`points.len()` weights).
+    pub points: &'a [Point],
+    pub point_weights: &'a [f32],
+    /// A map over a region of the frame (a correlation filter's response).
+    pub map: Option<ResponseMap<'a>>,
+}
+
+impl<'a> MethodVisual<'a> {
+    /// Quads and their weights only.
+    pub fn quads(
+        label: &'static str,
+        quads: &'a [Quad],
+        weights: &'a [f32],
+        chosen: Option<usize>,
+    ) -> Self {
+        MethodVisual {
+            label,
+            quads,
+            weights,
+            chosen,
+            points: &[],
+            point_weights: &[],
+            map: None,
+        }
+    }
+}
+
+/// A `width x height` map (row-major) laid over the quad `at` of the frame: value `(0, 0)` at its
+/// first corner, rows along its first side.
+#[derive(Clone, Copy, Debug)]
+pub struct ResponseMap<'a> {
+    pub width: usize,
+    pub height: usize,
+    pub values: &'a [f32],
+    pub at: Quad,
+}
 
 /// One iteration of a search method on one frame.
 #[derive(Clone, Copy, Debug)]
@@ -92,7 +140,7 @@ pub struct VisualRecord {
     pub map: Option<MapRecord>,
 }
 
-/// An owned copy of a [`crate::sm::ResponseMap`].
+/// An owned copy of a [`ResponseMap`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MapRecord {
     pub width: usize,

@@ -97,75 +97,16 @@ pub struct Report {
     pub files: Vec<PathBuf>,
 }
 
-fn report_error(path: &Path, message: impl Into<String>) -> Error {
-    Error::Report {
-        path: path.to_path_buf(),
-        message: message.into(),
-    }
-}
-
-/// Every run saved under each of `dirs` (`DIR/tracking_data/<seq>/*_run.json`). A folder without
-/// runs is an error naming it, and so is a run (sequence and tracker) found in two folders: its
-/// frames would count twice.
-pub fn read_all_runs(dirs: &[PathBuf]) -> Result<Vec<RunResult>> {
-    if dirs.is_empty() {
-        return Err(Error::InvalidParameter(
-            "no evaluation folder given".to_string(),
-        ));
-    }
-    let mut seen: BTreeMap<(String, String), &Path> = BTreeMap::new();
-    let mut all = Vec::new();
-    for dir in dirs {
-        if !dir.is_dir() {
-            return Err(Error::Missing { path: dir.clone() });
-        }
-        let no_runs = || {
-            report_error(
-                dir,
-                "no evaluation runs here (tracking_data/<sequence>/*_run.json); \
-                 give an output folder of `regtrack eval`",
-            )
-        };
-        if !dir.join("tracking_data").is_dir() {
-            return Err(no_runs());
-        }
-        let runs = eval::read_runs(dir)?;
-        if runs.is_empty() {
-            return Err(no_runs());
-        }
-        for r in &runs {
-            let key = (r.sequence.clone(), r.spec.label());
-            if let Some(first) = seen.insert(key, dir) {
-                return Err(report_error(
-                    dir,
-                    format!(
-                        "the run of {} on {} is also in {}: give each run once",
-                        r.spec.label(),
-                        r.sequence,
-                        first.display()
-                    ),
-                ));
-            }
-        }
-        all.extend(runs);
-    }
-    Ok(all)
-}
-
 /// Each tracker's runs pooled over every sequence ([`eval::summarize`] with `ALL`), sorted by
 /// mean SR, best first (ties by label).
 pub fn pool(runs: &[RunResult]) -> Vec<TrackerResult> {
-    let mut by_label: BTreeMap<String, Vec<&RunResult>> = BTreeMap::new();
-    for r in runs {
-        by_label.entry(r.spec.label()).or_default().push(r);
-    }
-    let mut out: Vec<TrackerResult> = by_label
-        .values()
+    let mut out: Vec<TrackerResult> = eval::by_tracker(runs)
+        .iter()
         .map(|mine| {
             let errors: Vec<f64> = mine.iter().flat_map(|r| r.sr_errors()).collect();
             let sequences: BTreeSet<String> = mine.iter().map(|r| r.sequence.clone()).collect();
             TrackerResult {
-                summary: eval::summarize("ALL", mine),
+                summary: eval::summarize(eval::POOLED, mine),
                 sequences: sequences.into_iter().collect(),
                 curve: eval::success_curve(&errors),
             }
@@ -402,7 +343,7 @@ fn register_font() -> Result<()> {
     if ok {
         Ok(())
     } else {
-        Err(report_error(
+        Err(Error::report(
             Path::new("assets/fonts/DejaVuSans.ttf"),
             "the bundled font cannot be read",
         ))
@@ -784,7 +725,7 @@ fn draw_speed<DB: DrawingBackend>(
 /// Draws `plot` to `path`, a `.png` or `.svg` file.
 fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
     if w < MIN_SIZE.0 || h < MIN_SIZE.1 || w > 8192 || h > 8192 {
-        return Err(report_error(
+        return Err(Error::report(
             path,
             format!(
                 "a figure of {w}x{h} px: width {}..=8192 and height {}..=8192",
@@ -793,7 +734,7 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
         ));
     }
     register_font()?;
-    let fail = |e: String| report_error(path, format!("cannot draw the figure: {e}"));
+    let fail = |e: String| Error::report(path, format!("cannot draw the figure: {e}"));
     let bytes = match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
             let mut svg = String::new();
@@ -827,7 +768,7 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
             png
         }
         _ => {
-            return Err(report_error(path, "a figure is written as .png or .svg"));
+            return Err(Error::report(path, "a figure is written as .png or .svg"));
         }
     };
     write_atomic(path, &bytes)
@@ -951,7 +892,7 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
 /// Reads every run under `dirs`, pools them per tracker, and writes to `out` the success-rate
 /// figures and the speed chart (PNG and SVG) and `report.md`.
 pub fn write_report(dirs: &[PathBuf], out: &Path) -> Result<Report> {
-    let runs = read_all_runs(dirs)?;
+    let runs = eval::read_all_runs(dirs)?;
     let trackers = pool(&runs);
     let figures = sr_figures(&trackers);
     let mut files = Vec::new();

@@ -263,33 +263,6 @@ fn correlation_models_are_invariant_to_gain_and_zncc_to_bias() {
 }
 
 #[test]
-fn am_parameter_names_are_not_taken_by_search_methods_or_the_tracker() {
-    // A registration tracker's method parameters are one bag: the AM takes its own names and
-    // the search method the rest, so a name must belong to one of them only.
-    for e in REGISTRY {
-        for d in e.build.params {
-            assert!(
-                !crate::params::TRACKER_PARAMS
-                    .iter()
-                    .any(|t| t.name == d.name),
-                "{}: '{}' is a tracker parameter",
-                e.name,
-                d.name
-            );
-            for s in crate::sm::REGISTRY {
-                assert!(
-                    !s.build.params.iter().any(|p| p.name == d.name),
-                    "{}: '{}' is a parameter of {}",
-                    e.name,
-                    d.name,
-                    s.name
-                );
-            }
-        }
-    }
-}
-
-#[test]
 fn am_parameters_reach_the_model_and_are_checked() {
     use crate::params::MethodParams;
     let mut p = MethodParams::default();

@@ -1041,37 +1041,7 @@ fn shortcut(i: &egui::InputState, key: egui::Key) -> Option<egui::Modifiers> {
 /// Per tracker, the iterations' patches are kept for this many of the newest tracked frames.
 pub const PATCH_FRAMES: usize = 300;
 
-/// The keyboard shortcuts (the help overlay and `regtrack inspect --help` list them).
-pub const SHORTCUTS: &[(&str, &str)] = &[
-    ("Space", "play / pause"),
-    (
-        "Right / Left",
-        "next frame (tracks it if needed) / previous frame",
-    ),
-    ("Home / End", "start frame / last tracked frame"),
-    ("Ctrl+O", "open a sequence (file dialog)"),
-    ("Ctrl+S", "save the session to the session field's path"),
-    ("F1 or ?", "this help"),
-    ("F2 / F3", "hide or show the trackers / plots panel"),
-    (
-        "Ctrl+Z / Ctrl+Shift+Z",
-        "undo / redo a ground-truth correction",
-    ),
-    ("ground-truth mode: 1-4, 0", "pick a corner, the whole quad"),
-    (
-        "ground-truth mode: arrows, + / -",
-        "nudge by the step, double / halve the step",
-    ),
-    ("ground-truth mode: N / P", "next / previous frame"),
-    (
-        "ground-truth mode: J, O",
-        "jump to the worst frame, mark occluded",
-    ),
-    (
-        "ground-truth mode: Enter / Esc",
-        "accept / reject a proposal",
-    ),
-];
+pub use crate::keys::SHORTCUTS;
 
 fn help_window(ctx: &egui::Context, open: &mut bool) {
     egui::Window::new("Keyboard shortcuts")

@@ -249,6 +249,18 @@ fn file_name(p: &Path) -> String {
         .unwrap_or_else(|| "sequence".into())
 }
 
+/// One sequence (a ground-truth file, or a folder that is not a dataset root) or the sequences
+/// of a dataset root ([`discover`]).
+pub fn open_or_discover(path: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
+    let single =
+        path.is_file() || (path.is_dir() && names.is_none() && discover(path, None).is_err());
+    if single {
+        Ok(vec![Sequence::open(path)?])
+    } else {
+        discover(path, names)
+    }
+}
+
 /// The sequences of a dataset root in the MTF layout: every `<root>/<seq>.txt` with a folder
 /// `<root>/<seq>/` beside it, sorted by name; with `names`, only those (in that order; an unknown
 /// name is an error listing what exists).

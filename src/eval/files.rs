@@ -2,9 +2,10 @@
 //! `tracking_data/<sequence>/<sm>_<am>_<ssm>*.txt` and the whole run as `..._run.json`; per batch
 //! `summary.csv` and `summary.json`. Shards of a batch (one `--out` each) merge into one summary.
 
-use super::{RunResult, Summary, success_curve, summarize};
+use super::{RunResult, Summary, success_curve, summary_rows};
 use crate::dataset::{write_atomic, write_corners};
 use crate::error::{Error, Result};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Writes a run's files; returns the corners file.
@@ -19,7 +20,7 @@ pub fn write_run_files(out: &Path, run: &RunResult) -> Result<PathBuf> {
     );
     for f in &run.frames {
         let status = match f.status {
-            crate::tracker::TrackStatus::Lost(r) => format!("lost:{}", serde_plain(&r)),
+            crate::status::TrackStatus::Lost(r) => format!("lost:{}", serde_plain(&r)),
             s => serde_plain(&s),
         };
         errors.push_str(&format!(
@@ -47,7 +48,7 @@ pub fn write_run_files(out: &Path, run: &RunResult) -> Result<PathBuf> {
 }
 
 /// The run file of a tracker on a sequence under an output folder.
-pub fn run_file(out: &Path, sequence: &str, spec: &crate::tracker::TrackerSpec) -> PathBuf {
+pub fn run_file(out: &Path, sequence: &str, spec: &crate::spec::TrackerSpec) -> PathBuf {
     out.join("tracking_data")
         .join(sequence)
         .join(format!("{}_run.json", spec.label()))
@@ -59,7 +60,7 @@ pub fn run_file(out: &Path, sequence: &str, spec: &crate::tracker::TrackerSpec) 
 pub fn finished_run(
     out: &Path,
     sequence: &str,
-    spec: &crate::tracker::TrackerSpec,
+    spec: &crate::spec::TrackerSpec,
     opts: &super::EvalOptions,
 ) -> Option<RunResult> {
     let text = std::fs::read_to_string(run_file(out, sequence, spec)).ok()?;
@@ -97,23 +98,59 @@ pub fn read_runs(dir: &Path) -> Result<Vec<RunResult>> {
         .collect()
 }
 
-/// Merges the outputs of several shards of one evaluation: one summary row per run and, per
-/// tracker, one pooled over all sequences (`ALL`), written to `out`. Returns the rows.
-pub fn merge_shards(shards: &[PathBuf], out: &Path) -> Result<Vec<Summary>> {
-    let mut runs = Vec::new();
-    for s in shards {
-        runs.extend(read_runs(s)?);
+/// Every run saved under each of `dirs` (`DIR/tracking_data/<seq>/*_run.json`). A folder without
+/// runs is an error naming it, and so is a run (sequence and tracker) found in two folders: its
+/// frames would count twice.
+pub fn read_all_runs(dirs: &[PathBuf]) -> Result<Vec<RunResult>> {
+    if dirs.is_empty() {
+        return Err(Error::InvalidParameter(
+            "no evaluation folder given".to_string(),
+        ));
     }
-    let mut rows: Vec<Summary> = runs.iter().map(|r| r.summary()).collect();
-    let mut labels: Vec<String> = runs.iter().map(|r| r.spec.label()).collect();
-    labels.sort();
-    labels.dedup();
-    for label in labels {
-        let mine: Vec<&RunResult> = runs.iter().filter(|r| r.spec.label() == label).collect();
-        if mine.len() > 1 {
-            rows.push(summarize("ALL", &mine));
+    let mut seen: BTreeMap<(String, String), &Path> = BTreeMap::new();
+    let mut all = Vec::new();
+    for dir in dirs {
+        if !dir.is_dir() {
+            return Err(Error::Missing { path: dir.clone() });
         }
+        let no_runs = || {
+            Error::report(
+                dir,
+                "no evaluation runs here (tracking_data/<sequence>/*_run.json); \
+                 give an output folder of `regtrack eval`",
+            )
+        };
+        if !dir.join("tracking_data").is_dir() {
+            return Err(no_runs());
+        }
+        let runs = read_runs(dir)?;
+        if runs.is_empty() {
+            return Err(no_runs());
+        }
+        for r in &runs {
+            let key = (r.sequence.clone(), r.spec.label());
+            if let Some(first) = seen.insert(key, dir) {
+                return Err(Error::report(
+                    dir,
+                    format!(
+                        "the run of {} on {} is also in {}: give each run once",
+                        r.spec.label(),
+                        r.sequence,
+                        first.display()
+                    ),
+                ));
+            }
+        }
+        all.extend(runs);
     }
+    Ok(all)
+}
+
+/// Merges the outputs of several shards of one evaluation: the summary rows of all their runs
+/// ([`summary_rows`]), written to `out`. A run found in two shards is an error. Returns the rows.
+pub fn merge_shards(shards: &[PathBuf], out: &Path) -> Result<Vec<Summary>> {
+    let runs = read_all_runs(shards)?;
+    let rows = summary_rows(&runs);
     write_summaries(out, &rows)?;
     Ok(rows)
 }
@@ -162,4 +199,37 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let json =
         serde_json::to_string_pretty(rows).map_err(|e| Error::InvalidParameter(e.to_string()))?;
     write_atomic(&out.join("summary.json"), json.as_bytes())
+}
+
+/// The summary rows as the command line prints them: a header, then a line per row.
+pub fn summary_table(rows: &[Summary]) -> String {
+    let mut out = format!(
+        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9}\n",
+        "sequence",
+        "tracker",
+        "frames",
+        "SR@5",
+        "SR@20",
+        "mean err",
+        "fail",
+        "it/fr",
+        "tracker FPS",
+        "live FPS"
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0}\n",
+            r.sequence,
+            r.tracker,
+            r.frames,
+            r.sr5,
+            r.sr20,
+            r.mean_error,
+            r.failures,
+            r.iterations_per_frame,
+            r.tracker_fps,
+            r.live_fps
+        ));
+    }
+    out
 }

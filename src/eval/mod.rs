@@ -3,10 +3,13 @@
 //! sequence and pooled over a dataset, and speed two ways: tracker-only (the search) and live
 //! path (from an 8-bit frame in memory, pre-processing included). Batches of runs go in parallel.
 
+mod batch;
 mod files;
 
+pub use batch::{Batch, BatchOutcome, POOLED, Plan, Shard, by_tracker, summary_rows};
 pub use files::{
-    finished_run, merge_shards, read_runs, run_file, write_run_files, write_summaries,
+    finished_run, merge_shards, read_all_runs, read_runs, run_file, summary_table, write_run_files,
+    write_summaries,
 };
 
 /// JSON has no infinity: errors of frames without corners are written as `null`.
@@ -31,7 +34,6 @@ use crate::error::{Error, Result};
 use crate::geometry::{Quad, alignment_error, center_error, iou};
 use crate::observe::Observer;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Largest threshold of the success curve (px).
@@ -471,36 +473,4 @@ pub fn run_sequence(
         options: opts.clone(),
         error: stopped,
     })
-}
-
-/// Runs every (sequence, spec) pair on `jobs` threads (`0`: all cores), calling
-/// `progress(done, total)` after each run. Results come back in input order.
-pub fn run_batch(
-    seqs: &[Sequence],
-    specs: &[TrackerSpec],
-    opts: &EvalOptions,
-    jobs: usize,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Vec<Result<RunResult>>> {
-    let pairs: Vec<(&Sequence, &TrackerSpec)> = seqs
-        .iter()
-        .flat_map(|s| specs.iter().map(move |p| (s, p)))
-        .collect();
-    let total = pairs.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs)
-        .build()
-        .map_err(|e| Error::InvalidParameter(format!("cannot start {jobs} worker threads: {e}")))?;
-    Ok(pool.install(|| {
-        pairs
-            .par_iter()
-            .map(|(s, p)| {
-                let r = run_sequence(s, p, opts, None, &mut crate::observe::NoObserver);
-                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                progress(d, total);
-                r
-            })
-            .collect()
-    }))
 }

@@ -308,3 +308,68 @@ mod tests {
         }
     }
 }
+
+/// What [`fit_sequences`] did for one sequence and SSM.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FitOutcome {
+    /// The OptGT file exists and was kept (it may hold corrections exported by the inspector).
+    Kept {
+        sequence: String,
+        ssm: String,
+        path: PathBuf,
+    },
+    /// The fit was written.
+    Written {
+        sequence: String,
+        ssm: String,
+        /// Frames with ground truth.
+        frames: usize,
+        mean_residual: f64,
+        /// The frame (0-based) with the largest residual, and that residual.
+        worst: (usize, f64),
+        path: PathBuf,
+    },
+}
+
+/// `regtrack gt-fit`: for each sequence and SSM, the low-DOF ground truth fitted and written in
+/// MTF's OptGT layout beside the sequence's ground truth; an existing file is kept unless
+/// `force`. A sequence without any ground truth is an error.
+pub fn fit_sequences(
+    sequences: &[Sequence],
+    ssms: &[String],
+    force: bool,
+) -> Result<Vec<FitOutcome>> {
+    let mut out = Vec::new();
+    for seq in sequences {
+        if seq.ground_truth.iter().all(Option::is_none) {
+            return Err(Error::Sequence {
+                path: seq.gt_path.clone().unwrap_or_default(),
+                message: format!("sequence '{}' has no ground truth to fit", seq.name),
+            });
+        }
+        let dir = ground_truth_dir(seq);
+        for name in ssms {
+            let low = fit_ground_truth(name, &seq.ground_truth)?;
+            let path = opt_gt_path(&dir, &seq.name, &low.ssm);
+            if path.exists() && !force {
+                out.push(FitOutcome::Kept {
+                    sequence: seq.name.clone(),
+                    ssm: low.ssm,
+                    path,
+                });
+                continue;
+            }
+            let (path, _) = write_opt_gt(&dir, seq, &low, &[])?;
+            let r: Vec<f64> = low.residuals.iter().flatten().copied().collect();
+            out.push(FitOutcome::Written {
+                sequence: seq.name.clone(),
+                ssm: low.ssm.clone(),
+                frames: r.len(),
+                mean_residual: r.iter().sum::<f64>() / r.len().max(1) as f64,
+                worst: low.worst_frames().first().copied().unwrap_or((0, 0.0)),
+                path,
+            });
+        }
+    }
+    Ok(out)
+}

@@ -13,8 +13,8 @@ pub mod fit;
 pub mod journal;
 
 pub use fit::{
-    LowDofGroundTruth, best_fit, fit_ground_truth, ground_truth_dir, low_dof_ground_truth,
-    opt_gt_path, write_opt_gt,
+    FitOutcome, LowDofGroundTruth, best_fit, fit_ground_truth, fit_sequences, ground_truth_dir,
+    low_dof_ground_truth, opt_gt_path, write_opt_gt,
 };
 pub use journal::{Change, Mark};
 

@@ -197,9 +197,7 @@ impl SearchMethod for Parallel {
                 continue;
             }
             let p = ctx.params;
-            ctx.warp_grid(&p);
-            ctx.sample(img, false);
-            let f = ctx.am.similarity(&ctx.work.values);
+            let f = ctx.similarity_at(img, &p);
             if f.is_finite() && best.is_none_or(|(b, _)| f > b) {
                 best = Some((f, p));
             }

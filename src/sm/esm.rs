@@ -89,8 +89,7 @@ impl SearchMethod for Esm {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, true);
+        ctx.sample_gradients_at(img, &p);
         ctx.warped_gradient(&p);
         let f = ctx
             .am

@@ -24,8 +24,7 @@ impl SearchMethod for Falk {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, true);
+        ctx.sample_gradients_at(img, &p);
         // d pixel / d (normalised point) is the scale of the normaliser.
         let s = ctx.norm.scale as f32;
         ctx.work

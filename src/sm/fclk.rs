@@ -24,8 +24,7 @@ impl SearchMethod for Fclk {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, true);
+        ctx.sample_gradients_at(img, &p);
         ctx.warped_gradient(&p);
         ctx.project_gradients(None);
         ctx.forward_step(Update::Compose).map(Step::auto)

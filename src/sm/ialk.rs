@@ -26,8 +26,7 @@ impl SearchMethod for Ialk {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, false);
+        ctx.sample_at(img, &p);
         // Template gradient times the inverse of the warp's point Jacobian (normalised frame).
         let m = ctx.ssm.matrix(&p).cast::<f32>();
         for i in 0..ctx.len() {

@@ -82,8 +82,7 @@ impl SearchMethod for Iclk {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, false);
+        ctx.sample_at(img, &p);
         let f = ctx
             .am
             .gradient(Wrt::Template, &ctx.work.values, &mut ctx.work.grad);

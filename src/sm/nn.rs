@@ -373,8 +373,7 @@ impl SearchMethod for Nn {
                     }
                 }
             };
-            ctx.warp_grid(&q);
-            ctx.sample(img, false);
+            ctx.sample_at(img, &q);
             let row = &mut self.data[k * n..(k + 1) * n];
             if self.scorer.is_some() {
                 row.copy_from_slice(&ctx.work.values);
@@ -422,9 +421,7 @@ impl SearchMethod for Nn {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
-        ctx.warp_grid(&p);
-        ctx.sample(img, false);
-        let f = ctx.am.similarity(&ctx.work.values);
+        let f = ctx.similarity_at(img, &p);
         if self.scorer.is_some() {
             self.query.copy_from_slice(&ctx.work.values);
         } else {

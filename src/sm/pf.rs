@@ -156,9 +156,7 @@ impl SearchMethod for Pf {
                 self.states[i] = s;
             }
             let s = self.states[i];
-            ctx.warp_grid(&s);
-            ctx.sample(img, false);
-            let f = ctx.am.similarity(&ctx.work.values);
+            let f = ctx.similarity_at(img, &s);
             self.sims[i] = if f.is_finite() { f } else { f64::NEG_INFINITY };
             best = best.max(self.sims[i]);
         }
@@ -212,9 +210,7 @@ impl SearchMethod for Pf {
         self.resample();
         ctx.params = estimate;
         self.last = Some(estimate);
-        ctx.warp_grid(&estimate);
-        ctx.sample(img, false);
-        let f = ctx.am.similarity(&ctx.work.values);
+        let f = ctx.similarity_at(img, &estimate);
         Ok(if self.round >= self.rounds {
             Step::done(f)
         } else {

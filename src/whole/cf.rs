@@ -6,7 +6,7 @@ use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
 use crate::imaging::hog::{FHOG_CHANNELS, FeatureMap, fhog};
 use crate::imaging::{GrayF32, resample_window};
-use crate::sm::{MethodVisual, ResponseMap};
+use crate::observe::{MethodVisual, ResponseMap};
 
 /// Which features a filter sees.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -4,18 +4,20 @@
 //! centre given the scale and rotation agreed by all pairs, and the largest cluster of votes
 //! decides. Outputs a rotated and scaled quad.
 
-use super::{Base, Pose, frame_f32};
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, track_forward_backward};
 use crate::imaging::keypoints::{BRIEF_BORDER, Brief, Descriptor, fast_in, hamming, orientation};
 use crate::imaging::{GrayF32, gaussian_blur, gaussian_kernel, resample_window};
 use crate::linalg::median;
+use crate::observe::MethodVisual;
 use crate::observe::Observer;
 use crate::params::ParamDef;
-use crate::sm::MethodVisual;
+use crate::registry::Entry;
+use crate::spec::WholeSpec;
 use crate::status::{FrameOutcome, LossReason, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 
 /// CMT's parameters (the paper's values where it gives them).
 pub const PARAMS: &[ParamDef] = &[
@@ -84,6 +86,18 @@ pub const PARAMS: &[ParamDef] = &[
 const MODEL_SCALES: [f64; 4] = [0.8, 0.64, 0.5, 1.25];
 /// Pixels around the target's bounding box in those views.
 const MARGIN: f64 = 20.0;
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "cmt",
+    aliases: &[],
+    description: "consensus-based matching and tracking of keypoints (Nebehay and Pflugfelder 2014): FAST and binary descriptors, optical flow, votes; translation, scale and rotation",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::Similarity,
+        build,
+    },
+};
 
 /// Builds a CMT tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
@@ -281,13 +295,18 @@ fn describe_frame(
         .collect()
 }
 
-impl VisualTracker for Cmt {
-    fn spec(&self) -> &TrackerSpec {
-        &self.base.spec
+impl WholeTracker for Cmt {
+    const MIN_SIDE: f64 = 8.0;
+
+    fn base(&self) -> &Base {
+        &self.base
     }
 
-    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
-        self.base.start(quad, 8.0)?;
+    fn base_mut(&mut self) -> &mut Base {
+        &mut self.base
+    }
+
+    fn start(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         let img = frame_f32(input);
         let inside = |p: Point| point_in_quad(quad, p);
         let kps = describe_frame(
@@ -375,7 +394,7 @@ impl VisualTracker for Cmt {
         Ok(())
     }
 
-    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         if self.base.status == TrackStatus::Uninitialized {
             return self.base.idle();
         }
@@ -513,21 +532,12 @@ impl VisualTracker for Cmt {
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
 
-    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
-        self.base.set_corners(quad)?;
+    fn corners_set(&mut self) -> Result<()> {
         // The active keypoints belong to the old position: matching finds them again.
         if let Some(m) = self.model.as_mut() {
             m.active.clear();
         }
         Ok(())
-    }
-
-    fn status(&self) -> TrackStatus {
-        self.base.status
-    }
-
-    fn corners(&self) -> Quad {
-        self.base.quad()
     }
 }
 

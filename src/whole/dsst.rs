@@ -4,7 +4,7 @@
 //! numerator and denominator updated as running averages).
 
 use super::cf::{self, Features, Window};
-use super::{Base, Pose, frame_f32};
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft1, Fft2};
@@ -12,8 +12,10 @@ use crate::imaging::hog::fhog;
 use crate::imaging::{GrayF32, resample_window};
 use crate::observe::Observer;
 use crate::params::ParamDef;
+use crate::registry::Entry;
+use crate::spec::WholeSpec;
 use crate::status::{FrameOutcome, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 
 /// DSST's parameters (the paper's values by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -76,6 +78,18 @@ pub const PARAMS: &[ParamDef] = &[
         256.0,
     ),
 ];
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "dsst",
+    aliases: &[],
+    description: "discriminative scale space tracker (Danelljan et al. 2014): translation filter plus a 1-D scale filter",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::TranslationScale,
+        build,
+    },
+};
 
 /// Builds a DSST tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
@@ -303,13 +317,18 @@ impl State {
     }
 }
 
-impl VisualTracker for Dsst {
-    fn spec(&self) -> &TrackerSpec {
-        &self.base.spec
+impl WholeTracker for Dsst {
+    const MIN_SIDE: f64 = 4.0;
+
+    fn base(&self) -> &Base {
+        &self.base
     }
 
-    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
-        self.base.start(quad, 4.0)?;
+    fn base_mut(&mut self) -> &mut Base {
+        &mut self.base
+    }
+
+    fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;
         let win = Window::new(
             tw,
@@ -356,7 +375,7 @@ impl VisualTracker for Dsst {
         Ok(())
     }
 
-    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         let Some(st) = self.state.as_mut() else {
             return self.base.idle();
         };
@@ -404,19 +423,10 @@ impl VisualTracker for Dsst {
         )
     }
 
-    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
-        self.base.set_corners(quad)?;
+    fn corners_set(&mut self) -> Result<()> {
         // DSST tracks translation and scale: it keeps no rotation.
         self.base.pose.angle = 0.0;
         Ok(())
-    }
-
-    fn status(&self) -> TrackStatus {
-        self.base.status
-    }
-
-    fn corners(&self) -> Quad {
-        self.base.quad()
     }
 }
 

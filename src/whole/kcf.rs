@@ -3,14 +3,16 @@
 //! evaluated in the Fourier domain. Translation only: the target keeps its initial size.
 
 use super::cf::{self, Features, Kernel, Window};
-use super::{Base, Pose, frame_f32};
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
 use crate::observe::Observer;
 use crate::params::ParamDef;
+use crate::registry::Entry;
+use crate::spec::WholeSpec;
 use crate::status::{FrameOutcome, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 
 /// KCF's parameters (the paper's values for HOG by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -68,6 +70,18 @@ pub const PARAMS: &[ParamDef] = &[
         256.0,
     ),
 ];
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "kcf",
+    aliases: &[],
+    description: "kernelised correlation filter (Henriques et al. 2015): Gaussian kernel, HOG or raw pixels, translation",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::Translation,
+        build,
+    },
+};
 
 /// Builds a KCF tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
@@ -181,13 +195,18 @@ impl State {
     }
 }
 
-impl VisualTracker for Kcf {
-    fn spec(&self) -> &TrackerSpec {
-        &self.base.spec
+impl WholeTracker for Kcf {
+    const MIN_SIDE: f64 = 4.0;
+
+    fn base(&self) -> &Base {
+        &self.base
     }
 
-    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
-        self.base.start(quad, 4.0)?;
+    fn base_mut(&mut self) -> &mut Base {
+        &mut self.base
+    }
+
+    fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;
         let win = Window::new(
             tw,
@@ -222,7 +241,7 @@ impl VisualTracker for Kcf {
         Ok(())
     }
 
-    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         let Some(st) = self.state.as_mut() else {
             return self.base.idle();
         };
@@ -261,19 +280,10 @@ impl VisualTracker for Kcf {
         )
     }
 
-    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
-        self.base.set_corners(quad)?;
+    fn corners_set(&mut self) -> Result<()> {
         // KCF tracks translation only: it keeps its scale and rotation.
         self.base.pose.scale = 1.0;
         self.base.pose.angle = 0.0;
         Ok(())
-    }
-
-    fn status(&self) -> TrackStatus {
-        self.base.status
-    }
-
-    fn corners(&self) -> Quad {
-        self.base.quad()
     }
 }

@@ -14,63 +14,38 @@ pub mod tld;
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad};
 use crate::imaging::GrayF32;
+use crate::observe::MethodVisual;
 use crate::observe::{Iteration, Observer};
 use crate::params::ParamDef;
 use crate::registry::Entry;
-use crate::sm::MethodVisual;
+use crate::spec::{TrackerSpec, WholeSpec};
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, WholeDef, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 use std::borrow::Cow;
 use std::time::{Duration, Instant};
 
-/// The whole trackers.
-pub const REGISTRY: &[Entry<WholeDef>] = &[
-    Entry {
-        name: "kcf",
-        aliases: &[],
-        description: "kernelised correlation filter (Henriques et al. 2015): Gaussian kernel, HOG or raw pixels, translation",
-        build: WholeDef {
-            params: kcf::PARAMS,
-            build: kcf::build,
-        },
-    },
-    Entry {
-        name: "dsst",
-        aliases: &[],
-        description: "discriminative scale space tracker (Danelljan et al. 2014): translation filter plus a 1-D scale filter",
-        build: WholeDef {
-            params: dsst::PARAMS,
-            build: dsst::build,
-        },
-    },
-    Entry {
-        name: "rct",
-        aliases: &["ct"],
-        description: "real-time compressive tracker (Zhang et al. 2012): random Haar-like projections, online naive Bayes, translation",
-        build: WholeDef {
-            params: rct::PARAMS,
-            build: rct::build,
-        },
-    },
-    Entry {
-        name: "tld",
-        aliases: &["tracking_learning_detection"],
-        description: "tracking-learning-detection (Kalal et al. 2012): median flow, a fern and nearest-neighbour detector, P-N learning; re-detects after a loss",
-        build: WholeDef {
-            params: tld::PARAMS,
-            build: tld::build,
-        },
-    },
-    Entry {
-        name: "cmt",
-        aliases: &[],
-        description: "consensus-based matching and tracking of keypoints (Nebehay and Pflugfelder 2014): FAST and binary descriptors, optical flow, votes; translation, scale and rotation",
-        build: WholeDef {
-            params: cmt::PARAMS,
-            build: cmt::build,
-        },
-    },
-];
+/// A registry entry of a whole tracker: its parameters, the motion it models and its
+/// constructor.
+#[derive(Clone, Copy)]
+pub struct WholeDef {
+    pub params: &'static [ParamDef],
+    pub motion: Motion,
+    pub build: fn(&WholeSpec) -> Result<Box<dyn VisualTracker>>,
+}
+
+/// What motion of its target a whole tracker estimates (the initial quad moved by it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Motion {
+    Translation,
+    /// Translation and scale.
+    TranslationScale,
+    /// Translation, scale and rotation.
+    Similarity,
+}
+
+/// The whole trackers: one entry per file.
+pub const REGISTRY: &[Entry<WholeDef>] =
+    &[kcf::ENTRY, dsst::ENTRY, rct::ENTRY, tld::ENTRY, cmt::ENTRY];
 
 /// Where a whole tracker puts its target: the initial quad moved by a similarity about its
 /// centre.
@@ -85,9 +60,52 @@ pub struct Pose {
     pub angle: f64,
 }
 
+/// What a whole tracker implements; [`VisualTracker`] follows from it (the spec, the status and
+/// the corners are the [`Base`]'s; initialising and moving the tracker check the quad there
+/// first).
+pub trait WholeTracker: Send + std::fmt::Debug {
+    /// The smallest side (px) of a target the tracker can start on.
+    const MIN_SIDE: f64;
+    fn base(&self) -> &Base;
+    fn base_mut(&mut self) -> &mut Base;
+    /// Learns the target: called once the base has started on `quad` (checked, at least
+    /// [`WholeTracker::MIN_SIDE`] a side).
+    fn start(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()>;
+    /// Tracks one frame ([`VisualTracker::update`]).
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome;
+    /// The base was moved to new corners ([`VisualTracker::set_corners`]): adjust the pose to
+    /// what the tracker can represent, and its model.
+    fn corners_set(&mut self) -> Result<()> {
+        Ok(())
+    }
+}
+
+impl<T: WholeTracker> VisualTracker for T {
+    fn spec(&self) -> &TrackerSpec {
+        &self.base().spec
+    }
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+        self.base_mut().start(quad, T::MIN_SIDE)?;
+        self.start(input, quad)
+    }
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+        self.track(input, observer)
+    }
+    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
+        self.base_mut().set_corners(quad)?;
+        self.corners_set()
+    }
+    fn status(&self) -> TrackStatus {
+        self.base().status
+    }
+    fn corners(&self) -> Quad {
+        self.base().quad()
+    }
+}
+
 /// What every whole tracker keeps: its spec, the initial quad, the pose, the status.
 #[derive(Clone, Debug)]
-pub(crate) struct Base {
+pub struct Base {
     pub spec: TrackerSpec,
     pub init: Quad,
     pub c0: Point,

@@ -4,16 +4,18 @@
 //! that is updated online from positives near the target and negatives around it. Translation
 //! only; the search is coarse to fine, as in the fast variant of the same authors.
 
-use super::{Base, Pose, frame_f32};
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::Integral;
+use crate::observe::MethodVisual;
 use crate::observe::Observer;
 use crate::params::ParamDef;
+use crate::registry::Entry;
 use crate::rng::Rng;
-use crate::sm::MethodVisual;
+use crate::spec::WholeSpec;
 use crate::status::{FrameOutcome, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 
 /// RCT's parameters (the paper's values by default).
 pub const PARAMS: &[ParamDef] = &[
@@ -89,6 +91,18 @@ pub const PARAMS: &[ParamDef] = &[
         0.0,
     ),
 ];
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "rct",
+    aliases: &["ct"],
+    description: "real-time compressive tracker (Zhang et al. 2012): random Haar-like projections, online naive Bayes, translation",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::Translation,
+        build,
+    },
+};
 
 /// Builds an RCT tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
@@ -266,13 +280,18 @@ impl Rct {
     }
 }
 
-impl VisualTracker for Rct {
-    fn spec(&self) -> &TrackerSpec {
-        &self.base.spec
+impl WholeTracker for Rct {
+    const MIN_SIDE: f64 = 6.0;
+
+    fn base(&self) -> &Base {
+        &self.base
     }
 
-    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
-        self.base.start(quad, 6.0)?;
+    fn base_mut(&mut self) -> &mut Base {
+        &mut self.base
+    }
+
+    fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;
         let (bw, bh) = (tw.round() as i64, th.round() as i64);
         let mut rng = Rng::new(self.seed);
@@ -324,7 +343,7 @@ impl VisualTracker for Rct {
         Ok(())
     }
 
-    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         if self.base.status != TrackStatus::Tracking || self.model.is_none() {
             return self.base.idle();
         }
@@ -405,19 +424,10 @@ impl VisualTracker for Rct {
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
 
-    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
-        self.base.set_corners(quad)?;
+    fn corners_set(&mut self) -> Result<()> {
         self.base.pose.scale = 1.0;
         self.base.pose.angle = 0.0;
         Ok(())
-    }
-
-    fn status(&self) -> TrackStatus {
-        self.base.status
-    }
-
-    fn corners(&self) -> Quad {
-        self.base.quad()
     }
 }
 

@@ -5,18 +5,20 @@
 //! that the detector accepted. The detector re-finds the target after a loss. The output box
 //! has the initial aspect ratio (translation and scale).
 
-use super::{Base, Pose, frame_f32};
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, ncc, track_forward_backward, window_ncc};
 use crate::imaging::{GrayF32, Integral, gaussian_blur, gaussian_kernel, resample_window};
 use crate::linalg::median;
+use crate::observe::MethodVisual;
 use crate::observe::Observer;
 use crate::params::ParamDef;
+use crate::registry::Entry;
 use crate::rng::Rng;
-use crate::sm::MethodVisual;
+use crate::spec::WholeSpec;
 use crate::status::{FrameOutcome, LossReason, TrackStatus};
-use crate::tracker::{FrameInput, TrackerSpec, VisualTracker, WholeSpec};
+use crate::visual_tracker::{FrameInput, VisualTracker};
 
 /// TLD's parameters (the paper's values by default; fewer scales, for speed).
 pub const PARAMS: &[ParamDef] = &[
@@ -72,6 +74,18 @@ pub const PARAMS: &[ParamDef] = &[
         0.0,
     ),
 ];
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "tld",
+    aliases: &["tracking_learning_detection"],
+    description: "tracking-learning-detection (Kalal et al. 2012): median flow, a fern and nearest-neighbour detector, P-N learning; re-detects after a loss",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::TranslationScale,
+        build,
+    },
+};
 
 /// Builds a TLD tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
@@ -616,13 +630,18 @@ fn cluster(boxes: &[BBox]) -> Vec<(BBox, Vec<usize>)> {
         .collect()
 }
 
-impl VisualTracker for Tld {
-    fn spec(&self) -> &TrackerSpec {
-        &self.base.spec
+impl WholeTracker for Tld {
+    const MIN_SIDE: f64 = 8.0;
+
+    fn base(&self) -> &Base {
+        &self.base
     }
 
-    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
-        self.base.start(quad, 8.0)?;
+    fn base_mut(&mut self) -> &mut Base {
+        &mut self.base
+    }
+
+    fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let img = frame_f32(input).into_owned();
         let (tw, th) = self.base.size0;
         let c = self.base.c0;
@@ -660,7 +679,7 @@ impl VisualTracker for Tld {
         Ok(())
     }
 
-    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         if self.base.status == TrackStatus::Uninitialized || self.model.is_none() {
             return self.base.idle();
         }
@@ -802,8 +821,7 @@ impl VisualTracker for Tld {
         out
     }
 
-    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
-        self.base.set_corners(quad)?;
+    fn corners_set(&mut self) -> Result<()> {
         self.base.pose.angle = 0.0;
         let (w, h) = (
             self.base.size0.0 * self.base.pose.scale,
@@ -819,14 +837,6 @@ impl VisualTracker for Tld {
             m.bbox = Some(b);
         }
         Ok(())
-    }
-
-    fn status(&self) -> TrackStatus {
-        self.base.status
-    }
-
-    fn corners(&self) -> Quad {
-        self.base.quad()
     }
 }
 

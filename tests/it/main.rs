@@ -1,6 +1,7 @@
 //! Integration tests (one binary links faster).
 
 mod alloc;
+mod architecture;
 mod cli;
 mod common;
 mod dataset;

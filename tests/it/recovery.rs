@@ -5,8 +5,9 @@ use crate::common::texture;
 use rayon::prelude::*;
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::observe::NoObserver;
-use regtrack::params::{MethodParams, TrackerParams};
+use regtrack::params::MethodParams;
 use regtrack::rng::Rng;
+use regtrack::spec::TrackerParams;
 use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use regtrack::{am, sm, ssm};
 
@@ -337,4 +338,63 @@ fn more_bins_make_the_histogram_models_less_biased() {
         assert!(bias[1] < 0.5 * bias[0], "{report:#?}");
     }
     eprintln!("{report:#?}");
+}
+
+#[test]
+fn every_stage_of_a_pyramid_and_of_the_ssm_hierarchy_has_the_am_parameters() {
+    // The coarse levels and the hierarchy's stages once built their AM with default parameters,
+    // so `bins` reached only the finest level's search. Each stage's first similarity on the same
+    // frame, from the same start, depends on its AM's bins: with bins=8 every stage must differ
+    // from the default (16) and match a tracker whose bins are set to 8 the same way.
+    use regtrack::observe::Recorder;
+    let img = texture("skimage_coffee.png");
+    let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    let start = truth.map(|p| regtrack::Point::new(p.x + 1.5, p.y - 1.0));
+    // (level, iteration) -> similarity of each stage's first iteration on the frame.
+    let first_similarities = |setup: &[(&str, &str)]| {
+        let mut spec = TrackerSpec::from_names("esm", "mi", "homography").unwrap();
+        for (k, v) in setup {
+            spec.set_param(k, v).unwrap();
+        }
+        let mut tracker = Tracker::new(&spec).unwrap();
+        tracker.initialize(FrameInput::Gray8(&img), &truth).unwrap();
+        tracker.set_corners(&start).unwrap();
+        let mut rec = Recorder::default();
+        tracker.update(FrameInput::Gray8(&img), &mut rec);
+        // The first iteration of each stage: where the level changes, or the hierarchy's stages
+        // (level 0) start, which the parameter count tells apart.
+        let mut firsts: Vec<(usize, usize, f64)> = Vec::new();
+        for r in &rec.iterations {
+            if firsts
+                .last()
+                .is_none_or(|&(l, n, _)| l != r.level || n != r.params.len())
+            {
+                firsts.push((r.level, r.params.len(), r.similarity));
+            }
+        }
+        firsts
+    };
+    for setup in [vec![("pyramid_levels", "3")], vec![("ssm_hierarchy", "on")]] {
+        let default = first_similarities(&setup);
+        let mut with8 = setup.clone();
+        with8.push(("bins", "8"));
+        let eight = first_similarities(&with8);
+        assert!(default.len() >= 3, "{setup:?}: stages {default:?}");
+        assert_eq!(default.len(), eight.len(), "{setup:?}");
+        for (d, e) in default.iter().zip(&eight) {
+            assert_eq!((d.0, d.1), (e.0, e.1), "{setup:?}");
+            assert!(
+                (d.2 - e.2).abs() > 1e-9 * d.2.abs().max(1.0),
+                "{setup:?}: the stage at level {} with {} parameters scores {} with bins=8 \
+                 and with the default: it did not get the AM's parameter",
+                d.0,
+                d.1,
+                d.2
+            );
+        }
+        // Setting the default explicitly changes nothing.
+        let mut with16 = setup.clone();
+        with16.push(("bins", "16"));
+        assert_eq!(first_similarities(&with16), default, "{setup:?}");
+    }
 }

@@ -199,7 +199,7 @@ fn report_errors_name_the_folder() {
     assert!(!d.path().join("report").exists());
     // A tracking_data folder without run files is no better.
     std::fs::create_dir_all(d.path().join("tracking_data/seq")).unwrap();
-    let err = report::read_all_runs(&[d.path().to_path_buf()]).unwrap_err();
+    let err = regtrack::eval::read_all_runs(&[d.path().to_path_buf()]).unwrap_err();
     assert!(
         matches!(&err, regtrack::Error::Report { path, .. } if path == d.path()),
         "{err}"

@@ -1,14 +1,25 @@
 //! The whole (learning-based) trackers on rendered sequences: each follows its target with a
 //! centre error below 5 px on at least 90% of the frames whose motion is within its model
-//! (translation for KCF and RCT; translation and scale for DSST).
+//! (each registry entry's `motion`): every tracker of the registry is checked on the motions it
+//! models.
 
 use crate::common::{TempDir, root};
 use regtrack::dataset::synth::{SynthConfig, render_frames};
 use regtrack::geometry::Quad;
 use regtrack::imaging::GrayU8;
 use regtrack::observe::NoObserver;
-use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
+use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec, WHOLE_REGISTRY};
+use regtrack::whole::Motion;
 use std::path::Path;
+
+/// The whole trackers of the registry that model at least `motion`.
+fn modelling(motion: Motion) -> Vec<&'static str> {
+    WHOLE_REGISTRY
+        .iter()
+        .filter(|e| e.build.motion >= motion)
+        .map(|e| e.name)
+        .collect()
+}
 
 /// Writes a motion profile (the TMT format the renderer reads).
 fn write_profile(path: &Path, quads: &[Quad]) {
@@ -96,7 +107,7 @@ fn whole_trackers_follow_a_translating_target() {
     write_profile(&p, &synthetic(120, |_| 1.0));
     let (frames, truth) = render(&p, Some((480, 360)));
     check(
-        &["kcf", "dsst", "rct", "tld"],
+        &modelling(Motion::Translation),
         &frames,
         &truth,
         "translation",
@@ -110,7 +121,12 @@ fn scale_trackers_follow_a_target_that_changes_scale() {
     // 1 -> 1.5 -> 0.7 times the size, about 1% a frame at most.
     write_profile(&p, &synthetic(150, |t| 1.1 + 0.4 * (t / 24.0).sin()));
     let (frames, truth) = render(&p, Some((560, 420)));
-    check(&["dsst", "tld", "cmt"], &frames, &truth, "scale change");
+    check(
+        &modelling(Motion::TranslationScale),
+        &frames,
+        &truth,
+        "scale change",
+    );
 }
 
 /// The UCSB profiles over a photograph (as the real sequences were filmed in a room). Over the
@@ -120,20 +136,14 @@ fn scale_trackers_follow_a_target_that_changes_scale() {
 #[test]
 fn whole_trackers_follow_the_ucsb_profiles_within_their_model() {
     let m = root().join("assets/motion");
-    for (profile, trackers) in [
-        (
-            "ucsb_bricks_m1.txt",
-            &["kcf", "dsst", "rct", "tld", "cmt"][..],
-        ),
-        (
-            "ucsb_bricks_m3.txt",
-            &["kcf", "dsst", "rct", "tld", "cmt"][..],
-        ),
-        ("ucsb_bricks_zm.txt", &["dsst", "tld", "cmt"][..]),
-        ("ucsb_bricks_rt.txt", &["cmt"][..]),
+    for (profile, motion) in [
+        ("ucsb_bricks_m1.txt", Motion::Translation),
+        ("ucsb_bricks_m3.txt", Motion::Translation),
+        ("ucsb_bricks_zm.txt", Motion::TranslationScale),
+        ("ucsb_bricks_rt.txt", Motion::Similarity),
     ] {
         let (frames, truth) = render_on(&m.join(profile), None, "skimage_coffee.png");
-        check(trackers, &frames, &truth, profile);
+        check(&modelling(motion), &frames, &truth, profile);
     }
 }
 
@@ -199,8 +209,12 @@ fn seeded_trackers_repeat_themselves() {
             .map(|f| t.update(FrameInput::Gray8(f), &mut NoObserver).corners)
             .collect()
     };
-    for name in ["rct", "tld", "cmt"] {
-        assert_eq!(run(name, "3"), run(name, "3"), "{name}");
+    // Every tracker that draws random numbers (it has a `seed`) repeats itself under a seed.
+    for e in WHOLE_REGISTRY
+        .iter()
+        .filter(|e| e.build.params.iter().any(|d| d.name == "seed"))
+    {
+        assert_eq!(run(e.name, "3"), run(e.name, "3"), "{}", e.name);
     }
     assert_ne!(run("rct", "3"), run("rct", "4"));
 }

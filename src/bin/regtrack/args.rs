@@ -1,0 +1,332 @@
+//! The command line's flags: the subcommands and their arguments. Tracker parameters get a flag
+//! each from their definitions ([`TRACKER_PARAMS`]), so that help, ranges and defaults are
+//! written once.
+
+use clap::{Arg, ArgAction, ArgMatches, Args, FromArgMatches, Subcommand};
+use regtrack::Result;
+use regtrack::eval;
+use regtrack::spec::{TRACKER_FLAGS, TRACKER_PARAMS};
+use regtrack::tracker::{self, TrackerSpec};
+use std::path::PathBuf;
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// The interactive inspector (the default).
+    #[command(after_help = regtrack::keys::help_text())]
+    Inspect {
+        /// A saved session (sessions/*.toml).
+        #[arg(long)]
+        session: Option<PathBuf>,
+        /// A sequence to open instead of the session's.
+        #[arg(long)]
+        seq: Option<PathBuf>,
+        /// With --screenshot: frames to track first.
+        #[arg(long, default_value_t = 30)]
+        frames: usize,
+        /// Track, save a screenshot of the whole window to this PNG, and exit.
+        #[arg(long)]
+        screenshot: Option<PathBuf>,
+    },
+    /// Render the bundled demo sequence (once) and compare ICLK, FCLK and ESM with SSD and ZNCC.
+    Demo {
+        /// Where the demo sequence is rendered (default: the user cache folder).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+    },
+    /// Track one sequence and write the corners in the MTF format.
+    Track {
+        /// A ground-truth file (MTF `<seq>.txt`, POT `_gt_points.txt`) or a folder of images.
+        #[arg(long)]
+        seq: PathBuf,
+        #[command(flatten)]
+        tracker: TrackerArgs,
+        /// Initial corners `ulx,uly,urx,ury,lrx,lry,llx,lly` (default: the first ground truth).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            num_args = 8,
+            allow_negative_numbers = true
+        )]
+        init: Option<Vec<f64>>,
+        /// Output corners file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Evaluate every (sequence, SM, AM, SSM) of a dataset in the MTF layout.
+    Eval {
+        /// Dataset root: `<root>/<seq>.txt` with frames in `<root>/<seq>/`.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Sequences (default: all).
+        #[arg(long, value_delimiter = ',')]
+        seqs: Option<Vec<String>>,
+        // The trackers (default: esm x ssd x homography).
+        #[command(flatten)]
+        select: SelectArgs,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Parallel runs (0 = all cores; 1 for clean timings).
+        #[arg(long, default_value_t = 0)]
+        jobs: usize,
+        /// Only the runs `k, k + n, k + 2n, ...` of the product, as `k/n` (for Slurm arrays or
+        /// GNU parallel: one shard per task, each with its own --out).
+        #[arg(long)]
+        shard: Option<eval::Shard>,
+        /// Re-initialise from the ground truth 5 frames after a failure.
+        #[arg(long)]
+        reinit: bool,
+        /// Score against the low-DOF ground truth of this SSM, as the paper does (read from
+        /// `<root>/OptGT/<seq>_<ssm>.txt` when it exists, fitted otherwise: see `gt-fit`);
+        /// `own`: each tracker against its own SSM's.
+        #[arg(long)]
+        gt_ssm: Option<String>,
+        /// Error type of the success rates: alignment (mean corner distance, E_AL), center
+        /// (centre location error) or jaccard (1 - IoU, SR over 0..1).
+        #[arg(long, default_value = "alignment")]
+        error: String,
+        /// Run everything again, even the runs a previous (killed) batch in --out finished.
+        #[arg(long)]
+        no_resume: bool,
+    },
+    /// Low-DOF ground truth (the paper's protocol): per sequence and SSM, the warp of the first
+    /// frame's quad with the least alignment error to each frame's 8-DOF ground truth, written
+    /// in MTF's OptGT layout (`<root>/OptGT/<seq>_<ssm>.txt`) with the residual per frame beside
+    /// it (`<seq>_<ssm>_residuals.txt`).
+    GtFit {
+        /// Dataset root in the MTF layout, or one sequence (ground-truth file or folder).
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Sequences (default: all).
+        #[arg(long, value_delimiter = ',')]
+        seqs: Option<Vec<String>>,
+        /// State space models.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "translation,isometry,similitude,affine"
+        )]
+        ssm: Vec<String>,
+        /// Overwrite OptGT files that exist (they may hold corrections exported by the inspector).
+        #[arg(long)]
+        force: bool,
+    },
+    /// Merge the outputs of `eval --shard` runs into one summary (with `ALL` rows pooled over
+    /// every sequence).
+    Merge {
+        /// Output folder for summary.csv and summary.json.
+        #[arg(long)]
+        out: PathBuf,
+        /// The shards' output folders.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+    },
+    /// Success-rate and speed figures (PNG, SVG) and a markdown table (`report.md`) of `eval`
+    /// output folders, each tracker pooled over every sequence (shards: give all their folders).
+    Report {
+        /// `eval` output folders.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output folder (default: `report` in the first folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// List every appearance model, state space model and search method with its aliases.
+    List,
+    /// Render a synthetic sequence with exact ground truth (MTF layout).
+    Synth(SynthArgs),
+    /// Speed per tracker on the demo sequence (or --seq): iterations per frame, us per iteration,
+    /// tracker-only and live-path FPS (medians over repeats).
+    Bench {
+        /// Sequence (default: the demo).
+        #[arg(long)]
+        seq: Option<PathBuf>,
+        // The trackers (default: iclk,fclk,esm x ssd,zncc x homography).
+        #[command(flatten)]
+        select: SelectArgs,
+        /// Repeats (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
+        /// Use only the first frames.
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+}
+
+#[derive(Args)]
+pub struct TrackerArgs {
+    /// A whole tracker (instead of --sm/--am/--ssm).
+    #[arg(long)]
+    pub tracker: Option<String>,
+    /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`.
+    #[arg(long, default_value = "esm")]
+    pub sm: String,
+    #[arg(long, default_value = "ssd")]
+    pub am: String,
+    #[arg(long, default_value = "homography")]
+    pub ssm: String,
+    #[command(flatten)]
+    pub params: ParamArgs,
+}
+
+/// The trackers of `eval` and `bench`: the product of the method lists, and whole trackers.
+#[derive(Args)]
+pub struct SelectArgs {
+    /// Search methods [none when only --tracker is given].
+    #[arg(long, value_delimiter = ',')]
+    pub sm: Option<Vec<String>>,
+    /// Appearance models.
+    #[arg(long, value_delimiter = ',')]
+    pub am: Option<Vec<String>>,
+    /// State space models.
+    #[arg(long, value_delimiter = ',')]
+    pub ssm: Option<Vec<String>>,
+    /// Whole trackers (`regtrack list` names them), beside the registration trackers (alone when
+    /// no --sm, --am or --ssm is given).
+    #[arg(long, value_delimiter = ',')]
+    pub tracker: Vec<String>,
+    #[command(flatten)]
+    pub params: ParamArgs,
+}
+
+impl SelectArgs {
+    /// The trackers, with `defaults` for the lists not given (none at all when only whole
+    /// trackers are asked for), with their parameters set.
+    pub fn specs(&self, defaults: [&str; 3]) -> Result<Vec<TrackerSpec>> {
+        let only_whole = !self.tracker.is_empty()
+            && self.sm.is_none()
+            && self.am.is_none()
+            && self.ssm.is_none();
+        let list = |v: &Option<Vec<String>>, d: &str| match v {
+            _ if only_whole => Vec::new(),
+            Some(v) => v.clone(),
+            None => d.split(',').map(String::from).collect(),
+        };
+        let mut specs = tracker::product(
+            &list(&self.sm, defaults[0]),
+            &list(&self.am, defaults[1]),
+            &list(&self.ssm, defaults[2]),
+            &self.tracker,
+        )?;
+        tracker::set_params(&mut specs, &self.params.assignments)?;
+        Ok(specs)
+    }
+}
+
+/// Tracker parameters: a flag per parameter of [`TRACKER_PARAMS`] (with the short flags of
+/// [`TRACKER_FLAGS`]), each a shortcut for `--param NAME=VALUE`, and `--param` for any tracker,
+/// search-method or appearance-model parameter. Help, ranges and defaults come from the
+/// definitions, as `regtrack list` shows them.
+#[derive(Clone, Default)]
+pub struct ParamArgs {
+    /// Every assignment given: the flags, then `--param`, in order.
+    pub assignments: Vec<(String, String)>,
+}
+
+impl Args for ParamArgs {
+    fn augment_args(mut cmd: clap::Command) -> clap::Command {
+        for d in TRACKER_PARAMS {
+            let mut arg = Arg::new(d.name)
+                .long(d.name)
+                .value_name("VALUE")
+                .allow_negative_numbers(true)
+                .help(d.describe());
+            for (flag, _) in TRACKER_FLAGS.iter().filter(|(_, n)| *n == d.name) {
+                arg = arg.visible_alias(*flag);
+            }
+            cmd = cmd.arg(arg);
+        }
+        cmd.arg(
+            Arg::new("param")
+                .long("param")
+                .value_name("NAME=VALUE")
+                .action(ArgAction::Append)
+                .help(
+                    "Any tracker, search-method or appearance-model parameter, repeatable \
+                     (e.g. --param samples=5000 --param bins=8); `regtrack list` lists them",
+                ),
+        )
+    }
+    fn augment_args_for_update(cmd: clap::Command) -> clap::Command {
+        Self::augment_args(cmd)
+    }
+}
+
+impl FromArgMatches for ParamArgs {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        let mut p = ParamArgs::default();
+        p.update_from_arg_matches(m)?;
+        Ok(p)
+    }
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        for d in TRACKER_PARAMS {
+            if let Some(v) = m.get_one::<String>(d.name) {
+                self.assignments.push((d.name.to_string(), v.clone()));
+            }
+        }
+        for a in m.get_many::<String>("param").into_iter().flatten() {
+            let (name, v) = regtrack::params::split_assignment(a)
+                .map_err(|e| clap::Error::raw(clap::error::ErrorKind::ValueValidation, e))?;
+            self.assignments.push((name.to_string(), v.to_string()));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Args)]
+pub struct SynthArgs {
+    /// Texture rendered into the target quad.
+    #[arg(long)]
+    pub texture: PathBuf,
+    /// Background image (default: mid-gray).
+    #[arg(long)]
+    pub background: Option<PathBuf>,
+    /// Motion profile (four corners per frame, TMT/MTF format).
+    #[arg(long)]
+    pub motion: PathBuf,
+    /// Output root: writes `<out>/<name>.txt` and `<out>/<name>/`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Sequence name.
+    #[arg(long)]
+    pub name: String,
+    /// Frame size `WxH` (default: the smallest common size holding the motion).
+    #[arg(long)]
+    pub size: Option<String>,
+    /// Use only the first frames.
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Take every k-th frame of the profile (k times faster motion).
+    #[arg(long, default_value_t = 1)]
+    pub step: usize,
+    /// Supersampling per axis.
+    #[arg(long, default_value_t = 3)]
+    pub supersample: usize,
+    /// Gaussian noise (gray levels).
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f32,
+    /// Global gain drift amplitude (0.2 = +-20%).
+    #[arg(long, default_value_t = 0.0)]
+    pub gain_drift: f32,
+    /// Global bias drift amplitude (gray levels).
+    #[arg(long, default_value_t = 0.0)]
+    pub bias_drift: f32,
+    /// Moving local light amplitude (0.5 = +50% at its centre).
+    #[arg(long, default_value_t = 0.0)]
+    pub local_light: f32,
+    /// Motion blur sub-frames (0 = none).
+    #[arg(long, default_value_t = 0)]
+    pub motion_blur: usize,
+    /// Occluder size as a fraction of the target (0 = none).
+    #[arg(long, default_value_t = 0.0)]
+    pub occlusion: f32,
+    /// JPEG quality (0 = PNG frames).
+    #[arg(long, default_value_t = 95)]
+    pub jpeg_quality: u8,
+    /// Seed of the random nuisances.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}

@@ -1,0 +1,388 @@
+//! The `regtrack` command: parses the command line and starts the library's work. Everything a
+//! command does is in the library (the batch in [`regtrack::eval::Batch`], the specs in
+//! [`regtrack::tracker`], the listing in [`regtrack::catalogue`]); here are the flags, the
+//! progress bars and what is printed.
+
+mod args;
+
+use anyhow::{Context as _, Result, bail};
+use args::{Command, SynthArgs, TrackerArgs};
+use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+use regtrack::dataset::{self, Sequence, demo, synth};
+use regtrack::eval::{self, Batch, EvalOptions};
+use regtrack::geometry::Quad;
+use regtrack::observe::NoObserver;
+use regtrack::tracker::{self, TrackerSpec};
+use regtrack::{bench, gt};
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(
+    name = "regtrack",
+    version,
+    about = "Modular registration-based visual trackers (AM x SSM x SM)"
+)]
+struct Cli {
+    /// Without a subcommand: the inspector on the bundled demo.
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    let command = cli.command.unwrap_or(Command::Inspect {
+        session: None,
+        seq: None,
+        frames: 30,
+        screenshot: None,
+    });
+    match command {
+        Command::Inspect {
+            session,
+            seq,
+            frames,
+            screenshot,
+        } => run_inspector(session, seq, frames, screenshot),
+        Command::Demo { cache } => run_demo(cache.as_deref()),
+        Command::Track {
+            seq,
+            tracker,
+            init,
+            out,
+        } => run_track(&seq, &tracker, init, &out),
+        Command::Eval {
+            dataset,
+            seqs,
+            select,
+            out,
+            jobs,
+            shard,
+            reinit,
+            gt_ssm,
+            error,
+            no_resume,
+        } => {
+            let gt_ssm = match gt_ssm {
+                Some(g) if g != eval::OWN_SSM => Some(gt::ssm_key(&g)?),
+                g => g,
+            };
+            let options = EvalOptions {
+                reinit,
+                gt_ssm,
+                error: eval::ErrorKind::parse(&error)?,
+                ..EvalOptions::default()
+            };
+            let specs = select.specs(["esm", "ssd", "homography"])?;
+            let sequences = dataset::discover(&dataset, seqs.as_deref())?;
+            let batch = Batch {
+                options,
+                jobs,
+                shard,
+                out: Some(&out),
+                resume: !no_resume,
+                ..Batch::new(&sequences, &specs)
+            };
+            run_eval(&batch, &out)
+        }
+        Command::GtFit {
+            dataset,
+            seqs,
+            ssm,
+            force,
+        } => run_gt_fit(&dataset, seqs, &ssm, force),
+        Command::Merge { out, shards } => {
+            let rows = eval::merge_shards(&shards, &out)?;
+            print!("{}", eval::summary_table(&rows));
+            println!("wrote {}", out.join("summary.csv").display());
+            Ok(())
+        }
+        Command::Report { dirs, out } => {
+            let out =
+                out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));
+            let report = regtrack::report::write_report(&dirs, &out)?;
+            println!(
+                "wrote {} ({} trackers, {} figures)",
+                out.join("report.md").display(),
+                report.trackers.len(),
+                report.figures.len() + 1
+            );
+            Ok(())
+        }
+        Command::List => {
+            print!("{}", regtrack::catalogue::listing());
+            Ok(())
+        }
+        Command::Synth(args) => run_synth(args),
+        Command::Bench {
+            seq,
+            select,
+            repeats,
+            frames,
+            json,
+        } => {
+            let specs = select.specs(["iclk,fclk,esm", "ssd,zncc", "homography"])?;
+            run_bench(seq.as_deref(), &specs, repeats, frames, json.as_deref())
+        }
+    }
+}
+
+#[cfg(feature = "gui")]
+fn run_inspector(
+    session: Option<PathBuf>,
+    seq: Option<PathBuf>,
+    frames: usize,
+    screenshot: Option<PathBuf>,
+) -> Result<()> {
+    let shot = screenshot.clone();
+    let summary = regtrack::app::run(regtrack::app::RunOptions {
+        session,
+        sequence: seq,
+        screenshot: screenshot.map(|p| (frames, p)),
+    })
+    .map_err(|e| anyhow::anyhow!("inspector: {e}"))?;
+    if let (Some(p), Some(summary)) = (shot, summary) {
+        println!("wrote {} ({summary})", p.display());
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "gui"))]
+fn run_inspector(
+    _: Option<PathBuf>,
+    _: Option<PathBuf>,
+    _: usize,
+    _: Option<PathBuf>,
+) -> Result<()> {
+    bail!("this regtrack was built without the inspector (feature `gui`); see `regtrack --help`")
+}
+
+fn bar(len: usize, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed_precise}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn load_demo(cache: Option<&Path>) -> Result<Sequence> {
+    let pb = bar(0, "rendering the demo sequence");
+    let seq = demo::ensure_demo(cache, &|d, t| {
+        pb.set_length(t as u64);
+        pb.set_position(d as u64);
+    })
+    .context("cannot prepare the demo sequence")?;
+    pb.finish_and_clear();
+    Ok(seq)
+}
+
+fn run_demo(cache: Option<&Path>) -> Result<()> {
+    let seq = load_demo(cache)?;
+    println!(
+        "demo sequence: {} frames ({})",
+        seq.len(),
+        seq.gt_path.as_deref().unwrap_or(Path::new("")).display()
+    );
+    let specs = tracker::product(
+        &["iclk".into(), "fclk".into(), "esm".into()],
+        &["ssd".into(), "zncc".into()],
+        &["homography".into()],
+        &[],
+    )?;
+    let pb = bar(specs.len(), "tracking");
+    let sequences = [seq];
+    let outcome = Batch {
+        jobs: 1,
+        ..Batch::new(&sequences, &specs)
+    }
+    .run(&|d, _| pb.set_position(d as u64))?;
+    pb.finish_and_clear();
+    if let Some(e) = outcome.failures.first() {
+        bail!("{e}");
+    }
+    print!("{}", eval::summary_table(&outcome.rows()));
+    Ok(())
+}
+
+fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) -> Result<()> {
+    let seq = Sequence::open(seq)?;
+    let mut spec = match &t.tracker {
+        Some(name) => TrackerSpec::whole(name)?,
+        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
+    };
+    tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
+    let init = match init {
+        Some(v) => {
+            let arr: [f64; 8] = v
+                .try_into()
+                .map_err(|_| anyhow::anyhow!("--init needs 8 numbers"))?;
+            Some(Quad::from_array(arr))
+        }
+        None => None,
+    };
+    let run = eval::run_sequence(&seq, &spec, &EvalOptions::default(), init, &mut NoObserver)?;
+    let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
+    dataset::write_corners(out, &corners, "jpg")?;
+    let lost = run.frames.iter().filter(|f| f.corners.is_none()).count();
+    println!(
+        "wrote {} ({} of {} frames, {} lost)",
+        out.display(),
+        run.frames.len(),
+        seq.len(),
+        lost
+    );
+    if !seq.ground_truth.is_empty() {
+        print!("{}", eval::summary_table(&[run.summary()]));
+    }
+    if let Some(e) = &run.error {
+        bail!(
+            "the run {e}; the frames tracked before it are in {}",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bool) -> Result<()> {
+    let sequences = dataset::open_or_discover(root, seqs.as_deref())?;
+    let outcomes = gt::fit_sequences(&sequences, ssms, force)?;
+    println!(
+        "{:<24} {:<12} {:>8} {:>10} {:>10}  worst frame",
+        "sequence", "ssm", "frames", "mean px", "max px"
+    );
+    let mut kept = 0;
+    for o in &outcomes {
+        match o {
+            gt::FitOutcome::Kept {
+                sequence,
+                ssm,
+                path,
+            } => {
+                kept += 1;
+                println!(
+                    "{sequence:<24} {ssm:<12} kept {} (--force to overwrite)",
+                    path.display()
+                );
+            }
+            gt::FitOutcome::Written {
+                sequence,
+                ssm,
+                frames,
+                mean_residual,
+                worst,
+                path,
+            } => println!(
+                "{sequence:<24} {ssm:<12} {frames:>8} {mean_residual:>10.3} {:>10.3}  {} ({})",
+                worst.1,
+                worst.0 + 1,
+                path.display()
+            ),
+        }
+    }
+    if kept > 0 {
+        println!("{kept} file(s) kept");
+    }
+    Ok(())
+}
+
+fn run_eval(batch: &Batch, out: &Path) -> Result<()> {
+    let plan = batch.plan();
+    if !plan.finished.is_empty() {
+        println!(
+            "resuming: {} of {} runs already finished in {} (--no-resume to redo them)",
+            plan.finished.len(),
+            plan.selected,
+            out.display()
+        );
+    }
+    let pb = bar(plan.todo.len(), "evaluating");
+    let outcome = batch.execute(plan, &|d, _| pb.set_position(d as u64))?;
+    pb.finish_and_clear();
+    let rows = outcome.rows();
+    eval::write_summaries(out, &rows)?;
+    print!("{}", eval::summary_table(&rows));
+    println!("wrote {}", out.join("summary.csv").display());
+    if !outcome.failures.is_empty() {
+        bail!(
+            "{} run(s) failed:\n  {}",
+            outcome.failures.len(),
+            outcome.failures.join("\n  ")
+        );
+    }
+    Ok(())
+}
+
+fn run_synth(a: SynthArgs) -> Result<()> {
+    let size = match a.size {
+        Some(s) => {
+            let (w, h) = s
+                .split_once(['x', 'X'])
+                .context("--size must be WxH, e.g. 640x480")?;
+            Some((w.trim().parse()?, h.trim().parse()?))
+        }
+        None => None,
+    };
+    let cfg = synth::SynthConfig {
+        texture: a.texture,
+        background: a.background,
+        motion: a.motion,
+        size,
+        max_frames: a.frames,
+        step: a.step,
+        supersample: a.supersample,
+        noise: a.noise,
+        gain_drift: a.gain_drift,
+        bias_drift: a.bias_drift,
+        local_light: a.local_light,
+        motion_blur: a.motion_blur,
+        occlusion: a.occlusion,
+        jpeg_quality: a.jpeg_quality,
+        seed: a.seed,
+    };
+    let pb = bar(0, "rendering");
+    let seq = synth::render_sequence(&cfg, &a.out, &a.name, &|d, t| {
+        pb.set_length(t as u64);
+        pb.set_position(d as u64);
+    })?;
+    pb.finish_and_clear();
+    println!(
+        "wrote {} frames: {}",
+        seq.len(),
+        seq.gt_path.as_deref().unwrap_or(Path::new("")).display()
+    );
+    Ok(())
+}
+
+fn run_bench(
+    seq: Option<&Path>,
+    specs: &[TrackerSpec],
+    repeats: usize,
+    frames: Option<usize>,
+    json: Option<&Path>,
+) -> Result<()> {
+    let seq = match seq {
+        Some(p) => Sequence::open(p)?,
+        None => load_demo(None)?,
+    };
+    let loaded = bench::load_frames(&seq, frames)?;
+    println!(
+        "{} frames of {}, {} repeats (medians); tracker-only = search on pre-smoothed frames, live = from 8-bit frames",
+        loaded.gray.len(),
+        seq.name,
+        repeats
+    );
+    println!("{}", bench::BenchRow::HEADER);
+    let mut rows = Vec::new();
+    for spec in specs {
+        let r = bench::bench_tracker(spec, &loaded, repeats)?;
+        println!("{}", r.line());
+        rows.push(r);
+    }
+    if let Some(p) = json {
+        dataset::write_atomic(p, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+    }
+    Ok(())
+}

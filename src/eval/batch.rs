@@ -1,0 +1,219 @@
+//! A batch evaluation: every (sequence, tracker) of a product, in parallel, optionally one shard
+//! of it, writing each run's files as soon as it ends and resuming the runs an earlier batch in
+//! the same folder finished. The command line, the tests and the bindings drive it the same way.
+
+use super::{EvalOptions, RunResult, Summary, files, run_sequence, summarize};
+use crate::dataset::Sequence;
+use crate::error::{Error, Result};
+use crate::observe::NoObserver;
+use crate::spec::TrackerSpec;
+use rayon::prelude::*;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// One shard of a batch: the runs `index, index + count, index + 2 count, ...` of the product
+/// (sequences outer, trackers inner), for a cluster scheduler's array of tasks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = Error;
+    /// `k/n`, with `0 <= k < n`.
+    fn from_str(s: &str) -> Result<Self> {
+        let bad =
+            || Error::InvalidParameter(format!("--shard must be k/n with 0 <= k < n, got '{s}'"));
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if count == 0 || index >= count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// What to evaluate and how.
+#[derive(Clone, Debug)]
+pub struct Batch<'a> {
+    pub sequences: &'a [Sequence],
+    pub specs: &'a [TrackerSpec],
+    pub options: EvalOptions,
+    /// Parallel runs (0: all cores).
+    pub jobs: usize,
+    pub shard: Option<Shard>,
+    /// Where each run's files are written (and, with `resume`, read back from).
+    pub out: Option<&'a Path>,
+    /// Read back the runs that a batch in `out` finished with the same settings.
+    pub resume: bool,
+}
+
+/// The runs of a batch that are done and those to make.
+#[derive(Debug)]
+pub struct Plan {
+    /// Runs read back from the output folder.
+    pub finished: Vec<RunResult>,
+    /// `(sequence, spec)` indices still to run.
+    pub todo: Vec<(usize, usize)>,
+    /// The runs of this shard of the product (finished + todo).
+    pub selected: usize,
+}
+
+/// What a batch did.
+#[derive(Debug)]
+pub struct BatchOutcome {
+    /// Every run made or read back (in the order of the product, resumed ones first).
+    pub runs: Vec<RunResult>,
+    /// How many were read back instead of made.
+    pub resumed: usize,
+    /// Runs that failed (no ground truth to start from, files that cannot be written) or
+    /// stopped early (a frame that cannot be read: what they tracked is in `runs`), one message
+    /// each.
+    pub failures: Vec<String>,
+}
+
+impl BatchOutcome {
+    /// The summary rows: one per run, then the pooled rows ([`summary_rows`]).
+    pub fn rows(&self) -> Vec<Summary> {
+        summary_rows(&self.runs)
+    }
+}
+
+impl<'a> Batch<'a> {
+    /// Every pair of the product, with the default options, all cores, no files.
+    pub fn new(sequences: &'a [Sequence], specs: &'a [TrackerSpec]) -> Self {
+        Batch {
+            sequences,
+            specs,
+            options: EvalOptions::default(),
+            jobs: 0,
+            shard: None,
+            out: None,
+            resume: false,
+        }
+    }
+
+    /// The runs of this shard, split into those an earlier batch finished and those to make.
+    pub fn plan(&self) -> Plan {
+        let pairs = (0..self.sequences.len())
+            .flat_map(|s| (0..self.specs.len()).map(move |p| (s, p)))
+            .enumerate()
+            .filter(|(i, _)| self.shard.is_none_or(|sh| i % sh.count == sh.index))
+            .map(|(_, p)| p);
+        let mut plan = Plan {
+            finished: Vec::new(),
+            todo: Vec::new(),
+            selected: 0,
+        };
+        for (s, p) in pairs {
+            plan.selected += 1;
+            // A run file is written last and atomically: it exists only for a complete run.
+            let done = self.out.filter(|_| self.resume).and_then(|out| {
+                files::finished_run(out, &self.sequences[s].name, &self.specs[p], &self.options)
+            });
+            match done {
+                Some(r) => plan.finished.push(r),
+                None => plan.todo.push((s, p)),
+            }
+        }
+        plan
+    }
+
+    /// Makes the runs `plan` has still to make, calling `progress(done, total)` after each.
+    pub fn execute(
+        &self,
+        plan: Plan,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<BatchOutcome> {
+        let total = plan.todo.len();
+        let done = AtomicUsize::new(0);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(self.jobs)
+            .build()
+            .map_err(|e| Error::Threads {
+                threads: self.jobs,
+                message: e.to_string(),
+            })?;
+        let made: Vec<Result<RunResult>> = pool.install(|| {
+            plan.todo
+                .par_iter()
+                .map(|&(s, p)| {
+                    let r = self.run_one(&self.sequences[s], &self.specs[p]);
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                    r
+                })
+                .collect()
+        });
+        let resumed = plan.finished.len();
+        let mut outcome = BatchOutcome {
+            runs: plan.finished,
+            resumed,
+            failures: Vec::new(),
+        };
+        for (r, &(s, p)) in made.into_iter().zip(&plan.todo) {
+            match r {
+                Ok(r) => {
+                    if let Some(e) = &r.error {
+                        outcome
+                            .failures
+                            .push(format!("{} on {}: {e}", r.spec.label(), r.sequence));
+                    }
+                    outcome.runs.push(r);
+                }
+                Err(e) => outcome.failures.push(format!(
+                    "{} on {}: {e}",
+                    self.specs[p].label(),
+                    self.sequences[s].name
+                )),
+            }
+        }
+        Ok(outcome)
+    }
+
+    /// [`Batch::plan`], then [`Batch::execute`].
+    pub fn run(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<BatchOutcome> {
+        self.execute(self.plan(), progress)
+    }
+
+    /// One run; its files are written as soon as it ends, so that a killed batch keeps them.
+    fn run_one(&self, seq: &Sequence, spec: &TrackerSpec) -> Result<RunResult> {
+        let run = run_sequence(seq, spec, &self.options, None, &mut NoObserver)?;
+        if let Some(out) = self.out {
+            files::write_run_files(out, &run)?;
+        }
+        Ok(run)
+    }
+}
+
+/// The runs grouped by tracker (its label), in the order each tracker first appears.
+pub fn by_tracker(runs: &[RunResult]) -> Vec<Vec<&RunResult>> {
+    let mut groups: Vec<(String, Vec<&RunResult>)> = Vec::new();
+    for r in runs {
+        let label = r.spec.label();
+        match groups.iter_mut().find(|(l, _)| *l == label) {
+            Some((_, g)) => g.push(r),
+            None => groups.push((label, vec![r])),
+        }
+    }
+    groups.into_iter().map(|(_, g)| g).collect()
+}
+
+/// The rows of a summary: one per run, then, for each tracker with runs on more than one
+/// sequence, one pooled over them (sequence `ALL`: its frames counted together).
+pub fn summary_rows(runs: &[RunResult]) -> Vec<Summary> {
+    let mut rows: Vec<Summary> = runs.iter().map(RunResult::summary).collect();
+    rows.extend(
+        by_tracker(runs)
+            .into_iter()
+            .filter(|g| g.len() > 1)
+            .map(|g| summarize(POOLED, &g)),
+    );
+    rows
+}
+
+/// The sequence name of the pooled rows.
+pub const POOLED: &str = "ALL";

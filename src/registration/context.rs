@@ -1,0 +1,396 @@
+//! The registration problem of one tracker, `p_t = argmax_p f(I*, I_t(w(x, p)))`: the models,
+//! the sampling grid, the template, the current parameters and the buffers of one iteration,
+//! shared by the search method and the driver. [`Context::similarity_at`] is the equation's
+//! objective evaluated at a warp.
+
+use crate::am::{Am, HessianKind, Wrt, jt_times};
+use crate::geometry::{Normaliser, Point, Quad};
+use crate::imaging::{ImageView, sample_values, sample_values_gradients};
+use crate::linalg::{MAX_DOF, newton_step};
+use crate::spec::GridLayout;
+use crate::ssm::{Params, Ssm};
+use crate::status::LossReason;
+use nalgebra::Matrix3;
+
+/// How a step `dp` changes the parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Update {
+    /// `p + dp`.
+    Additive,
+    /// `w(w(x, dp), p)`: `p` after `dp`.
+    Compose,
+    /// `w(w(x, dp)^-1, p)`: `p` after the inverse of `dp`.
+    ComposeInverse,
+}
+
+/// The registration problem of one tracker, shared by its search method and the driver: the
+/// models, the sampling grid, the template and the current parameters; the per-iteration
+/// buffers are apart, in [`Workspace`].
+#[derive(Debug)]
+pub struct Context {
+    pub ssm: Box<dyn Ssm>,
+    pub am: Box<dyn Am>,
+    /// The Hessian kind to use (resolved: never [`HessianKind::Default`]).
+    pub hessian: HessianKind,
+    /// Levenberg-Marquardt damping `lambda` of the Newton steps (0: none); set by `lm:`.
+    pub damping: f64,
+    pub dof: usize,
+    /// Image <-> normalised frame.
+    pub norm: Normaliser,
+    /// The sampling grid, in normalised coordinates (see [`GridLayout`]).
+    pub grid_x: Vec<f32>,
+    pub grid_y: Vec<f32>,
+    /// The initial quad in normalised coordinates.
+    pub template_corners: Quad,
+    /// Current parameters.
+    pub params: Params,
+    /// Template intensities `I*` and their gradient in normalised coordinates.
+    pub template: Vec<f32>,
+    pub template_gx: Vec<f32>,
+    pub template_gy: Vec<f32>,
+    /// `dw/dp` at the identity on the grid (layout of [`Ssm::jacobian`]).
+    pub dwdp0: Vec<f32>,
+    /// Per-iteration buffers.
+    pub work: Workspace,
+}
+
+/// The buffers of one iteration (allocated once, with the grid): the warped grid, the sampled
+/// values and gradients, the AM's gradient and the pixel Jacobian. A search method's own state
+/// (ESM's mean Jacobian, NN's index, PF's particles) lives in the method.
+#[derive(Debug, Default)]
+pub struct Workspace {
+    /// `dw/dp` at the current parameters.
+    pub dwdp: Vec<f32>,
+    /// Warped grid in frame pixels.
+    pub px: Vec<f32>,
+    pub py: Vec<f32>,
+    /// Sampled current intensities and gradients.
+    pub values: Vec<f32>,
+    pub gx: Vec<f32>,
+    pub gy: Vec<f32>,
+    /// AM gradient with respect to pixels.
+    pub grad: Vec<f32>,
+    /// Pixel Jacobian `dI/dp` (`N x S`, stored by parameter).
+    pub jac: Vec<f32>,
+}
+
+impl Context {
+    /// A context for the given models with an `res x res` grid (buffers allocated here).
+    pub fn new(ssm: Box<dyn Ssm>, am: Box<dyn Am>, hessian: HessianKind, res: usize) -> Self {
+        let dof = ssm.dof();
+        let hessian = hessian.or(am.default_hessian());
+        let n = res * res;
+        let z = |len: usize| vec![0.0f32; len];
+        Context {
+            ssm,
+            am,
+            hessian,
+            damping: 0.0,
+            dof,
+            norm: Normaliser {
+                cx: 0.0,
+                cy: 0.0,
+                scale: 1.0,
+            },
+            grid_x: z(n),
+            grid_y: z(n),
+            template_corners: Quad::unit_square(),
+            params: [0.0; MAX_DOF],
+            template: z(n),
+            template_gx: z(n),
+            template_gy: z(n),
+            dwdp0: z(2 * n * dof),
+            work: Workspace {
+                dwdp: z(2 * n * dof),
+                px: z(n),
+                py: z(n),
+                values: z(n),
+                gx: z(n),
+                gy: z(n),
+                grad: z(n),
+                jac: z(n * dof),
+            },
+        }
+    }
+
+    /// Number of sampled points.
+    pub fn len(&self) -> usize {
+        self.grid_x.len()
+    }
+
+    /// Whether the grid is empty.
+    pub fn is_empty(&self) -> bool {
+        self.grid_x.is_empty()
+    }
+
+    /// The matrix taking normalised template points to frame pixels under `p`.
+    pub fn pixel_matrix(&self, p: &Params) -> Matrix3<f64> {
+        self.norm.to_image_matrix() * self.ssm.matrix(p)
+    }
+
+    /// The corners under `p`, in frame pixels.
+    pub fn corners(&self, p: &Params) -> Quad {
+        let m = self.pixel_matrix(p);
+        self.template_corners
+            .map(|c| crate::geometry::apply_homography(&m, c))
+    }
+
+    /// Warps the grid by `p` into frame pixels (`px`, `py`).
+    pub fn warp_grid(&mut self, p: &Params) {
+        let m = self.pixel_matrix(p).cast::<f32>();
+        let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+        let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+        let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+        for i in 0..self.grid_x.len() {
+            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+            let w = 1.0 / (m20 * x + m21 * y + m22);
+            self.work.px[i] = (m00 * x + m01 * y + m02) * w;
+            self.work.py[i] = (m10 * x + m11 * y + m12) * w;
+        }
+    }
+
+    /// The objective of `p_t = argmax_p f(I*, I_t(w(x, p)))` at `p`: the grid warped by `p`,
+    /// the frame sampled there (into `work.values`), and the AM's similarity to the template.
+    pub fn similarity_at(&mut self, img: &ImageView, p: &Params) -> f64 {
+        self.sample_at(img, p);
+        self.am.similarity(&self.work.values)
+    }
+
+    /// The patch of `img` under `p`: the grid warped by `p` and the frame's values sampled
+    /// there, into `work.values`.
+    pub fn sample_at(&mut self, img: &ImageView, p: &Params) {
+        self.warp_grid(p);
+        self.sample(img, false);
+    }
+
+    /// [`Context::sample_at`] with the frame's gradients (frame pixels) too, into `work.gx`,
+    /// `work.gy`.
+    pub fn sample_gradients_at(&mut self, img: &ImageView, p: &Params) {
+        self.warp_grid(p);
+        self.sample(img, true);
+    }
+
+    /// Samples the frame at the warped grid: values, and gradients (frame pixels) if asked.
+    pub fn sample(&mut self, img: &ImageView, gradients: bool) {
+        if gradients {
+            sample_values_gradients(
+                img,
+                &self.work.px,
+                &self.work.py,
+                &mut self.work.values,
+                &mut self.work.gx,
+                &mut self.work.gy,
+            );
+        } else {
+            sample_values(img, &self.work.px, &self.work.py, &mut self.work.values);
+        }
+    }
+
+    /// Turns the sampled frame gradients into the gradient of the warped frame
+    /// `I_t(pixel(w(x, p)))` with respect to the normalised template point `x` (chain rule
+    /// through the warp's point Jacobian), in place in `gx`, `gy`.
+    pub fn warped_gradient(&mut self, p: &Params) {
+        let m = self.pixel_matrix(p).cast::<f32>();
+        for i in 0..self.grid_x.len() {
+            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+            let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
+            let (u, v) = (self.work.px[i], self.work.py[i]);
+            let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
+            let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
+            let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
+            let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
+            let (gx, gy) = (self.work.gx[i], self.work.gy[i]);
+            self.work.gx[i] = gx * a00 + gy * a10;
+            self.work.gy[i] = gx * a01 + gy * a11;
+        }
+    }
+
+    /// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
+    /// [`Ssm::jacobian`].
+    pub fn project(gx: &[f32], gy: &[f32], dwdp: &[f32], dof: usize, jac: &mut [f32]) {
+        let n = gx.len();
+        for k in 0..dof {
+            let dx = &dwdp[2 * k * n..(2 * k + 1) * n];
+            let dy = &dwdp[(2 * k + 1) * n..(2 * k + 2) * n];
+            let jk = &mut jac[k * n..(k + 1) * n];
+            for ((((j, &a), &b), &u), &v) in jk.iter_mut().zip(gx).zip(gy).zip(dx).zip(dy) {
+                *j = a * u + b * v;
+            }
+        }
+    }
+
+    /// Projects the gradients in `gx`, `gy` (with respect to the normalised template point) on
+    /// `dw/dp` into the pixel Jacobian `jac`: `dw/dp` at the identity (compositional methods)
+    /// or, given `p`, at `p` (additive methods).
+    pub fn project_gradients(&mut self, at: Option<&Params>) {
+        let dwdp = match at {
+            Some(p) => {
+                self.ssm
+                    .jacobian(p, &self.grid_x, &self.grid_y, &mut self.work.dwdp);
+                &self.work.dwdp
+            }
+            None => &self.dwdp0,
+        };
+        Self::project(
+            &self.work.gx,
+            &self.work.gy,
+            dwdp,
+            self.dof,
+            &mut self.work.jac,
+        );
+    }
+
+    /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
+    /// current pixels `values`, through the pixel Jacobian `jac`; returns the similarity before
+    /// the step.
+    pub fn forward_step(&mut self, update: Update) -> Result<f64, LossReason> {
+        let f = self
+            .am
+            .gradient(Wrt::Current, &self.work.values, &mut self.work.grad);
+        self.forward_step_from_gradient(update).map(|_| f)
+    }
+
+    /// [`Context::forward_step`] once the AM's gradient with respect to the current pixels is
+    /// in `self.work.grad` (for `self.work.values`): the Hessian, the Newton system, the update.
+    pub fn forward_step_from_gradient(&mut self, update: Update) -> Result<(), LossReason> {
+        let mut h = [0.0; MAX_DOF * MAX_DOF];
+        self.am.hessian(
+            Wrt::Current,
+            self.hessian,
+            &self.work.values,
+            &self.work.jac,
+            self.dof,
+            &mut h,
+        );
+        let jac = std::mem::take(&mut self.work.jac);
+        let r = self.step(&jac, &h, update);
+        self.work.jac = jac;
+        r
+    }
+
+    /// Solves the Newton system `H dp = -J^T g` (with `g` the AM gradient in `self.work.grad`) and
+    /// applies the step to the parameters.
+    pub fn step(
+        &mut self,
+        jac: &[f32],
+        h: &[f64; MAX_DOF * MAX_DOF],
+        update: Update,
+    ) -> Result<(), LossReason> {
+        let mut g = [0.0f64; MAX_DOF];
+        jt_times(jac, &self.work.grad, self.dof, &mut g);
+        let dp = if self.damping > 0.0 {
+            // Levenberg-Marquardt: the diagonal scaled by 1 + lambda (a shorter, more
+            // gradient-like step).
+            let mut hd = *h;
+            for i in 0..self.dof {
+                hd[i * self.dof + i] *= 1.0 + self.damping;
+            }
+            newton_step(&hd, &g, self.dof)
+        } else {
+            newton_step(h, &g, self.dof)
+        }
+        .ok_or(LossReason::Singular)?;
+        self.apply(&dp, update)
+    }
+
+    /// Applies the step `dp` to the parameters.
+    pub fn apply(&mut self, dp: &Params, update: Update) -> Result<(), LossReason> {
+        let dp = *dp;
+        let p = self.params;
+        let next = match update {
+            Update::Additive => Some(self.ssm.additive_update(&p, &dp)),
+            Update::Compose => self.ssm.compose(&p, &dp),
+            Update::ComposeInverse => self
+                .ssm
+                .invert(&dp)
+                .and_then(|inv| self.ssm.compose(&p, &inv)),
+        }
+        .ok_or(LossReason::Singular)?;
+        if !next.iter().all(|v| v.is_finite()) {
+            return Err(LossReason::NonFinite);
+        }
+        self.params = next;
+        Ok(())
+    }
+
+    /// Sets up the grid and the normaliser for the initial quad `q` (image coordinates), and
+    /// resets the parameters to the identity.
+    pub fn set_region(&mut self, q: &Quad, res: usize, layout: GridLayout) -> crate::Result<()> {
+        q.validate()?;
+        self.norm = Normaliser::of_quad(q);
+        let nq = q.map(|p| self.norm.to_norm(p));
+        let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
+            .ok_or_else(|| crate::Error::InvalidRegion(format!("{q} has no homography")))?;
+        // Centres: -0.5 + (k + 1/2) / res; border: -0.5 + k / (res - 1), corners included.
+        let (step, offset) = match layout {
+            GridLayout::Border if res > 1 => (1.0 / (res - 1) as f64, 0.0),
+            _ => (1.0 / res as f64, 0.5),
+        };
+        for r in 0..res {
+            for c in 0..res {
+                let u = Point::new(
+                    -0.5 + (c as f64 + offset) * step,
+                    -0.5 + (r as f64 + offset) * step,
+                );
+                let p = crate::geometry::apply_homography(&h, u);
+                self.grid_x[r * res + c] = p.x as f32;
+                self.grid_y[r * res + c] = p.y as f32;
+            }
+        }
+        self.template_corners = nq;
+        self.params = self.ssm.identity();
+        let (gx, gy) = (self.grid_x.clone(), self.grid_y.clone());
+        self.ssm.jacobian(&self.params, &gx, &gy, &mut self.dwdp0);
+        Ok(())
+    }
+
+    /// Samples the template (values and normalised gradients) from `img` at the grid under the
+    /// current parameters and gives it to the AM.
+    pub fn sample_template(&mut self, img: &ImageView) {
+        let p = self.params;
+        self.sample_gradients_at(img, &p);
+        self.warped_gradient(&p);
+        self.template.copy_from_slice(&self.work.values);
+        self.template_gx.copy_from_slice(&self.work.gx);
+        self.template_gy.copy_from_slice(&self.work.gy);
+        self.am.set_template(&self.template);
+    }
+}
+
+#[cfg(test)]
+mod grid_tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_lies_inside_or_spans_the_target() {
+        let q = Quad::from_rect(10.0, 20.0, 40.0, 30.0);
+        for layout in [GridLayout::Centres, GridLayout::Border] {
+            let mut ctx = Context::new(
+                crate::ssm::build("homography").unwrap(),
+                crate::am::build("ssd").unwrap(),
+                HessianKind::Default,
+                5,
+            );
+            ctx.set_region(&q, 5, layout).unwrap();
+            let m = ctx.pixel_matrix(&ctx.params);
+            let px = |i: usize| {
+                crate::geometry::apply_homography(
+                    &m,
+                    Point::new(ctx.grid_x[i] as f64, ctx.grid_y[i] as f64),
+                )
+            };
+            let (first, last) = (px(0), px(24));
+            match layout {
+                // Cell centres: half a cell (4 x 3 px) inside the corners.
+                GridLayout::Centres => {
+                    assert!(first.dist(Point::new(14.0, 23.0)) < 1e-4, "{first:?}");
+                    assert!(last.dist(Point::new(46.0, 47.0)) < 1e-4, "{last:?}");
+                }
+                GridLayout::Border => {
+                    assert!(first.dist(q.0[0]) < 1e-4, "{first:?}");
+                    assert!(last.dist(q.0[2]) < 1e-4, "{last:?}");
+                }
+            }
+        }
+    }
+}

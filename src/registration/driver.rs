@@ -1,0 +1,557 @@
+//! The driver of a registration tracker: it owns the iteration loop of every frame (the stop
+//! test, the model relearning, the observer), the pre-processing of the region the tracker
+//! reads, the coarse-to-fine pyramid and the SSM hierarchy, and the loss-of-track checks. The
+//! search method makes one iteration at a time ([`SearchMethod::iterate`]).
+
+use super::{Context, Control, SearchMethod, sweep};
+use crate::error::{Error, Result};
+use crate::geometry::{Quad, apply_homography};
+use crate::imaging::{ImageView, Preprocessor, gaussian_kernel};
+use crate::landscape::{Landscape, LandscapeSpec};
+use crate::observe::{Iteration, Observer};
+use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
+use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
+use crate::visual_tracker::{FrameInput, Inspection, VisualTracker};
+use std::time::Instant;
+
+/// The SSMs of the hierarchy (`ssm_hierarchy=on`), fewer DOF first; those below the tracker's
+/// own are searched before it.
+pub const HIERARCHY: [&str; 3] = ["translation", "similitude", "affine"];
+
+/// One search: a search method and its context (models, grid, template, buffers).
+#[derive(Debug)]
+pub struct Stage {
+    pub ctx: Context,
+    pub sm: Box<dyn SearchMethod>,
+}
+
+/// A registration tracker: SSM + AM + SM, built from a [`RegistrationSpec`], and the driver that
+/// owns the iteration loop.
+#[derive(Debug)]
+pub struct RegistrationTracker {
+    spec: TrackerSpec,
+    params: TrackerParams,
+    ctx: Context,
+    sm: Box<dyn SearchMethod>,
+    /// Pyramid levels 1, 2, ... (coarser and coarser), each with its own template.
+    coarse: Vec<Stage>,
+    /// The SSM hierarchy's stages (fewer DOF first), at full resolution.
+    lower: Vec<Stage>,
+    pre: Preprocessor,
+    /// Builds the pyramid of already smoothed input.
+    pre_copy: Preprocessor,
+    status: TrackStatus,
+    frame: usize,
+    corners: Quad,
+    initial_area: f64,
+}
+
+impl RegistrationTracker {
+    /// A tracker for `spec` (with canonical names and checked parameters) searching with `main`,
+    /// whose other stages are made by `build`: given an SSM's name, the AM, the SM and their
+    /// context as `spec` has them. Every stage, at every pyramid level and of the SSM hierarchy,
+    /// is built by it, so each has the spec's AM and SM parameters.
+    pub fn from_stages(
+        spec: RegistrationSpec,
+        main: Stage,
+        build: &dyn Fn(&str) -> Result<Stage>,
+    ) -> Result<Self> {
+        let p = spec.params.clone();
+        let coarse = (1..p.pyramid_levels)
+            .map(|_| build(&spec.ssm))
+            .collect::<Result<Vec<_>>>()?;
+        let mut lower = Vec::new();
+        if p.ssm_hierarchy {
+            let dof = main.ctx.dof;
+            for name in HIERARCHY {
+                let stage = build(name)?;
+                if stage.ctx.dof < dof {
+                    lower.push(stage);
+                }
+            }
+        }
+        let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma));
+        Ok(RegistrationTracker {
+            spec: TrackerSpec::Registration(spec),
+            params: p,
+            ctx: main.ctx,
+            sm: main.sm,
+            coarse,
+            lower,
+            pre,
+            pre_copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
+            status: TrackStatus::Uninitialized,
+            frame: 0,
+            corners: Quad::default(),
+            initial_area: 0.0,
+        })
+    }
+
+    /// Current SSM parameters (normalised frame).
+    pub fn params(&self) -> &[f64] {
+        &self.ctx.params[..self.ctx.dof]
+    }
+    /// The models and buffers, taken out of the tracker (for benchmarks of single stages).
+    pub fn into_context(self) -> Context {
+        self.ctx
+    }
+
+    /// The models and buffers (template, last sampled patch...), read-only.
+    pub fn context(&self) -> &Context {
+        &self.ctx
+    }
+
+    /// Pre-processes the region the trackers read (and its pyramid levels).
+    fn prepare(&mut self, input: FrameInput<'_>, region: (f64, f64, f64, f64)) {
+        let (x0, y0, x1, y1) = region;
+        let levels = self.coarse.len();
+        let pre = match input {
+            FrameInput::Gray8(img) => {
+                self.pre.process(img, x0, y0, x1, y1);
+                &mut self.pre
+            }
+            FrameInput::Gray32(img) => {
+                self.pre.process(img, x0, y0, x1, y1);
+                &mut self.pre
+            }
+            FrameInput::Smoothed(img) => {
+                if levels == 0 {
+                    return;
+                }
+                self.pre_copy.process(img, x0, y0, x1, y1);
+                &mut self.pre_copy
+            }
+        };
+        pre.build_levels(levels);
+    }
+
+    /// The view of pyramid level `level` prepared by [`RegistrationTracker::prepare`].
+    fn view<'a>(
+        pre: &'a Preprocessor,
+        pre_copy: &'a Preprocessor,
+        input: FrameInput<'a>,
+        level: usize,
+    ) -> ImageView<'a> {
+        match input {
+            FrameInput::Smoothed(img) if level == 0 => img.view(),
+            FrameInput::Smoothed(_) => pre_copy.level_view(level),
+            _ => pre.level_view(level),
+        }
+    }
+
+    /// See [`VisualTracker::landscape`]: the region the sweep reads is pre-processed, then
+    /// [`sweep::sweep`].
+    fn sweep(
+        &mut self,
+        input: FrameInput<'_>,
+        at: &Quad,
+        spec: &LandscapeSpec,
+    ) -> Result<Landscape> {
+        if self.status == TrackStatus::Uninitialized {
+            return Err(Error::InvalidRegion(
+                "the tracker is not initialised".into(),
+            ));
+        }
+        at.validate()?;
+        let (x0, y0, x1, y1) = self.region_around(at);
+        let grow = sweep::reach(spec);
+        self.prepare(input, (x0 - grow, y0 - grow, x1 + grow, y1 + grow));
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        sweep::sweep(&mut self.ctx, &view, at, spec)
+    }
+
+    /// The region to pre-process around `q`: its bounding box grown by the margin.
+    fn region_around(&self, q: &Quad) -> (f64, f64, f64, f64) {
+        let (x0, y0, x1, y1) = q.bbox();
+        let m = self.params.roi_margin * (x1 - x0).max(y1 - y0) + 8.0;
+        (x0 - m, y0 - m, x1 + m, y1 + m)
+    }
+
+    /// The iteration loop on one pre-processed region.
+    fn iterate_frame(
+        &mut self,
+        input: FrameInput<'_>,
+        region: (f64, f64, f64, f64),
+        observer: &mut dyn Observer,
+        started: Instant,
+        timing: &mut FrameTiming,
+    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let t0 = Instant::now();
+        self.prepare(input, region);
+        let t1 = Instant::now();
+        timing.preprocess += t1 - t0;
+        let params = &self.params;
+        let mut done = 0;
+        // The SSM hierarchy: each stage starts from its SSM's least-squares fit to the corners the
+        // previous stage found (every context shares the normaliser and the template corners).
+        if !self.lower.is_empty() {
+            let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+            // The corners in the normalised frame.
+            let m = self.ctx.ssm.matrix(&self.ctx.params);
+            let mut corners = self.ctx.template_corners.map(|c| apply_homography(&m, c));
+            for Stage { ctx, sm } in self.lower.iter_mut() {
+                ctx.params = ctx
+                    .ssm
+                    .fit(&ctx.template_corners.0, &corners.0)
+                    .ok_or(LossReason::Singular)?;
+                let (_, iters, _, _) = Self::search(
+                    ctx, &mut **sm, params, self.frame, 0, done, &view, observer, started,
+                )?;
+                done += iters;
+                let m = ctx.ssm.matrix(&ctx.params);
+                corners = ctx.template_corners.map(|c| apply_homography(&m, c));
+            }
+            self.ctx.params = self
+                .ctx
+                .ssm
+                .fit(&self.ctx.template_corners.0, &corners.0)
+                .ok_or(LossReason::Singular)?;
+        }
+        let mut p = self.ctx.params;
+        // Coarse to fine: each level starts from the parameters the coarser one found (the
+        // parameters live in the normalised frame, the same at every level).
+        for (l, Stage { ctx, sm }) in self.coarse.iter_mut().enumerate().rev() {
+            ctx.params = p;
+            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            let (_, iters, _, _) = Self::search(
+                ctx,
+                &mut **sm,
+                params,
+                self.frame,
+                l + 1,
+                done,
+                &view,
+                observer,
+                started,
+            )?;
+            done += iters;
+            p = ctx.params;
+        }
+        self.ctx.params = p;
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        let result = Self::search(
+            &mut self.ctx,
+            &mut *self.sm,
+            params,
+            self.frame,
+            0,
+            done,
+            &view,
+            observer,
+            started,
+        )
+        .map(|(q, iters, conv, f)| (q, iters + done, conv, f));
+        timing.search += t1.elapsed();
+        result
+    }
+
+    /// The iteration loop proper.
+    #[allow(clippy::too_many_arguments)]
+    fn search(
+        ctx: &mut Context,
+        sm: &mut dyn SearchMethod,
+        params: &TrackerParams,
+        frame: usize,
+        level: usize,
+        first: usize,
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        started: Instant,
+    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+        let mut prev = ctx.corners(&ctx.params);
+        let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
+        sm.start_frame(ctx);
+        let budget = sm.max_iterations(params.max_iters);
+        let mut relearnt = 0;
+        for it in 0..budget {
+            let s = sm.iterate(ctx, view)?;
+            let f = s.similarity;
+            let corners = ctx.corners(&ctx.params);
+            if !corners.is_finite() || f.is_nan() {
+                return Err(LossReason::NonFinite);
+            }
+            let step = corners.change_norm(&prev);
+            prev = corners;
+            iterations = it + 1;
+            similarity = f;
+            // The patch where this iteration ended, for observers that show it (the next
+            // iteration samples again, so the shared buffers may be used).
+            let patch = if observer.wants_patches() {
+                let p = ctx.params;
+                ctx.sample_at(view, &p);
+                Some(&ctx.work.values[..])
+            } else {
+                None
+            };
+            observer.iteration(&Iteration {
+                frame,
+                level,
+                iteration: first + it,
+                params: &ctx.params[..ctx.dof],
+                corners,
+                similarity: f,
+                step,
+                elapsed: started.elapsed(),
+                patch,
+            });
+            if observer.wants_method_visuals()
+                && let Some(v) = sm.visual(ctx)
+            {
+                observer.method_visual(frame, first + it, &v);
+            }
+            let stop = match s.control {
+                Control::Done => true,
+                Control::Continue => false,
+                Control::Auto => step < params.eps,
+            };
+            if stop {
+                // A model that follows the light (SCV's intensity map) was learnt on the previous
+                // frame: once the search has settled, it learns this frame's light there and the
+                // search goes on (alternating the warp and the intensity map), up to three times a
+                // frame. Learnt only once per frame, after convergence, it lagged one frame behind
+                // a steady change of light; learnt where the frame starts, it absorbs the motion.
+                if ctx.am.updates_model() && relearnt < 3 && it + 1 < budget {
+                    relearnt += 1;
+                    Self::learn_model(ctx, sm, view);
+                    continue;
+                }
+                converged = true;
+                break;
+            }
+        }
+        Ok((prev, iterations, converged, similarity))
+    }
+
+    /// The AM's model learns the patch of `view` at the current parameters; the search method
+    /// refreshes what depends on it.
+    fn learn_model(ctx: &mut Context, sm: &mut dyn SearchMethod, view: &ImageView) {
+        let p = ctx.params;
+        ctx.sample_at(view, &p);
+        let values = std::mem::take(&mut ctx.work.values);
+        ctx.am.update_model(&values);
+        ctx.work.values = values;
+        sm.model_updated(ctx);
+    }
+
+    /// The loss-of-track checks on a frame's final quad.
+    fn check_quad(&self, q: &Quad, fw: usize, fh: usize) -> std::result::Result<(), LossReason> {
+        if !q.is_finite() {
+            return Err(LossReason::NonFinite);
+        }
+        let area = q.signed_area().abs();
+        if !q.is_convex() || area < self.initial_area / 100.0 || area > self.initial_area * 100.0 {
+            return Err(LossReason::Degenerate);
+        }
+        let c = q.centroid();
+        let (w, h) = (fw as f64, fh as f64);
+        if c.x < -0.5 * w || c.x > 1.5 * w || c.y < -0.5 * h || c.y > 1.5 * h {
+            return Err(LossReason::OutOfFrame);
+        }
+        Ok(())
+    }
+}
+
+impl VisualTracker for RegistrationTracker {
+    fn landscape(
+        &mut self,
+        input: FrameInput<'_>,
+        at: &Quad,
+        spec: &LandscapeSpec,
+    ) -> Option<Result<Landscape>> {
+        Some(self.sweep(input, at, spec))
+    }
+    /// The spec (with canonical names).
+    fn spec(&self) -> &TrackerSpec {
+        &self.spec
+    }
+    /// Current status.
+    fn status(&self) -> TrackStatus {
+        self.status
+    }
+    /// Current corners (image coordinates).
+    fn corners(&self) -> Quad {
+        self.corners
+    }
+    /// Starts tracking `quad` in `input`: samples the template there.
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+        // Until it succeeds the tracker is not usable (its context is being replaced).
+        self.status = TrackStatus::Uninitialized;
+        self.ctx
+            .set_region(quad, self.params.res, self.params.grid)?;
+        let region = self.region_around(quad);
+        self.prepare(input, region);
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        self.ctx.sample_template(&view);
+        let energy: f64 = self
+            .ctx
+            .template_gx
+            .iter()
+            .zip(&self.ctx.template_gy)
+            .map(|(&a, &b)| (a * a + b * b) as f64)
+            .sum();
+        if energy.partial_cmp(&(1e-6 * self.ctx.len() as f64)) != Some(std::cmp::Ordering::Greater)
+        {
+            self.status = TrackStatus::Uninitialized;
+            return Err(Error::InvalidRegion(format!(
+                "cannot track {quad}: the template is flat (no image gradient): {}",
+                LossReason::Singular
+            )));
+        }
+        self.sm
+            .initialize(&mut self.ctx, &view)
+            .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
+        for (l, Stage { ctx, sm }) in self.coarse.iter_mut().enumerate() {
+            ctx.set_region(quad, self.params.res, self.params.grid)?;
+            let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            ctx.sample_template(&view);
+            sm.initialize(ctx, &view).map_err(|r| {
+                Error::InvalidRegion(format!(
+                    "cannot track {quad} at pyramid level {}: {r}",
+                    l + 1
+                ))
+            })?;
+        }
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        for Stage { ctx, sm } in self.lower.iter_mut() {
+            ctx.set_region(quad, self.params.res, self.params.grid)?;
+            ctx.sample_template(&view);
+            sm.initialize(ctx, &view).map_err(|r| {
+                Error::InvalidRegion(format!("cannot track {quad} with {}: {r}", ctx.ssm.name()))
+            })?;
+        }
+        self.status = TrackStatus::Tracking;
+        self.frame = 0;
+        self.corners = self.ctx.corners(&self.ctx.params);
+        self.initial_area = quad.signed_area().abs();
+        Ok(())
+    }
+
+    /// Moves the tracker to `quad` keeping its template (the SSM's least-squares fit to the
+    /// quad), and resumes tracking if it was lost.
+    fn set_corners(&mut self, quad: &Quad) -> Result<()> {
+        if self.status == TrackStatus::Uninitialized {
+            return Err(Error::InvalidRegion(
+                "the tracker is not initialised".into(),
+            ));
+        }
+        quad.validate()?;
+        let target = quad.map(|p| self.ctx.norm.to_norm(p));
+        let p = self
+            .ctx
+            .ssm
+            .fit(&self.ctx.template_corners.0, &target.0)
+            .ok_or_else(|| {
+                Error::InvalidRegion(format!("cannot fit {} to {quad}", self.ctx.ssm.name()))
+            })?;
+        self.ctx.params = p;
+        self.corners = self.ctx.corners(&p);
+        self.status = TrackStatus::Tracking;
+        Ok(())
+    }
+
+    /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
+    /// reported in the status, with the last good corners.
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+        let resume = matches!(self.status, TrackStatus::Lost(_))
+            && self.params.on_loss == LossPolicy::Continue;
+        if self.status != TrackStatus::Tracking && !resume {
+            return FrameOutcome {
+                frame: self.frame,
+                status: self.status,
+                corners: self.corners,
+                iterations: 0,
+                converged: false,
+                similarity: f64::NAN,
+                timing: FrameTiming::default(),
+            };
+        }
+        self.frame += 1;
+        let mut timing = FrameTiming::default();
+        let start_params = self.ctx.params;
+        let start_corners = self.corners;
+        let (fw, fh) = input.size();
+        let mut region = self.region_around(&start_corners);
+        let started = Instant::now();
+        let mut result = Err(LossReason::NonFinite);
+        for attempt in 0..2 {
+            self.ctx.params = start_params;
+            observer.frame_started(self.frame, &start_corners);
+            result = self.iterate_frame(input, region, observer, started, &mut timing);
+            // The search left the pre-processed region (or failed in it): redo the frame once on
+            // a larger region, or on the whole frame after a failure.
+            let raw = matches!(input, FrameInput::Gray8(_) | FrameInput::Gray32(_));
+            if attempt == 0 && raw {
+                let (rx0, ry0, rx1, ry1) = {
+                    let (a, b, c, d) = self.pre.region();
+                    (a as f64, b as f64, c as f64, d as f64)
+                };
+                let whole = rx0 <= 0.0 && ry0 <= 0.0 && rx1 >= fw as f64 && ry1 >= fh as f64;
+                match &result {
+                    Ok(out) => {
+                        let (x0, y0, x1, y1) = out.0.bbox();
+                        let escaped = (x0 - 3.0 < rx0 && rx0 > 0.0)
+                            || (y0 - 3.0 < ry0 && ry0 > 0.0)
+                            || (x1 + 3.0 > rx1 && rx1 < fw as f64)
+                            || (y1 + 3.0 > ry1 && ry1 < fh as f64);
+                        if escaped && out.0.is_finite() {
+                            let grown = self.region_around(&out.0);
+                            region = (
+                                region.0.min(grown.0),
+                                region.1.min(grown.1),
+                                region.2.max(grown.2),
+                                region.3.max(grown.3),
+                            );
+                            continue;
+                        }
+                    }
+                    Err(_) if !whole => {
+                        region = (0.0, 0.0, fw as f64, fh as f64);
+                        continue;
+                    }
+                    Err(_) => {}
+                }
+            }
+            break;
+        }
+        let outcome = match result.and_then(|(q, iters, conv, f)| {
+            self.check_quad(&q, fw, fh).map(|_| (q, iters, conv, f))
+        }) {
+            Ok((q, iterations, converged, similarity)) => {
+                self.corners = q;
+                self.status = TrackStatus::Tracking;
+                FrameOutcome {
+                    frame: self.frame,
+                    status: TrackStatus::Tracking,
+                    corners: q,
+                    iterations,
+                    converged,
+                    similarity,
+                    timing,
+                }
+            }
+            Err(reason) => {
+                self.ctx.params = start_params;
+                self.status = TrackStatus::Lost(reason);
+                FrameOutcome {
+                    frame: self.frame,
+                    status: self.status,
+                    corners: start_corners,
+                    iterations: 0,
+                    converged: false,
+                    similarity: f64::NAN,
+                    timing,
+                }
+            }
+        };
+        observer.frame_finished(self.frame, &outcome);
+        outcome
+    }
+
+    fn inspection(&self) -> Option<Inspection<'_>> {
+        Some(Inspection {
+            res: self.params.res,
+            template: &self.ctx.template,
+            patch: &self.ctx.work.values,
+        })
+    }
+}

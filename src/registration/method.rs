@@ -1,0 +1,98 @@
+//! The interface between the driver and a search method: one iteration
+//! ([`SearchMethod::iterate`]) on the shared [`Context`], and what the driver does after it
+//! ([`Step`], [`Control`]). The methods themselves are in [`crate::sm`].
+
+use super::Context;
+use crate::am::Capabilities;
+use crate::imaging::ImageView;
+use crate::observe::MethodVisual;
+use crate::params::{MethodParams, ParamDef};
+use crate::spec::TrackerParams;
+use crate::status::LossReason;
+
+/// What the driver does after an iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// The driver's stop test decides (the corners moved less than `eps`).
+    Auto,
+    /// The method has finished this frame (one-shot methods such as NN, the last stage of a
+    /// cascade).
+    Done,
+    /// Go on even if the corners did not move (a cascade moving to its next stage).
+    Continue,
+}
+
+/// The result of one iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// The similarity before the step (at the parameters the iteration started from).
+    pub similarity: f64,
+    pub control: Control,
+}
+
+impl Step {
+    /// A step left to the driver's stop test.
+    pub fn auto(similarity: f64) -> Self {
+        Step {
+            similarity,
+            control: Control::Auto,
+        }
+    }
+    /// The last step of the frame.
+    pub fn done(similarity: f64) -> Self {
+        Step {
+            similarity,
+            control: Control::Done,
+        }
+    }
+}
+
+/// One search method. Object-safe; its per-pixel loops are concrete.
+pub trait SearchMethod: Send + std::fmt::Debug {
+    /// The canonical name (the registry name, or a composite's `cascade:a+b`).
+    fn name(&self) -> &str;
+    /// AM capabilities the method needs.
+    fn requires(&self) -> Capabilities {
+        Capabilities {
+            derivatives: true,
+            distance: false,
+        }
+    }
+    /// Called once the template is set in `ctx` (values and gradients sampled) with the
+    /// (pre-processed) initialisation frame, which sampling methods draw warped patches from.
+    fn initialize(&mut self, _ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
+        Ok(())
+    }
+    /// A new frame starts from `ctx.params`.
+    fn start_frame(&mut self, _ctx: &mut Context) {}
+    /// The AM's model was just updated ([`Am::update_model`]): refresh what was computed from it
+    /// (ICLK's constant Hessian).
+    fn model_updated(&mut self, _ctx: &mut Context) {}
+    /// One iteration on `img`: updates `ctx.params`.
+    fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason>;
+    /// How many iterations a frame may take, given the tracker's `max_iters` (a cascade gives
+    /// each of its stages that many).
+    fn max_iterations(&self, max_iters: usize) -> usize {
+        max_iters
+    }
+    /// What the method shows of its state after the last iteration (asked only when an
+    /// observer wants it).
+    fn visual(&mut self, _ctx: &Context) -> Option<MethodVisual<'_>> {
+        None
+    }
+}
+
+/// What a search method is built from: its own parameters (validated against its
+/// [`SmDef::params`]) and the tracker's.
+#[derive(Clone, Copy, Debug)]
+pub struct SmConfig<'a> {
+    pub method: &'a MethodParams,
+    pub tracker: &'a TrackerParams,
+}
+
+impl SmConfig<'_> {
+    /// The value of one of the method's parameters.
+    pub fn get(&self, def: &ParamDef) -> f64 {
+        self.method.get(def)
+    }
+}

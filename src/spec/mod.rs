@@ -1,0 +1,170 @@
+//! Trackers by name: what sessions, run files, the command line and the inspector store of a
+//! tracker ([`TrackerSpec`]: a registration tracker's AM, SSM and SM names with its parameters, or
+//! a whole tracker's name), and the registration tracker's parameters ([`TrackerParams`]).
+//!
+//! Specs are plain data: resolving their names against the registries and building the tracker
+//! is the factory's ([`crate::tracker`]).
+
+mod tracker_params;
+
+pub use tracker_params::{
+    GridLayout, LossPolicy, OFF_ON, ParamValue, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+};
+
+use crate::params::MethodParams;
+use serde::{Deserialize, Serialize};
+
+/// A registration tracker by name: search method, appearance model, state space model, the
+/// tracker's parameters and the search method's own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegistrationSpec {
+    pub sm: String,
+    pub am: String,
+    pub ssm: String,
+    pub params: TrackerParams,
+    /// The search method's and the appearance model's own parameters; unset ones take their
+    /// defaults.
+    pub method: MethodParams,
+}
+
+/// A whole tracker by name (one entry of [`crate::whole::REGISTRY`]) with its parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WholeSpec {
+    pub tracker: String,
+    pub method: MethodParams,
+}
+
+/// Any tracker, by name: a registration tracker (AM x SSM x SM) or a whole tracker. Sessions and
+/// run files store it as a table: `sm`, `am`, `ssm`, `params`, `method` for the first, `tracker`
+/// and `method` for the second.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RawSpec", into = "RawSpec")]
+pub enum TrackerSpec {
+    Registration(RegistrationSpec),
+    Whole(WholeSpec),
+}
+
+/// The stored form of a [`TrackerSpec`].
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSpec {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tracker: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sm: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    am: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    ssm: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    params: Option<TrackerParams>,
+    #[serde(default, skip_serializing_if = "MethodParams::is_empty")]
+    method: MethodParams,
+}
+
+impl TryFrom<RawSpec> for TrackerSpec {
+    type Error = String;
+    fn try_from(r: RawSpec) -> std::result::Result<Self, String> {
+        match (r.tracker, r.sm, r.am, r.ssm) {
+            (Some(tracker), None, None, None) => {
+                if r.params.is_some() {
+                    return Err(format!(
+                        "tracker '{tracker}' takes its parameters in `method`, not `params`"
+                    ));
+                }
+                Ok(TrackerSpec::Whole(WholeSpec {
+                    tracker,
+                    method: r.method,
+                }))
+            }
+            (None, Some(sm), Some(am), Some(ssm)) => {
+                Ok(TrackerSpec::Registration(RegistrationSpec {
+                    sm,
+                    am,
+                    ssm,
+                    params: r.params.unwrap_or_default(),
+                    method: r.method,
+                }))
+            }
+            (Some(_), _, _, _) => {
+                Err("a tracker is either `tracker = NAME` or `sm`, `am` and `ssm`, not both".into())
+            }
+            _ => Err("a registration tracker needs `sm`, `am` and `ssm`".into()),
+        }
+    }
+}
+
+impl From<TrackerSpec> for RawSpec {
+    fn from(s: TrackerSpec) -> Self {
+        match s {
+            TrackerSpec::Registration(r) => RawSpec {
+                sm: Some(r.sm),
+                am: Some(r.am),
+                ssm: Some(r.ssm),
+                params: Some(r.params),
+                method: r.method,
+                ..Default::default()
+            },
+            TrackerSpec::Whole(w) => RawSpec {
+                tracker: Some(w.tracker),
+                method: w.method,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+impl TrackerSpec {
+    /// The registration tracker's names and parameters, if it is one.
+    pub fn registration(&self) -> Option<&RegistrationSpec> {
+        match self {
+            TrackerSpec::Registration(r) => Some(r),
+            TrackerSpec::Whole(_) => None,
+        }
+    }
+
+    /// Mutable [`TrackerSpec::registration`].
+    pub fn registration_mut(&mut self) -> Option<&mut RegistrationSpec> {
+        match self {
+            TrackerSpec::Registration(r) => Some(r),
+            TrackerSpec::Whole(_) => None,
+        }
+    }
+
+    /// The tracker's parameters (a registration tracker's; `None` for a whole tracker).
+    pub fn params(&self) -> Option<&TrackerParams> {
+        self.registration().map(|r| &r.params)
+    }
+
+    /// Mutable [`TrackerSpec::params`].
+    pub fn params_mut(&mut self) -> Option<&mut TrackerParams> {
+        self.registration_mut().map(|r| &mut r.params)
+    }
+
+    /// The method's own parameters.
+    pub fn method_params(&self) -> &MethodParams {
+        match self {
+            TrackerSpec::Registration(r) => &r.method,
+            TrackerSpec::Whole(w) => &w.method,
+        }
+    }
+
+    /// `(sm, am, ssm)` as summary columns (a whole tracker: its name, then empty).
+    pub fn columns(&self) -> (String, String, String) {
+        match self {
+            TrackerSpec::Registration(r) => (r.sm.clone(), r.am.clone(), r.ssm.clone()),
+            TrackerSpec::Whole(w) => (w.tracker.clone(), String::new(), String::new()),
+        }
+    }
+
+    /// `sm_am_ssm` (or the whole tracker's name), as used in result file names; a composite's
+    /// `cascade:a+b` becomes `cascade-a+b`.
+    pub fn label(&self) -> String {
+        match self {
+            TrackerSpec::Registration(r) => {
+                format!("{}_{}_{}", r.sm.replace(':', "-"), r.am, r.ssm)
+            }
+            TrackerSpec::Whole(w) => w.tracker.clone(),
+        }
+    }
+}

@@ -1,0 +1,286 @@
+//! The parameters every registration tracker has, declared once: each line of
+//! [`tracker_params!`] gives a parameter's field, type, range, default and help, and from it
+//! follow the [`TrackerParams`] struct (its serde form, which sessions store), the definitions
+//! [`TRACKER_PARAMS`] (which `regtrack list`, the command line's flags, `--param`, the
+//! inspector's widgets and validation read) and the by-name access ([`TrackerParams::value`],
+//! [`TrackerParams::set_value`]).
+
+use crate::am::HessianKind;
+use crate::error::Result;
+use crate::params::ParamDef;
+use serde::{Deserialize, Serialize};
+
+/// A type a tracker parameter can have: converted to and from the `f64` that definitions,
+/// widgets and `--param` use (a choice as its index).
+pub trait ParamValue: Sized {
+    fn to_param(&self) -> f64;
+    /// From a value already checked against the definition.
+    fn from_param(v: f64) -> Self;
+}
+
+impl ParamValue for usize {
+    fn to_param(&self) -> f64 {
+        *self as f64
+    }
+    fn from_param(v: f64) -> Self {
+        v.max(0.0) as usize
+    }
+}
+impl ParamValue for u64 {
+    fn to_param(&self) -> f64 {
+        *self as f64
+    }
+    fn from_param(v: f64) -> Self {
+        v.max(0.0) as u64
+    }
+}
+impl ParamValue for f64 {
+    fn to_param(&self) -> f64 {
+        *self
+    }
+    fn from_param(v: f64) -> Self {
+        v
+    }
+}
+impl ParamValue for f32 {
+    fn to_param(&self) -> f64 {
+        *self as f64
+    }
+    fn from_param(v: f64) -> Self {
+        v as f32
+    }
+}
+impl ParamValue for bool {
+    fn to_param(&self) -> f64 {
+        *self as u8 as f64
+    }
+    fn from_param(v: f64) -> Self {
+        v >= 0.5
+    }
+}
+
+/// The names of a `bool` parameter's two choices.
+pub const OFF_ON: &[&str] = &["off", "on"];
+
+/// A closed set of names used as a choice parameter: `choice_param!(Type { Variant = "name", ...
+/// })` implements [`ParamValue`] (the index in this order) and gives `Type::NAMES`, the choice's
+/// names in the same order, which must be the serde names.
+macro_rules! choice_param {
+    ($ty:ty { $($variant:ident = $name:literal),+ $(,)? }) => {
+        impl $ty {
+            /// The names of the choice, in the order of its indices.
+            pub const NAMES: &'static [&'static str] = &[$($name),+];
+            const ALL: &'static [$ty] = &[$(<$ty>::$variant),+];
+        }
+        impl ParamValue for $ty {
+            fn to_param(&self) -> f64 {
+                Self::ALL.iter().position(|v| v == self).unwrap_or(0) as f64
+            }
+            fn from_param(v: f64) -> Self {
+                Self::ALL.get(v.max(0.0) as usize).copied().unwrap_or(Self::ALL[0])
+            }
+        }
+    };
+}
+
+/// Declares the tracker's parameters: `field: Type = kind(args...), "help";` with `kind` one
+/// of [`ParamDef`]'s constructors (`int`, `float`, `choice`) and its arguments after the name
+/// and help; `flag "name"` before the help adds a short command-line flag.
+macro_rules! tracker_params {
+    ($(
+        $(#[doc = $doc:literal])*
+        $field:ident : $ty:ty = $kind:ident ( $($arg:expr),* ) $(, flag $flag:literal)? , $help:literal ;
+    )*) => {
+        /// The parameters every registration tracker has (the paper's defaults), in
+        /// [`TRACKER_PARAMS`]' order. Sessions store them by these names.
+        #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        pub struct TrackerParams {
+            $(
+                #[doc = $help]
+                $(#[doc = ""] #[doc = $doc])*
+                pub $field: $ty,
+            )*
+        }
+
+        /// The definitions of [`TrackerParams`]: names, ranges, defaults, help.
+        pub const TRACKER_PARAMS: &[ParamDef] = &[
+            $(ParamDef::$kind(stringify!($field), $help, $($arg),*),)*
+        ];
+
+        /// Short command-line flags of some parameters: `(flag, parameter)`.
+        pub const TRACKER_FLAGS: &[(&str, &str)] = &[$($(($flag, stringify!($field)),)?)*];
+
+        impl TrackerParams {
+            /// The value of the parameter `name` (a choice as its index; `NaN` for an unknown
+            /// name).
+            pub fn value(&self, name: &str) -> f64 {
+                $(if name == stringify!($field) {
+                    return self.$field.to_param();
+                })*
+                f64::NAN
+            }
+
+            /// Sets the parameter `name` (unchecked: see [`TrackerParams::validate`]); returns
+            /// whether the name exists.
+            pub fn set_value(&mut self, name: &str, v: f64) -> bool {
+                $(if name == stringify!($field) {
+                    self.$field = <$ty as ParamValue>::from_param(v);
+                    return true;
+                })*
+                false
+            }
+        }
+
+        impl Default for TrackerParams {
+            fn default() -> Self {
+                let mut defs = TRACKER_PARAMS.iter();
+                TrackerParams {
+                    $($field: <$ty as ParamValue>::from_param(
+                        defs.next().map_or(0.0, |d| d.default),
+                    ),)*
+                }
+            }
+        }
+    };
+}
+
+tracker_params! {
+    res: usize = int(2.0, 1000.0, 50.0),
+        "sampling resolution: res x res points on the target";
+    max_iters: usize = int(1.0, 10_000.0, 30.0),
+        "maximum iterations per frame";
+    eps: f64 = float(0.0, 1000.0, 0.001),
+        "stop when the corners move less than this in an iteration (L2 norm of the 8 coordinates, px)";
+    blur_size: usize = int(1.0, 31.0, 5.0), flag "blur",
+        "Gaussian pre-smoothing kernel size (1 = none)";
+    blur_sigma: f32 = float(0.0, 100.0, 3.0), flag "sigma",
+        "Gaussian pre-smoothing standard deviation (px)";
+    hessian: HessianKind = choice(HessianKind::NAMES),
+        "the Hessian of the Newton step (default: the AM's own)";
+    roi_margin: f64 = float(0.0, 10.0, 0.25),
+        "margin of the pre-processed region around the target, as a fraction of its size";
+    /// Each level is half the size of the previous one and has its own template.
+    pyramid_levels: usize = int(1.0, 6.0, 1.0), flag "levels",
+        "coarse-to-fine pyramid levels (1 = none)";
+    seed: u64 = int(0.0, 9_007_199_254_740_991.0, 0.0),
+        "seed of the random generators (NN samples, PF particles)";
+    on_loss: LossPolicy = choice(LossPolicy::NAMES),
+        "after a loss of track: stop (until re-initialised) or continue from the last good estimate";
+    /// MTF's `hrch`: each frame is first searched with the SSMs of 2, 4 and 6 DOF below the
+    /// tracker's own, each from the previous one's result.
+    ssm_hierarchy: bool = choice(OFF_ON),
+        "off, or on: search translation, similitude and affine (those below the tracker's SSM) first, then the tracker's SSM (MTF's hrch)";
+    grid: GridLayout = choice(GridLayout::NAMES),
+        "sampling grid: centres (of a res x res tiling, inside the target) or border (corner to corner, as MTF)";
+}
+
+choice_param!(HessianKind {
+    Default = "default",
+    GaussNewton = "gauss_newton",
+    Newton = "newton",
+    AfterConvergence = "after_convergence",
+});
+
+/// Where a tracker's sampling grid lies on the target.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GridLayout {
+    /// The centres of a `res x res` tiling: every sample inside the target.
+    #[default]
+    Centres,
+    /// `res` points from edge to edge on each axis, corners included: the outer samples lie on
+    /// the target's border (and see the background when smoothed).
+    Border,
+}
+choice_param!(GridLayout {
+    Centres = "centres",
+    Border = "border",
+});
+
+/// What a tracker does after a loss of track.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossPolicy {
+    /// Stays lost until it is initialised again (or moved with `set_corners`); the evaluation's
+    /// reinit protocol restarts it from the ground truth.
+    #[default]
+    Stop,
+    /// Keeps searching each frame from the last good estimate, reporting `Lost` until a frame
+    /// passes the checks again (as MTF does).
+    Continue,
+}
+choice_param!(LossPolicy {
+    Stop = "stop",
+    Continue = "continue",
+});
+
+impl TrackerParams {
+    /// The definition called `name`.
+    pub fn def(name: &str) -> Option<&'static ParamDef> {
+        TRACKER_PARAMS.iter().find(|d| d.name == name)
+    }
+
+    /// Sets a parameter from its typed form (`hessian=newton`, `res=80`), checked; returns
+    /// whether the name is a tracker parameter.
+    pub fn assign(&mut self, name: &str, value: &str) -> Result<bool> {
+        match Self::def(name) {
+            Some(d) => {
+                let v = d.parse("tracker", value)?;
+                self.set_value(name, v);
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+
+    /// Checks every value against [`TRACKER_PARAMS`]; the error says which parameter is wrong.
+    pub fn validate(&self) -> Result<()> {
+        for d in TRACKER_PARAMS {
+            d.check("tracker", self.value(d.name))?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_parameter_reads_back_what_was_set_and_defaults_match_the_definitions() {
+        let mut p = TrackerParams::default();
+        for d in TRACKER_PARAMS {
+            assert_eq!(p.value(d.name), d.default, "{}", d.name);
+            let other = if d.max > d.default { d.max } else { d.min };
+            assert!(p.set_value(d.name, other), "{}", d.name);
+            assert_eq!(p.value(d.name), other, "{}", d.name);
+        }
+        assert!(!p.set_value("nope", 1.0));
+        assert!(p.value("nope").is_nan());
+        // Every flag names a parameter.
+        for (_, name) in TRACKER_FLAGS {
+            assert!(TrackerParams::def(name).is_some(), "{name}");
+        }
+    }
+
+    #[test]
+    fn choice_names_are_the_serde_names() {
+        fn serde_name<T: Serialize>(v: &T) -> String {
+            serde_json::to_value(v)
+                .unwrap()
+                .as_str()
+                .unwrap()
+                .to_string()
+        }
+        for (i, n) in HessianKind::NAMES.iter().enumerate() {
+            assert_eq!(serde_name(&HessianKind::from_param(i as f64)), *n);
+        }
+        for (i, n) in GridLayout::NAMES.iter().enumerate() {
+            assert_eq!(serde_name(&GridLayout::from_param(i as f64)), *n);
+        }
+        for (i, n) in LossPolicy::NAMES.iter().enumerate() {
+            assert_eq!(serde_name(&LossPolicy::from_param(i as f64)), *n);
+        }
+    }
+}

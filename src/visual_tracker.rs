@@ -1,0 +1,85 @@
+//! What every tracker is: initialised on a frame and a quad, then updated frame by frame
+//! ([`VisualTracker`]), with what it is given ([`FrameInput`]) and what it shows of itself
+//! ([`Inspection`], [`Landscape`]).
+
+use crate::error::Result;
+use crate::geometry::Quad;
+use crate::imaging::{GrayF32, GrayU8};
+use crate::landscape::{Landscape, LandscapeSpec};
+use crate::observe::Observer;
+use crate::spec::TrackerSpec;
+use crate::status::{FrameOutcome, TrackStatus};
+
+/// What a tracker is given for a frame.
+#[derive(Clone, Copy, Debug)]
+pub enum FrameInput<'a> {
+    /// An 8-bit frame: the tracker converts and smooths only the region it reads (live path).
+    Gray8(&'a GrayU8),
+    /// A float frame, not smoothed yet: likewise.
+    Gray32(&'a GrayF32),
+    /// A float frame already smoothed by the caller: used as it is (tracker-only timing).
+    Smoothed(&'a GrayF32),
+}
+
+impl FrameInput<'_> {
+    /// `(width, height)`.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            FrameInput::Gray8(i) => (i.width, i.height),
+            FrameInput::Gray32(i) | FrameInput::Smoothed(i) => (i.width, i.height),
+        }
+    }
+}
+
+impl<'a> From<&'a GrayU8> for FrameInput<'a> {
+    fn from(i: &'a GrayU8) -> Self {
+        FrameInput::Gray8(i)
+    }
+}
+
+/// What a tracker shows of its inner state for inspection: the template and the current patch
+/// (on a `res x res` grid, row-major), from which the error image follows.
+#[derive(Clone, Copy, Debug)]
+pub struct Inspection<'a> {
+    pub res: usize,
+    pub template: &'a [f32],
+    pub patch: &'a [f32],
+}
+
+/// Any tracker: initialised on a frame and a quad, then updated frame by frame. Registration
+/// trackers ([`crate::registration::RegistrationTracker`]) and whole trackers
+/// ([`crate::whole::REGISTRY`]) implement it; the evaluation, the benchmarks, the command line
+/// and the inspector use only this (through [`crate::tracker::Tracker`]).
+pub trait VisualTracker: Send + std::fmt::Debug {
+    /// The spec it was built from (with canonical names).
+    fn spec(&self) -> &TrackerSpec;
+    /// Starts tracking `quad` in `input`.
+    fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()>;
+    /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
+    /// reported in the status, with the last good corners.
+    fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome;
+    /// Moves the tracker to `quad` keeping what it learnt, and resumes tracking if it was lost.
+    fn set_corners(&mut self, quad: &Quad) -> Result<()>;
+    /// Current status.
+    fn status(&self) -> TrackStatus;
+    /// Current corners (image coordinates).
+    fn corners(&self) -> Quad;
+    /// The template and current patch, for trackers that have them.
+    fn inspection(&self) -> Option<Inspection<'_>> {
+        None
+    }
+    /// The label used in file names and tables.
+    fn label(&self) -> String {
+        self.spec().label()
+    }
+    /// The similarity swept around the warp whose corners are `at`, on `input` (see
+    /// [`crate::landscape`]); `None` for trackers without a similarity over warps.
+    fn landscape(
+        &mut self,
+        _input: FrameInput<'_>,
+        _at: &Quad,
+        _spec: &LandscapeSpec,
+    ) -> Option<Result<Landscape>> {
+        None
+    }
+}

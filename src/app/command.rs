@@ -31,49 +31,66 @@ pub enum Command {
     SelectIteration(Option<usize>),
     SetTool(Tool),
     SetView(super::state::View),
+    /// Opens or closes the cost-landscape view.
+    ShowLandscape(bool),
+    /// What the cost-landscape view sweeps.
+    SetLandscape(super::LandscapeSettings),
     /// Show (and correct) the ground truth projected on this SSM.
     SetGtSsm(String),
-    /// A ground-truth drag in progress (drawn, not yet an edit).
-    GtDrag {
-        frame: usize,
-        quad: Quad,
+    /// An action of the ground-truth mode.
+    Gt(GtCommand),
+    /// A file dialog for a sequence: a folder of frames, or a ground-truth file.
+    OpenDialog {
+        folder: bool,
     },
-    /// One ground-truth edit: the quad, refitted on the shown SSM.
-    GtCommit {
-        frame: usize,
-        quad: Quad,
-        label: String,
-    },
-    /// The corner the keyboard moves (`None`: the whole quad).
-    GtPickCorner(Option<usize>),
-    /// Moves the picked corner (or the quad) of the shown frame by this many pixels.
-    GtNudge {
-        dx: f64,
-        dy: f64,
-    },
-    /// The nudge step (px).
-    GtStep(f64),
-    /// Marks the shown frame occluded / not annotatable, or unmarks it.
-    GtToggleOccluded,
-    /// The shown frame back to its original ground truth.
-    GtRevert,
-    GtUndo,
-    GtRedo,
-    /// Writes the corrected ground truth (own format and OptGT).
-    GtExport,
-    /// Seek to the uncorrected frame that most needs a look.
-    GtJumpWorst,
-    /// Interpolates between the corrected key frames around the shown frame.
-    GtInterpolate,
-    /// Tracks forward from the shown frame to propose corrections.
-    GtPropagate,
-    GtAcceptProposal,
-    GtRejectProposal,
+    /// The session file *Save session* writes and *Load session* reads.
+    SetSessionPath(String),
     SaveSession(PathBuf),
     LoadSession(PathBuf),
     DismissError(usize),
     /// Show an error message.
     ReportError(String),
+}
+
+/// The actions of the ground-truth mode ([`Command::Gt`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum GtCommand {
+    /// A ground-truth drag in progress (drawn, not yet an edit).
+    Drag {
+        frame: usize,
+        quad: Quad,
+    },
+    /// One ground-truth edit: the quad, refitted on the shown SSM.
+    Commit {
+        frame: usize,
+        quad: Quad,
+        label: String,
+    },
+    /// The corner the keyboard moves (`None`: the whole quad).
+    PickCorner(Option<usize>),
+    /// Moves the picked corner (or the quad) of the shown frame by this many pixels.
+    Nudge {
+        dx: f64,
+        dy: f64,
+    },
+    /// The nudge step (px).
+    Step(f64),
+    /// Marks the shown frame occluded / not annotatable, or unmarks it.
+    ToggleOccluded,
+    /// The shown frame back to its original ground truth.
+    Revert,
+    Undo,
+    Redo,
+    /// Writes the corrected ground truth (own format and OptGT).
+    Export,
+    /// Seek to the uncorrected frame that most needs a look.
+    JumpWorst,
+    /// Interpolates between the corrected key frames around the shown frame.
+    Interpolate,
+    /// Tracks forward from the shown frame to propose corrections.
+    Propagate,
+    AcceptProposal,
+    RejectProposal,
 }
 
 impl InspectorApp {
@@ -92,7 +109,6 @@ impl InspectorApp {
                 // A new sequence: nothing of the old one's frames carries over.
                 self.state.start_frame = 0;
                 self.state.frame = 0;
-                self.rt.gt_version += 1;
                 for t in &mut self.state.trackers {
                     t.init = InitSource::GroundTruth;
                 }
@@ -109,22 +125,21 @@ impl InspectorApp {
                 entry.color = PALETTE[n % PALETTE.len()];
                 entry.init = InitSource::GroundTruth;
                 self.state.trackers.push(entry);
-                self.rt.results.push(Vec::new());
-                self.rt.starts.push(self.state.start_frame);
+                self.rt.run.results.edit().push(Vec::new());
+                self.rt.run.starts.push(self.state.start_frame);
                 // Only the new tracker runs (up to where the others are).
                 self.rerun_tracker(n);
             }
             Command::RemoveTracker(i) => {
                 if i < self.state.trackers.len() {
                     self.state.trackers.remove(i);
-                    if i < self.rt.results.len() {
-                        self.rt.results.remove(i);
+                    if i < self.rt.run.results.len() {
+                        self.rt.run.results.edit().remove(i);
                     }
-                    if i < self.rt.starts.len() {
-                        self.rt.starts.remove(i);
+                    if i < self.rt.run.starts.len() {
+                        self.rt.run.starts.remove(i);
                     }
                     self.rt.worker.send(Job::Remove { index: i });
-                    self.rt.results_version += 1;
                     self.state.selected_tracker = self
                         .state
                         .selected_tracker
@@ -140,7 +155,7 @@ impl InspectorApp {
                             // Re-run once the pointer is released (not on every drag step);
                             // the other trackers keep their results.
                             Ok(_) => {
-                                self.rt.rerun_due.insert(i);
+                                self.rt.run.rerun_due.insert(i);
                             }
                             Err(e) => self.error(format!("tracker {}: {e}", i + 1)),
                         }
@@ -149,46 +164,46 @@ impl InspectorApp {
             }
             Command::Play => {
                 let n = self.frame_count();
-                let until = self.rt.tracked_until;
+                let until = self.rt.run.tracked_until;
                 if n == 0 {
                 } else if until.is_some_and(|u| self.state.frame < u) {
                     // Replay the stored results up to the last tracked frame, then go on.
-                    self.rt.replaying = Some(std::time::Instant::now());
+                    self.rt.run.replaying = Some(std::time::Instant::now());
                 } else if until.is_some_and(|u| u + 1 >= n) {
-                    self.rt.status = "at the end of the sequence: |< Start and Play replays, \
+                    self.rt.msg.status = "at the end of the sequence: |< Start and Play replays, \
                                       Re-run from here tracks again"
                         .into();
                 } else {
-                    self.rt.playing = true;
+                    self.rt.run.playing = true;
                     self.rt.worker.send(Job::Advance {
-                        generation: self.rt.generation,
+                        generation: self.rt.run.generation,
                         frames: None,
                         fps: self.state.playback_fps,
                     });
                 }
             }
             Command::Pause => {
-                self.rt.playing = false;
-                self.rt.replaying = None;
+                self.rt.run.playing = false;
+                self.rt.run.replaying = None;
                 self.rt.worker.stop();
             }
             Command::Step => {
                 self.rt.worker.send(Job::Advance {
-                    generation: self.rt.generation,
+                    generation: self.rt.run.generation,
                     frames: Some(1),
                     fps: 0.0,
                 });
             }
             Command::Seek(i) => {
-                self.rt.replaying = None;
-                if self.rt.playing {
-                    self.rt.playing = false;
+                self.rt.run.replaying = None;
+                if self.rt.run.playing {
+                    self.rt.run.playing = false;
                     self.rt.worker.stop();
                 }
                 let n = self.frame_count();
                 if n > 0 {
                     self.state.frame = i.min(n - 1);
-                    self.rt.selected_iteration = None;
+                    self.rt.ui.selected_iteration = None;
                     self.rt.worker.send(Job::Show(self.state.frame));
                 }
             }
@@ -196,65 +211,55 @@ impl InspectorApp {
             Command::RerunFrom(f) => {
                 // Re-tracking from here, and playing on.
                 self.restart(f);
-                self.rt.play_after_start = true;
+                self.rt.run.play_after_start = true;
             }
             Command::InitTracker(i, init) => {
                 if let Some(t) = self.state.trackers.get_mut(i) {
                     t.init = init;
                     // This tracker starts on the shown frame; the others keep their results.
-                    if let Some(s) = self.rt.starts.get_mut(i) {
+                    if let Some(s) = self.rt.run.starts.get_mut(i) {
                         *s = self.state.frame;
                     }
                     self.rerun_tracker(i);
                 }
             }
             Command::SelectTracker(i) => self.state.selected_tracker = i,
-            Command::SelectIteration(it) => self.rt.selected_iteration = it,
+            Command::SelectIteration(it) => self.rt.ui.selected_iteration = it,
             Command::SetTool(t) => {
-                if t == Tool::EditGroundTruth && self.rt.tool != t {
+                if t == Tool::EditGroundTruth && self.rt.ui.tool != t {
                     // The ground-truth mode needs the gray frame: show the frame again.
-                    self.rt.texture_frame = None;
+                    self.rt.display.texture_frame = None;
                 }
-                self.rt.tool = t;
+                self.rt.ui.tool = t;
             }
             Command::SetView(v) => self.state.view = v,
+            Command::ShowLandscape(open) => self.rt.ui.landscape.open = open,
+            Command::SetLandscape(s) => self.rt.ui.landscape.settings = s,
             Command::SetGtSsm(name) => match ssm::build(&name) {
                 Ok(m) => self.state.gt_ssm = m.name().to_string(),
                 Err(e) => self.error(e.to_string()),
             },
-            c @ (Command::GtDrag { .. }
-            | Command::GtCommit { .. }
-            | Command::GtPickCorner(_)
-            | Command::GtNudge { .. }
-            | Command::GtStep(_)
-            | Command::GtToggleOccluded
-            | Command::GtRevert
-            | Command::GtUndo
-            | Command::GtRedo
-            | Command::GtExport
-            | Command::GtJumpWorst
-            | Command::GtInterpolate
-            | Command::GtPropagate
-            | Command::GtAcceptProposal
-            | Command::GtRejectProposal) => self.apply_gt(c),
+            Command::Gt(c) => self.apply_gt(c),
+            Command::OpenDialog { folder } => self.open_dialog(folder),
+            Command::SetSessionPath(p) => self.rt.ui.session_path = p,
             Command::SaveSession(p) => match self.state.save(&p) {
                 Ok(()) => {
-                    self.rt.status = format!("saved session {}", p.display());
-                    self.rt.session_path = p.display().to_string();
+                    self.rt.msg.status = format!("saved session {}", p.display());
+                    self.rt.ui.session_path = p.display().to_string();
                 }
                 Err(e) => self.error(format!("cannot save the session: {e}")),
             },
             Command::LoadSession(p) => match State::load(&p) {
                 Ok(s) => {
-                    self.rt.session_path = p.display().to_string();
+                    self.rt.ui.session_path = p.display().to_string();
                     self.load_state(s);
                 }
                 Err(e) => self.error(format!("cannot load the session: {e}")),
             },
             Command::ReportError(e) => self.error(e),
             Command::DismissError(i) => {
-                if i < self.rt.errors.len() {
-                    self.rt.errors.remove(i);
+                if i < self.rt.msg.errors.len() {
+                    self.rt.msg.errors.remove(i);
                 }
             }
         }

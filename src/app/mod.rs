@@ -42,9 +42,23 @@ pub enum Tool {
     EditGroundTruth,
 }
 
+/// What can stop the inspector from running (the errors of a running window are shown in it).
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    #[error("cannot load the session: {0}")]
+    Session(#[source] crate::Error),
+    /// The windowing system's error, as it describes it.
+    #[error("the window cannot run: {0}")]
+    Window(String),
+    #[error("cannot write the screenshot {}: {message}", path.display())]
+    Screenshot { path: PathBuf, message: String },
+    #[error("the window closed before the screenshot was taken")]
+    NoScreenshot,
+}
+
 /// Where a screenshot's outcome is reported (`None` until it is taken).
 /// On success, a summary of the window's frame rate while the trackers ran.
-pub type ShotResult = Arc<Mutex<Option<Result<String, String>>>>;
+pub type ShotResult = Arc<Mutex<Option<Result<String, AppError>>>>;
 
 /// Take a screenshot once enough frames are tracked, then close.
 #[derive(Debug)]
@@ -56,16 +70,16 @@ pub struct ScreenshotPlan {
     pub result: ShotResult,
 }
 
-/// What a tracker's errors depend on: generation, results received, ground-truth version and
-/// SSM, start frame.
+/// What a tracker's errors depend on: generation, results' version, corrections' version,
+/// ground-truth SSM, start frame.
 type ErrorsKey = (u64, u64, u64, String, usize);
 
 /// Per tracker, its errors and what they were computed from.
 type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
 
-/// The cost-landscape view's settings and state.
-pub struct LandscapeView {
-    pub open: bool,
+/// What the cost-landscape view sweeps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LandscapeSettings {
     /// The swept parameters (0-based); the second is optional (a curve or a map).
     pub x: usize,
     pub y: Option<usize>,
@@ -73,85 +87,155 @@ pub struct LandscapeView {
     pub radius: f64,
     /// Around the ground truth instead of the tracker's estimate.
     pub around_truth: bool,
-    pub requested: Option<String>,
-    pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
-    pub texture: Option<(String, egui::TextureHandle)>,
 }
 
-impl Default for LandscapeView {
+impl Default for LandscapeSettings {
     fn default() -> Self {
-        LandscapeView {
-            open: false,
+        LandscapeSettings {
             x: 0,
             y: None,
             radius: 5.0,
             around_truth: false,
-            requested: None,
-            result: None,
-            texture: None,
         }
     }
 }
 
-/// Runtime fields: never saved.
-pub struct Runtime {
-    worker: Worker,
+/// The cost-landscape view: open or not, its settings, the request in flight, the last result.
+#[derive(Default)]
+pub struct LandscapeView {
+    pub open: bool,
+    pub settings: LandscapeSettings,
+    pub requested: Option<String>,
+    pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
+}
+
+/// A value with a version that every change bumps: caches keyed by the version stay right
+/// without anyone remembering to invalidate them. Reads go through `Deref`; changes through
+/// [`Versioned::edit`].
+#[derive(Debug, Default)]
+pub struct Versioned<T> {
+    value: T,
+    version: u64,
+}
+
+impl<T> Versioned<T> {
+    pub fn new(value: T) -> Self {
+        Versioned { value, version: 0 }
+    }
+    /// The value, to change (the version moves on).
+    pub fn edit(&mut self) -> &mut T {
+        self.version += 1;
+        &mut self.value
+    }
+    /// How many times the value was handed out for a change.
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+}
+
+impl<T> std::ops::Deref for Versioned<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.value
+    }
+}
+
+/// The open sequence, and one being opened.
+#[derive(Default)]
+struct SequenceRt {
     sequence: Option<Arc<Sequence>>,
-    generation: u64,
-    /// Per tracker, per frame.
-    results: Vec<Vec<Option<TrackerFrame>>>,
-    texture: Option<egui::TextureHandle>,
-    texture_frame: Option<usize>,
-    image_size: [usize; 2],
-    pending_image: Option<FrameImage>,
-    playing: bool,
-    /// The last frame the trackers reached.
-    tracked_until: Option<usize>,
-    status: String,
-    errors: Vec<String>,
-    progress: Option<(String, usize, usize)>,
-    tool: Tool,
-    selected_iteration: Option<usize>,
-    /// The cost-landscape view: its settings, the request in flight and the last result.
-    pub(crate) landscape: LandscapeView,
-    /// The keyboard help overlay is open.
-    show_help: bool,
+    /// A sequence being opened (the session points to it once it opened).
+    opening: Option<SequenceSource>,
     /// A loaded session's frame: the trackers run up to it once the sequence opened.
     restore_frame: Option<usize>,
     /// A frame that could not be read, and why (the view shows a placeholder for it).
     bad_frame: Option<(usize, String)>,
-    /// A sequence being opened (the session points to it once it opened).
-    opening: Option<SequenceSource>,
-    /// The ground-truth mode: corrections (journaled), drag, proposal, patches.
-    gt: gt_edit::GtRuntime,
-    /// Typed-path fallbacks for the file dialogs.
-    path_input: String,
-    session_path: String,
-    recent: Vec<PathBuf>,
-    commands: Vec<Command>,
-    patches: BTreeMap<usize, [egui::TextureHandle; 3]>,
-    screenshot: Option<ScreenshotPlan>,
-    /// The frame view's image-to-screen mapping, as last drawn.
-    transform: Option<panels::Transform>,
-    /// Trackers whose settings changed: each re-runs alone once the pointer is released.
-    rerun_due: std::collections::BTreeSet<usize>,
+}
+
+/// The trackers' results and the run that makes them.
+#[derive(Default)]
+struct RunRt {
+    /// Bumped at every re-initialisation: replies of an older generation are dropped.
+    generation: u64,
+    /// Per tracker, per frame.
+    results: Versioned<Vec<Vec<Option<TrackerFrame>>>>,
     /// Per tracker, the frame it was initialised on.
     starts: Vec<usize>,
-    /// Bumped at every result received (invalidates the error cache).
-    results_version: u64,
-    /// Play once the trackers are initialised (after *Re-run from here*).
-    play_after_start: bool,
+    /// The last frame the trackers reached.
+    tracked_until: Option<usize>,
+    playing: bool,
     /// Playing back stored results (not tracking): when the shown frame last advanced.
     replaying: Option<std::time::Instant>,
-    /// Bumped at every ground-truth correction or new sequence (invalidates the errors, the
-    /// ground-truth table and the ground-truth patches).
-    gt_version: u64,
+    /// Play once the trackers are initialised (after *Re-run from here*).
+    play_after_start: bool,
+    /// Trackers whose settings changed: each re-runs alone once the pointer is released.
+    rerun_due: std::collections::BTreeSet<usize>,
     /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
     errors_cache: ErrorsCache,
-    /// A file dialog running on its own thread, and where it puts its answer.
-    dialog: Option<Arc<Mutex<Option<Option<PathBuf>>>>>,
-    /// Per tracker, the (frame, generation) whose patches the textures show.
-    patch_keys: BTreeMap<usize, (usize, u64, Option<usize>, u64)>,
+}
+
+/// What the frame view shows: the frame's texture and where it was drawn.
+#[derive(Default)]
+struct DisplayRt {
+    texture: Option<egui::TextureHandle>,
+    texture_frame: Option<usize>,
+    image_size: [usize; 2],
+    pending_image: Option<FrameImage>,
+    /// The frame view's image-to-screen mapping, as last drawn.
+    transform: Option<panels::Transform>,
+}
+
+/// What the window tells the user.
+#[derive(Default)]
+struct MessagesRt {
+    status: String,
+    errors: Vec<String>,
+    progress: Option<(String, usize, usize)>,
+}
+
+/// The window's modes and fields that are not part of a session.
+struct UiRt {
+    tool: Tool,
+    selected_iteration: Option<usize>,
+    /// The keyboard help overlay is open.
+    show_help: bool,
+    /// The cost-landscape view: its settings, the request in flight and the last result.
+    landscape: LandscapeView,
+    /// The session file *Save session* writes.
+    session_path: String,
+    recent: Vec<PathBuf>,
+    /// A file dialog is open (its answer arrives as a reply).
+    dialog: bool,
+}
+
+impl Default for UiRt {
+    fn default() -> Self {
+        UiRt {
+            tool: Tool::Navigate,
+            selected_iteration: None,
+            show_help: false,
+            landscape: LandscapeView::default(),
+            session_path: String::from("sessions/my_session.toml"),
+            recent: Vec::new(),
+            dialog: false,
+        }
+    }
+}
+
+/// Runtime state, never saved, grouped by concern.
+pub struct Runtime {
+    /// All background work: jobs out, replies in.
+    worker: Worker,
+    /// Commands pushed this frame, applied after the panels are drawn.
+    commands: Vec<Command>,
+    seq: SequenceRt,
+    run: RunRt,
+    display: DisplayRt,
+    msg: MessagesRt,
+    ui: UiRt,
+    /// The ground-truth mode: corrections (journaled), drag, proposal, images.
+    gt: gt_edit::GtRuntime,
+    screenshot: Option<ScreenshotPlan>,
     /// Durations (s) of the window's frames, and of building the UI of each, while the
     /// trackers ran (the last 10 000).
     frame_times: Vec<(f32, f32)>,
@@ -168,42 +252,14 @@ impl InspectorApp {
     pub fn new(state: State, wake: impl Fn() + Send + Sync + 'static) -> Self {
         let rt = Runtime {
             worker: Worker::spawn(wake),
-            sequence: None,
-            generation: 0,
-            results: Vec::new(),
-            texture: None,
-            texture_frame: None,
-            image_size: [0, 0],
-            pending_image: None,
-            playing: false,
-            tracked_until: None,
-            status: String::new(),
-            errors: Vec::new(),
-            progress: None,
-            tool: Tool::Navigate,
-            selected_iteration: None,
-            opening: None,
-            show_help: false,
-            landscape: LandscapeView::default(),
-            restore_frame: None,
-            bad_frame: None,
-            gt: gt_edit::GtRuntime::default(),
-            path_input: String::new(),
-            session_path: String::from("sessions/my_session.toml"),
-            recent: Vec::new(),
             commands: Vec::new(),
-            patches: BTreeMap::new(),
+            seq: SequenceRt::default(),
+            run: RunRt::default(),
+            display: DisplayRt::default(),
+            msg: MessagesRt::default(),
+            ui: UiRt::default(),
+            gt: gt_edit::GtRuntime::default(),
             screenshot: None,
-            transform: None,
-            rerun_due: Default::default(),
-            starts: Vec::new(),
-            results_version: 0,
-            play_after_start: false,
-            replaying: None,
-            gt_version: 0,
-            errors_cache: Default::default(),
-            dialog: None,
-            patch_keys: BTreeMap::new(),
             frame_times: Vec::new(),
         };
         let mut app = InspectorApp {
@@ -231,16 +287,15 @@ impl InspectorApp {
 
     /// The session file the session field shows (and *Save session* writes).
     pub fn set_session_path(&mut self, p: &std::path::Path) {
-        self.rt.session_path = p.display().to_string();
+        self.rt.ui.session_path = p.display().to_string();
     }
 
     /// Replaces the session (the trackers then run up to its saved frame).
     fn load_state(&mut self, state: State) {
         let src = state.sequence.clone();
-        self.rt.restore_frame = Some(state.frame);
+        self.rt.seq.restore_frame = Some(state.frame);
         self.state = state;
-        self.rt.results = vec![Vec::new(); self.state.trackers.len()];
-        self.rt.gt_version += 1;
+        *self.rt.run.results.edit() = vec![Vec::new(); self.state.trackers.len()];
         self.open(src);
     }
 
@@ -251,54 +306,54 @@ impl InspectorApp {
 
     /// Shows an error once: the same message again moves to the end instead of stacking.
     fn error(&mut self, e: String) {
-        self.rt.errors.retain(|x| *x != e);
-        self.rt.errors.push(e);
-        if self.rt.errors.len() > 5 {
-            self.rt.errors.remove(0);
+        self.rt.msg.errors.retain(|x| *x != e);
+        self.rt.msg.errors.push(e);
+        if self.rt.msg.errors.len() > 5 {
+            self.rt.msg.errors.remove(0);
         }
     }
 
     fn open(&mut self, src: SequenceSource) {
-        self.rt.playing = false;
-        self.rt.progress = Some(("opening the sequence".into(), 0, 0));
+        self.rt.run.playing = false;
+        self.rt.msg.progress = Some(("opening the sequence".into(), 0, 0));
         // The session and the recent list change once it opened (a failed open changes nothing).
-        self.rt.opening = Some(src.clone());
+        self.rt.seq.opening = Some(src.clone());
         self.rt.worker.send(Job::Open(src));
     }
 
     /// Frames in the open sequence.
     pub fn frame_count(&self) -> usize {
-        self.rt.sequence.as_ref().map_or(0, |s| s.len())
+        self.rt.seq.sequence.as_ref().map_or(0, |s| s.len())
     }
 
     /// Whether the trackers are playing.
     pub fn is_playing(&self) -> bool {
-        self.rt.playing
+        self.rt.run.playing
     }
 
     /// The last frame the trackers reached.
     pub fn tracked_until(&self) -> Option<usize> {
-        self.rt.tracked_until
+        self.rt.run.tracked_until
     }
 
     /// Where an image point was drawn on screen in the last frame view.
     pub fn screen_pos(&self, p: Point) -> Option<egui::Pos2> {
-        self.rt.transform.map(|t| t.to_screen(p))
+        self.rt.display.transform.map(|t| t.to_screen(p))
     }
 
     /// The frame the view shows a "could not be read" placeholder for.
     pub fn bad_frame(&self) -> Option<usize> {
-        self.rt.bad_frame.as_ref().map(|b| b.0)
+        self.rt.seq.bad_frame.as_ref().map(|b| b.0)
     }
 
     /// The status line.
     pub fn status(&self) -> &str {
-        &self.rt.status
+        &self.rt.msg.status
     }
 
     /// Error messages shown.
     pub fn errors_shown(&self) -> &[String] {
-        &self.rt.errors
+        &self.rt.msg.errors
     }
 
     /// Whether corrections were made since the last export (they are in the journal either
@@ -309,28 +364,26 @@ impl InspectorApp {
 
     /// The open sequence.
     pub fn sequence(&self) -> Option<&Arc<Sequence>> {
-        self.rt.sequence.as_ref()
+        self.rt.seq.sequence.as_ref()
     }
 
     /// Re-initialises every enabled tracker on `frame` and shows it.
     fn restart(&mut self, frame: usize) {
-        let Some(seq) = self.rt.sequence.clone() else {
+        let Some(seq) = self.rt.seq.sequence.clone() else {
             return;
         };
         let frame = frame.min(seq.len().saturating_sub(1));
-        self.rt.generation += 1;
-        self.rt.playing = false;
-        self.rt.tracked_until = None;
-        self.rt.selected_iteration = None;
+        self.rt.run.generation += 1;
+        self.rt.run.playing = false;
+        self.rt.run.tracked_until = None;
+        self.rt.ui.selected_iteration = None;
         self.state.start_frame = frame;
         self.state.frame = frame;
-        self.rt.replaying = None;
-        self.rt.starts = vec![frame; self.state.trackers.len()];
-        self.rt.results_version += 1;
-        self.rt
-            .results
-            .resize(self.state.trackers.len(), Vec::new());
-        for r in &mut self.rt.results {
+        self.rt.run.replaying = None;
+        self.rt.run.starts = vec![frame; self.state.trackers.len()];
+        let results = self.rt.run.results.edit();
+        results.resize(self.state.trackers.len(), Vec::new());
+        for r in results {
             r.clear();
         }
         let mut specs = Vec::new();
@@ -359,7 +412,7 @@ impl InspectorApp {
             ));
         }
         self.rt.worker.send(Job::Start {
-            generation: self.rt.generation,
+            generation: self.rt.run.generation,
             frame,
             trackers: specs,
         });
@@ -368,6 +421,7 @@ impl InspectorApp {
     /// The frame tracker `t` was initialised on.
     fn tracker_start(&self, t: usize) -> usize {
         self.rt
+            .run
             .starts
             .get(t)
             .copied()
@@ -377,26 +431,25 @@ impl InspectorApp {
     /// Re-runs tracker `i` alone, from its start frame up to the frame the others reached; the
     /// view stays on its frame.
     fn rerun_tracker(&mut self, i: usize) {
-        let Some(seq) = self.rt.sequence.clone() else {
+        let Some(seq) = self.rt.seq.sequence.clone() else {
             return;
         };
         let Some(t) = self.state.trackers.get(i).cloned() else {
             return;
         };
-        if self.rt.playing {
-            self.rt.playing = false;
+        if self.rt.run.playing {
+            self.rt.run.playing = false;
             self.rt.worker.stop();
         }
         self.rt
+            .run
             .starts
             .resize(self.state.trackers.len(), self.state.start_frame);
-        self.rt
-            .results
-            .resize(self.state.trackers.len(), Vec::new());
-        let from = self.rt.starts[i].min(seq.len().saturating_sub(1));
-        let until = self.rt.tracked_until.unwrap_or(from).max(from);
-        self.rt.results[i].clear();
-        self.rt.results_version += 1;
+        let results = self.rt.run.results.edit();
+        results.resize(self.state.trackers.len(), Vec::new());
+        results[i].clear();
+        let from = self.rt.run.starts[i].min(seq.len().saturating_sub(1));
+        let until = self.rt.run.tracked_until.unwrap_or(from).max(from);
         let tracker = if t.enabled {
             let quad = match &t.init {
                 InitSource::Quad(q) => Some(*q),
@@ -417,7 +470,7 @@ impl InspectorApp {
             None
         };
         self.rt.worker.send(Job::Rerun {
-            generation: self.rt.generation,
+            generation: self.rt.run.generation,
             index: i,
             tracker,
             from,
@@ -429,7 +482,7 @@ impl InspectorApp {
     /// advances at the playback speed (30 fps when "as fast as the trackers go"), and tracking
     /// goes on from the last tracked frame.
     fn replay(&mut self, ctx: &egui::Context) {
-        let Some(last) = self.rt.replaying else {
+        let Some(last) = self.rt.run.replaying else {
             return;
         };
         ctx.request_repaint();
@@ -439,21 +492,21 @@ impl InspectorApp {
             30.0
         };
         if last.elapsed().as_secs_f32() < 1.0 / fps
-            || self.rt.texture_frame != Some(self.state.frame)
+            || self.rt.display.texture_frame != Some(self.state.frame)
         {
             return;
         }
-        let until = self.rt.tracked_until.unwrap_or(0);
+        let until = self.rt.run.tracked_until.unwrap_or(0);
         if self.state.frame < until {
             self.state.frame += 1;
-            self.rt.selected_iteration = None;
-            self.rt.replaying = Some(std::time::Instant::now());
+            self.rt.ui.selected_iteration = None;
+            self.rt.run.replaying = Some(std::time::Instant::now());
         } else {
-            self.rt.replaying = None;
+            self.rt.run.replaying = None;
             if until + 1 < self.frame_count() {
                 self.send(Command::Play);
             } else {
-                self.rt.status = "end of the sequence".into();
+                self.rt.msg.status = "end of the sequence".into();
             }
         }
     }
@@ -461,7 +514,7 @@ impl InspectorApp {
     /// Asks the worker for the cost landscape of the inspected tracker on the shown frame when
     /// the view is open and what it shows changed.
     fn request_landscape(&mut self) {
-        if !self.rt.landscape.open {
+        if !self.rt.ui.landscape.open {
             return;
         }
         let (i, frame) = (self.state.selected_tracker, self.state.frame);
@@ -477,7 +530,7 @@ impl InspectorApp {
             state::InitSource::Quad(q) => Some(*q),
             state::InitSource::GroundTruth => self.ground_truth(start),
         };
-        let at = if self.rt.landscape.around_truth {
+        let at = if self.rt.ui.landscape.settings.around_truth {
             self.ground_truth(frame)
         } else {
             Some(estimate)
@@ -485,7 +538,7 @@ impl InspectorApp {
         let (Some(init), Some(at)) = (init, at) else {
             return;
         };
-        let v = &self.rt.landscape;
+        let v = &self.rt.ui.landscape.settings;
         let mut axes = vec![v.x];
         axes.extend(v.y.filter(|&y| y != v.x));
         let sweep = crate::landscape::LandscapeSpec {
@@ -494,10 +547,10 @@ impl InspectorApp {
             radius: v.radius,
         };
         let key = format!("{:?}|{start}|{init}|{frame}|{at}|{sweep:?}", t.spec);
-        if v.requested.as_deref() == Some(key.as_str()) {
+        if self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()) {
             return;
         }
-        self.rt.landscape.requested = Some(key.clone());
+        self.rt.ui.landscape.requested = Some(key.clone());
         self.rt
             .worker
             .send(Job::Landscape(Box::new(worker::LandscapeJob {
@@ -513,22 +566,17 @@ impl InspectorApp {
 
     /// The cost landscape shown (the last one computed) and whether it is current.
     pub fn landscape_shown(&self) -> Option<(&Result<crate::landscape::Landscape, String>, bool)> {
-        let (key, r) = self.rt.landscape.result.as_ref()?;
+        let (key, r) = self.rt.ui.landscape.result.as_ref()?;
         Some((
             r,
-            self.rt.landscape.requested.as_deref() == Some(key.as_str()),
+            self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()),
         ))
-    }
-
-    /// Opens or closes the cost-landscape view.
-    pub fn show_landscape(&mut self, open: bool) {
-        self.rt.landscape.open = open;
     }
 
     /// The frames where trackers `a` and `b` disagree most: the alignment error between their
     /// corners (infinite where exactly one of them is lost), largest first.
     pub fn disagreements(&self, a: usize, b: usize) -> Vec<(usize, f64)> {
-        let (Some(ra), Some(rb)) = (self.rt.results.get(a), self.rt.results.get(b)) else {
+        let (Some(ra), Some(rb)) = (self.rt.run.results.get(a), self.rt.run.results.get(b)) else {
             return Vec::new();
         };
         let mut v: Vec<(usize, f64)> = ra
@@ -554,7 +602,7 @@ impl InspectorApp {
 
     /// Whether stored results are being played back.
     pub fn is_replaying(&self) -> bool {
-        self.rt.replaying.is_some()
+        self.rt.run.replaying.is_some()
     }
 
     /// Handles the worker's replies.
@@ -562,47 +610,53 @@ impl InspectorApp {
         for r in self.rt.worker.poll() {
             match r {
                 Reply::Progress(what, d, t) => {
-                    self.rt.progress = (!what.is_empty()).then_some((what, d, t))
+                    self.rt.msg.progress = (!what.is_empty()).then_some((what, d, t))
                 }
                 Reply::Opened(seq) => {
-                    self.rt.progress = None;
-                    self.rt.status = format!("{}: {} frames", seq.name, seq.len());
+                    self.rt.msg.progress = None;
+                    self.rt.msg.status = format!("{}: {} frames", seq.name, seq.len());
                     let start = self.state.start_frame.min(seq.len() - 1);
-                    if let Some(src) = self.rt.opening.take() {
+                    if let Some(src) = self.rt.seq.opening.take() {
                         if let SequenceSource::Path(p) = &src {
-                            self.rt.recent.retain(|r| r != p);
-                            self.rt.recent.insert(0, p.clone());
-                            self.rt.recent.truncate(8);
+                            self.rt.ui.recent.retain(|r| r != p);
+                            self.rt.ui.recent.insert(0, p.clone());
+                            self.rt.ui.recent.truncate(8);
                         }
                         self.state.sequence = src;
                     }
                     // Errors of an earlier attempt are stale now.
-                    self.rt.errors.clear();
-                    self.rt.bad_frame = None;
+                    self.rt.msg.errors.clear();
+                    self.rt.seq.bad_frame = None;
                     self.open_corrections(&seq);
-                    let restore = self.rt.restore_frame.take();
+                    let restore = self.rt.seq.restore_frame.take();
                     let n = seq.len();
-                    self.rt.sequence = Some(seq);
-                    self.rt.texture_frame = None;
+                    self.rt.seq.sequence = Some(seq);
+                    self.rt.display.texture_frame = None;
                     self.restart(start);
                     // A session's saved frame: track up to it.
                     if let Some(f) = restore.map(|f| f.min(n - 1)).filter(|&f| f > start)
                         && self.rt.screenshot.is_none()
                     {
-                        self.rt.playing = true;
+                        self.rt.run.playing = true;
                         self.rt.worker.send(Job::Advance {
-                            generation: self.rt.generation,
+                            generation: self.rt.run.generation,
                             frames: Some(f - start),
                             fps: 0.0,
                         });
                     }
                 }
                 Reply::Image(img) => {
-                    if self.rt.bad_frame.as_ref().is_some_and(|b| b.0 == img.index) {
-                        self.rt.bad_frame = None;
+                    if self
+                        .rt
+                        .seq
+                        .bad_frame
+                        .as_ref()
+                        .is_some_and(|b| b.0 == img.index)
+                    {
+                        self.rt.seq.bad_frame = None;
                     }
                     if img.index == self.state.frame {
-                        self.rt.pending_image = Some(img);
+                        self.rt.display.pending_image = Some(img);
                     }
                 }
                 Reply::Frame {
@@ -612,12 +666,12 @@ impl InspectorApp {
                     image,
                     catch_up,
                 } => {
-                    if generation != self.rt.generation {
+                    if generation != self.rt.run.generation {
                         continue;
                     }
-                    self.rt.results_version += 1;
+                    let stored = self.rt.run.results.edit();
                     for r in results {
-                        if let Some(v) = self.rt.results.get_mut(r.tracker) {
+                        if let Some(v) = stored.get_mut(r.tracker) {
                             if v.len() <= frame {
                                 v.resize(frame + 1, None);
                             }
@@ -643,35 +697,49 @@ impl InspectorApp {
                         // One tracker re-run over frames the others reached: the view stays.
                         continue;
                     }
-                    self.rt.tracked_until = Some(frame);
+                    self.rt.run.tracked_until = Some(frame);
                     // Follow the trackers while they run.
                     self.state.frame = frame;
-                    if std::mem::take(&mut self.rt.play_after_start) {
+                    if std::mem::take(&mut self.rt.run.play_after_start) {
                         self.send(Command::Play);
                     }
                     if let Some(img) = image {
-                        self.rt.pending_image = Some(img);
+                        self.rt.display.pending_image = Some(img);
                     }
                 }
                 Reply::Stopped { generation, .. } => {
-                    if generation == self.rt.generation {
-                        self.rt.playing = false;
+                    if generation == self.rt.run.generation {
+                        self.rt.run.playing = false;
                     }
                 }
-                Reply::Error(e) => {
-                    self.rt.progress = None;
-                    self.rt.opening = None;
-                    self.error(e);
+                Reply::Error { context, error } => {
+                    self.rt.msg.progress = None;
+                    self.rt.seq.opening = None;
+                    self.error(format!("{context}: {error}"));
                 }
                 Reply::Landscape { key, result } => {
-                    if self.rt.landscape.requested.as_deref() == Some(key.as_str()) {
-                        self.rt.landscape.result = Some((key, result));
+                    if self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()) {
+                        self.rt.ui.landscape.result =
+                            Some((key, result.map_err(|e| e.to_string())));
                     }
                 }
-                Reply::FrameError { index, message } => {
-                    self.rt.progress = None;
-                    self.rt.bad_frame = Some((index, message.clone()));
+                Reply::FrameError { index, error } => {
+                    self.rt.msg.progress = None;
+                    let message = error.to_string();
                     self.error(format!("frame {}: {message}", index + 1));
+                    self.rt.seq.bad_frame = Some((index, message));
+                }
+                Reply::Proposal { label, result } => self.proposal_arrived(label, result),
+                Reply::Picked(path) => {
+                    self.rt.ui.dialog = false;
+                    match path {
+                        Some(p) => self.apply(Command::OpenSequence(SequenceSource::Path(p))),
+                        None => {
+                            self.rt.msg.status = "no file chosen (without a desktop portal the \
+                                                  dialog cannot open: type the path)"
+                                .into()
+                        }
+                    }
                 }
             }
         }
@@ -679,58 +747,59 @@ impl InspectorApp {
 
     /// Uploads the newest decoded frame as the view's texture.
     fn upload(&mut self, ctx: &egui::Context) {
-        if let Some(img) = self.rt.pending_image.take() {
+        if let Some(img) = self.rt.display.pending_image.take() {
             let color =
                 // Frames are opaque: premultiplied is the same bytes, without a pass over them.
                 egui::ColorImage::from_rgba_premultiplied([img.width, img.height], &img.rgba);
-            match &mut self.rt.texture {
+            match &mut self.rt.display.texture {
                 Some(t) => t.set(color, egui::TextureOptions::LINEAR),
                 None => {
-                    self.rt.texture =
+                    self.rt.display.texture =
                         Some(ctx.load_texture("frame", color, egui::TextureOptions::LINEAR))
                 }
             }
-            self.rt.image_size = [img.width, img.height];
-            self.rt.texture_frame = Some(img.index);
+            self.rt.display.image_size = [img.width, img.height];
+            self.rt.display.texture_frame = Some(img.index);
             // The gray frame, for the ground-truth mode's patch view (only in that mode: it costs
             // a pass over the frame).
-            if self.rt.tool == Tool::EditGroundTruth {
-                let gray: Vec<u8> = img
+            if self.rt.ui.tool == Tool::EditGroundTruth {
+                let gray: Vec<f32> = img
                     .rgba
                     .chunks_exact(4)
-                    .map(|p| crate::imaging::luma(p[0], p[1], p[2]))
+                    .map(|p| crate::imaging::luma(p[0], p[1], p[2]) as f32)
                     .collect();
                 self.rt.gt.frame_image =
-                    crate::imaging::GrayU8::from_vec(img.width, img.height, gray)
+                    crate::imaging::GrayF32::from_vec(img.width, img.height, gray)
                         .map(|g| (img.index, g));
             }
         }
-        if self.rt.texture_frame != Some(self.state.frame)
-            && self.rt.sequence.is_some()
-            && !self.rt.playing
+        if self.rt.display.texture_frame != Some(self.state.frame)
+            && self.rt.seq.sequence.is_some()
+            && !self.rt.run.playing
         {
-            self.rt.texture_frame = Some(self.state.frame);
+            self.rt.display.texture_frame = Some(self.state.frame);
             self.rt.worker.send(Job::Show(self.state.frame));
         }
     }
 
     /// The result of tracker `t` on `frame`.
     pub fn result(&self, t: usize, frame: usize) -> Option<&TrackerFrame> {
-        self.rt.results.get(t)?.get(frame)?.as_ref()
+        self.rt.run.results.get(t)?.get(frame)?.as_ref()
     }
 
     /// Alignment errors of tracker `t` on the frames tracked after the start frame (lost frames
     /// are infinite), against the ground truth shown.
     pub fn errors(&self, t: usize) -> Vec<(usize, f64)> {
         let key: ErrorsKey = (
-            self.rt.generation,
-            self.rt.results_version,
-            self.rt.gt_version,
+            self.rt.run.generation,
+            self.rt.run.results.version(),
+            self.rt.gt.corrections.version(),
             self.state.gt_ssm.clone(),
             self.state.start_frame,
         );
         if let Some((_, v)) = self
             .rt
+            .run
             .errors_cache
             .borrow()
             .get(&t)
@@ -740,6 +809,7 @@ impl InspectorApp {
         }
         let v = self.compute_errors(t);
         self.rt
+            .run
             .errors_cache
             .borrow_mut()
             .insert(t, (key, v.clone()));
@@ -747,7 +817,7 @@ impl InspectorApp {
     }
 
     fn compute_errors(&self, t: usize) -> Vec<(usize, f64)> {
-        let Some(v) = self.rt.results.get(t) else {
+        let Some(v) = self.rt.run.results.get(t) else {
             return Vec::new();
         };
         v.iter()
@@ -769,7 +839,7 @@ impl InspectorApp {
     /// Speed of tracker `t` over the frames it tracked after the start frame (with or without
     /// ground truth): `(frames, search us, update us, iterations)`.
     pub fn speed(&self, t: usize) -> (usize, f64, f64, usize) {
-        let Some(v) = self.rt.results.get(t) else {
+        let Some(v) = self.rt.run.results.get(t) else {
             return (0, 0.0, 0.0, 0);
         };
         v.iter()
@@ -801,40 +871,46 @@ impl InspectorApp {
         let built = std::time::Instant::now();
         let ctx = ui.ctx().clone();
         self.poll_worker();
-        self.poll_propagation();
         self.upload(&ctx);
         self.gt_keys(&ctx);
         self.global_keys(&ctx);
         self.handle_dropped_files(&ctx);
-        panels::top_bar(self, ui);
-        panels::playback_bar(self, ui);
-        panels::sidebar(self, ui);
-        panels::plots_panel(self, ui);
-        egui::CentralPanel::default().show(ui, |ui| {
-            if self.rt.tool == Tool::EditGroundTruth && self.rt.sequence.is_some() {
-                egui::Panel::bottom("gt_strip").show(ui, |ui| panels::gt_strip(self, ui));
-            }
-            panels::frame_view(self, ui)
-        });
+        // The panels read the app and push commands; they are applied once all are drawn.
+        let mut out = panels::Commands::new();
+        panels::top_bar(self, ui, &mut out);
+        panels::playback_bar(self, ui, &mut out);
+        panels::sidebar(self, ui, &mut out);
+        panels::plots_panel(self, ui, &mut out);
+        let transform = egui::CentralPanel::default()
+            .show(ui, |ui| {
+                if self.rt.ui.tool == Tool::EditGroundTruth && self.rt.seq.sequence.is_some() {
+                    egui::Panel::bottom("gt_strip").show(ui, |ui| panels::gt_strip(self, ui));
+                }
+                panels::frame_view(self, ui, &mut out)
+            })
+            .inner;
+        if transform.is_some() {
+            self.rt.display.transform = transform;
+        }
+        self.rt.commands.extend(out);
         self.apply_pending();
-        if !self.rt.rerun_due.is_empty() && !ctx.input(|i| i.pointer.any_down()) {
-            for i in std::mem::take(&mut self.rt.rerun_due) {
+        if !self.rt.run.rerun_due.is_empty() && !ctx.input(|i| i.pointer.any_down()) {
+            for i in std::mem::take(&mut self.rt.run.rerun_due) {
                 self.rerun_tracker(i);
             }
         }
         self.replay(&ctx);
-        if !self.rt.playing {
+        if !self.rt.run.playing {
             self.request_landscape();
         }
-        if self.rt.show_help {
-            help_window(&ctx, &mut self.rt.show_help);
+        if self.rt.ui.show_help {
+            help_window(&ctx, &mut self.rt.ui.show_help);
         }
-        self.poll_dialog();
         self.screenshot(&ctx);
-        if self.rt.playing || self.rt.progress.is_some() {
+        if self.rt.run.playing || self.rt.msg.progress.is_some() {
             ctx.request_repaint();
         }
-        if self.rt.playing {
+        if self.rt.run.playing {
             let dt = ctx.input(|i| i.unstable_dt);
             if self.rt.frame_times.len() >= 10_000 {
                 self.rt.frame_times.remove(0);
@@ -850,13 +926,13 @@ impl InspectorApp {
         if ctx.egui_wants_keyboard_input() {
             return;
         }
-        let gt_mode = self.rt.tool == Tool::EditGroundTruth;
+        let gt_mode = self.rt.ui.tool == Tool::EditGroundTruth;
         let (frame, n) = (self.state.frame, self.frame_count());
         let mut cmds = Vec::new();
         let mut dialog = false;
         ctx.input(|i| {
             if i.key_pressed(egui::Key::F1) || i.key_pressed(egui::Key::Questionmark) {
-                self.rt.show_help = !self.rt.show_help;
+                self.rt.ui.show_help = !self.rt.ui.show_help;
             }
             if i.key_pressed(egui::Key::F2) || i.key_pressed(egui::Key::F3) {
                 let mut view = self.state.view.clone();
@@ -869,7 +945,7 @@ impl InspectorApp {
             }
             if shortcut(i, egui::Key::S).is_some() {
                 cmds.push(Command::SaveSession(PathBuf::from(
-                    self.rt.session_path.trim(),
+                    self.rt.ui.session_path.trim(),
                 )));
             }
             if shortcut(i, egui::Key::O).is_some() {
@@ -879,7 +955,7 @@ impl InspectorApp {
                 return;
             }
             if i.key_pressed(egui::Key::Space) {
-                cmds.push(if self.rt.playing || self.rt.replaying.is_some() {
+                cmds.push(if self.rt.run.playing || self.rt.run.replaying.is_some() {
                     Command::Pause
                 } else {
                     Command::Play
@@ -887,7 +963,7 @@ impl InspectorApp {
             }
             if !gt_mode {
                 if i.key_pressed(egui::Key::ArrowRight) {
-                    match self.rt.tracked_until {
+                    match self.rt.run.tracked_until {
                         Some(t) if frame < t => cmds.push(Command::Seek(frame + 1)),
                         _ if frame + 1 < n => cmds.push(Command::Step),
                         _ => {}
@@ -901,59 +977,36 @@ impl InspectorApp {
                 cmds.push(Command::Seek(self.state.start_frame));
             }
             if i.key_pressed(egui::Key::End) {
-                cmds.push(Command::Seek(self.rt.tracked_until.unwrap_or(frame)));
+                cmds.push(Command::Seek(self.rt.run.tracked_until.unwrap_or(frame)));
             }
         });
+        if dialog {
+            cmds.push(Command::OpenDialog { folder: false });
+        }
         for c in cmds {
             self.send(c);
         }
-        if dialog {
-            self.open_dialog(false);
-        }
     }
 
-    /// Opens a file dialog on its own thread (the window keeps drawing meanwhile).
-    pub fn open_dialog(&mut self, folder: bool) {
-        if self.rt.dialog.is_some() {
+    /// Opens a file dialog on a thread of its own (the window keeps drawing meanwhile); the
+    /// path comes back as a worker reply.
+    fn open_dialog(&mut self, folder: bool) {
+        if self.rt.ui.dialog {
             return;
         }
-        let slot = Arc::new(Mutex::new(None));
-        let out = slot.clone();
-        let spawned = std::thread::Builder::new()
-            .name("file-dialog".into())
-            .spawn(move || {
-                let d = rfd::FileDialog::new();
-                let picked = if folder {
-                    d.pick_folder()
-                } else {
-                    d.add_filter("ground truth", &["txt"]).pick_file()
-                };
-                if let Ok(mut s) = out.lock() {
-                    *s = Some(picked);
-                }
-            });
+        let spawned = self.rt.worker.spawn_task("file-dialog", move || {
+            let d = rfd::FileDialog::new();
+            Reply::Picked(if folder {
+                d.pick_folder()
+            } else {
+                d.add_filter("ground truth", &["txt"]).pick_file()
+            })
+        });
         match spawned {
-            Ok(_) => self.rt.dialog = Some(slot),
+            Ok(()) => self.rt.ui.dialog = true,
             Err(e) => self.error(format!(
                 "cannot open a file dialog ({e}): type the path instead"
             )),
-        }
-    }
-
-    fn poll_dialog(&mut self) {
-        let Some(slot) = &self.rt.dialog else { return };
-        let answer = slot.lock().ok().and_then(|mut s| s.take());
-        match answer {
-            None => {}
-            Some(Some(p)) => {
-                self.rt.dialog = None;
-                self.send(Command::OpenSequence(SequenceSource::Path(p)));
-                self.apply_pending();
-            }
-            Some(None) => {
-                self.rt.dialog = None;
-                self.rt.status = "no file chosen (without a desktop portal the dialog cannot open: type the path)".into();
-            }
         }
     }
 
@@ -977,7 +1030,7 @@ impl InspectorApp {
         let (n, start, generation) = (
             self.frame_count(),
             self.state.start_frame,
-            self.rt.generation,
+            self.rt.run.generation,
         );
         let Some(plan) = self.rt.screenshot.as_mut() else {
             return;
@@ -987,13 +1040,13 @@ impl InspectorApp {
         }
         ctx.request_repaint();
         let target = (start + plan.frames).min(n - 1);
-        let Some(reached) = self.rt.tracked_until else {
+        let Some(reached) = self.rt.run.tracked_until else {
             return;
         };
         if reached < target {
             if !plan.started {
                 plan.started = true;
-                self.rt.playing = true;
+                self.rt.run.playing = true;
                 self.rt.worker.send(Job::Advance {
                     generation,
                     frames: Some(target - reached),
@@ -1002,9 +1055,9 @@ impl InspectorApp {
             }
             return;
         }
-        if self.rt.playing
-            || self.rt.texture_frame != Some(reached)
-            || self.rt.pending_image.is_some()
+        if self.rt.run.playing
+            || self.rt.display.texture_frame != Some(reached)
+            || self.rt.display.pending_image.is_some()
         {
             return;
         }
@@ -1080,16 +1133,19 @@ fn frame_rate_summary(times: &[(f32, f32)]) -> String {
     )
 }
 
-fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), String> {
+fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), AppError> {
+    let fail = |message: String| AppError::Screenshot {
+        path: path.to_path_buf(),
+        message,
+    };
     let [w, h] = img.size;
     let raw: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
     let buf = image::RgbaImage::from_raw(w as u32, h as u32, raw)
-        .ok_or("screenshot of the wrong size")?;
+        .ok_or_else(|| fail("an image of the wrong size".into()))?;
     if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+        std::fs::create_dir_all(d).map_err(|e| fail(format!("{}: {e}", d.display())))?;
     }
-    buf.save(path)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    buf.save(path).map_err(|e| fail(e.to_string()))
 }
 
 impl eframe::App for InspectorApp {
@@ -1107,9 +1163,9 @@ pub struct RunOptions {
 }
 
 /// Opens the inspector window (blocks until it closes).
-pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
+pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
     let mut state = match &opts.session {
-        Some(p) => State::load(p).map_err(|e| e.to_string())?,
+        Some(p) => State::load(p).map_err(AppError::Session)?,
         None => State::default(),
     };
     if let Some(p) = &opts.sequence {
@@ -1140,12 +1196,10 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, String> {
             Ok(Box::new(app))
         }),
     )
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| AppError::Window(e.to_string()))?;
     if opts.screenshot.is_none() {
         return Ok(None);
     }
-    let outcome = result.lock().ok().and_then(|r| r.clone());
-    outcome
-        .unwrap_or_else(|| Err("the window closed before the screenshot was taken".into()))
-        .map(Some)
+    let outcome = result.lock().ok().and_then(|mut r| r.take());
+    outcome.unwrap_or(Err(AppError::NoScreenshot)).map(Some)
 }

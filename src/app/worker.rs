@@ -1,16 +1,23 @@
-//! The tracking thread. The UI sends [`Job`]s and polls [`Reply`]s each frame; slow work
-//! (opening or rendering a sequence, decoding frames, tracking) never runs on the UI thread.
+//! Background work, one way: the UI sends [`Job`]s to the tracking thread, or starts a task on a
+//! thread of its own ([`Worker::spawn_task`], for what blocks, as a file dialog), and every
+//! result comes back as a [`Reply`] on one channel, which the UI polls each frame; each reply
+//! wakes the UI (a repaint). Slow work (opening or rendering a sequence, decoding frames,
+//! tracking, propagating corrections, sweeping a landscape) never runs on the UI thread.
 //! Results of an older generation (before a re-initialisation) are dropped by the UI.
 
 use super::state::SequenceSource;
 use crate::dataset::{Sequence, demo};
+use crate::error::{Error, Result};
 use crate::geometry::Quad;
+use crate::gt;
 use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
 use crate::observe::{IterationRecord, Recorder, VisualRecord};
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
-use std::sync::Arc;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 /// A decoded frame for display (RGBA, 8 bits per channel).
@@ -70,6 +77,9 @@ pub enum Job {
     Landscape(Box<LandscapeJob>),
     /// Removes tracker `index`; the trackers after it move down by one.
     Remove { index: usize },
+    /// Tracks forward from a corrected ground-truth frame to propose corrections of the next
+    /// frames; answered by [`Reply::Proposal`].
+    Propagate(Box<PropagateJob>),
     /// Track the next frames (`None`: to the end) at `fps` frames per second (0 = at once).
     Advance {
         generation: u64,
@@ -83,12 +93,15 @@ pub enum Job {
 const AHEAD: usize = 4;
 
 /// Decodes frame `i`: grayscale for the trackers, RGBA for display.
-fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage), String> {
-    let path = seq
-        .frames
-        .get(i)
-        .ok_or_else(|| format!("frame {} is out of range (1..{})", i + 1, seq.len()))?;
-    let img = load_dynamic(path).map_err(|e| e.to_string())?;
+fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage)> {
+    let path = seq.frames.get(i).ok_or_else(|| {
+        Error::InvalidParameter(format!(
+            "frame {} is out of range (1..{})",
+            i + 1,
+            seq.len()
+        ))
+    })?;
+    let img = load_dynamic(path)?;
     let gray = gray_from_dynamic(&img);
     let rgba = img.to_rgba8();
     Ok((
@@ -102,34 +115,53 @@ fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage), String
     ))
 }
 
-type Decoded = Result<(GrayU8, FrameImage), String>;
+type Decoded = Result<(GrayU8, FrameImage)>;
 
 /// A thread that decodes the next frames while the worker tracks the current one.
 struct Ahead {
     requests: Option<Sender<(Arc<Sequence>, usize)>>,
-    /// Decoded frames by (sequence identity, index); `pending` were asked for.
-    done: Arc<std::sync::Mutex<AheadState>>,
+    /// Decoded frames by (sequence identity, index); `pending` were asked for. The condition
+    /// variable is notified whenever a frame is decoded.
+    done: Arc<(Mutex<AheadState>, Condvar)>,
 }
 
 #[derive(Default)]
 struct AheadState {
-    frames: std::collections::BTreeMap<usize, Decoded>,
-    pending: std::collections::BTreeSet<usize>,
+    frames: BTreeMap<usize, Decoded>,
+    pending: BTreeSet<usize>,
     /// The sequence the frames belong to (its address).
     sequence: usize,
 }
 
+impl AheadState {
+    /// Starts over for the sequence `id` if the state is another's.
+    fn for_sequence(&mut self, id: usize) -> bool {
+        if self.sequence == id {
+            return true;
+        }
+        *self = AheadState {
+            sequence: id,
+            ..AheadState::default()
+        };
+        false
+    }
+}
+
+/// How long [`Ahead::take`] waits for a frame being decoded before decoding it itself.
+const AHEAD_WAIT: Duration = Duration::from_secs(1);
+
 impl Ahead {
     fn spawn() -> Ahead {
         let (tx, rx) = channel::<(Arc<Sequence>, usize)>();
-        let done = Arc::new(std::sync::Mutex::new(AheadState::default()));
+        let done = Arc::new((Mutex::new(AheadState::default()), Condvar::new()));
         let state = done.clone();
         let spawned = std::thread::Builder::new()
             .name("regtrack-decoder".into())
             .spawn(move || {
+                let (lock, decoded) = &*state;
                 while let Ok((seq, i)) = rx.recv() {
                     let id = Arc::as_ptr(&seq) as usize;
-                    let wanted = state
+                    let wanted = lock
                         .lock()
                         .map(|s| s.sequence == id && s.pending.contains(&i))
                         .unwrap_or(false);
@@ -137,12 +169,13 @@ impl Ahead {
                         continue;
                     }
                     let r = decode_frame(&seq, i);
-                    if let Ok(mut s) = state.lock()
+                    if let Ok(mut s) = lock.lock()
                         && s.sequence == id
                         && s.pending.remove(&i)
                     {
                         s.frames.insert(i, r);
                     }
+                    decoded.notify_all();
                 }
             });
         Ahead {
@@ -156,44 +189,36 @@ impl Ahead {
     /// every frame outside the `AHEAD` after it.
     fn take(&self, seq: &Arc<Sequence>, i: usize) -> Option<Decoded> {
         let id = Arc::as_ptr(seq) as usize;
-        for _ in 0..2000 {
-            let mut s = self.done.lock().ok()?;
-            if s.sequence != id {
-                *s = AheadState {
-                    sequence: id,
-                    ..AheadState::default()
-                };
-                return None;
-            }
-            // Only the frames just ahead of `i` are kept (a seek drops the others).
-            let window = |k: usize| k > i && k <= i + AHEAD;
-            if let Some(r) = s.frames.remove(&i) {
-                s.frames.retain(|&k, _| window(k));
-                s.pending.retain(|&k| window(k));
-                return Some(r);
-            }
-            if !s.pending.contains(&i) {
-                s.frames.retain(|&k, _| window(k));
-                s.pending.retain(|&k| window(k));
-                return None;
-            }
-            drop(s);
-            std::thread::sleep(Duration::from_micros(500));
+        let (lock, decoded) = &*self.done;
+        let mut s = lock.lock().ok()?;
+        if !s.for_sequence(id) {
+            return None;
         }
-        None
+        // Wait while the frame is being decoded (the decoder notifies after each frame).
+        let deadline = Instant::now() + AHEAD_WAIT;
+        while s.pending.contains(&i) && !s.frames.contains_key(&i) {
+            let left = deadline.checked_duration_since(Instant::now())?;
+            s = decoded.wait_timeout(s, left).ok()?.0;
+            if s.sequence != id {
+                return None;
+            }
+        }
+        // Only the frames just ahead of `i` are kept (a seek drops the others).
+        let got = s.frames.remove(&i);
+        let window = |k: usize| k > i && k <= i + AHEAD;
+        s.frames.retain(|&k, _| window(k));
+        s.pending.retain(|&k| window(k));
+        got
     }
 
     /// Asks for the frames in `range` not yet decoded or asked for.
     fn request(&self, seq: &Arc<Sequence>, range: std::ops::Range<usize>) {
         let Some(tx) = &self.requests else { return };
         let id = Arc::as_ptr(seq) as usize;
-        let Ok(mut s) = self.done.lock() else { return };
-        if s.sequence != id {
-            *s = AheadState {
-                sequence: id,
-                ..AheadState::default()
-            };
-        }
+        let Ok(mut s) = self.done.0.lock() else {
+            return;
+        };
+        s.for_sequence(id);
         for k in range {
             if !s.frames.contains_key(&k) && s.pending.insert(k) {
                 let _ = tx.send((seq.clone(), k));
@@ -255,6 +280,20 @@ pub struct LandscapeJob {
     pub sweep: crate::landscape::LandscapeSpec,
 }
 
+/// A propagation to run (see [`gt::propagate`]).
+#[derive(Debug)]
+pub struct PropagateJob {
+    /// What the proposal is called in the undo history.
+    pub label: String,
+    pub spec: TrackerSpec,
+    /// The corrected frame it starts from, and its corners.
+    pub from: (usize, Quad),
+    /// The ground truth before the propagation, per frame.
+    pub old: Vec<Option<Quad>>,
+    /// Frames corrected by hand (the propagation stops before them).
+    pub corrected: BTreeSet<usize>,
+}
+
 /// A job with the cancellation epoch it was sent in: an advance runs only while no stop,
 /// start or open came after it.
 type Stamped = (u64, Job);
@@ -279,23 +318,37 @@ pub enum Reply {
         generation: u64,
         frame: usize,
     },
-    Error(String),
-    /// A frame that cannot be read (the message names its file).
+    /// A job that failed, with what it was doing.
+    Error {
+        context: String,
+        error: Error,
+    },
+    /// A frame that cannot be read (the error names its file).
     FrameError {
         index: usize,
-        message: String,
+        error: Error,
     },
     /// A cost landscape (for the request `key`).
     Landscape {
         key: String,
-        result: Result<crate::landscape::Landscape, String>,
+        result: Result<crate::landscape::Landscape>,
     },
+    /// A propagation's proposal (see [`Job::Propagate`]).
+    Proposal {
+        label: String,
+        result: Result<gt::Proposal>,
+    },
+    /// The path a file dialog returned (`None`: it was closed without a choice).
+    Picked(Option<PathBuf>),
 }
 
 /// The handle the UI keeps.
 pub struct Worker {
     jobs: Sender<Stamped>,
     replies: Receiver<Reply>,
+    /// For the tasks on threads of their own.
+    reply_tx: Sender<Reply>,
+    wake: Arc<dyn Fn() + Send + Sync>,
     epoch: Arc<AtomicU64>,
     /// Why the thread could not start, if it could not.
     pub spawn_error: Option<String>,
@@ -308,12 +361,16 @@ impl Worker {
         let (reply_tx, replies) = channel::<Reply>();
         let epoch = Arc::new(AtomicU64::new(0));
         let epoch2 = epoch.clone();
+        let wake: Arc<dyn Fn() + Send + Sync> = Arc::new(wake);
+        let (tx2, wake2) = (reply_tx.clone(), wake.clone());
         let spawned = std::thread::Builder::new()
             .name("regtrack-worker".into())
-            .spawn(move || Thread::new(reply_tx, epoch2, wake).run(job_rx));
+            .spawn(move || Thread::new(tx2, epoch2, move || wake2()).run(job_rx));
         Worker {
             jobs,
             replies,
+            reply_tx,
+            wake,
             epoch,
             // The handle still works without its thread (jobs go nowhere); the UI shows why.
             spawn_error: spawned
@@ -328,6 +385,23 @@ impl Worker {
             self.stop();
         }
         let _ = self.jobs.send((self.epoch.load(Ordering::SeqCst), job));
+    }
+
+    /// Runs `task` on a thread of its own (for work that blocks, as a file dialog); its reply
+    /// comes back with the others. The error says why the thread could not start.
+    pub fn spawn_task(
+        &self,
+        name: &str,
+        task: impl FnOnce() -> Reply + Send + 'static,
+    ) -> std::io::Result<()> {
+        let (tx, wake) = (self.reply_tx.clone(), self.wake.clone());
+        std::thread::Builder::new()
+            .name(name.to_string())
+            .spawn(move || {
+                let _ = tx.send(task());
+                wake();
+            })
+            .map(|_| ())
     }
 
     /// Stops a running advance after its current frame, and any advance queued before.
@@ -380,10 +454,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 Job::Open(src) => self.open(src),
                 Job::Show(i) => match self.decode(i) {
                     Ok((_, img)) => self.reply(Reply::Image(img)),
-                    Err(e) => self.reply(Reply::FrameError {
-                        index: i,
-                        message: e,
-                    }),
+                    Err(e) => self.reply(Reply::FrameError { index: i, error: e }),
                 },
                 Job::Start {
                     generation,
@@ -405,6 +476,13 @@ impl<W: Fn() + Sync> Thread<W> {
                     let result = self.landscape(&job);
                     self.reply(Reply::Landscape {
                         key: job.key.clone(),
+                        result,
+                    });
+                }
+                Job::Propagate(job) => {
+                    let result = self.propagate(&job);
+                    self.reply(Reply::Proposal {
+                        label: job.label,
                         result,
                     });
                 }
@@ -457,14 +535,20 @@ impl<W: Fn() + Sync> Thread<W> {
                 self.trackers.clear();
                 self.reply(Reply::Opened(seq));
             }
-            Err(e) => self.reply(Reply::Error(e.to_string())),
+            Err(e) => self.reply(Reply::Error {
+                context: "cannot open the sequence".into(),
+                error: e,
+            }),
         }
     }
 
     /// Frame `i`: from the frames decoded ahead, else decoded now; asks the decoder for the
     /// next few frames (tracking and replay go forward).
-    fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage), String> {
-        let seq = self.sequence.as_ref().ok_or("no sequence is open")?;
+    fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage)> {
+        let seq = self
+            .sequence
+            .as_ref()
+            .ok_or_else(|| Error::InvalidParameter("no sequence is open".into()))?;
         let ahead = self.ahead.take(seq, i);
         self.ahead
             .request(seq, i + 1..(i + 1 + AHEAD).min(seq.len()));
@@ -491,7 +575,12 @@ impl<W: Fn() + Sync> Thread<W> {
         self.templates.clear();
         let (gray, image) = match self.decode(frame) {
             Ok(v) => v,
-            Err(e) => return self.reply(Reply::Error(e)),
+            Err(e) => {
+                return self.reply(Reply::FrameError {
+                    index: frame,
+                    error: e,
+                });
+            }
         };
         let mut results = Vec::new();
         for (idx, spec, quad) in specs {
@@ -514,7 +603,10 @@ impl<W: Fn() + Sync> Thread<W> {
                         self.templates[k].clone(),
                     ));
                 }
-                Err(e) => self.reply(Reply::Error(format!("{}: {e}", spec.label()))),
+                Err(e) => self.reply(Reply::Error {
+                    context: spec.label(),
+                    error: e,
+                }),
             }
         }
         self.reply(Reply::Frame {
@@ -526,16 +618,33 @@ impl<W: Fn() + Sync> Thread<W> {
         });
     }
 
-    fn landscape(&self, job: &LandscapeJob) -> Result<crate::landscape::Landscape, String> {
+    fn landscape(&self, job: &LandscapeJob) -> Result<crate::landscape::Landscape> {
         let (start, _) = self.decode(job.start)?;
-        let mut t = Tracker::new(&job.spec).map_err(|e| e.to_string())?;
-        t.initialize(FrameInput::Gray8(&start), &job.init)
-            .map_err(|e| e.to_string())?;
+        let mut t = Tracker::new(&job.spec)?;
+        t.initialize(FrameInput::Gray8(&start), &job.init)?;
         let (img, _) = self.decode(job.frame)?;
-        match t.landscape(FrameInput::Gray8(&img), &job.at, &job.sweep) {
-            Some(r) => r.map_err(|e| e.to_string()),
-            None => Err(format!("{} has no similarity over warps", job.spec.label())),
-        }
+        t.landscape(FrameInput::Gray8(&img), &job.at, &job.sweep)
+            .unwrap_or_else(|| {
+                Err(Error::Incompatible(format!(
+                    "{} has no similarity over warps",
+                    job.spec.label()
+                )))
+            })
+    }
+
+    fn propagate(&self, job: &PropagateJob) -> Result<gt::Proposal> {
+        let seq = self
+            .sequence
+            .as_ref()
+            .ok_or_else(|| Error::InvalidParameter("no sequence is open".into()))?;
+        gt::propagate(
+            seq,
+            &job.spec,
+            job.from,
+            &job.old,
+            &|f| job.corrected.contains(&f),
+            gt::PropagateLimits::default(),
+        )
     }
 
     /// Re-runs one tracker from `from` to `until` (see [`Job::Rerun`]); the others keep their
@@ -561,7 +670,7 @@ impl<W: Fn() + Sync> Thread<W> {
             Err(e) => {
                 return self.reply(Reply::FrameError {
                     index: from,
-                    message: e,
+                    error: e,
                 });
             }
         };
@@ -570,7 +679,12 @@ impl<W: Fn() + Sync> Thread<W> {
             Ok(t)
         }) {
             Ok(t) => t,
-            Err(e) => return self.reply(Reply::Error(format!("{}: {e}", spec.label()))),
+            Err(e) => {
+                return self.reply(Reply::Error {
+                    context: spec.label(),
+                    error: e,
+                });
+            }
         };
         let template = Arc::new(
             t.inspection()
@@ -595,10 +709,7 @@ impl<W: Fn() + Sync> Thread<W> {
             let gray = match self.decode(i) {
                 Ok(v) => v.0,
                 Err(e) => {
-                    self.reply(Reply::FrameError {
-                        index: i,
-                        message: e,
-                    });
+                    self.reply(Reply::FrameError { index: i, error: e });
                     break;
                 }
             };
@@ -623,7 +734,10 @@ impl<W: Fn() + Sync> Thread<W> {
 
     fn advance(&mut self, frames: Option<usize>, fps: f32, epoch: u64) {
         let Some(seq) = self.sequence.clone() else {
-            return self.reply(Reply::Error("no sequence is open".into()));
+            return self.reply(Reply::Error {
+                context: "cannot track".into(),
+                error: Error::InvalidParameter("no sequence is open".into()),
+            });
         };
         let last = match frames {
             Some(n) => (self.frame + n).min(seq.len() - 1),
@@ -637,10 +751,7 @@ impl<W: Fn() + Sync> Thread<W> {
             let (gray, image) = match self.decode(i) {
                 Ok(v) => v,
                 Err(e) => {
-                    self.reply(Reply::FrameError {
-                        index: i,
-                        message: e,
-                    });
+                    self.reply(Reply::FrameError { index: i, error: e });
                     break;
                 }
             };
@@ -707,7 +818,7 @@ mod tests {
             let direct = decode_frame(&seq, i).unwrap();
             assert_eq!(gray.data, direct.0.data, "frame {i}");
             assert_eq!(image.index, i);
-            let s = ahead.done.lock().unwrap();
+            let s = ahead.done.0.lock().unwrap();
             assert!(
                 s.frames.len() + s.pending.len() <= AHEAD,
                 "{} kept",
@@ -719,7 +830,7 @@ mod tests {
         ahead.request(&seq, 4..8);
         std::thread::sleep(Duration::from_millis(50));
         let _ = ahead.take(&seq, 0);
-        let s = ahead.done.lock().unwrap();
+        let s = ahead.done.0.lock().unwrap();
         assert!(
             s.frames
                 .keys()

@@ -9,9 +9,11 @@
 //! [`export`] writes the corrected ground truth atomically, in the sequence's own format and in
 //! OptGT layout.
 
+pub mod edit;
 pub mod fit;
 pub mod journal;
 
+pub use edit::{Grab, drag, grab, move_corner, rectify};
 pub use fit::{
     FitOutcome, LowDofGroundTruth, best_fit, fit_ground_truth, fit_sequences, ground_truth_dir,
     low_dof_ground_truth, opt_gt_path, write_opt_gt,

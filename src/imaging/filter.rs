@@ -18,10 +18,6 @@ impl GaussianKernel {
     pub fn radius(&self) -> usize {
         self.weights.len() / 2
     }
-    /// Whether this kernel changes nothing.
-    pub fn is_identity(&self) -> bool {
-        self.weights.len() <= 1
-    }
 }
 
 /// A normalised Gaussian kernel of `size` taps (made odd) and standard deviation `sigma` (px).

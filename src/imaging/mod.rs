@@ -98,6 +98,17 @@ impl Pixel for f32 {
     }
 }
 
+impl GrayU8 {
+    /// The image as floats (gray levels 0..255).
+    pub fn to_f32(&self) -> GrayF32 {
+        Image {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| v as f32).collect(),
+        }
+    }
+}
+
 impl GrayF32 {
     /// A view of the whole image for sampling.
     pub fn view(&self) -> ImageView<'_> {

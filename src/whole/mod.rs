@@ -345,11 +345,7 @@ pub(crate) fn components(n: usize, linked: impl Fn(usize, usize) -> bool) -> Vec
 /// The frame as floats (8-bit frames are converted; float frames are used as they are).
 pub(crate) fn frame_f32(input: FrameInput<'_>) -> Cow<'_, GrayF32> {
     match input {
-        FrameInput::Gray8(i) => Cow::Owned(GrayF32 {
-            width: i.width,
-            height: i.height,
-            data: i.data.iter().map(|&v| v as f32).collect(),
-        }),
+        FrameInput::Gray8(i) => Cow::Owned(i.to_f32()),
         FrameInput::Gray32(i) | FrameInput::Smoothed(i) => Cow::Borrowed(i),
     }
 }

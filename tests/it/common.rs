@@ -8,6 +8,13 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Whether the exhaustive variants of the grids run (`REGTRACK_FULL_TESTS=1`): every trial of
+/// the recovery grid, every SSM of the allocation test. The default is a seeded subset of the
+/// same grids, each combination still run (README, "Tests").
+pub fn full_tests() -> bool {
+    std::env::var_os("REGTRACK_FULL_TESTS").is_some_and(|v| v != "0")
+}
+
 /// A bundled texture, in grayscale.
 pub fn texture(name: &str) -> GrayU8 {
     load_gray(&root().join("assets/textures").join(name)).expect("bundled texture")

@@ -676,7 +676,7 @@ fn the_cost_landscape_view_sweeps_the_inspected_tracker() {
     step_until(&mut h, "the end", |a| {
         a.tracked_until() == Some(4) && !a.is_playing()
     });
-    h.state_mut().show_landscape(true);
+    h.state_mut().apply(Command::ShowLandscape(true));
     step_until(&mut h, "the curve", |a| {
         matches!(a.landscape_shown(), Some((Ok(_), true)))
     });

@@ -1,7 +1,7 @@
 //! Generic recovery tests: every AM x SSM x SM from the registries recovers a known warp on a real
 //! texture (the Baker-Matthews protocol).
 
-use crate::common::texture;
+use crate::common::{full_tests, texture};
 use rayon::prelude::*;
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::observe::NoObserver;
@@ -127,12 +127,18 @@ fn every_combination_recovers_a_known_warp() {
     // Gradient methods: 100 trials within 0.1 px. Sampling methods (NN, PF) are as precise as
     // their samples: 40 trials within 3 px (the start is about 2.5 px off), and a separate test
     // below holds them to 0.5 px on translation. MI and CCRE are held to their own optimum (see
-    // `optimum_bias`).
+    // `optimum_bias`). By default the first 20 and 10 of those trials (the same seeded warps);
+    // REGTRACK_FULL_TESTS=1 runs them all.
+    let (gradient_trials, sampling_trials) = if full_tests() { (100, 40) } else { (20, 10) };
     let results: Vec<(String, usize, usize, f64, Option<f64>)> = combos
         .par_iter()
         .map(|(spec, sampled)| {
             let r = spec.registration().unwrap();
-            let (trials, tol) = if *sampled { (40, 3.0) } else { (100, 0.1) };
+            let (trials, tol) = if *sampled {
+                (sampling_trials, 3.0)
+            } else {
+                (gradient_trials, 0.1)
+            };
             let bound = optimum_bias(&r.sm, &r.am, &r.ssm);
             let (ok, bias) = recovered(spec, 2.0, trials, tol, 42, bound.is_some());
             (spec.label(), ok, trials, bias, bound)
@@ -149,7 +155,8 @@ fn every_combination_recovers_a_known_warp() {
     let failures: Vec<_> = results
         .iter()
         .filter(|(_, ok, n, bias, bound)| {
-            (*ok as f64) < 0.95 * *n as f64 || bound.is_some_and(|b| *bias > b)
+            // At most 5% of the trials may miss (rounded down: 1 of 20, none of 10).
+            n - ok > n / 20 || bound.is_some_and(|b| *bias > b)
         })
         .collect();
     assert!(

@@ -7,7 +7,7 @@ use eframe::egui;
 use std::path::PathBuf;
 
 /// Opening sequences and sessions, status and errors.
-pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     egui::Panel::top("top_bar").show(ui, |ui| {
         ui.horizontal_wrapped(|ui| {
             ui.strong("regtrack");
@@ -18,7 +18,7 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             ui.toggle_value(&mut view.show_plots_panel, "Plots")
                 .on_hover_text("Show or hide the plots panel (F3)");
             if view != app.state.view {
-                app.send(Command::SetView(view));
+                out.push(Command::SetView(view));
             }
             ui.separator();
             if ui
@@ -26,64 +26,73 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .on_hover_text("A folder of frames or an MTF dataset sequence folder")
                 .clicked()
             {
-                app.open_dialog(true);
+                out.push(Command::OpenDialog { folder: true });
             }
             if ui
                 .button("Open ground truth…")
                 .on_hover_text("An MTF <seq>.txt or a POT _gt_points.txt file")
                 .clicked()
             {
-                app.open_dialog(false);
+                out.push(Command::OpenDialog { folder: false });
             }
             // Typed path: works without a desktop portal.
+            let id = ui.make_persistent_id("path_input");
+            let mut path = super::remembered_text(ui, id);
             let edit = ui.add(
-                egui::TextEdit::singleline(&mut app.rt.path_input)
+                egui::TextEdit::singleline(&mut path)
                     .hint_text("or type a path and press Enter")
                     .desired_width(260.0),
             );
             let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-            if (ui.button("Open path").clicked() || enter) && !app.rt.path_input.trim().is_empty() {
-                let p = PathBuf::from(app.rt.path_input.trim());
-                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+            if (ui.button("Open path").clicked() || enter) && !path.trim().is_empty() {
+                let p = PathBuf::from(path.trim());
+                out.push(Command::OpenSequence(SequenceSource::Path(p)));
             }
+            super::remember_text(ui, id, path);
             if ui
                 .button("Demo")
                 .on_hover_text("The bundled demo sequence")
                 .clicked()
             {
-                app.send(Command::OpenSequence(SequenceSource::Demo));
+                out.push(Command::OpenSequence(SequenceSource::Demo));
             }
-            if !app.rt.recent.is_empty() {
+            if !app.rt.ui.recent.is_empty() {
                 egui::ComboBox::from_label("recent")
                     .selected_text("Recent")
                     .show_ui(ui, |ui| {
-                        for p in app.rt.recent.clone() {
+                        for p in app.rt.ui.recent.iter().cloned() {
                             if ui
                                 .selectable_label(false, p.display().to_string())
                                 .clicked()
                             {
-                                app.send(Command::OpenSequence(SequenceSource::Path(p)));
+                                out.push(Command::OpenSequence(SequenceSource::Path(p)));
                             }
                         }
                     });
             }
             ui.separator();
             let label = ui.label("Session:");
-            ui.add(egui::TextEdit::singleline(&mut app.rt.session_path).desired_width(200.0))
-                .labelled_by(label.id);
+            let mut session = app.rt.ui.session_path.clone();
+            if ui
+                .add(egui::TextEdit::singleline(&mut session).desired_width(200.0))
+                .labelled_by(label.id)
+                .changed()
+            {
+                out.push(Command::SetSessionPath(session));
+            }
             if ui.button("Save session").clicked() {
-                app.send(Command::SaveSession(PathBuf::from(
-                    app.rt.session_path.trim(),
+                out.push(Command::SaveSession(PathBuf::from(
+                    app.rt.ui.session_path.trim(),
                 )));
             }
             if ui.button("Load session").clicked() {
-                app.send(Command::LoadSession(PathBuf::from(
-                    app.rt.session_path.trim(),
+                out.push(Command::LoadSession(PathBuf::from(
+                    app.rt.ui.session_path.trim(),
                 )));
             }
         });
         ui.horizontal(|ui| {
-            if let Some((what, d, t)) = &app.rt.progress {
+            if let Some((what, d, t)) = &app.rt.msg.progress {
                 ui.spinner();
                 if *t > 0 {
                     ui.add(
@@ -95,10 +104,10 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                     ui.label(what.as_str());
                 }
             }
-            ui.label(app.rt.status.as_str());
+            ui.label(app.rt.msg.status.as_str());
         });
         let mut dismiss = None;
-        for (i, e) in app.rt.errors.iter().enumerate() {
+        for (i, e) in app.rt.msg.errors.iter().enumerate() {
             // The dismiss button first, so that a long message wraps after it, never over it.
             ui.horizontal_top(|ui| {
                 if ui.small_button("dismiss").clicked() {
@@ -114,13 +123,13 @@ pub fn top_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             });
         }
         if let Some(i) = dismiss {
-            app.send(Command::DismissError(i));
+            out.push(Command::DismissError(i));
         }
     });
 }
 
 /// Play, pause, step, seek, speed, re-run.
-pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     egui::Panel::bottom("playback").show(ui, |ui| {
         ui.horizontal(|ui| {
             let n = app.frame_count();
@@ -129,25 +138,25 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .on_hover_text("Show the start frame")
                 .clicked()
             {
-                app.send(Command::Seek(app.state.start_frame));
+                out.push(Command::Seek(app.state.start_frame));
             }
             if app.is_playing() || app.is_replaying() {
                 if ui.button("Pause").clicked() {
-                    app.send(Command::Pause);
+                    out.push(Command::Pause);
                 }
             } else if ui
                 .add_enabled(n > 0, egui::Button::new("Play"))
                 .on_hover_text("Replays the tracked frames, then tracks on (Space)")
                 .clicked()
             {
-                app.send(Command::Play);
+                out.push(Command::Play);
             }
             if ui
                 .add_enabled(n > 0 && !app.is_playing(), egui::Button::new("Step"))
                 .on_hover_text("Track one more frame")
                 .clicked()
             {
-                app.send(Command::Step);
+                out.push(Command::Step);
             }
             let mut frame = app.state.frame + 1;
             let slider = ui.add_enabled(
@@ -155,14 +164,14 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 egui::Slider::new(&mut frame, 1..=n.max(1)).text(format!("of {n}")),
             );
             if slider.changed() {
-                app.send(Command::Seek(frame.saturating_sub(1)));
+                out.push(Command::Seek(frame.saturating_sub(1)));
             }
             if ui
                 .add_enabled(n > 0, egui::Button::new("Re-run from here"))
                 .on_hover_text("Re-initialise every tracker on this frame and play")
                 .clicked()
             {
-                app.send(Command::RerunFrom(app.state.frame));
+                out.push(Command::RerunFrom(app.state.frame));
             }
             let mut fps = app.state.playback_fps;
             ui.label("speed");
@@ -175,9 +184,9 @@ pub fn playback_bar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .on_hover_text("0 = as fast as the trackers go")
                 .changed()
             {
-                app.send(Command::SetPlaybackFps(fps));
+                out.push(Command::SetPlaybackFps(fps));
             }
-            if let Some(f) = app.rt.tracked_until {
+            if let Some(f) = app.rt.run.tracked_until {
                 ui.label(format!("tracked to frame {}", f + 1));
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {

@@ -1,8 +1,8 @@
 //! The frame with the tracked and ground-truth quads; zoom and pan; drawing a tracker's initial
 //! quad or box; dragging ground-truth corners. One place maps image to screen coordinates.
 
-use super::{GT_COLOR, color};
-use crate::app::command::Command;
+use super::{Commands, GT_COLOR, color};
+use crate::app::command::{Command, GtCommand};
 use crate::app::state::{InitSource, View};
 use crate::app::{InspectorApp, Tool};
 use crate::geometry::{Point, Quad};
@@ -132,7 +132,13 @@ fn draw_tracker_quad(
 }
 
 /// Scroll zooms around the pointer (the image point under it stays); double-click fits.
-fn zoom(app: &mut InspectorApp, ui: &egui::Ui, response: &egui::Response, t: &Transform) {
+fn zoom(
+    app: &InspectorApp,
+    ui: &egui::Ui,
+    out: &mut Commands,
+    response: &egui::Response,
+    t: &Transform,
+) {
     if let Some(pos) = response.hover_pos() {
         let scroll = ui.input(|i| i.smooth_scroll_delta.y);
         if scroll != 0.0 {
@@ -142,24 +148,24 @@ fn zoom(app: &mut InspectorApp, ui: &egui::Ui, response: &egui::Response, t: &Tr
             let mut view = app.state.view.clone();
             view.zoom = scale;
             view.center = [anchor.x as f32 - d.x / scale, anchor.y as f32 - d.y / scale];
-            app.send(Command::SetView(view));
+            out.push(Command::SetView(view));
         }
     }
-    if response.double_clicked() && app.rt.tool == Tool::Navigate {
+    if response.double_clicked() && app.rt.ui.tool == Tool::Navigate {
         let mut view = app.state.view.clone();
         view.zoom = 0.0;
-        app.send(Command::SetView(view));
+        out.push(Command::SetView(view));
     }
 }
 
 /// A/B mode: the frame twice, tracker A's quad on the left and B's on the right (the ground truth
 /// on both), under the same zoom.
-fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
+fn ab_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands, a: usize, b: usize) {
     let rect = ui.available_rect_before_wrap();
     let response = ui.allocate_rect(rect, Sense::click_and_drag());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 0.0, Color32::from_gray(24));
-    let Some(texture) = app.rt.texture.clone() else {
+    let Some(texture) = app.rt.display.texture.clone() else {
         return;
     };
     let frame = app.state.frame;
@@ -169,9 +175,9 @@ fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
             rect.left_top() + Vec2::new(side as f32 * half, 0.0),
             Vec2::new(half - 2.0, rect.height()),
         );
-        let t = Transform::new(r, app.rt.image_size, &app.state.view);
+        let t = Transform::new(r, app.rt.display.image_size, &app.state.view);
         let p = painter.with_clip_rect(r);
-        draw_frame(&p, &t, &texture, app.rt.image_size);
+        draw_frame(&p, &t, &texture, app.rt.display.image_size);
         if app.state.view.show_ground_truth
             && let Some(gt) = app.ground_truth(frame)
         {
@@ -206,25 +212,29 @@ fn ab_view(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
         zoom(
             app,
             ui,
+            out,
             &response,
-            &Transform::new(r, app.rt.image_size, &app.state.view),
+            &Transform::new(r, app.rt.display.image_size, &app.state.view),
         );
     }
 }
 
-pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
+/// The frame with the quads; returns where it drew the image (`None` in A/B mode or without an
+/// image).
+pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> Option<Transform> {
     if let Some((a, b)) = app.state.view.ab
         && a < app.state.trackers.len()
         && b < app.state.trackers.len()
-        && app.rt.tool == Tool::Navigate
+        && app.rt.ui.tool == Tool::Navigate
     {
-        return ab_view(app, ui, a, b);
+        ab_view(app, ui, out, a, b);
+        return None;
     }
     let rect = ui.available_rect_before_wrap();
     let response = ui.allocate_rect(rect, Sense::click_and_drag());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 0.0, Color32::from_gray(24));
-    let Some(texture) = app.rt.texture.clone() else {
+    let Some(texture) = app.rt.display.texture.clone() else {
         painter.text(
             rect.center(),
             egui::Align2::CENTER_CENTER,
@@ -232,12 +242,17 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
             egui::FontId::proportional(18.0),
             Color32::GRAY,
         );
-        return;
+        return None;
     };
-    let t = Transform::new(rect, app.rt.image_size, &app.state.view);
-    app.rt.transform = Some(t);
-    let [w, h] = app.rt.image_size;
-    match app.rt.bad_frame.as_ref().filter(|b| b.0 == app.state.frame) {
+    let t = Transform::new(rect, app.rt.display.image_size, &app.state.view);
+    let [w, h] = app.rt.display.image_size;
+    match app
+        .rt
+        .seq
+        .bad_frame
+        .as_ref()
+        .filter(|b| b.0 == app.state.frame)
+    {
         // The frame could not be read: say so instead of showing the previous image under this
         // frame's ground truth.
         Some((_, message)) => {
@@ -255,7 +270,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
             );
         }
         None => {
-            draw_frame(&painter, &t, &texture, app.rt.image_size);
+            draw_frame(&painter, &t, &texture, app.rt.display.image_size);
         }
     }
 
@@ -263,7 +278,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     let numbers = app.state.view.show_corner_numbers;
     if app.state.view.show_ground_truth {
         // The 8-DOF ground truth under a low-DOF one, thin.
-        if app.rt.tool == Tool::EditGroundTruth
+        if app.rt.ui.tool == Tool::EditGroundTruth
             && crate::gt::ssm_key(&app.state.gt_ssm).is_ok_and(|k| k != "homography")
             && let Some(full) = app.sequence().and_then(|s| s.ground_truth(frame))
         {
@@ -317,7 +332,7 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
     }
     // The selected iteration of the inspected tracker.
     if let (Some(it), Some(r)) = (
-        app.rt.selected_iteration,
+        app.rt.ui.selected_iteration,
         app.result(app.state.selected_tracker, frame),
     ) && let Some(rec) = r.iterations.get(it)
     {
@@ -341,7 +356,8 @@ pub fn frame_view(app: &mut InspectorApp, ui: &mut egui::Ui) {
             light,
         );
     }
-    interact(app, ui, &response, &t, &painter);
+    interact(app, ui, out, &response, &t, &painter);
+    Some(t)
 }
 
 /// What a method shows: a response map under everything (blue to yellow, translucent), a
@@ -421,22 +437,23 @@ fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Colo
 }
 
 fn interact(
-    app: &mut InspectorApp,
+    app: &InspectorApp,
     ui: &egui::Ui,
+    out: &mut Commands,
     response: &egui::Response,
     t: &Transform,
     painter: &egui::Painter,
 ) {
     let hover = response.hover_pos();
-    zoom(app, ui, response, t);
-    match app.rt.tool.clone() {
+    zoom(app, ui, out, response, t);
+    match app.rt.ui.tool.clone() {
         Tool::Navigate => {
             if response.dragged() {
                 let d = response.drag_delta();
                 let mut view = app.state.view.clone();
                 view.zoom = t.scale;
                 view.center = [t.center[0] - d.x / t.scale, t.center[1] - d.y / t.scale];
-                app.send(Command::SetView(view));
+                out.push(Command::SetView(view));
             }
         }
         Tool::DrawQuad {
@@ -468,9 +485,9 @@ fn interact(
                 corners.push(t.to_image(pos));
                 if corners.len() == 4 {
                     let q = Quad([corners[0], corners[1], corners[2], corners[3]]);
-                    finish_drawing(app, tracker, q);
+                    finish_drawing(out, tracker, q);
                 } else {
-                    app.send(Command::SetTool(Tool::DrawQuad { tracker, corners }));
+                    out.push(Command::SetTool(Tool::DrawQuad { tracker, corners }));
                 }
             }
         }
@@ -488,7 +505,7 @@ fn interact(
                     .input(|i| i.pointer.press_origin())
                     .or(response.interact_pointer_pos())
             {
-                app.send(Command::SetTool(Tool::DrawBox {
+                out.push(Command::SetTool(Tool::DrawBox {
                     tracker,
                     start: Some(t.to_image(pos)),
                 }));
@@ -503,11 +520,11 @@ fn interact(
                 );
                 draw_quad(painter, t, &q, Color32::YELLOW, true, false);
                 if response.drag_stopped() {
-                    finish_drawing(app, tracker, q);
+                    finish_drawing(out, tracker, q);
                 }
             }
         }
-        Tool::EditGroundTruth => edit_ground_truth(app, ui, response, t, painter),
+        Tool::EditGroundTruth => edit_ground_truth(app, ui, out, response, t, painter),
     }
 }
 
@@ -515,8 +532,9 @@ fn interact(
 /// inside it); one edit on release. Draws the picked corner, a magnifier around it and the
 /// template beside the shown frame's rectified region.
 fn edit_ground_truth(
-    app: &mut InspectorApp,
+    app: &InspectorApp,
     ui: &egui::Ui,
+    out: &mut Commands,
     response: &egui::Response,
     t: &Transform,
     painter: &egui::Painter,
@@ -537,62 +555,44 @@ fn edit_ground_truth(
             Color32::YELLOW,
         );
         if !occluded {
-            annotate_box(app, ui, response, t, painter, frame);
+            annotate_box(ui, out, response, t, painter, frame);
         }
         return;
     };
-    /// What a drag holds: the corner (or `None`: the whole quad), the press point, the quad then.
-    type Grab = (Option<usize>, Point, Quad);
+    /// What a drag holds: what was grabbed, the press point, the quad then.
+    type Grab = (crate::gt::Grab, Point, Quad);
     let id = response.id.with("gt_grab");
     if response.drag_started()
         && let Some(pos) = ui
             .input(|i| i.pointer.press_origin())
             .or(response.interact_pointer_pos())
     {
-        let nearest = (0..4)
-            .map(|k| (k, t.to_screen(gt.0[k]).distance(pos)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .filter(|(_, d)| *d < 15.0)
-            .map(|(k, _)| k);
+        // A corner within 15 screen px, else the whole quad from inside it.
         let p = t.to_image(pos);
-        let inside = crate::geometry::polygon_area(&[gt.0[0], gt.0[1], p]).signum()
-            == crate::geometry::polygon_area(&[gt.0[1], gt.0[2], p]).signum()
-            && crate::geometry::polygon_area(&[gt.0[1], gt.0[2], p]).signum()
-                == crate::geometry::polygon_area(&[gt.0[2], gt.0[3], p]).signum()
-            && crate::geometry::polygon_area(&[gt.0[2], gt.0[3], p]).signum()
-                == crate::geometry::polygon_area(&[gt.0[3], gt.0[0], p]).signum();
-        let grab: Option<Grab> = match nearest {
-            Some(k) => Some((Some(k), p, gt)),
-            None if inside => Some((None, p, gt)),
-            None => None,
-        };
-        if let Some((k, _, _)) = grab {
-            app.send(Command::GtPickCorner(k));
+        let grab: Option<Grab> = crate::gt::grab(&gt, p, 15.0 / t.scale as f64).map(|g| (g, p, gt));
+        if let Some((g, _, _)) = grab {
+            out.push(Command::Gt(GtCommand::PickCorner(g.corner())));
         }
         ui.data_mut(|d| d.insert_temp(id, grab));
     }
     let grab: Option<Grab> = ui.data(|d| d.get_temp(id)).flatten();
-    if let Some((k, from, q0)) = grab
+    if let Some((g, from, q0)) = grab
         && let Some(pos) = response.interact_pointer_pos().or(response.hover_pos())
     {
-        let to = t.to_image(pos);
-        let moved = match k {
-            Some(k) => crate::app::gt_edit::move_corner(&app.state.gt_ssm, &q0, k, to),
-            None => q0.map(|c| Point::new(c.x + to.x - from.x, c.y + to.y - from.y)),
-        };
+        let moved = crate::gt::drag(&app.state.gt_ssm, &q0, g, from, t.to_image(pos));
         if response.drag_stopped() {
             ui.data_mut(|d| d.remove::<Option<Grab>>(id));
-            let label = match k {
+            let label = match g.corner() {
                 Some(k) => format!("move corner {}", k + 1),
                 None => "move the quad".into(),
             };
-            app.send(Command::GtCommit {
+            out.push(Command::Gt(GtCommand::Commit {
                 frame,
                 quad: moved,
                 label,
-            });
+            }));
         } else if response.dragged() {
-            app.send(Command::GtDrag { frame, quad: moved });
+            out.push(Command::Gt(GtCommand::Drag { frame, quad: moved }));
         }
     }
     for (k, p) in gt.0.iter().enumerate() {
@@ -622,19 +622,19 @@ fn edit_ground_truth(
     );
 }
 
-fn finish_drawing(app: &mut InspectorApp, tracker: usize, q: Quad) {
-    app.send(Command::SetTool(Tool::Navigate));
+fn finish_drawing(out: &mut Commands, tracker: usize, q: Quad) {
+    out.push(Command::SetTool(Tool::Navigate));
     match q.validate() {
-        Ok(()) => app.send(Command::InitTracker(tracker, InitSource::Quad(q))),
-        Err(e) => app.send(Command::ReportError(format!("not a usable quad: {e}"))),
+        Ok(()) => out.push(Command::InitTracker(tracker, InitSource::Quad(q))),
+        Err(e) => out.push(Command::ReportError(format!("not a usable quad: {e}"))),
     }
 }
 
 /// The ground-truth mode on a frame without ground truth: a dragged box becomes its ground truth
 /// (one journaled edit), so that a sequence can be annotated from scratch.
 fn annotate_box(
-    app: &mut InspectorApp,
     ui: &egui::Ui,
+    out: &mut Commands,
     response: &egui::Response,
     t: &Transform,
     painter: &egui::Painter,
@@ -664,12 +664,12 @@ fn annotate_box(
         if response.drag_stopped() {
             ui.data_mut(|d| d.remove::<Option<Point>>(id));
             match q.validate() {
-                Ok(()) => app.send(Command::GtCommit {
+                Ok(()) => out.push(Command::Gt(GtCommand::Commit {
                     frame,
                     quad: q,
                     label: "annotate".into(),
-                }),
-                Err(e) => app.send(Command::ReportError(format!("not a usable box: {e}"))),
+                })),
+                Err(e) => out.push(Command::ReportError(format!("not a usable box: {e}"))),
             }
         }
     }
@@ -678,7 +678,7 @@ fn annotate_box(
 /// The ground-truth mode's strip under the frame: a magnifier around the picked corner and the
 /// template beside the shown frame's ground-truth region, rectified (a misalignment shows as a
 /// shift between the two).
-pub fn gt_strip(app: &mut InspectorApp, ui: &mut egui::Ui) {
+pub fn gt_strip(app: &InspectorApp, ui: &mut egui::Ui) {
     let side = 150.0f32;
     let (rect, _) =
         ui.allocate_exact_size(Vec2::new(ui.available_width(), side + 18.0), Sense::hover());
@@ -698,10 +698,10 @@ pub fn gt_strip(app: &mut InspectorApp, ui: &mut egui::Ui) {
         );
     };
     // Magnifier around the picked corner (or the centre), 6x.
-    if let Some(texture) = app.rt.texture.clone() {
+    if let Some(texture) = app.rt.display.texture.clone() {
         let c = picked.map_or(gt.centroid(), |k| gt.0[k]);
         let r = side / 12.0;
-        let [w, h] = app.rt.image_size;
+        let [w, h] = app.rt.display.image_size;
         let (w, h) = (w.max(1) as f32, h.max(1) as f32);
         let area = Rect::from_min_size(rect.left_top(), Vec2::splat(side));
         let uv = Rect::from_min_max(
@@ -741,7 +741,7 @@ pub fn gt_strip(app: &mut InspectorApp, ui: &mut egui::Ui) {
         Some(r) => format!("frame {} · fit residual {r:.2} px", frame + 1),
         None => format!("frame {}", frame + 1),
     };
-    if let Some([a, b]) = app.gt_patches(ui.ctx()) {
+    if let Some([a, b]) = gt_patches(app, ui.ctx()) {
         for (k, (tex, text)) in [(a, "template (first frame)".to_string()), (b, this)]
             .into_iter()
             .enumerate()
@@ -759,4 +759,35 @@ pub fn gt_strip(app: &mut InspectorApp, ui: &mut egui::Ui) {
             label(r, text);
         }
     }
+}
+
+/// The template and the shown frame's ground-truth region, rectified, as textures (made again
+/// when the frame or its ground truth changes).
+fn gt_patches(app: &InspectorApp, ctx: &egui::Context) -> Option<[egui::TextureHandle; 2]> {
+    use crate::app::gt_edit::{PATCH, rectified};
+    let frame = app.state.frame;
+    let (tf, timg) = app.rt.gt.template_image.as_ref()?;
+    let (ff, fimg) = app.rt.gt.frame_image.as_ref()?;
+    if *ff != frame {
+        return None;
+    }
+    let tq = app.ground_truth(*tf)?;
+    let fq = app.ground_truth(frame);
+    let opts = egui::TextureOptions::NEAREST;
+    // The images belong to the open sequence: its identity is part of the keys.
+    let seq = app.sequence().map(|s| std::sync::Arc::as_ptr(s) as usize);
+    let bits = |q: Quad| q.to_array().map(f64::to_bits);
+    let template = super::cached_texture(ctx, "gt-template", (seq, *tf, bits(tq)), opts, || {
+        rectified(timg, &tq).unwrap_or_else(|| blank_patch(PATCH))
+    });
+    let key = (seq, frame, fq.map(bits));
+    let current = super::cached_texture(ctx, "gt-current", key, opts, || {
+        fq.and_then(|q| rectified(fimg, &q))
+            .unwrap_or_else(|| blank_patch(PATCH))
+    });
+    Some([template, current])
+}
+
+fn blank_patch(side: usize) -> egui::ColorImage {
+    egui::ColorImage::new([side, side], vec![Color32::from_gray(40); side * side])
 }

@@ -1,4 +1,6 @@
-//! The panels. They read the app and push commands; none of them changes the model.
+//! The panels. Each is given the app to read and a list to push [`Command`]s to, nothing else:
+//! none of them changes the app. What a widget keeps between frames (a typed path, a texture
+//! made from the app's data) lives in egui's memory, keyed by the widget.
 
 use eframe::egui;
 mod bars;
@@ -10,6 +12,52 @@ pub use bars::{playback_bar, top_bar};
 pub use frame_view::{Transform, frame_view, gt_strip};
 pub use plots::plots_panel;
 pub use sidebar::sidebar;
+
+use crate::app::command::Command;
+use std::hash::{Hash, Hasher};
+
+/// Where panels push their commands.
+pub type Commands = Vec<Command>;
+
+/// A texture kept in egui's memory under `name`, made again only when `key` changes (`make`
+/// is not called while it stays the same).
+pub fn cached_texture(
+    ctx: &egui::Context,
+    name: &str,
+    key: impl Hash,
+    options: egui::TextureOptions,
+    make: impl FnOnce() -> egui::ColorImage,
+) -> egui::TextureHandle {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    key.hash(&mut h);
+    let key = h.finish();
+    let id = egui::Id::unique(("cached_texture", name));
+    let cached: Option<(u64, egui::TextureHandle)> = ctx.data(|d| d.get_temp(id));
+    match cached {
+        Some((k, t)) if k == key => t,
+        Some((_, mut t)) => {
+            t.set(make(), options);
+            ctx.data_mut(|d| d.insert_temp(id, (key, t.clone())));
+            t
+        }
+        None => {
+            let t = ctx.load_texture(name, make(), options);
+            ctx.data_mut(|d| d.insert_temp(id, (key, t.clone())));
+            t
+        }
+    }
+}
+
+/// A text field's contents kept in egui's memory under `id` (for fields that are not part of
+/// the app's state, as a path being typed).
+pub fn remembered_text(ui: &egui::Ui, id: egui::Id) -> String {
+    ui.data(|d| d.get_temp(id)).unwrap_or_default()
+}
+
+/// Keeps a text field's contents for the next frame.
+pub fn remember_text(ui: &egui::Ui, id: egui::Id, text: String) {
+    ui.data_mut(|d| d.insert_temp(id, text));
+}
 
 /// An egui colour from an RGB triple.
 pub fn color(c: [u8; 3]) -> egui::Color32 {

@@ -26,7 +26,7 @@ fn axes(plot: Plot<'static>, x: &str, y: &str) -> Plot<'static> {
     .grid_spacing(6.0..=200.0)
 }
 
-pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
+pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     if !app.state.view.show_plots_panel {
         return;
     }
@@ -110,16 +110,16 @@ pub fn plots_panel(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         && app.frame_count() > 0
                     {
                         let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
-                        app.send(Command::Seek(f));
+                        out.push(Command::Seek(f));
                     }
                     if let Some((a, b)) = app.state.view.ab {
-                        disagreement(app, ui, a, b);
+                        disagreement(app, ui, out, a, b);
                     }
                     speed_table(app, ui);
                     ui.separator();
-                    convergence(app, ui);
+                    convergence(app, ui, out);
                     ui.separator();
-                    landscape(app, ui);
+                    landscape(app, ui, out);
                 });
         });
 }
@@ -154,7 +154,7 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
     });
 }
 
-fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
+fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let i = app.state.selected_tracker;
     let frame = app.state.frame;
     ui.heading(format!(
@@ -208,7 +208,7 @@ fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
             .iter()
             .map(|it| [it.iteration as f64 + 1.0, it.step.max(1e-6).log10()])
             .collect();
-        let marker = app.rt.selected_iteration.map(|k| {
+        let marker = app.rt.ui.selected_iteration.map(|k| {
             VLine::new("selected iteration", (k + 1) as f64).color(egui::Color32::from_gray(170))
         });
         ui.columns(2, |cols| {
@@ -235,20 +235,20 @@ fn convergence(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 }
             });
         });
-        let mut sel = app.rt.selected_iteration.map_or(0, |s| s + 1);
+        let mut sel = app.rt.ui.selected_iteration.map_or(0, |s| s + 1);
         let changed = ui
             .add(egui::Slider::new(&mut sel, 0..=n).text("iteration (0 = none)"))
             .on_hover_text("The frame view draws the quad after this iteration, dashed")
             .changed();
         if changed {
-            app.send(Command::SelectIteration(sel.checked_sub(1)));
+            out.push(Command::SelectIteration(sel.checked_sub(1)));
         }
     }
     patches(app, ui, i, frame, &r);
 }
 
 fn patches(
-    app: &mut InspectorApp,
+    app: &InspectorApp,
     ui: &mut egui::Ui,
     i: usize,
     frame: usize,
@@ -259,54 +259,51 @@ fn patches(
         return;
     }
     // The patch after the selected iteration (recorded per iteration), else the final one.
-    let selected = app.rt.selected_iteration;
+    let selected = app.rt.ui.selected_iteration;
     let recorded: Option<Vec<f32>> = selected
         .and_then(|k| r.iterations.get(k))
         .filter(|it| it.patch.len() == n)
         .map(|it| it.patch.iter().map(|&v| v as f32).collect());
     let missing = selected.is_some() && recorded.is_none();
     let current: &[f32] = recorded.as_deref().unwrap_or(&r.patch);
-    let (lo, hi) = r
-        .template
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let span = (hi - lo).max(1e-3);
-    let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
-    let template: Vec<u8> = r.template.iter().map(|&v| to8(v)).collect();
-    let patch: Vec<u8> = current.iter().map(|&v| to8(v)).collect();
-    let error: Vec<u8> = r
-        .template
-        .iter()
-        .zip(current)
-        .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
-        .collect();
-    let ctx = ui.ctx().clone();
     let size = [r.res, r.res];
-    let images = [template, patch, error].map(|g| egui::ColorImage::from_gray(size, &g));
-    let key = (frame, app.rt.generation, selected, app.rt.results_version);
-    let unchanged = app.rt.patch_keys.get(&i) == Some(&key);
-    app.rt.patch_keys.insert(i, key);
-    let handles = match app.rt.patches.get_mut(&i) {
-        Some(h) if unchanged => h.clone(),
-        Some(h) => {
-            for (h, img) in h.iter_mut().zip(images) {
-                h.set(img, egui::TextureOptions::NEAREST);
-            }
-            h.clone()
-        }
-        None => {
-            let [a, b, c] = images;
-            let h = [
-                ctx.load_texture(format!("template{i}"), a, egui::TextureOptions::NEAREST),
-                ctx.load_texture(format!("patch{i}"), b, egui::TextureOptions::NEAREST),
-                ctx.load_texture(format!("error{i}"), c, egui::TextureOptions::NEAREST),
-            ];
-            app.rt.patches.insert(i, h.clone());
-            h
-        }
+    // Made again only when the shown result changes (the run, its results, the iteration).
+    let key = (
+        frame,
+        app.rt.run.generation,
+        selected,
+        app.rt.run.results.version(),
+    );
+    let image = |kind: usize| {
+        let (lo, hi) = r
+            .template
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let span = (hi - lo).max(1e-3);
+        let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
+        let g: Vec<u8> = match kind {
+            0 => r.template.iter().map(|&v| to8(v)).collect(),
+            1 => current.iter().map(|&v| to8(v)).collect(),
+            _ => r
+                .template
+                .iter()
+                .zip(current)
+                .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
+                .collect(),
+        };
+        egui::ColorImage::from_gray(size, &g)
     };
+    let handles = [(0, "template"), (1, "patch"), (2, "error")].map(|(kind, name)| {
+        super::cached_texture(
+            ui.ctx(),
+            &format!("{name}{i}"),
+            key,
+            egui::TextureOptions::NEAREST,
+            || image(kind),
+        )
+    });
     let at = match selected {
         Some(k) if !missing => format!("warped patch, iteration {}", k + 1),
         _ => "warped patch (final)".into(),
@@ -356,10 +353,10 @@ fn colormap(t: f64) -> egui::Color32 {
 /// The cost landscape of the inspected tracker on the shown frame: the similarity swept along
 /// one parameter (a curve, with the analytic and numeric gradients drawn as tangents) or two (a
 /// map, with the path of the iterations), around the estimate or the ground truth.
-fn landscape(app: &mut InspectorApp, ui: &mut egui::Ui) {
+fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let open = egui::CollapsingHeader::new("Cost landscape")
         .id_salt("landscape")
-        .open(Some(app.rt.landscape.open))
+        .open(Some(app.rt.ui.landscape.open))
         .show(ui, |ui| {
             let i = app.state.selected_tracker;
             let dof = app
@@ -373,7 +370,8 @@ fn landscape(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 ui.label("the inspected tracker has no warp parameters");
                 return;
             }
-            let v = &mut app.rt.landscape;
+            let mut settings = app.rt.ui.landscape.settings;
+            let v = &mut settings;
             ui.horizontal(|ui| {
                 ui.label("x");
                 egui::ComboBox::from_id_salt("landscape_x")
@@ -409,6 +407,9 @@ fn landscape(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 ui.radio_value(&mut v.around_truth, false, "around the estimate");
                 ui.radio_value(&mut v.around_truth, true, "around the ground truth");
             });
+            if settings != app.rt.ui.landscape.settings {
+                out.push(Command::SetLandscape(settings));
+            }
             let iterations: Vec<Vec<f64>> = app
                 .result(i, app.state.frame)
                 .map(|r| r.iterations.iter().map(|it| it.params.clone()).collect())
@@ -449,12 +450,11 @@ fn landscape(app: &mut InspectorApp, ui: &mut egui::Ui) {
             if l.axes.len() == 1 {
                 landscape_curve(ui, &l, &path, c);
             } else {
-                landscape_map(app, ui, &l, &path);
+                landscape_map(ui, &l, &path);
             }
         });
     if open.header_response.clicked() {
-        let now = !app.rt.landscape.open;
-        app.show_landscape(now);
+        out.push(Command::ShowLandscape(!app.rt.ui.landscape.open));
     }
 }
 
@@ -525,12 +525,7 @@ fn landscape_curve(
     });
 }
 
-fn landscape_map(
-    app: &mut InspectorApp,
-    ui: &mut egui::Ui,
-    l: &crate::landscape::Landscape,
-    path: &[Vec<f64>],
-) {
+fn landscape_map(ui: &mut egui::Ui, l: &crate::landscape::Landscape, path: &[Vec<f64>]) {
     let n = l.offsets.len();
     let finite = l.values.iter().copied().filter(|v| v.is_finite());
     let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -544,23 +539,14 @@ fn landscape_map(
             pixels.push(colormap((l.values[row * n + col] - lo) / span));
         }
     }
-    let image = egui::ColorImage::new([n, n], pixels);
     let key = format!("{:?}{:?}{}", l.axes, l.center, l.center_value);
-    let tex = match &mut app.rt.landscape.texture {
-        Some((k, t)) if *k == key => t.clone(),
-        Some((k, t)) => {
-            t.set(image, egui::TextureOptions::NEAREST);
-            *k = key;
-            t.clone()
-        }
-        None => {
-            let t = ui
-                .ctx()
-                .load_texture("landscape", image, egui::TextureOptions::NEAREST);
-            app.rt.landscape.texture = Some((key, t.clone()));
-            t
-        }
-    };
+    let tex = super::cached_texture(
+        ui.ctx(),
+        "landscape",
+        key,
+        egui::TextureOptions::NEAREST,
+        || egui::ColorImage::new([n, n], pixels),
+    );
     let r = l.offsets[n - 1];
     let cell = 2.0 * r / (n - 1) as f64;
     let line: Vec<[f64; 2]> = path
@@ -609,7 +595,7 @@ fn landscape_map(
 }
 
 /// A/B mode: the frames where the two trackers disagree most, for a jump.
-fn disagreement(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
+fn disagreement(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, a: usize, b: usize) {
     ui.heading(format!("Where {} and {} disagree most", a + 1, b + 1));
     let worst = app.disagreements(a, b);
     if worst.is_empty() {
@@ -628,7 +614,7 @@ fn disagreement(app: &mut InspectorApp, ui: &mut egui::Ui, a: usize, b: usize) {
                 .on_hover_text("Show this frame")
                 .clicked()
             {
-                app.send(Command::Seek(*f));
+                out.push(Command::Seek(*f));
             }
         }
     });

@@ -2,7 +2,7 @@
 //! truth's settings.
 
 use super::color;
-use crate::app::command::Command;
+use crate::app::command::{Command, GtCommand};
 use crate::app::state::InitSource;
 use crate::app::{InspectorApp, Tool};
 use crate::params::{ParamDef, ParamKind};
@@ -30,7 +30,7 @@ fn method_combo<B>(
     (chosen != current).then_some(chosen)
 }
 
-pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
+pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     if !app.state.view.show_trackers_panel {
         return;
     }
@@ -50,7 +50,7 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                         ui.color_edit_button_srgb(&mut next.color);
                         ui.checkbox(&mut next.enabled, format!("Tracker {}", i + 1));
                         if ui.radio(app.state.selected_tracker == i, "inspect").on_hover_text("Show its iterations").clicked() {
-                            app.send(Command::SelectTracker(i));
+                            out.push(Command::SelectTracker(i));
                         }
                         if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
                             next.spec = kind;
@@ -75,28 +75,28 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
                     });
                     ui.horizontal_wrapped(|ui| {
                         if ui.button("Init from GT").on_hover_text("Start from the ground truth of this frame").clicked() {
-                            app.send(Command::InitTracker(i, InitSource::GroundTruth));
+                            out.push(Command::InitTracker(i, InitSource::GroundTruth));
                         }
                         if ui.button("Draw quad").on_hover_text("Click the four corners on the frame").clicked() {
-                            app.send(Command::SetTool(Tool::DrawQuad { tracker: i, corners: Vec::new() }));
+                            out.push(Command::SetTool(Tool::DrawQuad { tracker: i, corners: Vec::new() }));
                         }
                         if ui.button("Draw box").on_hover_text("Drag a box on the frame").clicked() {
-                            app.send(Command::SetTool(Tool::DrawBox { tracker: i, start: None }));
+                            out.push(Command::SetTool(Tool::DrawBox { tracker: i, start: None }));
                         }
                         if ui.button("Remove").clicked() {
-                            app.send(Command::RemoveTracker(i));
+                            out.push(Command::RemoveTracker(i));
                         }
                     });
                     ui.label(egui::RichText::new(stats).small().color(color(entry.color)));
                 });
                 if next != entry {
-                    app.send(Command::SetTracker(i, next));
+                    out.push(Command::SetTracker(i, next));
                 }
             }
             if ui.button("Add tracker").clicked() {
-                app.send(Command::AddTracker);
+                out.push(Command::AddTracker);
             }
-            ab_controls(app, ui);
+            ab_controls(app, ui, out);
             ui.separator();
             ui.heading("Ground truth");
             let mut view = app.state.view.clone();
@@ -105,18 +105,18 @@ pub fn sidebar(app: &mut InspectorApp, ui: &mut egui::Ui) {
             ui.checkbox(&mut view.show_samples, "show method internals")
                 .on_hover_text("On the newest frame: where NN and PF looked (brighter = more similar), KCF's and DSST's response map, TLD's detections and flow points, CMT's keypoints (inliers bright), RCT's candidates");
             if view != app.state.view {
-                app.send(Command::SetView(view));
+                out.push(Command::SetView(view));
             }
             if let Some(v) = method_combo(ui, "GT SSM".into(), &app.state.gt_ssm, ssm::REGISTRY) {
-                app.send(Command::SetGtSsm(v));
+                out.push(Command::SetGtSsm(v));
             }
             ui.label(egui::RichText::new("Trackers are scored against the ground truth projected on this SSM (low-DOF ground truth).").small());
-            let editing = app.rt.tool == Tool::EditGroundTruth;
+            let editing = app.rt.ui.tool == Tool::EditGroundTruth;
             if ui.selectable_label(editing, "Edit ground-truth corners").on_hover_text("Ground-truth mode: drag a corner or the quad; keys 1-4/0, arrows, +/-, N/P, J, O").clicked() {
-                app.send(Command::SetTool(if editing { Tool::Navigate } else { Tool::EditGroundTruth }));
+                out.push(Command::SetTool(if editing { Tool::Navigate } else { Tool::EditGroundTruth }));
             }
             if editing {
-                gt_controls(app, ui);
+                gt_controls(app, ui, out);
             }
         });
     });
@@ -160,7 +160,7 @@ fn tracker_kind_combo(ui: &mut egui::Ui, i: usize, spec: &TrackerSpec) -> Option
 }
 
 /// A/B mode: two trackers side by side.
-fn ab_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
+fn ab_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let n = app.state.trackers.len();
     let mut view = app.state.view.clone();
     let mut on = view.ab.is_some();
@@ -185,13 +185,13 @@ fn ab_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
         }
     });
     if view != app.state.view {
-        app.send(Command::SetView(view));
+        out.push(Command::SetView(view));
     }
 }
 
 /// The ground-truth mode's controls: corner, step, undo/redo, occluded, propagate,
 /// interpolate, export.
-fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
+fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let (picked, step) = app.gt_cursor();
     ui.horizontal(|ui| {
         ui.label("move");
@@ -200,20 +200,20 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .selectable_label(picked == Some(k), format!("{}", k + 1))
                 .clicked()
             {
-                app.send(Command::GtPickCorner(Some(k)));
+                out.push(Command::Gt(GtCommand::PickCorner(Some(k))));
             }
         }
         if ui.selectable_label(picked.is_none(), "quad").clicked() {
-            app.send(Command::GtPickCorner(None));
+            out.push(Command::Gt(GtCommand::PickCorner(None)));
         }
     });
     ui.horizontal(|ui| {
         ui.label(format!("step {step} px"));
         if ui.small_button("-").clicked() {
-            app.send(Command::GtStep(step / 2.0));
+            out.push(Command::Gt(GtCommand::Step(step / 2.0)));
         }
         if ui.small_button("+").clicked() {
-            app.send(Command::GtStep(step * 2.0));
+            out.push(Command::Gt(GtCommand::Step(step * 2.0)));
         }
     });
     let (done, redo) = {
@@ -229,7 +229,7 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
             .on_hover_text(format!("Ctrl+Z: {}", done.as_deref().unwrap_or("nothing")))
             .clicked()
         {
-            app.send(Command::GtUndo);
+            out.push(Command::Gt(GtCommand::Undo));
         }
         if ui
             .add_enabled(redo.is_some(), egui::Button::new("Redo"))
@@ -239,14 +239,14 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
             ))
             .clicked()
         {
-            app.send(Command::GtRedo);
+            out.push(Command::Gt(GtCommand::Redo));
         }
         if ui
             .button("Revert frame")
             .on_hover_text("Back to the original ground truth")
             .clicked()
         {
-            app.send(Command::GtRevert);
+            out.push(Command::Gt(GtCommand::Revert));
         }
     });
     let occluded = app.gt_frame(app.state.frame) == Some(crate::gt::GtFrame::Occluded);
@@ -256,7 +256,7 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
             .on_hover_text("O: not annotatable; skipped by the evaluation")
             .clicked()
         {
-            app.send(Command::GtToggleOccluded);
+            out.push(Command::Gt(GtCommand::ToggleOccluded));
         }
         if ui
             .button("Jump to worst")
@@ -265,7 +265,7 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
             )
             .clicked()
         {
-            app.send(Command::GtJumpWorst);
+            out.push(Command::Gt(GtCommand::JumpWorst));
         }
     });
     if let Some(r) = app.gt_residual(app.state.frame) {
@@ -277,10 +277,10 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
             .on_hover_text("Track forward from this frame with the inspected tracker on this SSM, until a corrected frame or an error jump; then accept or reject")
             .clicked()
         {
-            app.send(Command::GtPropagate);
+            out.push(Command::Gt(GtCommand::Propagate));
         }
         if ui.button("Interpolate").on_hover_text("Between the corrected key frames around this frame, in the SSM's parameters").clicked() {
-            app.send(Command::GtInterpolate);
+            out.push(Command::Gt(GtCommand::Interpolate));
         }
     });
     if let Some(p) = app.gt_proposal() {
@@ -295,10 +295,10 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
                 .on_hover_text("Enter: one undoable edit")
                 .clicked()
             {
-                app.send(Command::GtAcceptProposal);
+                out.push(Command::Gt(GtCommand::AcceptProposal));
             }
             if ui.button("Reject").on_hover_text("Esc").clicked() {
-                app.send(Command::GtRejectProposal);
+                out.push(Command::Gt(GtCommand::RejectProposal));
             }
         });
     }
@@ -320,7 +320,7 @@ fn gt_controls(app: &mut InspectorApp, ui: &mut egui::Ui) {
         "Export ground truth"
     };
     if ui.button(label).on_hover_text("Writes <seq>_gt_<ssm>.txt (the sequence's format) and OptGT/<seq>_<ssm>.txt atomically; the original is never written").clicked() {
-        app.send(Command::GtExport);
+        out.push(Command::Gt(GtCommand::Export));
     }
 }
 

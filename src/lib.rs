@@ -37,8 +37,6 @@
 //! # Ok(()) }
 //! ```
 
-#![allow(clippy::needless_range_loop)]
-
 pub mod am;
 #[cfg(feature = "gui")]
 pub mod app;

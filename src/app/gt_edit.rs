@@ -506,8 +506,13 @@ impl InspectorApp {
                 (egui::Key::ArrowUp, 0.0, -s),
                 (egui::Key::ArrowDown, 0.0, s),
             ] {
-                if i.key_pressed(key) {
-                    cmds.push(Command::Gt(GtCommand::Nudge { dx, dy }));
+                // Every press counts, also several within one frame of the window.
+                let k = i.num_presses(key) as f64;
+                if k > 0.0 {
+                    cmds.push(Command::Gt(GtCommand::Nudge {
+                        dx: dx * k,
+                        dy: dy * k,
+                    }));
                 }
             }
             if i.key_pressed(egui::Key::Plus) || i.key_pressed(egui::Key::Equals) {
@@ -516,16 +521,14 @@ impl InspectorApp {
             if i.key_pressed(egui::Key::Minus) {
                 cmds.push(Command::Gt(GtCommand::Step(s / 2.0)));
             }
-            let n = self.frame_count();
-            if (i.key_pressed(egui::Key::N) || i.key_pressed(egui::Key::PageDown))
-                && self.state.frame + 1 < n
-            {
-                cmds.push(Command::Seek(self.state.frame + 1));
+            let (n, frame) = (self.frame_count(), self.state.frame);
+            let next = i.num_presses(egui::Key::N) + i.num_presses(egui::Key::PageDown);
+            if next > 0 && frame + 1 < n {
+                cmds.push(Command::Seek((frame + next).min(n - 1)));
             }
-            if (i.key_pressed(egui::Key::P) || i.key_pressed(egui::Key::PageUp))
-                && self.state.frame > 0
-            {
-                cmds.push(Command::Seek(self.state.frame - 1));
+            let previous = i.num_presses(egui::Key::P) + i.num_presses(egui::Key::PageUp);
+            if previous > 0 && frame > 0 {
+                cmds.push(Command::Seek(frame.saturating_sub(previous)));
             }
             if i.key_pressed(egui::Key::J) {
                 cmds.push(Command::Gt(GtCommand::JumpWorst));

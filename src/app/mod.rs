@@ -969,8 +969,9 @@ impl InspectorApp {
                         _ => {}
                     }
                 }
-                if i.key_pressed(egui::Key::ArrowLeft) && frame > 0 {
-                    cmds.push(Command::Seek(frame - 1));
+                let back = i.num_presses(egui::Key::ArrowLeft);
+                if back > 0 && frame > 0 {
+                    cmds.push(Command::Seek(frame.saturating_sub(back)));
                 }
             }
             if i.key_pressed(egui::Key::Home) {

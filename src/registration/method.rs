@@ -65,7 +65,7 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     }
     /// A new frame starts from `ctx.params`.
     fn start_frame(&mut self, _ctx: &mut Context) {}
-    /// The AM's model was just updated ([`Am::update_model`]): refresh what was computed from it
+    /// The AM's model was just updated ([`crate::am::Am::update_model`]): refresh what was computed from it
     /// (ICLK's constant Hessian).
     fn model_updated(&mut self, _ctx: &mut Context) {}
     /// One iteration on `img`: updates `ctx.params`.
@@ -83,7 +83,7 @@ pub trait SearchMethod: Send + std::fmt::Debug {
 }
 
 /// What a search method is built from: its own parameters (validated against its
-/// [`SmDef::params`]) and the tracker's.
+/// [`crate::sm::SmDef::params`]) and the tracker's.
 #[derive(Clone, Copy, Debug)]
 pub struct SmConfig<'a> {
     pub method: &'a MethodParams,

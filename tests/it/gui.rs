@@ -799,3 +799,32 @@ fn a_whole_tracker_from_the_dropdown_tracks_and_shows_its_response_map() {
     assert!(m.width >= 8 && m.height >= 8);
     assert_eq!(a.errors(0).len(), 5);
 }
+
+#[test]
+fn several_presses_within_one_frame_of_the_window_all_count() {
+    // A fast typist (or xdotool) can press a key several times before the window draws again.
+    let d = TempDir::new("gui-presses");
+    let seq = small_sequence(d.path(), 8);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    let before = h.state().ground_truth(0).unwrap();
+    press(&mut h, egui::Key::Num2, egui::Modifiers::NONE);
+    for _ in 0..3 {
+        h.key_press_modifiers(egui::Modifiers::NONE, egui::Key::ArrowRight);
+    }
+    h.run_steps(2);
+    let after = h.state().ground_truth(0).unwrap();
+    assert!(
+        (after.0[1].x - before.0[1].x - 3.0).abs() < 1e-6,
+        "three presses, three steps: {before} -> {after}"
+    );
+    for _ in 0..2 {
+        h.key_press_modifiers(egui::Modifiers::NONE, egui::Key::N);
+    }
+    h.run_steps(2);
+    assert_eq!(h.state().state.frame, 2);
+}

@@ -9,237 +9,23 @@
 
 use eframe::egui;
 pub mod command;
+mod decoder;
 mod gt_edit;
 mod panels;
+mod queries;
+mod runtime;
 pub mod state;
+mod window;
 pub mod worker;
 
-use crate::dataset::Sequence;
-use crate::eval;
-use crate::geometry::{Point, alignment_error};
-use crate::tracker::TrackStatus;
+use runtime::{DisplayRt, MessagesRt, RunRt, SequenceRt, UiRt};
+pub use runtime::{LandscapeSettings, LandscapeView, Runtime, Tool, Versioned};
+pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
+
 use command::Command;
 use state::{InitSource, SequenceSource, State};
-use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
-use worker::{FrameImage, Job, Reply, TrackerFrame, Worker};
-
-/// What a pointer drag in the frame view does.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub enum Tool {
-    /// Drag pans, scroll zooms.
-    #[default]
-    Navigate,
-    /// Four clicks give a tracker's initial quad (the corners clicked so far).
-    DrawQuad { tracker: usize, corners: Vec<Point> },
-    /// A drag gives a tracker's initial box.
-    DrawBox {
-        tracker: usize,
-        start: Option<Point>,
-    },
-    /// Drag the ground-truth corners of the shown frame.
-    EditGroundTruth,
-}
-
-/// What can stop the inspector from running (the errors of a running window are shown in it).
-#[derive(Debug, thiserror::Error)]
-pub enum AppError {
-    #[error("cannot load the session: {0}")]
-    Session(#[source] crate::Error),
-    /// The windowing system's error, as it describes it.
-    #[error("the window cannot run: {0}")]
-    Window(String),
-    #[error("cannot write the screenshot {}: {message}", path.display())]
-    Screenshot { path: PathBuf, message: String },
-    #[error("the window closed before the screenshot was taken")]
-    NoScreenshot,
-}
-
-/// Where a screenshot's outcome is reported (`None` until it is taken).
-/// On success, a summary of the window's frame rate while the trackers ran.
-pub type ShotResult = Arc<Mutex<Option<Result<String, AppError>>>>;
-
-/// Take a screenshot once enough frames are tracked, then close.
-#[derive(Debug)]
-pub struct ScreenshotPlan {
-    pub frames: usize,
-    pub path: PathBuf,
-    started: bool,
-    requested: bool,
-    pub result: ShotResult,
-}
-
-/// What a tracker's errors depend on: generation, results' version, corrections' version,
-/// ground-truth SSM, start frame.
-type ErrorsKey = (u64, u64, u64, String, usize);
-
-/// Per tracker, its errors and what they were computed from.
-type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
-
-/// What the cost-landscape view sweeps.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LandscapeSettings {
-    /// The swept parameters (0-based); the second is optional (a curve or a map).
-    pub x: usize,
-    pub y: Option<usize>,
-    /// Half-width of the sweep, px of corner motion.
-    pub radius: f64,
-    /// Around the ground truth instead of the tracker's estimate.
-    pub around_truth: bool,
-}
-
-impl Default for LandscapeSettings {
-    fn default() -> Self {
-        LandscapeSettings {
-            x: 0,
-            y: None,
-            radius: 5.0,
-            around_truth: false,
-        }
-    }
-}
-
-/// The cost-landscape view: open or not, its settings, the request in flight, the last result.
-#[derive(Default)]
-pub struct LandscapeView {
-    pub open: bool,
-    pub settings: LandscapeSettings,
-    pub requested: Option<String>,
-    pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
-}
-
-/// A value with a version that every change bumps: caches keyed by the version stay right
-/// without anyone remembering to invalidate them. Reads go through `Deref`; changes through
-/// [`Versioned::edit`].
-#[derive(Debug, Default)]
-pub struct Versioned<T> {
-    value: T,
-    version: u64,
-}
-
-impl<T> Versioned<T> {
-    pub fn new(value: T) -> Self {
-        Versioned { value, version: 0 }
-    }
-    /// The value, to change (the version moves on).
-    pub fn edit(&mut self) -> &mut T {
-        self.version += 1;
-        &mut self.value
-    }
-    /// How many times the value was handed out for a change.
-    pub fn version(&self) -> u64 {
-        self.version
-    }
-}
-
-impl<T> std::ops::Deref for Versioned<T> {
-    type Target = T;
-    fn deref(&self) -> &T {
-        &self.value
-    }
-}
-
-/// The open sequence, and one being opened.
-#[derive(Default)]
-struct SequenceRt {
-    sequence: Option<Arc<Sequence>>,
-    /// A sequence being opened (the session points to it once it opened).
-    opening: Option<SequenceSource>,
-    /// A loaded session's frame: the trackers run up to it once the sequence opened.
-    restore_frame: Option<usize>,
-    /// A frame that could not be read, and why (the view shows a placeholder for it).
-    bad_frame: Option<(usize, String)>,
-}
-
-/// The trackers' results and the run that makes them.
-#[derive(Default)]
-struct RunRt {
-    /// Bumped at every re-initialisation: replies of an older generation are dropped.
-    generation: u64,
-    /// Per tracker, per frame.
-    results: Versioned<Vec<Vec<Option<TrackerFrame>>>>,
-    /// Per tracker, the frame it was initialised on.
-    starts: Vec<usize>,
-    /// The last frame the trackers reached.
-    tracked_until: Option<usize>,
-    playing: bool,
-    /// Playing back stored results (not tracking): when the shown frame last advanced.
-    replaying: Option<std::time::Instant>,
-    /// Play once the trackers are initialised (after *Re-run from here*).
-    play_after_start: bool,
-    /// Trackers whose settings changed: each re-runs alone once the pointer is released.
-    rerun_due: std::collections::BTreeSet<usize>,
-    /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
-    errors_cache: ErrorsCache,
-}
-
-/// What the frame view shows: the frame's texture and where it was drawn.
-#[derive(Default)]
-struct DisplayRt {
-    texture: Option<egui::TextureHandle>,
-    texture_frame: Option<usize>,
-    image_size: [usize; 2],
-    pending_image: Option<FrameImage>,
-    /// The frame view's image-to-screen mapping, as last drawn.
-    transform: Option<panels::Transform>,
-}
-
-/// What the window tells the user.
-#[derive(Default)]
-struct MessagesRt {
-    status: String,
-    errors: Vec<String>,
-    progress: Option<(String, usize, usize)>,
-}
-
-/// The window's modes and fields that are not part of a session.
-struct UiRt {
-    tool: Tool,
-    selected_iteration: Option<usize>,
-    /// The keyboard help overlay is open.
-    show_help: bool,
-    /// The cost-landscape view: its settings, the request in flight and the last result.
-    landscape: LandscapeView,
-    /// The session file *Save session* writes.
-    session_path: String,
-    recent: Vec<PathBuf>,
-    /// A file dialog is open (its answer arrives as a reply).
-    dialog: bool,
-}
-
-impl Default for UiRt {
-    fn default() -> Self {
-        UiRt {
-            tool: Tool::Navigate,
-            selected_iteration: None,
-            show_help: false,
-            landscape: LandscapeView::default(),
-            session_path: String::from("sessions/my_session.toml"),
-            recent: Vec::new(),
-            dialog: false,
-        }
-    }
-}
-
-/// Runtime state, never saved, grouped by concern.
-pub struct Runtime {
-    /// All background work: jobs out, replies in.
-    worker: Worker,
-    /// Commands pushed this frame, applied after the panels are drawn.
-    commands: Vec<Command>,
-    seq: SequenceRt,
-    run: RunRt,
-    display: DisplayRt,
-    msg: MessagesRt,
-    ui: UiRt,
-    /// The ground-truth mode: corrections (journaled), drag, proposal, images.
-    gt: gt_edit::GtRuntime,
-    screenshot: Option<ScreenshotPlan>,
-    /// Durations (s) of the window's frames, and of building the UI of each, while the
-    /// trackers ran (the last 10 000).
-    frame_times: Vec<(f32, f32)>,
-}
+use worker::{Job, Reply, Worker};
 
 /// The application.
 pub struct InspectorApp {
@@ -271,18 +57,6 @@ impl InspectorApp {
         }
         app.load_state(state);
         app
-    }
-
-    /// Plans a screenshot after `frames` tracked frames (the inspector then plays, captures the
-    /// window to `path`, reports in `result` and closes).
-    pub fn screenshot_after(&mut self, frames: usize, path: PathBuf, result: ShotResult) {
-        self.rt.screenshot = Some(ScreenshotPlan {
-            frames,
-            path,
-            started: false,
-            requested: false,
-            result,
-        });
     }
 
     /// The session file the session field shows (and *Save session* writes).
@@ -319,52 +93,6 @@ impl InspectorApp {
         // The session and the recent list change once it opened (a failed open changes nothing).
         self.rt.seq.opening = Some(src.clone());
         self.rt.worker.send(Job::Open(src));
-    }
-
-    /// Frames in the open sequence.
-    pub fn frame_count(&self) -> usize {
-        self.rt.seq.sequence.as_ref().map_or(0, |s| s.len())
-    }
-
-    /// Whether the trackers are playing.
-    pub fn is_playing(&self) -> bool {
-        self.rt.run.playing
-    }
-
-    /// The last frame the trackers reached.
-    pub fn tracked_until(&self) -> Option<usize> {
-        self.rt.run.tracked_until
-    }
-
-    /// Where an image point was drawn on screen in the last frame view.
-    pub fn screen_pos(&self, p: Point) -> Option<egui::Pos2> {
-        self.rt.display.transform.map(|t| t.to_screen(p))
-    }
-
-    /// The frame the view shows a "could not be read" placeholder for.
-    pub fn bad_frame(&self) -> Option<usize> {
-        self.rt.seq.bad_frame.as_ref().map(|b| b.0)
-    }
-
-    /// The status line.
-    pub fn status(&self) -> &str {
-        &self.rt.msg.status
-    }
-
-    /// Error messages shown.
-    pub fn errors_shown(&self) -> &[String] {
-        &self.rt.msg.errors
-    }
-
-    /// Whether corrections were made since the last export (they are in the journal either
-    /// way).
-    pub fn ground_truth_edited(&self) -> bool {
-        self.rt.gt.corrections.unexported()
-    }
-
-    /// The open sequence.
-    pub fn sequence(&self) -> Option<&Arc<Sequence>> {
-        self.rt.seq.sequence.as_ref()
     }
 
     /// Re-initialises every enabled tracker on `frame` and shows it.
@@ -416,16 +144,6 @@ impl InspectorApp {
             frame,
             trackers: specs,
         });
-    }
-
-    /// The frame tracker `t` was initialised on.
-    fn tracker_start(&self, t: usize) -> usize {
-        self.rt
-            .run
-            .starts
-            .get(t)
-            .copied()
-            .unwrap_or(self.state.start_frame)
     }
 
     /// Re-runs tracker `i` alone, from its start frame up to the frame the others reached; the
@@ -562,47 +280,6 @@ impl InspectorApp {
                 at,
                 sweep,
             })));
-    }
-
-    /// The cost landscape shown (the last one computed) and whether it is current.
-    pub fn landscape_shown(&self) -> Option<(&Result<crate::landscape::Landscape, String>, bool)> {
-        let (key, r) = self.rt.ui.landscape.result.as_ref()?;
-        Some((
-            r,
-            self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()),
-        ))
-    }
-
-    /// The frames where trackers `a` and `b` disagree most: the alignment error between their
-    /// corners (infinite where exactly one of them is lost), largest first.
-    pub fn disagreements(&self, a: usize, b: usize) -> Vec<(usize, f64)> {
-        let (Some(ra), Some(rb)) = (self.rt.run.results.get(a), self.rt.run.results.get(b)) else {
-            return Vec::new();
-        };
-        let mut v: Vec<(usize, f64)> = ra
-            .iter()
-            .zip(rb)
-            .enumerate()
-            .filter_map(|(f, (x, y))| {
-                let (x, y) = (x.as_ref()?, y.as_ref()?);
-                let (lx, ly) = (
-                    x.status != TrackStatus::Tracking,
-                    y.status != TrackStatus::Tracking,
-                );
-                match (lx, ly) {
-                    (false, false) => Some((f, alignment_error(&x.corners, &y.corners))),
-                    (true, true) => None,
-                    _ => Some((f, f64::INFINITY)),
-                }
-            })
-            .collect();
-        v.sort_by(|p, q| q.1.total_cmp(&p.1).then(p.0.cmp(&q.0)));
-        v
-    }
-
-    /// Whether stored results are being played back.
-    pub fn is_replaying(&self) -> bool {
-        self.rt.run.replaying.is_some()
     }
 
     /// Handles the worker's replies.
@@ -782,90 +459,6 @@ impl InspectorApp {
         }
     }
 
-    /// The result of tracker `t` on `frame`.
-    pub fn result(&self, t: usize, frame: usize) -> Option<&TrackerFrame> {
-        self.rt.run.results.get(t)?.get(frame)?.as_ref()
-    }
-
-    /// Alignment errors of tracker `t` on the frames tracked after the start frame (lost frames
-    /// are infinite), against the ground truth shown.
-    pub fn errors(&self, t: usize) -> Vec<(usize, f64)> {
-        let key: ErrorsKey = (
-            self.rt.run.generation,
-            self.rt.run.results.version(),
-            self.rt.gt.corrections.version(),
-            self.state.gt_ssm.clone(),
-            self.state.start_frame,
-        );
-        if let Some((_, v)) = self
-            .rt
-            .run
-            .errors_cache
-            .borrow()
-            .get(&t)
-            .filter(|(k, _)| *k == key)
-        {
-            return v.clone();
-        }
-        let v = self.compute_errors(t);
-        self.rt
-            .run
-            .errors_cache
-            .borrow_mut()
-            .insert(t, (key, v.clone()));
-        v
-    }
-
-    fn compute_errors(&self, t: usize) -> Vec<(usize, f64)> {
-        let Some(v) = self.rt.run.results.get(t) else {
-            return Vec::new();
-        };
-        v.iter()
-            .enumerate()
-            .filter(|(f, r)| *f > self.tracker_start(t) && r.is_some())
-            .filter_map(|(f, r)| {
-                let r = r.as_ref()?;
-                let gt = self.ground_truth(f)?;
-                let e = if r.status == TrackStatus::Tracking {
-                    alignment_error(&r.corners, &gt)
-                } else {
-                    f64::INFINITY
-                };
-                Some((f, e))
-            })
-            .collect()
-    }
-
-    /// Speed of tracker `t` over the frames it tracked after the start frame (with or without
-    /// ground truth): `(frames, search us, update us, iterations)`.
-    pub fn speed(&self, t: usize) -> (usize, f64, f64, usize) {
-        let Some(v) = self.rt.run.results.get(t) else {
-            return (0, 0.0, 0.0, 0);
-        };
-        v.iter()
-            .enumerate()
-            .filter(|(f, _)| *f > self.tracker_start(t))
-            .filter_map(|(_, r)| r.as_ref())
-            .filter(|r| r.status == TrackStatus::Tracking)
-            .fold((0, 0.0, 0.0, 0), |a, r| {
-                (
-                    a.0 + 1,
-                    a.1 + r.search_us,
-                    a.2 + r.update_us,
-                    a.3 + r.iterations.len(),
-                )
-            })
-    }
-
-    /// The success curve of tracker `t` (from [`eval::success_curve`]).
-    pub fn success_curve(&self, t: usize) -> Vec<(f64, f64)> {
-        let e: Vec<f64> = self.errors(t).into_iter().map(|(_, e)| e).collect();
-        if e.is_empty() {
-            return Vec::new();
-        }
-        eval::success_curve(&e)
-    }
-
     /// Draws the whole window into `ui` (used by eframe and by the UI tests).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
         let built = std::time::Instant::now();
@@ -904,7 +497,7 @@ impl InspectorApp {
             self.request_landscape();
         }
         if self.rt.ui.show_help {
-            help_window(&ctx, &mut self.rt.ui.show_help);
+            window::help_window(&ctx, &mut self.rt.ui.show_help);
         }
         self.screenshot(&ctx);
         if self.rt.run.playing || self.rt.msg.progress.is_some() {
@@ -1024,58 +617,6 @@ impl InspectorApp {
             self.send(Command::OpenSequence(SequenceSource::Path(p)));
         }
     }
-
-    /// Drives a planned screenshot: track the planned frames, wait for the frame to be shown,
-    /// then capture the window and close it.
-    fn screenshot(&mut self, ctx: &egui::Context) {
-        let (n, start, generation) = (
-            self.frame_count(),
-            self.state.start_frame,
-            self.rt.run.generation,
-        );
-        let Some(plan) = self.rt.screenshot.as_mut() else {
-            return;
-        };
-        if plan.requested || n == 0 {
-            return;
-        }
-        ctx.request_repaint();
-        let target = (start + plan.frames).min(n - 1);
-        let Some(reached) = self.rt.run.tracked_until else {
-            return;
-        };
-        if reached < target {
-            if !plan.started {
-                plan.started = true;
-                self.rt.run.playing = true;
-                self.rt.worker.send(Job::Advance {
-                    generation,
-                    frames: Some(target - reached),
-                    fps: self.state.playback_fps,
-                });
-            }
-            return;
-        }
-        if self.rt.run.playing
-            || self.rt.display.texture_frame != Some(reached)
-            || self.rt.display.pending_image.is_some()
-        {
-            return;
-        }
-        plan.requested = true;
-        let path = plan.path.clone();
-        let result = plan.result.clone();
-        let ctx2 = ctx.clone();
-        let summary = frame_rate_summary(&self.rt.frame_times);
-        ctx.request_screenshot(move |img| {
-            let saved = save_png(&path, &img).map(|()| summary);
-            if let Ok(mut r) = result.lock() {
-                *r = Some(saved);
-            }
-            ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
-            ctx2.request_repaint();
-        });
-    }
 }
 
 /// `Ctrl` (`Cmd` on macOS) + `key` pressed this frame, with the modifiers held *at that press*
@@ -1096,111 +637,3 @@ fn shortcut(i: &egui::InputState, key: egui::Key) -> Option<egui::Modifiers> {
 pub const PATCH_FRAMES: usize = 300;
 
 pub use crate::keys::SHORTCUTS;
-
-fn help_window(ctx: &egui::Context, open: &mut bool) {
-    egui::Window::new("Keyboard shortcuts")
-        .open(open)
-        .collapsible(false)
-        .resizable(false)
-        .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO)
-        .show(ctx, |ui| {
-            egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
-                for (k, what) in SHORTCUTS {
-                    ui.strong(*k);
-                    ui.label(*what);
-                    ui.end_row();
-                }
-            });
-        });
-}
-
-/// The window's frame rate while the trackers ran, and the time the UI took to build a frame
-/// (what the app itself costs; the rest is rendering).
-fn frame_rate_summary(times: &[(f32, f32)]) -> String {
-    let median = |mut v: Vec<f32>| -> f32 {
-        v.sort_by(f32::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(f32::NAN)
-    };
-    let dts: Vec<f32> = times.iter().map(|t| t.0).filter(|v| *v > 0.0).collect();
-    if dts.is_empty() {
-        return "window: no frame while tracking".into();
-    }
-    let n = dts.len();
-    let (frame, build) = (median(dts), median(times.iter().map(|t| t.1).collect()));
-    format!(
-        "window: median {:.0} fps over {n} frames while tracking; building the UI took a median {:.2} ms per frame",
-        1.0 / frame,
-        build * 1e3
-    )
-}
-
-fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), AppError> {
-    let fail = |message: String| AppError::Screenshot {
-        path: path.to_path_buf(),
-        message,
-    };
-    let [w, h] = img.size;
-    let raw: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
-    let buf = image::RgbaImage::from_raw(w as u32, h as u32, raw)
-        .ok_or_else(|| fail("an image of the wrong size".into()))?;
-    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).map_err(|e| fail(format!("{}: {e}", d.display())))?;
-    }
-    buf.save(path).map_err(|e| fail(e.to_string()))
-}
-
-impl eframe::App for InspectorApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        InspectorApp::ui(self, ui);
-    }
-}
-
-/// How to start the inspector.
-#[derive(Debug, Default)]
-pub struct RunOptions {
-    pub session: Option<PathBuf>,
-    pub sequence: Option<PathBuf>,
-    pub screenshot: Option<(usize, PathBuf)>,
-}
-
-/// Opens the inspector window (blocks until it closes).
-pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
-    let mut state = match &opts.session {
-        Some(p) => State::load(p).map_err(AppError::Session)?,
-        None => State::default(),
-    };
-    if let Some(p) = &opts.sequence {
-        state.sequence = SequenceSource::Path(p.clone());
-    }
-    let native = eframe::NativeOptions {
-        viewport: egui::ViewportBuilder::default()
-            .with_title("regtrack inspector")
-            .with_inner_size([1280.0, 800.0]),
-        ..Default::default()
-    };
-    let shot = opts.screenshot.clone();
-    let session = opts.session.clone();
-    let result: ShotResult = Arc::new(Mutex::new(None));
-    let result2 = result.clone();
-    eframe::run_native(
-        "regtrack inspector",
-        native,
-        Box::new(move |cc| {
-            let ctx = cc.egui_ctx.clone();
-            let mut app = InspectorApp::new(state, move || ctx.request_repaint());
-            if let Some(p) = &session {
-                app.set_session_path(p);
-            }
-            if let Some((frames, path)) = shot {
-                app.screenshot_after(frames, path, result2);
-            }
-            Ok(Box::new(app))
-        }),
-    )
-    .map_err(|e| AppError::Window(e.to_string()))?;
-    if opts.screenshot.is_none() {
-        return Ok(None);
-    }
-    let outcome = result.lock().ok().and_then(|mut r| r.take());
-    outcome.unwrap_or(Err(AppError::NoScreenshot)).map(Some)
-}

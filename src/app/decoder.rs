@@ -1,0 +1,198 @@
+//! Decoding frames: a frame file to a gray image for the trackers and RGBA for display, and a
+//! thread that decodes the next frames while the worker tracks the current one (at most
+//! [`AHEAD`] of them, so memory stays bounded); a frame being decoded is waited for on a
+//! condition variable.
+
+use super::worker::FrameImage;
+use crate::dataset::Sequence;
+use crate::error::{Error, Result};
+use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::mpsc::{Sender, channel};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+/// Frames decoded ahead of the one asked for, at most this many (memory stays bounded whatever
+/// the sequence's length: about 4 x 1280 x 720 x 5 bytes).
+pub(super) const AHEAD: usize = 4;
+
+/// Decodes frame `i`: grayscale for the trackers, RGBA for display.
+pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage)> {
+    let path = seq.frames.get(i).ok_or_else(|| {
+        Error::InvalidParameter(format!(
+            "frame {} is out of range (1..{})",
+            i + 1,
+            seq.len()
+        ))
+    })?;
+    let img = load_dynamic(path)?;
+    let gray = gray_from_dynamic(&img);
+    let rgba = img.to_rgba8();
+    Ok((
+        gray,
+        FrameImage {
+            index: i,
+            width: rgba.width() as usize,
+            height: rgba.height() as usize,
+            rgba: rgba.into_raw(),
+        },
+    ))
+}
+
+pub(super) type Decoded = Result<(GrayU8, FrameImage)>;
+
+/// A thread that decodes the next frames while the worker tracks the current one.
+pub(super) struct Ahead {
+    requests: Option<Sender<(Arc<Sequence>, usize)>>,
+    /// Decoded frames by (sequence identity, index); `pending` were asked for. The condition
+    /// variable is notified whenever a frame is decoded.
+    done: Arc<(Mutex<AheadState>, Condvar)>,
+}
+
+#[derive(Default)]
+struct AheadState {
+    frames: BTreeMap<usize, Decoded>,
+    pending: BTreeSet<usize>,
+    /// The sequence the frames belong to (its address).
+    sequence: usize,
+}
+
+impl AheadState {
+    /// Starts over for the sequence `id` if the state is another's.
+    fn for_sequence(&mut self, id: usize) -> bool {
+        if self.sequence == id {
+            return true;
+        }
+        *self = AheadState {
+            sequence: id,
+            ..AheadState::default()
+        };
+        false
+    }
+}
+
+/// How long [`Ahead::take`] waits for a frame being decoded before decoding it itself.
+const AHEAD_WAIT: Duration = Duration::from_secs(1);
+
+impl Ahead {
+    pub(super) fn spawn() -> Ahead {
+        let (tx, rx) = channel::<(Arc<Sequence>, usize)>();
+        let done = Arc::new((Mutex::new(AheadState::default()), Condvar::new()));
+        let state = done.clone();
+        let spawned = std::thread::Builder::new()
+            .name("regtrack-decoder".into())
+            .spawn(move || {
+                let (lock, decoded) = &*state;
+                while let Ok((seq, i)) = rx.recv() {
+                    let id = Arc::as_ptr(&seq) as usize;
+                    let wanted = lock
+                        .lock()
+                        .map(|s| s.sequence == id && s.pending.contains(&i))
+                        .unwrap_or(false);
+                    if !wanted {
+                        continue;
+                    }
+                    let r = decode_frame(&seq, i);
+                    if let Ok(mut s) = lock.lock()
+                        && s.sequence == id
+                        && s.pending.remove(&i)
+                    {
+                        s.frames.insert(i, r);
+                    }
+                    decoded.notify_all();
+                }
+            });
+        Ahead {
+            // Without its thread every frame is decoded when asked.
+            requests: spawned.ok().map(|_| tx),
+            done,
+        }
+    }
+
+    /// Takes frame `i` if it was decoded ahead (waiting for it if it is being decoded); drops
+    /// every frame outside the `AHEAD` after it.
+    pub(super) fn take(&self, seq: &Arc<Sequence>, i: usize) -> Option<Decoded> {
+        let id = Arc::as_ptr(seq) as usize;
+        let (lock, decoded) = &*self.done;
+        let mut s = lock.lock().ok()?;
+        if !s.for_sequence(id) {
+            return None;
+        }
+        // Wait while the frame is being decoded (the decoder notifies after each frame).
+        let deadline = Instant::now() + AHEAD_WAIT;
+        while s.pending.contains(&i) && !s.frames.contains_key(&i) {
+            let left = deadline.checked_duration_since(Instant::now())?;
+            s = decoded.wait_timeout(s, left).ok()?.0;
+            if s.sequence != id {
+                return None;
+            }
+        }
+        // Only the frames just ahead of `i` are kept (a seek drops the others).
+        let got = s.frames.remove(&i);
+        let window = |k: usize| k > i && k <= i + AHEAD;
+        s.frames.retain(|&k, _| window(k));
+        s.pending.retain(|&k| window(k));
+        got
+    }
+
+    /// Asks for the frames in `range` not yet decoded or asked for.
+    pub(super) fn request(&self, seq: &Arc<Sequence>, range: std::ops::Range<usize>) {
+        let Some(tx) = &self.requests else { return };
+        let id = Arc::as_ptr(seq) as usize;
+        let Ok(mut s) = self.done.0.lock() else {
+            return;
+        };
+        s.for_sequence(id);
+        for k in range {
+            if !s.frames.contains_key(&k) && s.pending.insert(k) {
+                let _ = tx.send((seq.clone(), k));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_decoded_ahead_are_the_frames_and_stay_few() {
+        let dir = std::env::temp_dir().join(format!("regtrack-ahead-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for k in 0..8u32 {
+            let img = image::GrayImage::from_fn(32, 24, |x, y| {
+                image::Luma([(x * 5 + y * 3 + k * 20) as u8])
+            });
+            img.save(dir.join(format!("f{k:02}.png"))).unwrap();
+        }
+        let seq = Arc::new(Sequence::from_parts("s", &dir, None).unwrap());
+        let ahead = Ahead::spawn();
+        for i in 0..8 {
+            let got = ahead.take(&seq, i).unwrap_or_else(|| decode_frame(&seq, i));
+            ahead.request(&seq, i + 1..(i + 1 + AHEAD).min(seq.len()));
+            let (gray, image) = got.unwrap();
+            let direct = decode_frame(&seq, i).unwrap();
+            assert_eq!(gray.data, direct.0.data, "frame {i}");
+            assert_eq!(image.index, i);
+            let s = ahead.done.0.lock().unwrap();
+            assert!(
+                s.frames.len() + s.pending.len() <= AHEAD,
+                "{} kept",
+                s.frames.len()
+            );
+            assert!(s.frames.keys().all(|&k| k > i));
+        }
+        // A seek back keeps only the frames just after it.
+        ahead.request(&seq, 4..8);
+        std::thread::sleep(Duration::from_millis(50));
+        let _ = ahead.take(&seq, 0);
+        let s = ahead.done.0.lock().unwrap();
+        assert!(
+            s.frames
+                .keys()
+                .chain(s.pending.iter())
+                .all(|&k| (1..=AHEAD).contains(&k))
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,203 @@
+//! The inspector's runtime state: what a session does not save, grouped by concern (the open
+//! sequence, the run of the trackers, what the frame view shows, the messages, the window's
+//! modes), and [`Versioned`] values whose caches follow every change.
+
+use super::command::Command;
+use super::gt_edit::GtRuntime;
+use super::panels;
+use super::state::SequenceSource;
+use super::worker::{FrameImage, TrackerFrame, Worker};
+use crate::dataset::Sequence;
+use crate::geometry::Point;
+use eframe::egui;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// What a pointer drag in the frame view does.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Tool {
+    /// Drag pans, scroll zooms.
+    #[default]
+    Navigate,
+    /// Four clicks give a tracker's initial quad (the corners clicked so far).
+    DrawQuad { tracker: usize, corners: Vec<Point> },
+    /// A drag gives a tracker's initial box.
+    DrawBox {
+        tracker: usize,
+        start: Option<Point>,
+    },
+    /// Drag the ground-truth corners of the shown frame.
+    EditGroundTruth,
+}
+
+/// What a tracker's errors depend on: generation, results' version, corrections' version,
+/// ground-truth SSM, start frame.
+pub(super) type ErrorsKey = (u64, u64, u64, String, usize);
+
+/// Per tracker, its errors and what they were computed from.
+pub(super) type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
+
+/// What the cost-landscape view sweeps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LandscapeSettings {
+    /// The swept parameters (0-based); the second is optional (a curve or a map).
+    pub x: usize,
+    pub y: Option<usize>,
+    /// Half-width of the sweep, px of corner motion.
+    pub radius: f64,
+    /// Around the ground truth instead of the tracker's estimate.
+    pub around_truth: bool,
+}
+
+impl Default for LandscapeSettings {
+    fn default() -> Self {
+        LandscapeSettings {
+            x: 0,
+            y: None,
+            radius: 5.0,
+            around_truth: false,
+        }
+    }
+}
+
+/// The cost-landscape view: open or not, its settings, the request in flight, the last result.
+#[derive(Default)]
+pub struct LandscapeView {
+    pub open: bool,
+    pub settings: LandscapeSettings,
+    pub requested: Option<String>,
+    pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
+}
+
+/// A value with a version that every change bumps: caches keyed by the version stay right
+/// without anyone remembering to invalidate them. Reads go through `Deref`; changes through
+/// [`Versioned::edit`].
+#[derive(Debug, Default)]
+pub struct Versioned<T> {
+    pub(super) value: T,
+    pub(super) version: u64,
+}
+
+impl<T> Versioned<T> {
+    pub fn new(value: T) -> Self {
+        Versioned { value, version: 0 }
+    }
+    /// The value, to change (the version moves on).
+    pub fn edit(&mut self) -> &mut T {
+        self.version += 1;
+        &mut self.value
+    }
+    /// How many times the value was handed out for a change.
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+}
+
+impl<T> std::ops::Deref for Versioned<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.value
+    }
+}
+
+/// The open sequence, and one being opened.
+#[derive(Default)]
+pub(super) struct SequenceRt {
+    pub(super) sequence: Option<Arc<Sequence>>,
+    /// A sequence being opened (the session points to it once it opened).
+    pub(super) opening: Option<SequenceSource>,
+    /// A loaded session's frame: the trackers run up to it once the sequence opened.
+    pub(super) restore_frame: Option<usize>,
+    /// A frame that could not be read, and why (the view shows a placeholder for it).
+    pub(super) bad_frame: Option<(usize, String)>,
+}
+
+/// The trackers' results and the run that makes them.
+#[derive(Default)]
+pub(super) struct RunRt {
+    /// Bumped at every re-initialisation: replies of an older generation are dropped.
+    pub(super) generation: u64,
+    /// Per tracker, per frame.
+    pub(super) results: Versioned<Vec<Vec<Option<TrackerFrame>>>>,
+    /// Per tracker, the frame it was initialised on.
+    pub(super) starts: Vec<usize>,
+    /// The last frame the trackers reached.
+    pub(super) tracked_until: Option<usize>,
+    pub(super) playing: bool,
+    /// Playing back stored results (not tracking): when the shown frame last advanced.
+    pub(super) replaying: Option<std::time::Instant>,
+    /// Play once the trackers are initialised (after *Re-run from here*).
+    pub(super) play_after_start: bool,
+    /// Trackers whose settings changed: each re-runs alone once the pointer is released.
+    pub(super) rerun_due: std::collections::BTreeSet<usize>,
+    /// Per tracker, the errors of [`InspectorApp::errors`] and what they were computed from.
+    pub(super) errors_cache: ErrorsCache,
+}
+
+/// What the frame view shows: the frame's texture and where it was drawn.
+#[derive(Default)]
+pub(super) struct DisplayRt {
+    pub(super) texture: Option<egui::TextureHandle>,
+    pub(super) texture_frame: Option<usize>,
+    pub(super) image_size: [usize; 2],
+    pub(super) pending_image: Option<FrameImage>,
+    /// The frame view's image-to-screen mapping, as last drawn.
+    pub(super) transform: Option<panels::Transform>,
+}
+
+/// What the window tells the user.
+#[derive(Default)]
+pub(super) struct MessagesRt {
+    pub(super) status: String,
+    pub(super) errors: Vec<String>,
+    pub(super) progress: Option<(String, usize, usize)>,
+}
+
+/// The window's modes and fields that are not part of a session.
+pub(super) struct UiRt {
+    pub(super) tool: Tool,
+    pub(super) selected_iteration: Option<usize>,
+    /// The keyboard help overlay is open.
+    pub(super) show_help: bool,
+    /// The cost-landscape view: its settings, the request in flight and the last result.
+    pub(super) landscape: LandscapeView,
+    /// The session file *Save session* writes.
+    pub(super) session_path: String,
+    pub(super) recent: Vec<PathBuf>,
+    /// A file dialog is open (its answer arrives as a reply).
+    pub(super) dialog: bool,
+}
+
+impl Default for UiRt {
+    fn default() -> Self {
+        UiRt {
+            tool: Tool::Navigate,
+            selected_iteration: None,
+            show_help: false,
+            landscape: LandscapeView::default(),
+            session_path: String::from("sessions/my_session.toml"),
+            recent: Vec::new(),
+            dialog: false,
+        }
+    }
+}
+
+/// Runtime state, never saved, grouped by concern.
+pub struct Runtime {
+    /// All background work: jobs out, replies in.
+    pub(super) worker: Worker,
+    /// Commands pushed this frame, applied after the panels are drawn.
+    pub(super) commands: Vec<Command>,
+    pub(super) seq: SequenceRt,
+    pub(super) run: RunRt,
+    pub(super) display: DisplayRt,
+    pub(super) msg: MessagesRt,
+    pub(super) ui: UiRt,
+    /// The ground-truth mode: corrections (journaled), drag, proposal, images.
+    pub(super) gt: GtRuntime,
+    pub(super) screenshot: Option<super::window::ScreenshotPlan>,
+    /// Durations (s) of the window's frames, and of building the UI of each, while the
+    /// trackers ran (the last 10 000).
+    pub(super) frame_times: Vec<(f32, f32)>,
+}

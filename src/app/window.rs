@@ -1,0 +1,211 @@
+//! The inspector as a window: [`run`] opens it (blocking until it closes), with a planned
+//! screenshot for `regtrack inspect --screenshot`; the keyboard help overlay.
+
+use super::state::{SequenceSource, State};
+use super::worker::Job;
+use super::{InspectorApp, SHORTCUTS};
+use eframe::egui;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+/// What can stop the inspector from running (the errors of a running window are shown in it).
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    #[error("cannot load the session: {0}")]
+    Session(#[source] crate::Error),
+    /// The windowing system's error, as it describes it.
+    #[error("the window cannot run: {0}")]
+    Window(String),
+    #[error("cannot write the screenshot {}: {message}", path.display())]
+    Screenshot { path: PathBuf, message: String },
+    #[error("the window closed before the screenshot was taken")]
+    NoScreenshot,
+}
+
+/// Where a screenshot's outcome is reported (`None` until it is taken).
+/// On success, a summary of the window's frame rate while the trackers ran.
+pub type ShotResult = Arc<Mutex<Option<Result<String, AppError>>>>;
+
+/// Take a screenshot once enough frames are tracked, then close.
+#[derive(Debug)]
+pub struct ScreenshotPlan {
+    pub frames: usize,
+    pub path: PathBuf,
+    started: bool,
+    requested: bool,
+    pub result: ShotResult,
+}
+
+impl InspectorApp {
+    /// Plans a screenshot after `frames` tracked frames (the inspector then plays, captures the
+    /// window to `path`, reports in `result` and closes).
+    pub fn screenshot_after(&mut self, frames: usize, path: PathBuf, result: ShotResult) {
+        self.rt.screenshot = Some(ScreenshotPlan {
+            frames,
+            path,
+            started: false,
+            requested: false,
+            result,
+        });
+    }
+
+    /// Drives a planned screenshot: track the planned frames, wait for the frame to be shown,
+    /// then capture the window and close it.
+    pub(super) fn screenshot(&mut self, ctx: &egui::Context) {
+        let (n, start, generation) = (
+            self.frame_count(),
+            self.state.start_frame,
+            self.rt.run.generation,
+        );
+        let Some(plan) = self.rt.screenshot.as_mut() else {
+            return;
+        };
+        if plan.requested || n == 0 {
+            return;
+        }
+        ctx.request_repaint();
+        let target = (start + plan.frames).min(n - 1);
+        let Some(reached) = self.rt.run.tracked_until else {
+            return;
+        };
+        if reached < target {
+            if !plan.started {
+                plan.started = true;
+                self.rt.run.playing = true;
+                self.rt.worker.send(Job::Advance {
+                    generation,
+                    frames: Some(target - reached),
+                    fps: self.state.playback_fps,
+                });
+            }
+            return;
+        }
+        if self.rt.run.playing
+            || self.rt.display.texture_frame != Some(reached)
+            || self.rt.display.pending_image.is_some()
+        {
+            return;
+        }
+        plan.requested = true;
+        let path = plan.path.clone();
+        let result = plan.result.clone();
+        let ctx2 = ctx.clone();
+        let summary = frame_rate_summary(&self.rt.frame_times);
+        ctx.request_screenshot(move |img| {
+            let saved = save_png(&path, &img).map(|()| summary);
+            if let Ok(mut r) = result.lock() {
+                *r = Some(saved);
+            }
+            ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+            ctx2.request_repaint();
+        });
+    }
+}
+
+pub(super) fn help_window(ctx: &egui::Context, open: &mut bool) {
+    egui::Window::new("Keyboard shortcuts")
+        .open(open)
+        .collapsible(false)
+        .resizable(false)
+        .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO)
+        .show(ctx, |ui| {
+            egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
+                for (k, what) in SHORTCUTS {
+                    ui.strong(*k);
+                    ui.label(*what);
+                    ui.end_row();
+                }
+            });
+        });
+}
+
+/// The window's frame rate while the trackers ran, and the time the UI took to build a frame
+/// (what the app itself costs; the rest is rendering).
+fn frame_rate_summary(times: &[(f32, f32)]) -> String {
+    let median = |mut v: Vec<f32>| -> f32 {
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f32::NAN)
+    };
+    let dts: Vec<f32> = times.iter().map(|t| t.0).filter(|v| *v > 0.0).collect();
+    if dts.is_empty() {
+        return "window: no frame while tracking".into();
+    }
+    let n = dts.len();
+    let (frame, build) = (median(dts), median(times.iter().map(|t| t.1).collect()));
+    format!(
+        "window: median {:.0} fps over {n} frames while tracking; building the UI took a median {:.2} ms per frame",
+        1.0 / frame,
+        build * 1e3
+    )
+}
+
+fn save_png(path: &std::path::Path, img: &egui::ColorImage) -> Result<(), AppError> {
+    let fail = |message: String| AppError::Screenshot {
+        path: path.to_path_buf(),
+        message,
+    };
+    let [w, h] = img.size;
+    let raw: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
+    let buf = image::RgbaImage::from_raw(w as u32, h as u32, raw)
+        .ok_or_else(|| fail("an image of the wrong size".into()))?;
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).map_err(|e| fail(format!("{}: {e}", d.display())))?;
+    }
+    buf.save(path).map_err(|e| fail(e.to_string()))
+}
+
+impl eframe::App for InspectorApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        InspectorApp::ui(self, ui);
+    }
+}
+
+/// How to start the inspector.
+#[derive(Debug, Default)]
+pub struct RunOptions {
+    pub session: Option<PathBuf>,
+    pub sequence: Option<PathBuf>,
+    pub screenshot: Option<(usize, PathBuf)>,
+}
+
+/// Opens the inspector window (blocks until it closes).
+pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
+    let mut state = match &opts.session {
+        Some(p) => State::load(p).map_err(AppError::Session)?,
+        None => State::default(),
+    };
+    if let Some(p) = &opts.sequence {
+        state.sequence = SequenceSource::Path(p.clone());
+    }
+    let native = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("regtrack inspector")
+            .with_inner_size([1280.0, 800.0]),
+        ..Default::default()
+    };
+    let shot = opts.screenshot.clone();
+    let session = opts.session.clone();
+    let result: ShotResult = Arc::new(Mutex::new(None));
+    let result2 = result.clone();
+    eframe::run_native(
+        "regtrack inspector",
+        native,
+        Box::new(move |cc| {
+            let ctx = cc.egui_ctx.clone();
+            let mut app = InspectorApp::new(state, move || ctx.request_repaint());
+            if let Some(p) = &session {
+                app.set_session_path(p);
+            }
+            if let Some((frames, path)) = shot {
+                app.screenshot_after(frames, path, result2);
+            }
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| AppError::Window(e.to_string()))?;
+    if opts.screenshot.is_none() {
+        return Ok(None);
+    }
+    let outcome = result.lock().ok().and_then(|mut r| r.take());
+    outcome.unwrap_or(Err(AppError::NoScreenshot)).map(Some)
+}

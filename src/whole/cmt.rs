@@ -298,13 +298,7 @@ fn describe_frame(
 impl WholeTracker for Cmt {
     const MIN_SIDE: f64 = 8.0;
 
-    fn base(&self) -> &Base {
-        &self.base
-    }
-
-    fn base_mut(&mut self) -> &mut Base {
-        &mut self.base
-    }
+    base_field!();
 
     fn start(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         let img = frame_f32(input);

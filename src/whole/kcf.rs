@@ -198,13 +198,7 @@ impl State {
 impl WholeTracker for Kcf {
     const MIN_SIDE: f64 = 4.0;
 
-    fn base(&self) -> &Base {
-        &self.base
-    }
-
-    fn base_mut(&mut self) -> &mut Base {
-        &mut self.base
-    }
+    base_field!();
 
     fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;

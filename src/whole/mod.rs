@@ -4,6 +4,18 @@
 //! scale, rotation about its centre), so they are compared with the registration trackers
 //! against translation ground truth, as in the paper.
 
+/// The [`WholeTracker::base`] accessors of a tracker whose [`Base`] is its field `base`.
+macro_rules! base_field {
+    () => {
+        fn base(&self) -> &Base {
+            &self.base
+        }
+        fn base_mut(&mut self) -> &mut Base {
+            &mut self.base
+        }
+    };
+}
+
 pub(crate) mod cf;
 pub mod cmt;
 pub mod dsst;

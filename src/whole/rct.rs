@@ -283,13 +283,7 @@ impl Rct {
 impl WholeTracker for Rct {
     const MIN_SIDE: f64 = 6.0;
 
-    fn base(&self) -> &Base {
-        &self.base
-    }
-
-    fn base_mut(&mut self) -> &mut Base {
-        &mut self.base
-    }
+    base_field!();
 
     fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;

@@ -633,13 +633,7 @@ fn cluster(boxes: &[BBox]) -> Vec<(BBox, Vec<usize>)> {
 impl WholeTracker for Tld {
     const MIN_SIDE: f64 = 8.0;
 
-    fn base(&self) -> &Base {
-        &self.base
-    }
-
-    fn base_mut(&mut self) -> &mut Base {
-        &mut self.base
-    }
+    base_field!();
 
     fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let img = frame_f32(input).into_owned();

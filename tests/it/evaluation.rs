@@ -180,3 +180,89 @@ fn unknown_names_list_what_exists() {
     let spec = TrackerSpec::from_names("ic", "ZNCC", "c8").unwrap();
     assert_eq!(spec.label(), "iclk_zncc_corner");
 }
+
+#[test]
+fn a_batch_shards_resumes_reports_progress_and_pools() {
+    // The library's batch, as `regtrack eval` drives it: two sequences x two trackers.
+    use regtrack::eval::{Batch, POOLED, Shard};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let d = TempDir::new("batch");
+    let a = crate::common::root().join("assets");
+    let sequences: Vec<_> = ["one", "two"]
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let cfg = SynthConfig {
+                texture: a.join("textures/skimage_coffee.png"),
+                motion: a.join("motion/ucsb_bricks_rt.txt"),
+                max_frames: Some(6 + k),
+                jpeg_quality: 0,
+                ..SynthConfig::default()
+            };
+            render_sequence(&cfg, d.path(), name, &|_, _| {}).unwrap()
+        })
+        .collect();
+    let specs = regtrack::tracker::product(
+        &["esm".into(), "iclk".into()],
+        &["ssd".into()],
+        &["homography".into()],
+        &[],
+    )
+    .unwrap();
+    let out = d.path().join("out");
+    let calls = AtomicUsize::new(0);
+    let progress = |done: usize, total: usize| {
+        assert!(done <= total);
+        calls.fetch_add(1, Ordering::Relaxed);
+    };
+    let batch = Batch {
+        out: Some(&out),
+        resume: true,
+        jobs: 2,
+        ..Batch::new(&sequences, &specs)
+    };
+    let first = batch.run(&progress).unwrap();
+    assert_eq!((first.runs.len(), first.resumed), (4, 0));
+    assert!(first.failures.is_empty(), "{:?}", first.failures);
+    assert_eq!(
+        calls.load(Ordering::Relaxed),
+        4,
+        "one progress call per run"
+    );
+    // One row per run, one pooled row per tracker (both ran on two sequences).
+    let rows = first.rows();
+    assert_eq!(rows.len(), 6);
+    let pooled: Vec<_> = rows.iter().filter(|r| r.sequence == POOLED).collect();
+    assert_eq!(pooled.len(), 2);
+    assert_eq!(
+        pooled[0].frames,
+        5 + 6,
+        "the pooled row counts both sequences' frames"
+    );
+    // Run again into the same folder: everything is read back, nothing is made.
+    let again = batch.run(&progress).unwrap();
+    assert_eq!((again.runs.len(), again.resumed), (4, 4));
+    assert_eq!(calls.load(Ordering::Relaxed), 4);
+    assert_eq!(again.rows(), rows);
+    // Two shards make up the batch, each its own part.
+    let shard = |index| {
+        Batch {
+            shard: Some(Shard { index, count: 2 }),
+            ..Batch::new(&sequences, &specs)
+        }
+        .run(&|_, _| {})
+        .unwrap()
+    };
+    let (s0, s1) = (shard(0), shard(1));
+    assert_eq!(s0.runs.len() + s1.runs.len(), 4);
+    let mut labels: Vec<(String, String)> = s0
+        .runs
+        .iter()
+        .chain(&s1.runs)
+        .map(|r| (r.sequence.clone(), r.spec.label()))
+        .collect();
+    labels.sort();
+    labels.dedup();
+    assert_eq!(labels.len(), 4);
+    assert!("2/2".parse::<Shard>().is_err() && "1/2".parse::<Shard>().is_ok());
+}

@@ -243,7 +243,19 @@ fn a_batch_shards_resumes_reports_progress_and_pools() {
     let again = batch.run(&progress).unwrap();
     assert_eq!((again.runs.len(), again.resumed), (4, 4));
     assert_eq!(calls.load(Ordering::Relaxed), 4);
-    assert_eq!(again.rows(), rows);
+    // The same rows (speeds are derived from stored timings: equal to the float's last bits).
+    let key = |r: &eval::Summary| {
+        (
+            r.sequence.clone(),
+            r.tracker.clone(),
+            r.frames,
+            r.sr5,
+            r.failures,
+            (r.mean_error * 1e9).round(),
+        )
+    };
+    let keys = |rows: &[eval::Summary]| rows.iter().map(key).collect::<Vec<_>>();
+    assert_eq!(keys(&again.rows()), keys(&rows));
     // Two shards make up the batch, each its own part.
     let shard = |index| {
         Batch {

@@ -295,6 +295,74 @@ pub fn sparse_lit_sequence(
     (out, target)
 }
 
+/// A static star field: 40 point-like marks (Gaussian dots of 0.6-1.5 px sigma, +80..+200 gray
+/// levels, so smaller than the 50x50 grid's 2.8 px step on the 140 px target) on a dark plate,
+/// under the light of [`lit_static_sequence`] (gain swing of +-35 %, an additive blob of +60
+/// sweeping across), noise of sigma 2 and JPEG at quality 75. The kind of sequence on which the
+/// default trackers lost targets that the peers held (issue 17; docs/robustness.md).
+pub fn star_field_sequence(frames: usize, seed: u64) -> (Vec<GrayU8>, Quad) {
+    let (w, h) = (480usize, 360usize);
+    let target = Quad::from_rect(170.0, 110.0, 140.0, 140.0);
+    let mut rng = Rng::new(seed);
+    let stars: Vec<(f64, f64, f64, f64)> = (0..40)
+        .map(|_| {
+            (
+                175.0 + 130.0 * rng.uniform(),
+                115.0 + 130.0 * rng.uniform(),
+                0.6 + 0.9 * rng.uniform(),
+                80.0 + 120.0 * rng.uniform(),
+            )
+        })
+        .collect();
+    let mut plate = vec![0.0f64; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let inside = (170..310).contains(&x) && (110..250).contains(&y);
+            plate[y * w + x] = if inside { 12.0 } else { 30.0 };
+        }
+    }
+    for &(cx, cy, r, b) in &stars {
+        for y in (cy - 5.0) as usize..=(cy + 5.0) as usize {
+            for x in (cx - 5.0) as usize..=(cx + 5.0) as usize {
+                let d2 = (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2);
+                plate[y * w + x] += b * (-d2 / (2.0 * r * r)).exp();
+            }
+        }
+    }
+    let mut out = Vec::with_capacity(frames);
+    for i in 0..frames {
+        let t = i as f64;
+        let gain = 1.0 + 0.35 * (2.0 * std::f64::consts::PI * t / 80.0).sin();
+        let (bx, by) = (
+            240.0 + 170.0 * (t / 25.0).cos(),
+            180.0 + 110.0 * (t / 37.0).sin(),
+        );
+        let mut data = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let d2 = (x as f64 - bx).powi(2) + (y as f64 - by).powi(2);
+                let blob = 60.0 * (-d2 / (2.0 * 60.0f64.powi(2))).exp();
+                let v = plate[y * w + x] * gain + blob + 2.0 * rng.normal();
+                data[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        let mut buf = Vec::new();
+        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, 75);
+        let img = image::GrayImage::from_raw(w as u32, h as u32, data).expect("frame size");
+        img.write_with_encoder(enc).expect("jpeg encoding");
+        let data = image::load_from_memory(&buf)
+            .expect("jpeg decoding")
+            .to_luma8()
+            .into_raw();
+        out.push(GrayU8 {
+            width: w,
+            height: h,
+            data,
+        });
+    }
+    (out, target)
+}
+
 #[test]
 fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
     // Under the light of `lit_static_sequence` over a target of a few strong marks, SSD and ZNCC
@@ -409,6 +477,8 @@ fn write_the_lit_sequences() {
     let mut seqs: Vec<(String, Vec<GrayU8>, Quad)> = Vec::new();
     let (f, q) = sparse_lit_sequence(121, 1, true, true, true);
     seqs.push(("sparse".into(), f, q));
+    let (f, q) = star_field_sequence(79, 1);
+    seqs.push(("stars".into(), f, q));
     for c in [0.25, 0.5, 1.0] {
         let (f, q) = lit_sequence_with_contrast(121, 1, c);
         seqs.push((format!("brick{}", (c * 100.0) as i32), f, q));

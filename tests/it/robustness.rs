@@ -21,39 +21,24 @@ pub fn lit_sequence_with_contrast(frames: usize, seed: u64, contrast: f64) -> (V
     let (w, h) = (480usize, 360usize);
     let target = Quad::from_rect(170.0, 110.0, 140.0, 140.0);
     let mut rng = Rng::new(seed);
-    let mut out = Vec::with_capacity(frames);
-    for i in 0..frames {
-        let t = i as f64;
-        let gain = 1.0 + 0.35 * (2.0 * std::f64::consts::PI * t / 80.0).sin();
-        let (bx, by) = (
-            240.0 + 170.0 * (t / 25.0).cos(),
-            180.0 + 110.0 * (t / 37.0).sin(),
-        );
-        let mut data = vec![0u8; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let (fx, fy) = (x as f64, y as f64);
-                let inside = (170.0..310.0).contains(&fx) && (110.0..250.0).contains(&fy);
-                let base = if inside {
-                    let (u, v) = ((x - 170) * 2, (y - 110) * 2);
-                    let s = tex.data[(v % tex.height) * tex.width + (u % tex.width)] as f64;
-                    25.0 + contrast * s
-                } else {
-                    30.0
-                };
-                let d2 = (fx - bx).powi(2) + (fy - by).powi(2);
-                let blob = 60.0 * (-d2 / (2.0 * 60.0f64.powi(2))).exp();
-                let v = base * gain + blob + 2.0 * rng.normal();
-                data[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
-            }
+    let mut plate = vec![0.0f64; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let inside = (170..310).contains(&x) && (110..250).contains(&y);
+            plate[y * w + x] = if inside {
+                let (u, v) = ((x - 170) * 2, (y - 110) * 2);
+                25.0 + contrast * tex.data[(v % tex.height) * tex.width + (u % tex.width)] as f64
+            } else {
+                30.0
+            };
         }
-        out.push(GrayU8 {
-            width: w,
-            height: h,
-            data,
-        });
     }
-    (out, target)
+    let light = Light {
+        gain: true,
+        blob: true,
+        jpeg: false,
+    };
+    (light.frames(&plate, w, frames, &mut rng), target)
 }
 
 /// Tracks the frames; returns the error per frame (infinite once lost).
@@ -247,52 +232,81 @@ pub fn sparse_lit_sequence(
             )
         })
         .collect();
-    let mut out = Vec::with_capacity(frames);
-    for i in 0..frames {
-        let t = i as f64;
-        let gain = if gain_on {
-            1.0 + 0.35 * (2.0 * std::f64::consts::PI * t / 80.0).sin()
-        } else {
-            1.0
-        };
-        let (bx, by) = (
-            240.0 + 170.0 * (t / 25.0).cos(),
-            180.0 + 110.0 * (t / 37.0).sin(),
-        );
-        let amp = if blob_on { 60.0 } else { 0.0 };
-        let mut data = vec![0u8; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let (fx, fy) = (x as f64, y as f64);
-                let inside = (170.0..310.0).contains(&fx) && (110.0..250.0).contains(&fy);
-                let mut base = if inside { 22.0 } else { 30.0 };
-                for &(mx, my, r, c) in &marks {
-                    let d = ((fx - mx).powi(2) + (fy - my).powi(2)).sqrt();
-                    base += c * (r + 0.5 - d).clamp(0.0, 1.0);
-                }
-                let d2 = (fx - bx).powi(2) + (fy - by).powi(2);
-                let blob = amp * (-d2 / (2.0 * 60.0f64.powi(2))).exp();
-                let v = base * gain + blob + 2.0 * rng.normal();
-                data[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
+    let mut plate = vec![0.0f64; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (fx, fy) = (x as f64, y as f64);
+            let inside = (170.0..310.0).contains(&fx) && (110.0..250.0).contains(&fy);
+            let mut base = if inside { 22.0 } else { 30.0 };
+            for &(mx, my, r, c) in &marks {
+                let d = ((fx - mx).powi(2) + (fy - my).powi(2)).sqrt();
+                base += c * (r + 0.5 - d).clamp(0.0, 1.0);
             }
+            plate[y * w + x] = base;
         }
-        if jpeg {
-            let mut buf = Vec::new();
-            let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, 75);
-            let img = image::GrayImage::from_raw(w as u32, h as u32, data).expect("frame size");
-            img.write_with_encoder(enc).expect("jpeg encoding");
-            data = image::load_from_memory(&buf)
-                .expect("jpeg decoding")
-                .to_luma8()
-                .into_raw();
-        }
-        out.push(GrayU8 {
-            width: w,
-            height: h,
-            data,
-        });
     }
-    (out, target)
+    let light = Light {
+        gain: gain_on,
+        blob: blob_on,
+        jpeg,
+    };
+    (light.frames(&plate, w, frames, &mut rng), target)
+}
+
+/// The light over a static plate: which of the nuisances are on.
+struct Light {
+    /// The global gain swing, +-35 % over 80 frames.
+    gain: bool,
+    /// An additive blob of +60 gray levels (sigma 60 px) sweeping across the frame.
+    blob: bool,
+    /// JPEG at quality 75.
+    jpeg: bool,
+}
+
+impl Light {
+    /// `frames` frames of the static `plate` (`w` wide) under this light, with noise of sigma 2.
+    fn frames(&self, plate: &[f64], w: usize, frames: usize, rng: &mut Rng) -> Vec<GrayU8> {
+        let h = plate.len() / w;
+        let mut out = Vec::with_capacity(frames);
+        for i in 0..frames {
+            let t = i as f64;
+            let gain = if self.gain {
+                1.0 + 0.35 * (2.0 * std::f64::consts::PI * t / 80.0).sin()
+            } else {
+                1.0
+            };
+            let (bx, by) = (
+                240.0 + 170.0 * (t / 25.0).cos(),
+                180.0 + 110.0 * (t / 37.0).sin(),
+            );
+            let amp = if self.blob { 60.0 } else { 0.0 };
+            let mut data = vec![0u8; w * h];
+            for y in 0..h {
+                for x in 0..w {
+                    let d2 = (x as f64 - bx).powi(2) + (y as f64 - by).powi(2);
+                    let blob = amp * (-d2 / (2.0 * 60.0f64.powi(2))).exp();
+                    let v = plate[y * w + x] * gain + blob + 2.0 * rng.normal();
+                    data[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
+                }
+            }
+            if self.jpeg {
+                let mut buf = Vec::new();
+                let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, 75);
+                let img = image::GrayImage::from_raw(w as u32, h as u32, data).expect("frame size");
+                img.write_with_encoder(enc).expect("jpeg encoding");
+                data = image::load_from_memory(&buf)
+                    .expect("jpeg decoding")
+                    .to_luma8()
+                    .into_raw();
+            }
+            out.push(GrayU8 {
+                width: w,
+                height: h,
+                data,
+            });
+        }
+        out
+    }
 }
 
 /// A static star field: 40 point-like marks (Gaussian dots of 0.6-1.5 px sigma, +80..+200 gray
@@ -329,38 +343,12 @@ pub fn star_field_sequence(frames: usize, seed: u64) -> (Vec<GrayU8>, Quad) {
             }
         }
     }
-    let mut out = Vec::with_capacity(frames);
-    for i in 0..frames {
-        let t = i as f64;
-        let gain = 1.0 + 0.35 * (2.0 * std::f64::consts::PI * t / 80.0).sin();
-        let (bx, by) = (
-            240.0 + 170.0 * (t / 25.0).cos(),
-            180.0 + 110.0 * (t / 37.0).sin(),
-        );
-        let mut data = vec![0u8; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let d2 = (x as f64 - bx).powi(2) + (y as f64 - by).powi(2);
-                let blob = 60.0 * (-d2 / (2.0 * 60.0f64.powi(2))).exp();
-                let v = plate[y * w + x] * gain + blob + 2.0 * rng.normal();
-                data[y * w + x] = v.round().clamp(0.0, 255.0) as u8;
-            }
-        }
-        let mut buf = Vec::new();
-        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, 75);
-        let img = image::GrayImage::from_raw(w as u32, h as u32, data).expect("frame size");
-        img.write_with_encoder(enc).expect("jpeg encoding");
-        let data = image::load_from_memory(&buf)
-            .expect("jpeg decoding")
-            .to_luma8()
-            .into_raw();
-        out.push(GrayU8 {
-            width: w,
-            height: h,
-            data,
-        });
-    }
-    (out, target)
+    let light = Light {
+        gain: true,
+        blob: true,
+        jpeg: true,
+    };
+    (light.frames(&plate, w, frames, &mut rng), target)
 }
 
 #[test]

@@ -12,6 +12,7 @@ use crate::observe::{Iteration, Observer};
 use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::visual_tracker::{FrameInput, Inspection, VisualTracker};
+use std::cmp::Ordering;
 use std::time::Instant;
 
 /// The SSMs of the hierarchy (`ssm_hierarchy=on`), fewer DOF first; those below the tracker's
@@ -208,6 +209,7 @@ impl RegistrationTracker {
                 .ok_or(LossReason::Singular)?;
         }
         let mut p = self.ctx.params;
+        let start = p;
         // Coarse to fine: each level starts from the parameters the coarser one found (the
         // parameters live in the normalised frame, the same at every level).
         for (l, Stage { ctx, sm }) in self.coarse.iter_mut().enumerate().rev() {
@@ -227,8 +229,23 @@ impl RegistrationTracker {
             done += iters;
             p = ctx.params;
         }
-        self.ctx.params = p;
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        // A check between the levels: the coarse levels' estimate is kept only if the finest
+        // level finds it more similar than where the frame started. Marks finer than the coarse
+        // levels' pixels (a star field) vanish there, and the coarse search then follows the
+        // light instead of the target.
+        if !self.coarse.is_empty() && p != start {
+            let coarse = self.ctx.similarity_at(&view, &p);
+            let at_start = self.ctx.similarity_at(&view, &start);
+            // Also when either is NaN: the start is the safe side.
+            if !matches!(
+                coarse.partial_cmp(&at_start),
+                Some(Ordering::Greater | Ordering::Equal)
+            ) {
+                p = start;
+            }
+        }
+        self.ctx.params = p;
         let result = Self::search(
             &mut self.ctx,
             &mut *self.sm,

@@ -485,3 +485,20 @@ fn write_the_lit_sequences() {
             .unwrap();
     }
 }
+
+#[test]
+fn a_pyramid_keeps_a_star_field_that_its_coarse_levels_cannot_see() {
+    // The star field's marks are finer than the coarse levels' pixels: there the search follows
+    // the light. The finest level checks the coarse estimate against where the frame started,
+    // and keeps the start when the coarse estimate is less similar (without that check ESM-ZNCC
+    // with 3 levels held 31 of the 78 frames within 5 px, ICLK-ZNCC 25).
+    let (frames, truth) = star_field_sequence(79, 1);
+    for sm in ["esm", "iclk"] {
+        let mut spec = TrackerSpec::from_names(sm, "zncc", "homography").unwrap();
+        spec.set_param("pyramid_levels", "3").unwrap();
+        spec.set_param("blur_sigma", "1").unwrap();
+        let e = run(&spec, &frames, &truth);
+        let worst = e.iter().copied().fold(0.0, f64::max);
+        assert!(worst < 5.0, "{sm}-zncc, 3 levels: worst {worst:.2} px");
+    }
+}

@@ -774,13 +774,16 @@ fn gt_patches(app: &InspectorApp, ctx: &egui::Context) -> Option<[egui::TextureH
     let tq = app.ground_truth(*tf)?;
     let fq = app.ground_truth(frame);
     let opts = egui::TextureOptions::NEAREST;
-    // The images belong to the open sequence: its identity is part of the keys.
-    let seq = app.sequence().map(|s| std::sync::Arc::as_ptr(s) as usize);
+    // The images belong to the open sequence: its identity (not its address, which a later
+    // sequence may reuse) is part of the keys.
+    let seq = app
+        .sequence()
+        .map(|s| (s.name.clone(), s.gt_path.clone(), s.frames.first().cloned()));
     let bits = |q: Quad| q.to_array().map(f64::to_bits);
-    let template = super::cached_texture(ctx, "gt-template", (seq, *tf, bits(tq)), opts, || {
+    let template = super::cached_texture(ctx, "gt-template", (&seq, *tf, bits(tq)), opts, || {
         rectified(timg, &tq).unwrap_or_else(|| blank_patch(PATCH))
     });
-    let key = (seq, frame, fq.map(bits));
+    let key = (&seq, frame, fq.map(bits));
     let current = super::cached_texture(ctx, "gt-current", key, opts, || {
         fq.and_then(|q| rectified(fimg, &q))
             .unwrap_or_else(|| blank_patch(PATCH))

@@ -19,6 +19,9 @@ pub enum LossReason {
     /// A tracker with its own detector found the target neither by tracking nor by detection
     /// (it keeps searching and reports `Tracking` again when it finds it).
     NotFound,
+    /// The patch where the search ended no longer looks like the template: its confidence (the
+    /// zero-mean normalised cross-correlation with the template) fell below `min_confidence`.
+    LowConfidence,
 }
 
 impl std::fmt::Display for LossReason {
@@ -29,6 +32,7 @@ impl std::fmt::Display for LossReason {
             LossReason::Degenerate => "degenerate quad",
             LossReason::OutOfFrame => "out of frame",
             LossReason::NotFound => "not found",
+            LossReason::LowConfidence => "low confidence",
         })
     }
 }
@@ -59,6 +63,16 @@ pub struct FrameOutcome {
     pub converged: bool,
     /// The similarity before the last iteration's step.
     pub similarity: f64,
+    /// Whether the tracker searched this frame (`false` when it was idle: not initialised, or
+    /// lost with `on_loss=stop`).
+    pub searched: bool,
+    /// Where the search ended, also when a check then rejected it and the status is `Lost`
+    /// (`None` when it did not search or its values were not finite).
+    pub estimate: Option<Quad>,
+    /// How much the patch at `estimate` looks like the template, in -1..1: their zero-mean
+    /// normalised cross-correlation, insensitive to gain and bias (`None` for trackers that do
+    /// not compute it).
+    pub confidence: Option<f64>,
     /// Time spent pre-processing (smoothing the region read) and searching.
     pub timing: FrameTiming,
 }

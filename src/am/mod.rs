@@ -289,6 +289,88 @@ pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     total
 }
 
+/// The most blocks per side of [`block_correlation`].
+pub const MAX_BLOCKS: usize = 8;
+
+/// The confidence that `current` shows what `template` shows, both `res x res` patches stored
+/// row by row, in -1..1. The patches are cut into `cells x cells` blocks; in each, a plane
+/// (bias and slopes along both axes) is fitted to each patch and removed, and the residuals are
+/// correlated. The blocks' correlations are averaged with the template's residual variance as
+/// weight. So it is insensitive to light that varies smoothly across the target (a lamp's spot,
+/// a face turning to the light: in each block that is nearly a gain, a bias and a slope), and
+/// blocks the template has no texture in (only noise) weigh little. 0 when the template is flat.
+/// Does not allocate.
+pub fn block_correlation(template: &[f32], current: &[f32], res: usize, cells: usize) -> f64 {
+    let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
+    if res == 0 || template.len() < res * res || current.len() < res * res {
+        return 0.0;
+    }
+    // Per block, sums of: 1, x, y, xx, xy, yy, t, tx, ty, c, cx, cy, tt, cc, tc.
+    let mut acc = [[0.0f64; 15]; MAX_BLOCKS * MAX_BLOCKS];
+    for r in 0..res {
+        let br = r * cells / res;
+        let row = r * res;
+        // Block-local coordinates keep the sums small.
+        let y = (r - br * res / cells) as f64;
+        for c in 0..res {
+            let bc = c * cells / res;
+            let x = (c - bc * res / cells) as f64;
+            let b = &mut acc[br * cells + bc];
+            let (t, v) = (template[row + c] as f64, current[row + c] as f64);
+            for (k, term) in [
+                1.0,
+                x,
+                y,
+                x * x,
+                x * y,
+                y * y,
+                t,
+                t * x,
+                t * y,
+                v,
+                v * x,
+                v * y,
+                t * t,
+                v * v,
+                t * v,
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                b[k] += term;
+            }
+        }
+    }
+    let (mut num, mut den) = (0.0, 0.0);
+    for b in &acc[..cells * cells] {
+        let n = b[0];
+        if n < 4.0 {
+            continue;
+        }
+        let m = nalgebra::Matrix3::new(b[0], b[1], b[2], b[1], b[3], b[4], b[2], b[4], b[5]);
+        let Some(inv) = m.try_inverse() else {
+            continue;
+        };
+        let ut = nalgebra::Vector3::new(b[6], b[7], b[8]);
+        let uc = nalgebra::Vector3::new(b[9], b[10], b[11]);
+        // Inner products of the residuals after the planes are removed.
+        let vt = b[12] - ut.dot(&(inv * ut));
+        let vc = b[13] - uc.dot(&(inv * uc));
+        let cov = b[14] - ut.dot(&(inv * uc));
+        if !(vt.is_finite() && vc.is_finite() && cov.is_finite()) || vt <= 1e-6 * n {
+            continue;
+        }
+        let rho = if vc <= 1e-6 * n {
+            0.0
+        } else {
+            (cov / (vt * vc).sqrt()).clamp(-1.0, 1.0)
+        };
+        num += vt * rho;
+        den += vt;
+    }
+    if den > 0.0 { num / den } else { 0.0 }
+}
+
 /// The sum of a patch (vectorised like [`dot`]).
 pub fn sum(a: &[f32]) -> f64 {
     let mut total = 0.0f64;

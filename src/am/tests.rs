@@ -292,3 +292,42 @@ fn am_parameters_reach_the_model_and_are_checked() {
     assert!(e.contains("regions") && e.contains("lscv"), "{e}");
     assert_eq!(param_defs("ssd").unwrap().len(), 0);
 }
+
+#[test]
+fn the_block_correlation_ignores_light_that_varies_smoothly_and_sees_anything_else() {
+    let mut rng = Rng::new(11);
+    let res = 50;
+    let t = patch(&mut rng, res * res);
+    let same = block_correlation(&t, &t, res, 4);
+    assert!((same - 1.0).abs() < 1e-9, "{same}");
+    // A light field over the patch: a gain from 0.6 to 1.4 and a bias from -30 to +40 that vary
+    // smoothly across it (a lamp's spot): within a block nearly a gain, a bias and a slope.
+    let lit: Vec<f32> = (0..res * res)
+        .map(|i| {
+            let (x, y) = ((i % res) as f32 / res as f32, (i / res) as f32 / res as f32);
+            let gain = 0.6 + 0.8 * x * y;
+            let bias = -30.0 + 70.0 * (-(x - 0.6).powi(2) / 0.1 - (y - 0.4).powi(2) / 0.1).exp();
+            gain * t[i] + bias
+        })
+        .collect();
+    let c = block_correlation(&t, &lit, res, 4);
+    assert!(c > 0.97, "lit: {c}");
+    // Without blocks (one block) the same light lowers it more.
+    assert!(block_correlation(&t, &lit, res, 1) < c);
+    // Another patch, or the same one shifted by a few samples: near 0.
+    let other = patch(&mut rng, res * res);
+    assert!(block_correlation(&t, &other, res, 4).abs() < 0.15);
+    let shifted: Vec<f32> = (0..res * res).map(|i| t[(i + 3) % (res * res)]).collect();
+    assert!(block_correlation(&t, &shifted, res, 4).abs() < 0.15);
+    // The negative, -1; flat patches, 0; never NaN.
+    let neg: Vec<f32> = t.iter().map(|v| 255.0 - v).collect();
+    assert!((block_correlation(&t, &neg, res, 4) + 1.0).abs() < 1e-9);
+    let flat = vec![100.0f32; res * res];
+    assert_eq!(block_correlation(&flat, &t, res, 4), 0.0);
+    assert_eq!(block_correlation(&t, &flat, res, 4), 0.0);
+    let nan = vec![f32::NAN; res * res];
+    assert_eq!(block_correlation(&t, &nan, res, 4), 0.0);
+    // Too many blocks for the patch, or a short patch: still defined.
+    assert!(block_correlation(&t[..16], &t[..16], 4, 8).is_finite());
+    assert_eq!(block_correlation(&t[..10], &t[..10], 50, 4), 0.0);
+}

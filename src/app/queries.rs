@@ -163,6 +163,22 @@ impl InspectorApp {
             .collect()
     }
 
+    /// The confidence of tracker `t` per frame after its start frame, and whether it reported
+    /// the frame lost: `(frame, confidence, lost)` (frames without a confidence are left out).
+    pub fn confidences(&self, t: usize) -> Vec<(usize, f64, bool)> {
+        let Some(v) = self.rt.run.results.get(t) else {
+            return Vec::new();
+        };
+        v.iter()
+            .enumerate()
+            .filter(|(f, _)| *f > self.tracker_start(t))
+            .filter_map(|(f, r)| {
+                let r = r.as_ref()?;
+                Some((f, r.confidence?, r.status != TrackStatus::Tracking))
+            })
+            .collect()
+    }
+
     /// Speed of tracker `t` over the frames it tracked after the start frame (with or without
     /// ground truth): `(frames, search us, update us, iterations)`.
     pub fn speed(&self, t: usize) -> (usize, f64, f64, usize) {

@@ -37,6 +37,8 @@ pub struct TrackerFrame {
     pub tracker: usize,
     pub status: TrackStatus,
     pub corners: Quad,
+    /// The tracker's confidence in the frame (see [`crate::status::FrameOutcome::confidence`]).
+    pub confidence: Option<f64>,
     pub iterations: Vec<IterationRecord>,
     /// Corners before the first iteration.
     pub start: Option<Quad>,
@@ -101,6 +103,7 @@ fn tracked_frame(
         tracker: index,
         status: out.status,
         corners: out.corners,
+        confidence: out.confidence,
         iterations: rec.iterations.clone(),
         visual: rec.method_visuals.pop().map(Arc::new),
         start: rec.start,
@@ -118,6 +121,7 @@ fn initial_frame(index: usize, t: &Tracker, template: Arc<Vec<f32>>) -> TrackerF
         tracker: index,
         status: t.status(),
         corners: t.corners(),
+        confidence: None,
         iterations: Vec::new(),
         visual: None,
         start: None,

@@ -171,11 +171,11 @@ fn serde_plain<T: serde::Serialize>(v: &T) -> String {
 /// Writes `summary.csv` and `summary.json` in `out`.
 pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let mut csv = String::from(
-        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt\n",
+        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt,lost_when_off,lost_when_on\n",
     );
     for r in rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{}\n",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{},{},{}\n",
             r.sequence,
             r.tracker,
             r.sm,
@@ -192,7 +192,9 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
             r.tracker_fps,
             r.live_fps,
             r.error_type,
-            r.gt
+            r.gt,
+            fraction(r.lost_when_off),
+            fraction(r.lost_when_on)
         ));
     }
     write_atomic(&out.join("summary.csv"), csv.as_bytes())?;
@@ -201,10 +203,19 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     write_atomic(&out.join("summary.json"), json.as_bytes())
 }
 
+/// A fraction for the CSV: four decimals, empty when undefined.
+fn fraction(v: f64) -> String {
+    if v.is_nan() {
+        String::new()
+    } else {
+        format!("{v:.4}")
+    }
+}
+
 /// The summary rows as the command line prints them: a header, then a line per row.
 pub fn summary_table(rows: &[Summary]) -> String {
     let mut out = format!(
-        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9}\n",
+        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9} {:>7} {:>7}\n",
         "sequence",
         "tracker",
         "frames",
@@ -214,11 +225,13 @@ pub fn summary_table(rows: &[Summary]) -> String {
         "fail",
         "it/fr",
         "tracker FPS",
-        "live FPS"
+        "live FPS",
+        "lost>20",
+        "lost<5"
     );
     for r in rows {
         out.push_str(&format!(
-            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0}\n",
+            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0} {:>7} {:>7}\n",
             r.sequence,
             r.tracker,
             r.frames,
@@ -228,8 +241,19 @@ pub fn summary_table(rows: &[Summary]) -> String {
             r.failures,
             r.iterations_per_frame,
             r.tracker_fps,
-            r.live_fps
+            r.live_fps,
+            fraction_short(r.lost_when_off),
+            fraction_short(r.lost_when_on)
         ));
     }
     out
+}
+
+/// A fraction for the table: three decimals, `-` when undefined.
+fn fraction_short(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        format!("{v:.3}")
+    }
 }

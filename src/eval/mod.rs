@@ -29,6 +29,23 @@ mod infinite_as_null {
     }
 }
 
+/// A fraction that may be undefined (`NaN`, written as `null`).
+mod nan_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_nan() {
+            s.serialize_none()
+        } else {
+            s.serialize_f64(*v)
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+}
+
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::{Quad, alignment_error, center_error, iou};
@@ -181,6 +198,21 @@ pub struct FrameRecord {
     pub update_us: f64,
     /// Whether this frame (re-)initialised the tracker (excluded from the success rates).
     pub init: bool,
+    /// Whether the tracker searched this frame (not when idle after a loss, skipped or
+    /// initialised).
+    #[serde(default)]
+    pub searched: bool,
+    /// E_AL of where the search ended, also when the tracker then reported the frame lost
+    /// (infinite when it has no estimate): what the loss detection is scored on.
+    #[serde(with = "infinite_as_null", default = "infinite")]
+    pub estimate_error: f64,
+    /// The tracker's confidence in the frame (see [`crate::status::FrameOutcome::confidence`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<f64>,
+}
+
+fn infinite() -> f64 {
+    f64::INFINITY
 }
 
 /// A tracker run over one sequence.
@@ -235,6 +267,45 @@ pub struct Summary {
     /// The ground truth scored against: `full`, or the SSM of a low-DOF ground truth.
     #[serde(default)]
     pub gt: String,
+    /// Loss detection: of the frames searched whose estimate was more than 20 px off, the
+    /// fraction reported lost (`NaN` without such frames).
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub lost_when_off: f64,
+    /// Of the frames searched whose estimate was within 5 px, the fraction reported lost.
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub lost_when_on: f64,
+}
+
+fn not_a_number() -> f64 {
+    f64::NAN
+}
+
+/// The estimate error above which a frame should be reported lost, and below which it should
+/// not ([`Summary::lost_when_off`], [`Summary::lost_when_on`]), px.
+pub const LOSS_OFF: f64 = 20.0;
+pub const LOSS_ON: f64 = 5.0;
+
+/// The fractions of [`Summary::lost_when_off`] and [`Summary::lost_when_on`] over `frames`.
+pub fn loss_detection<'a>(frames: impl Iterator<Item = &'a FrameRecord>) -> (f64, f64) {
+    let (mut off, mut off_lost, mut on, mut on_lost) = (0usize, 0usize, 0usize, 0usize);
+    for f in frames.filter(|f| f.searched && !f.init && f.ground_truth.is_some()) {
+        let lost = f.status != TrackStatus::Tracking;
+        if f.estimate_error > LOSS_OFF {
+            off += 1;
+            off_lost += usize::from(lost);
+        } else if f.estimate_error <= LOSS_ON {
+            on += 1;
+            on_lost += usize::from(lost);
+        }
+    }
+    let frac = |k: usize, n: usize| {
+        if n == 0 {
+            f64::NAN
+        } else {
+            k as f64 / n as f64
+        }
+    };
+    (frac(off_lost, off), frac(on_lost, on))
 }
 
 impl RunResult {
@@ -278,6 +349,7 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     let failures = runs.iter().map(|r| count_failures(r)).sum();
     let spec = runs.first().map(|r| r.spec.clone());
     let cols = spec.as_ref().map(|s| s.columns()).unwrap_or_default();
+    let (lost_when_off, lost_when_on) = loss_detection(runs.iter().flat_map(|r| r.frames.iter()));
     Summary {
         sequence: name.to_string(),
         tracker: spec.as_ref().map(|s| s.label()).unwrap_or_default(),
@@ -317,6 +389,8 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
                 other => other.map(str::to_string),
             })
             .unwrap_or_else(|| "full".into()),
+        lost_when_off,
+        lost_when_on,
     }
 }
 
@@ -399,6 +473,9 @@ pub fn run_sequence(
                 search_us,
                 update_us,
                 init,
+                searched: false,
+                estimate_error: f64::INFINITY,
+                confidence: None,
             }
         };
     for i in 0..seq.len() {
@@ -449,7 +526,7 @@ pub fn run_sequence(
         let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
         let search = out.timing.search.as_secs_f64() * 1e6;
         let update = search + out.timing.preprocess.as_secs_f64() * 1e6;
-        let rec = record(
+        let mut rec = record(
             i,
             corners,
             out.status,
@@ -458,6 +535,11 @@ pub fn run_sequence(
             update,
             false,
         );
+        rec.searched = out.searched;
+        rec.confidence = out.confidence;
+        if let (Some(q), Some(g)) = (out.estimate, rec.ground_truth) {
+            rec.estimate_error = alignment_error(&q, &g);
+        }
         let failed =
             rec.status != TrackStatus::Tracking || rec.alignment_error > opts.failure_threshold;
         frames.push(rec);

@@ -10,6 +10,7 @@ use crate::imaging::{ImageView, Preprocessor, gaussian_kernel};
 use crate::landscape::{Landscape, LandscapeSpec};
 use crate::observe::{Iteration, Observer};
 use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
+use crate::ssm::Params;
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::visual_tracker::{FrameInput, Inspection, VisualTracker};
 use std::cmp::Ordering;
@@ -18,6 +19,25 @@ use std::time::Instant;
 /// The SSMs of the hierarchy (`ssm_hierarchy=on`), fewer DOF first; those below the tracker's
 /// own are searched before it.
 pub const HIERARCHY: [&str; 3] = ["translation", "similitude", "affine"];
+
+/// The confidence's blocks per side (see [`crate::am::block_correlation`]): 4 x 4 blocks of
+/// about 12 x 12 samples on the default 50 x 50 grid.
+const CONFIDENCE_BLOCKS: usize = 4;
+
+/// A frame's search: where it ended, or why it failed (with where it ended when a check failed).
+type SearchResult = std::result::Result<Searched, (LossReason, Option<Searched>)>;
+
+/// Where one frame's search ended.
+#[derive(Clone, Copy, Debug)]
+struct Searched {
+    params: Params,
+    corners: Quad,
+    iterations: usize,
+    converged: bool,
+    similarity: f64,
+    /// The correlation of the patch there with the template.
+    confidence: f64,
+}
 
 /// One search: a search method and its context (models, grid, template, buffers).
 #[derive(Debug)]
@@ -45,6 +65,10 @@ pub struct RegistrationTracker {
     frame: usize,
     corners: Quad,
     initial_area: f64,
+    /// The recent confidences the loss checks compare a frame's with.
+    loss: super::LossCheck,
+    /// Where the last search ended when only its confidence failed (see `update`).
+    lost_at: Option<Params>,
 }
 
 impl RegistrationTracker {
@@ -85,6 +109,8 @@ impl RegistrationTracker {
             frame: 0,
             corners: Quad::default(),
             initial_area: 0.0,
+            loss: super::LossCheck::default(),
+            lost_at: None,
         })
     }
 
@@ -176,7 +202,7 @@ impl RegistrationTracker {
         observer: &mut dyn Observer,
         started: Instant,
         timing: &mut FrameTiming,
-    ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
+    ) -> std::result::Result<Searched, LossReason> {
         let t0 = Instant::now();
         self.prepare(input, region);
         let t1 = Instant::now();
@@ -257,8 +283,87 @@ impl RegistrationTracker {
             observer,
             started,
         )
-        .map(|(q, iters, conv, f)| (q, iters + done, conv, f));
+        .map(|(corners, iters, converged, similarity)| {
+            // The confidence: how much the patch where the search ended looks like the template,
+            // whatever the AM (one more sampling of the grid).
+            let p = self.ctx.params;
+            self.ctx.sample_at(&view, &p);
+            Searched {
+                params: p,
+                corners,
+                iterations: iters + done,
+                converged,
+                similarity,
+                confidence: crate::am::block_correlation(
+                    &self.ctx.template,
+                    &self.ctx.work.values,
+                    params.res,
+                    CONFIDENCE_BLOCKS,
+                ),
+            }
+        });
         timing.search += t1.elapsed();
+        result
+    }
+
+    /// One frame's search from `start_params` (at `start_corners`), redone once on a larger
+    /// region when it leaves the pre-processed one.
+    // Returned by value: a frame's update does not allocate.
+    #[allow(clippy::result_large_err)]
+    fn search_from(
+        &mut self,
+        input: FrameInput<'_>,
+        start_params: Params,
+        start_corners: &Quad,
+        observer: &mut dyn Observer,
+        started: Instant,
+        timing: &mut FrameTiming,
+    ) -> SearchResult {
+        let (fw, fh) = input.size();
+        let mut region = self.region_around(start_corners);
+        let mut result: SearchResult = Err((LossReason::NonFinite, None));
+        for attempt in 0..2 {
+            self.ctx.params = start_params;
+            observer.frame_started(self.frame, start_corners);
+            result = self
+                .iterate_frame(input, region, observer, started, timing)
+                .map_err(|r| (r, None));
+            // The search left the pre-processed region (or failed in it): redo the frame once on
+            // a larger region, or on the whole frame after a failure.
+            let raw = matches!(input, FrameInput::Gray8(_) | FrameInput::Gray32(_));
+            if attempt == 0 && raw {
+                let (rx0, ry0, rx1, ry1) = {
+                    let (a, b, c, d) = self.pre.region();
+                    (a as f64, b as f64, c as f64, d as f64)
+                };
+                let whole = rx0 <= 0.0 && ry0 <= 0.0 && rx1 >= fw as f64 && ry1 >= fh as f64;
+                match &result {
+                    Ok(out) => {
+                        let (x0, y0, x1, y1) = out.corners.bbox();
+                        let escaped = (x0 - 3.0 < rx0 && rx0 > 0.0)
+                            || (y0 - 3.0 < ry0 && ry0 > 0.0)
+                            || (x1 + 3.0 > rx1 && rx1 < fw as f64)
+                            || (y1 + 3.0 > ry1 && ry1 < fh as f64);
+                        if escaped && out.corners.is_finite() {
+                            let grown = self.region_around(&out.corners);
+                            region = (
+                                region.0.min(grown.0),
+                                region.1.min(grown.1),
+                                region.2.max(grown.2),
+                                region.3.max(grown.3),
+                            );
+                            continue;
+                        }
+                    }
+                    Err(_) if !whole => {
+                        region = (0.0, 0.0, fw as f64, fh as f64);
+                        continue;
+                    }
+                    Err(_) => {}
+                }
+            }
+            break;
+        }
         result
     }
 
@@ -440,6 +545,8 @@ impl VisualTracker for RegistrationTracker {
         self.frame = 0;
         self.corners = self.ctx.corners(&self.ctx.params);
         self.initial_area = quad.signed_area().abs();
+        self.loss.reset();
+        self.lost_at = None;
         Ok(())
     }
 
@@ -463,11 +570,14 @@ impl VisualTracker for RegistrationTracker {
         self.ctx.params = p;
         self.corners = self.ctx.corners(&p);
         self.status = TrackStatus::Tracking;
+        self.loss.reset();
+        self.lost_at = None;
         Ok(())
     }
 
     /// Tracks one frame. Never panics and never returns non-finite corners: a loss of track is
     /// reported in the status, with the last good corners.
+    #[allow(clippy::result_large_err)]
     fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
         let resume = matches!(self.status, TrackStatus::Lost(_))
             && self.params.on_loss == LossPolicy::Continue;
@@ -479,6 +589,9 @@ impl VisualTracker for RegistrationTracker {
                 iterations: 0,
                 converged: false,
                 similarity: f64::NAN,
+                searched: false,
+                estimate: None,
+                confidence: None,
                 timing: FrameTiming::default(),
             };
         }
@@ -487,75 +600,78 @@ impl VisualTracker for RegistrationTracker {
         let start_params = self.ctx.params;
         let start_corners = self.corners;
         let (fw, fh) = input.size();
-        let mut region = self.region_around(&start_corners);
         let started = Instant::now();
-        let mut result = Err(LossReason::NonFinite);
-        for attempt in 0..2 {
-            self.ctx.params = start_params;
-            observer.frame_started(self.frame, &start_corners);
-            result = self.iterate_frame(input, region, observer, started, &mut timing);
-            // The search left the pre-processed region (or failed in it): redo the frame once on
-            // a larger region, or on the whole frame after a failure.
-            let raw = matches!(input, FrameInput::Gray8(_) | FrameInput::Gray32(_));
-            if attempt == 0 && raw {
-                let (rx0, ry0, rx1, ry1) = {
-                    let (a, b, c, d) = self.pre.region();
-                    (a as f64, b as f64, c as f64, d as f64)
-                };
-                let whole = rx0 <= 0.0 && ry0 <= 0.0 && rx1 >= fw as f64 && ry1 >= fh as f64;
-                match &result {
-                    Ok(out) => {
-                        let (x0, y0, x1, y1) = out.0.bbox();
-                        let escaped = (x0 - 3.0 < rx0 && rx0 > 0.0)
-                            || (y0 - 3.0 < ry0 && ry0 > 0.0)
-                            || (x1 + 3.0 > rx1 && rx1 < fw as f64)
-                            || (y1 + 3.0 > ry1 && ry1 < fh as f64);
-                        if escaped && out.0.is_finite() {
-                            let grown = self.region_around(&out.0);
-                            region = (
-                                region.0.min(grown.0),
-                                region.1.min(grown.1),
-                                region.2.max(grown.2),
-                                region.3.max(grown.3),
-                            );
-                            continue;
-                        }
-                    }
-                    Err(_) if !whole => {
-                        region = (0.0, 0.0, fw as f64, fh as f64);
-                        continue;
-                    }
-                    Err(_) => {}
-                }
+        let mut result = self.search_from(
+            input,
+            start_params,
+            &start_corners,
+            observer,
+            started,
+            &mut timing,
+        );
+        // Lost and searching on: also from where the last search ended when only its confidence
+        // failed. A frame judged lost on the target (a sudden blur) is then found again, where
+        // a search from the last good estimate alone falls behind a moving target for good.
+        if resume && let Some(p) = self.lost_at {
+            let from = self.ctx.corners(&p);
+            let other = self.search_from(input, p, &from, observer, started, &mut timing);
+            let conf = |r: &SearchResult| match r {
+                Ok(o) | Err((_, Some(o))) => o.confidence,
+                Err((_, None)) => f64::NEG_INFINITY,
+            };
+            if conf(&other) > conf(&result) {
+                result = other;
             }
-            break;
         }
-        let outcome = match result.and_then(|(q, iters, conv, f)| {
-            self.check_quad(&q, fw, fh).map(|_| (q, iters, conv, f))
-        }) {
-            Ok((q, iterations, converged, similarity)) => {
-                self.corners = q;
+        let checked = result.and_then(|out| {
+            self.check_quad(&out.corners, fw, fh)
+                .and_then(|()| {
+                    if self.ctx.dof < super::confidence::MIN_DOF {
+                        return Ok(());
+                    }
+                    self.loss.judge(out.confidence, out.converged, &self.params)
+                })
+                .map(|()| out)
+                .map_err(|r| (r, Some(out)))
+        });
+        let outcome = match checked {
+            Ok(out) => {
+                self.ctx.params = out.params;
+                self.corners = out.corners;
                 self.status = TrackStatus::Tracking;
+                self.lost_at = None;
                 FrameOutcome {
                     frame: self.frame,
                     status: TrackStatus::Tracking,
-                    corners: q,
-                    iterations,
-                    converged,
-                    similarity,
+                    corners: out.corners,
+                    iterations: out.iterations,
+                    converged: out.converged,
+                    similarity: out.similarity,
+                    searched: true,
+                    estimate: Some(out.corners),
+                    confidence: Some(out.confidence),
                     timing,
                 }
             }
-            Err(reason) => {
+            Err((reason, out)) => {
                 self.ctx.params = start_params;
                 self.status = TrackStatus::Lost(reason);
+                // Where a search that only failed the confidence checks ended: with
+                // `on_loss=continue` the next frame is searched from there too.
+                self.lost_at = out
+                    .filter(|_| reason == LossReason::LowConfidence)
+                    .map(|o| o.params);
+                let finite = out.filter(|o| o.corners.is_finite());
                 FrameOutcome {
                     frame: self.frame,
                     status: self.status,
                     corners: start_corners,
-                    iterations: 0,
+                    iterations: out.map_or(0, |o| o.iterations),
                     converged: false,
                     similarity: f64::NAN,
+                    searched: true,
+                    estimate: finite.map(|o| o.corners),
+                    confidence: finite.map(|o| o.confidence),
                     timing,
                 }
             }

@@ -7,11 +7,13 @@
 //! search methods ([`crate::sm`]) implement its interface; the factory ([`crate::tracker`])
 //! builds the stages from the registries and hands them to the driver.
 
+mod confidence;
 mod context;
 mod driver;
 mod method;
 mod sweep;
 
+pub use confidence::LossCheck;
 pub use context::{Context, Update, Workspace};
 pub use driver::{HIERARCHY, RegistrationTracker, Stage};
 pub use method::{Control, SearchMethod, SmConfig, Step};

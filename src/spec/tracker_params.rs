@@ -167,6 +167,14 @@ tracker_params! {
         "seed of the random generators (NN samples, PF particles)";
     on_loss: LossPolicy = choice(LossPolicy::NAMES),
         "after a loss of track: stop (until re-initialised) or continue from the last good estimate";
+    /// The confidence of a frame is the correlation of the patch where the search ended with the
+    /// template, block by block (insensitive to light that varies across the target, whatever
+    /// the AM). A search that ran out of iterations needs 0.1 more.
+    min_confidence: f64 = float(-1.0, 1.0, 0.5),
+        "a frame whose confidence (the patch's block-wise correlation with the template, -1..1) is below this is reported lost (-1 = never)";
+    /// The median is over the last 10 frames tracked.
+    confidence_drop: f64 = float(0.0, 1.0, 0.75),
+        "a frame whose confidence falls below this times the median of the last frames' is reported lost (0 = never)";
     /// MTF's `hrch`: each frame is first searched with the SSMs of 2, 4 and 6 DOF below the
     /// tracker's own, each from the previous one's result.
     ssm_hierarchy: bool = choice(OFF_ON),

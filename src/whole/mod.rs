@@ -243,6 +243,9 @@ impl Base {
             iterations: 0,
             converged: false,
             similarity: f64::NAN,
+            searched: false,
+            estimate: None,
+            confidence: None,
             timing: FrameTiming::default(),
         }
     }
@@ -261,6 +264,11 @@ impl Base {
         visual: Option<MethodVisual<'_>>,
     ) -> FrameOutcome {
         let start = self.quad();
+        let estimate = found
+            .as_ref()
+            .ok()
+            .map(|(pose, _)| self.quad_at(pose))
+            .filter(Quad::is_finite);
         let checked = found.and_then(|(pose, sim)| {
             let ok = [pose.cx, pose.cy, pose.scale, pose.angle, sim]
                 .iter()
@@ -313,6 +321,9 @@ impl Base {
             iterations: usize::from(status == TrackStatus::Tracking),
             converged: status == TrackStatus::Tracking,
             similarity,
+            searched: true,
+            estimate,
+            confidence: None,
             timing: FrameTiming {
                 preprocess,
                 search: elapsed.saturating_sub(preprocess),

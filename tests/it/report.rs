@@ -236,6 +236,8 @@ fn tracker(sm: &str, am: &str, ssm: &str, mean_sr: f64) -> TrackerResult {
             live_fps: 90.0,
             error_type: "alignment".into(),
             gt: "full".into(),
+            lost_when_off: 1.0,
+            lost_when_on: 0.0,
         },
         sequences: vec!["a".into()],
         curve: regtrack::eval::thresholds()

@@ -7,8 +7,13 @@ use crate::app::InspectorApp;
 use crate::app::command::Command;
 use eframe::egui;
 use egui_plot::{
-    AxisHints, Legend, Line, LineStyle, Plot, PlotImage, PlotPoint, PlotPoints, Points, VLine,
+    AxisHints, HPlacement, Legend, Line, LineStyle, MarkerShape, Plot, PlotImage, PlotPoint,
+    PlotPoints, Points, VLine,
 };
+
+/// The error plot draws each tracker's confidence (0..1) on its right-hand axis, scaled to
+/// 0..[`CONFIDENCE_SCALE`] px of the left one (the success curve's range).
+const CONFIDENCE_SCALE: f64 = 20.0;
 
 /// Axes whose tick labels show even on short plots (egui_plot's defaults hide every label of a
 /// 150 px plot but the extremes).
@@ -70,10 +75,27 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                                 }
                             }
                         });
-                    ui.heading("Alignment error per frame");
+                    ui.heading("Alignment error and confidence per frame");
                     let shown = app.state.frame;
                     let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
-                        .height(150.0)
+                        .custom_y_axes(vec![
+                            AxisHints::new_y()
+                                .label("E_AL (px)")
+                                .label_spacing(14.0..=22.0),
+                            AxisHints::new_y()
+                                .label("confidence (dashed)")
+                                .placement(HPlacement::Right)
+                                .label_spacing(14.0..=22.0)
+                                .formatter(|m, _| {
+                                    let c = m.value / CONFIDENCE_SCALE;
+                                    if (0.0..=1.0).contains(&c) {
+                                        format!("{c:.1}")
+                                    } else {
+                                        String::new()
+                                    }
+                                }),
+                        ])
+                        .height(170.0)
                         .legend(Legend::default())
                         .include_y(0.0)
                         .allow_scroll(false)
@@ -94,6 +116,39 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                                     p.line(
                                         Line::new(format!("{}", i + 1), PlotPoints::from(pts))
                                             .color(color(t.color)),
+                                    );
+                                }
+                                // The confidence, dashed, and the frames reported lost.
+                                let conf = app.confidences(i);
+                                let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
+                                let line: Vec<[f64; 2]> = conf
+                                    .iter()
+                                    .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+                                    .collect();
+                                if !line.is_empty() {
+                                    p.line(
+                                        Line::new(
+                                            format!("{} confidence", i + 1),
+                                            PlotPoints::from(line),
+                                        )
+                                        .color(color(t.color).gamma_multiply(0.7))
+                                        .style(LineStyle::dashed_loose()),
+                                    );
+                                }
+                                let lost: Vec<[f64; 2]> = conf
+                                    .iter()
+                                    .filter(|(_, _, lost)| *lost)
+                                    .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+                                    .collect();
+                                if !lost.is_empty() {
+                                    p.points(
+                                        Points::new(
+                                            format!("{} reported lost", i + 1),
+                                            PlotPoints::from(lost),
+                                        )
+                                        .shape(MarkerShape::Cross)
+                                        .radius(3.0)
+                                        .color(egui::Color32::from_rgb(230, 60, 60)),
                                     );
                                 }
                             }

@@ -6,6 +6,7 @@
 //! tracker interface ([`crate::visual_tracker`]) and the status types, so that users write
 //! `regtrack::tracker::{Tracker, TrackerSpec, FrameInput}`.
 
+use crate::am::ilm::Illumination;
 use crate::error::{Error, Result};
 use crate::params::{MethodParams, ParamDef};
 use crate::registration::{Context, SmConfig, Stage};
@@ -162,7 +163,7 @@ impl RegistrationTracker {
                 method: &sm_method,
                 tracker: &spec.params,
             };
-            let model = am::build_with(&spec.am, &spec.method)?;
+            let model = appearance_model(spec)?;
             let sm = sm::build(&spec.sm, &cfg)?;
             check_capabilities(&*sm, &*model)?;
             let ctx = Context::new(
@@ -180,6 +181,24 @@ impl RegistrationTracker {
         canonical.ssm = main.ctx.ssm.name().to_string();
         RegistrationTracker::from_stages(canonical, main, &build)
     }
+}
+
+/// The spec's AM, under its illumination model if it has one.
+fn appearance_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
+    let model = am::build_with(&spec.am, &spec.method)?;
+    let p = &spec.params;
+    if p.ilm == Illumination::None {
+        return Ok(model);
+    }
+    if !am::ilm::LEAST_SQUARES.contains(&model.name()) {
+        return Err(Error::Incompatible(format!(
+            "an illumination model (ilm={}) needs a least-squares appearance model ({}), not '{}'",
+            Illumination::NAMES[crate::spec::ParamValue::to_param(&p.ilm) as usize],
+            am::ilm::LEAST_SQUARES.join(", "),
+            model.name()
+        )));
+    }
+    Ok(Box::new(am::ilm::IlmSsd::new(p.ilm, p.ilm_cells)))
 }
 
 /// Refuses a search method whose needs the appearance model does not meet, naming the models

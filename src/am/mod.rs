@@ -12,6 +12,7 @@
 
 mod ccre;
 mod correlation;
+pub mod ilm;
 mod intensity_map;
 mod kld;
 mod lscv;

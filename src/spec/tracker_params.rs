@@ -6,6 +6,7 @@
 //! [`TrackerParams::set_value`]).
 
 use crate::am::HessianKind;
+use crate::am::ilm::Illumination;
 use crate::error::Result;
 use crate::params::ParamDef;
 use serde::{Deserialize, Serialize};
@@ -179,9 +180,22 @@ tracker_params! {
     /// tracker's own, each from the previous one's result.
     ssm_hierarchy: bool = choice(OFF_ON),
         "off, or on: search translation, similitude and affine (those below the tracker's SSM) first, then the tracker's SSM (MTF's hrch)";
+    /// Estimated jointly with the warp at every evaluation (see `am::ilm`): `pgb`, a gain and a
+    /// bias per cell of an `ilm_cells x ilm_cells` grid; `rbf`, a gain and a bias that vary
+    /// smoothly (Gaussian radial basis functions on the cells).
+    ilm: Illumination = choice(Illumination::NAMES),
+        "illumination model of the least-squares AM (ssd), fitted with the warp: none, pgb (piecewise gain and bias) or rbf (radial basis functions)";
+    ilm_cells: usize = int(1.0, 8.0, 3.0),
+        "cells per side of the illumination model's grid";
     grid: GridLayout = choice(GridLayout::NAMES),
         "sampling grid: centres (of a res x res tiling, inside the target) or border (corner to corner, as MTF)";
 }
+
+choice_param!(Illumination {
+    None = "none",
+    Pieces = "pgb",
+    Radial = "rbf",
+});
 
 choice_param!(HessianKind {
     Default = "default",

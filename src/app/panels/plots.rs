@@ -118,7 +118,8 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                                             .color(color(t.color)),
                                     );
                                 }
-                                // The confidence, dashed, and the frames reported lost.
+                                // The confidence, dashed, and the frames reported lost (under the
+                                // tracker's legend entry, which shows and hides all three).
                                 let conf = app.confidences(i);
                                 let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
                                 let line: Vec<[f64; 2]> = conf
@@ -127,12 +128,9 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                                     .collect();
                                 if !line.is_empty() {
                                     p.line(
-                                        Line::new(
-                                            format!("{} confidence", i + 1),
-                                            PlotPoints::from(line),
-                                        )
-                                        .color(color(t.color).gamma_multiply(0.7))
-                                        .style(LineStyle::dashed_loose()),
+                                        Line::new(format!("{}", i + 1), PlotPoints::from(line))
+                                            .color(color(t.color).gamma_multiply(0.7))
+                                            .style(LineStyle::dashed_loose()),
                                     );
                                 }
                                 let lost: Vec<[f64; 2]> = conf
@@ -142,13 +140,10 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                                     .collect();
                                 if !lost.is_empty() {
                                     p.points(
-                                        Points::new(
-                                            format!("{} reported lost", i + 1),
-                                            PlotPoints::from(lost),
-                                        )
-                                        .shape(MarkerShape::Cross)
-                                        .radius(3.0)
-                                        .color(egui::Color32::from_rgb(230, 60, 60)),
+                                        Points::new(format!("{}", i + 1), PlotPoints::from(lost))
+                                            .shape(MarkerShape::Cross)
+                                            .radius(3.0)
+                                            .color(egui::Color32::from_rgb(230, 60, 60)),
                                     );
                                 }
                             }

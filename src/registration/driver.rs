@@ -27,6 +27,11 @@ const CONFIDENCE_BLOCKS: usize = 4;
 /// A frame's search: where it ended, or why it failed (with where it ended when a check failed).
 type SearchResult = std::result::Result<Searched, (LossReason, Option<Searched>)>;
 
+/// The scales of the last good quad at which `on_loss=redetect` searches the frame.
+const REDETECT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
+/// The candidates of the frame search that are refined.
+const REDETECT_REFINED: usize = 3;
+
 /// Where one frame's search ended.
 #[derive(Clone, Copy, Debug)]
 struct Searched {
@@ -306,6 +311,82 @@ impl RegistrationTracker {
         result
     }
 
+    /// Searches the whole frame for the template: the last good quad moved over the frame in
+    /// steps of a sixth of its size, at [`REDETECT_SCALES`], each candidate ranked by its
+    /// confidence; the [`REDETECT_REFINED`] best are refined by the search method in turn, and
+    /// the first that passes the checks is returned.
+    fn redetect(
+        &mut self,
+        input: FrameInput<'_>,
+        observer: &mut dyn Observer,
+        started: Instant,
+        timing: &mut FrameTiming,
+        fw: usize,
+        fh: usize,
+    ) -> Option<Searched> {
+        let t0 = Instant::now();
+        self.prepare(input, (0.0, 0.0, fw as f64, fh as f64));
+        timing.preprocess += t0.elapsed();
+        let base = self.corners;
+        let c = base.centroid();
+        let (x0, y0, x1, y1) = base.bbox();
+        let step = ((x1 - x0).max(y1 - y0) / 6.0).max(4.0);
+        let mut best = [(f64::NEG_INFINITY, self.ctx.params); REDETECT_REFINED];
+        let t1 = Instant::now();
+        {
+            let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+            let ctx = &mut self.ctx;
+            for scale in REDETECT_SCALES {
+                let mut cy = step / 2.0;
+                while cy < fh as f64 {
+                    let mut cx = step / 2.0;
+                    while cx < fw as f64 {
+                        let q = base.map(|p| {
+                            crate::geometry::Point::new(
+                                cx + scale * (p.x - c.x),
+                                cy + scale * (p.y - c.y),
+                            )
+                        });
+                        let target = q.map(|p| ctx.norm.to_norm(p));
+                        if let Some(p) = ctx.ssm.fit(&ctx.template_corners.0, &target.0) {
+                            ctx.sample_at(&view, &p);
+                            let conf = crate::am::block_correlation(
+                                &ctx.template,
+                                &ctx.work.values,
+                                self.params.res,
+                                CONFIDENCE_BLOCKS,
+                            );
+                            // Keep the best few, best first.
+                            if conf > best[REDETECT_REFINED - 1].0 {
+                                best[REDETECT_REFINED - 1] = (conf, p);
+                                best.sort_by(|a, b| b.0.total_cmp(&a.0));
+                            }
+                        }
+                        cx += step;
+                    }
+                    cy += step;
+                }
+            }
+        }
+        timing.search += t1.elapsed();
+        for (conf, p) in best {
+            if !conf.is_finite() {
+                break;
+            }
+            let from = self.ctx.corners(&p);
+            if let Ok(out) = self.search_from(input, p, &from, observer, started, timing)
+                && self.check_quad(&out.corners, fw, fh).is_ok()
+                && self
+                    .loss
+                    .judge(out.confidence, out.converged, &self.params)
+                    .is_ok()
+            {
+                return Some(out);
+            }
+        }
+        None
+    }
+
     /// One frame's search from `start_params` (at `start_corners`), redone once on a larger
     /// region when it leaves the pre-processed one.
     // Returned by value: a frame's update does not allocate.
@@ -579,8 +660,8 @@ impl VisualTracker for RegistrationTracker {
     /// reported in the status, with the last good corners.
     #[allow(clippy::result_large_err)]
     fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
-        let resume = matches!(self.status, TrackStatus::Lost(_))
-            && self.params.on_loss == LossPolicy::Continue;
+        let resume =
+            matches!(self.status, TrackStatus::Lost(_)) && self.params.on_loss != LossPolicy::Stop;
         if self.status != TrackStatus::Tracking && !resume {
             return FrameOutcome {
                 frame: self.frame,
@@ -634,6 +715,22 @@ impl VisualTracker for RegistrationTracker {
                 .map(|()| out)
                 .map_err(|r| (r, Some(out)))
         });
+        // Where a search that only failed the confidence checks ended: with `on_loss=continue`
+        // (or `redetect`) the next frame is searched from there too.
+        let lost_at = match &checked {
+            Err((LossReason::LowConfidence, Some(o))) => Some(o.params),
+            _ => None,
+        };
+        // Still lost with `on_loss=redetect`: search the whole frame.
+        let checked = match checked {
+            Err(failed) if resume && self.params.on_loss == LossPolicy::Redetect => {
+                let found = self.redetect(input, observer, started, &mut timing, fw, fh);
+                found
+                    .ok_or(failed)
+                    .map_err(|(_, out)| (LossReason::NotFound, out))
+            }
+            other => other,
+        };
         let outcome = match checked {
             Ok(out) => {
                 self.ctx.params = out.params;
@@ -656,11 +753,7 @@ impl VisualTracker for RegistrationTracker {
             Err((reason, out)) => {
                 self.ctx.params = start_params;
                 self.status = TrackStatus::Lost(reason);
-                // Where a search that only failed the confidence checks ended: with
-                // `on_loss=continue` the next frame is searched from there too.
-                self.lost_at = out
-                    .filter(|_| reason == LossReason::LowConfidence)
-                    .map(|o| o.params);
+                self.lost_at = lost_at;
                 let finite = out.filter(|o| o.corners.is_finite());
                 FrameOutcome {
                     frame: self.frame,

@@ -167,7 +167,7 @@ tracker_params! {
     seed: u64 = int(0.0, 9_007_199_254_740_991.0, 0.0),
         "seed of the random generators (NN samples, PF particles)";
     on_loss: LossPolicy = choice(LossPolicy::NAMES),
-        "after a loss of track: stop (until re-initialised) or continue from the last good estimate";
+        "after a loss of track: stop (until re-initialised), continue from the last good estimate, or redetect (continue, else search the whole frame for the template)";
     /// The confidence of a frame is the correlation of the patch where the search ended with the
     /// template, block by block (insensitive to light that varies across the target, whatever
     /// the AM). A search that ran out of iterations needs 0.1 more.
@@ -231,10 +231,15 @@ pub enum LossPolicy {
     /// Keeps searching each frame from the last good estimate, reporting `Lost` until a frame
     /// passes the checks again (as MTF does).
     Continue,
+    /// As `Continue`, and when that fails, searches the whole frame for the template (the last
+    /// good quad moved over the frame at three scales, ranked by confidence), refines the best
+    /// candidates and resumes with the first that passes the checks.
+    Redetect,
 }
 choice_param!(LossPolicy {
     Stop = "stop",
     Continue = "continue",
+    Redetect = "redetect",
 });
 
 impl TrackerParams {

@@ -606,3 +606,60 @@ fn ssd_with_an_illumination_model_holds_the_star_field_at_the_default_smoothing(
         }
     }
 }
+
+/// A frame of the grass texture with a 100 x 100 crop of the coffee pasted at `(x, y)`, scaled
+/// by `scale` (nearest neighbour); returns the frame and the crop's quad.
+fn pasted(x: f64, y: f64, scale: f64) -> (GrayU8, Quad) {
+    let bg = texture("skimage_grass.png");
+    let fg = texture("skimage_coffee.png");
+    let mut img = bg.clone();
+    let side = 100.0 * scale;
+    for j in 0..side as usize {
+        for i in 0..side as usize {
+            let (u, v) = ((i as f64 / scale) as usize, (j as f64 / scale) as usize);
+            let (px, py) = (x as usize + i, y as usize + j);
+            if px < img.width && py < img.height {
+                img.data[py * img.width + px] = fg.data[(150 + v) * fg.width + 250 + u];
+            }
+        }
+    }
+    (img, Quad::from_rect(x - 0.5, y - 0.5, side, side))
+}
+
+#[test]
+fn redetection_finds_a_target_that_comes_back_elsewhere() {
+    // The target is hidden for a frame (the tracker is lost), then shows again 200 px away and
+    // 10 % larger. `continue` searches where it was and stays lost; `redetect` searches the
+    // frame, finds it and tracks on.
+    let (first, truth) = pasted(100.0, 80.0, 1.0);
+    let hidden = texture("skimage_grass.png");
+    let (moved, there) = pasted(300.0, 200.0, 1.1);
+    for policy in ["continue", "redetect"] {
+        let mut spec = TrackerSpec::from_names("esm", "ssd", "homography").unwrap();
+        spec.set_param("on_loss", policy).unwrap();
+        let mut t = Tracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&first), &truth).unwrap();
+        let lost = t.update(FrameInput::Gray8(&hidden), &mut NoObserver);
+        assert!(
+            matches!(lost.status, TrackStatus::Lost(_)),
+            "{policy}: {lost:?}"
+        );
+        let mut errors = Vec::new();
+        for _ in 0..3 {
+            let out = t.update(FrameInput::Gray8(&moved), &mut NoObserver);
+            errors.push(if out.status == TrackStatus::Tracking {
+                alignment_error(&out.corners, &there)
+            } else {
+                f64::INFINITY
+            });
+        }
+        if policy == "continue" {
+            assert!(
+                errors.iter().all(|e| e.is_infinite()),
+                "continue: {errors:?}"
+            );
+        } else {
+            assert!(errors.iter().all(|e| *e < 1.5), "redetect: {errors:?}");
+        }
+    }
+}

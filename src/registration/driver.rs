@@ -335,7 +335,17 @@ impl RegistrationTracker {
         let t1 = Instant::now();
         {
             let view = Self::view(&self.pre, &self.pre_copy, input, 0);
-            let ctx = &mut self.ctx;
+            let ctx = &self.ctx;
+            // Candidates are ranked on every other sample of the grid (a quarter of the work).
+            let res = self.params.res;
+            let sub = res.div_ceil(2);
+            let picks: Vec<usize> = (0..sub)
+                .flat_map(|j| {
+                    (0..sub).map(move |i| (2 * j).min(res - 1) * res + (2 * i).min(res - 1))
+                })
+                .collect();
+            let template: Vec<f32> = picks.iter().map(|&k| ctx.template[k]).collect();
+            let mut patch = vec![0.0f32; picks.len()];
             for scale in REDETECT_SCALES {
                 let mut cy = step / 2.0;
                 while cy < fh as f64 {
@@ -349,11 +359,21 @@ impl RegistrationTracker {
                         });
                         let target = q.map(|p| ctx.norm.to_norm(p));
                         if let Some(p) = ctx.ssm.fit(&ctx.template_corners.0, &target.0) {
-                            ctx.sample_at(&view, &p);
+                            let m = ctx.pixel_matrix(&p);
+                            for (v, &k) in patch.iter_mut().zip(&picks) {
+                                let pt = apply_homography(
+                                    &m,
+                                    crate::geometry::Point::new(
+                                        ctx.grid_x[k] as f64,
+                                        ctx.grid_y[k] as f64,
+                                    ),
+                                );
+                                *v = crate::imaging::sample_value(&view, pt.x as f32, pt.y as f32);
+                            }
                             let conf = crate::am::block_correlation(
-                                &ctx.template,
-                                &ctx.work.values,
-                                self.params.res,
+                                &template,
+                                &patch,
+                                sub,
                                 CONFIDENCE_BLOCKS,
                             );
                             // Keep the best few, best first.

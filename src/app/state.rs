@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
+use crate::spec::DEFAULT_TRACKER;
 use crate::tracker::{RegistrationSpec, TrackerSpec};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -119,7 +120,7 @@ impl Default for State {
             spec: TrackerSpec::Registration(RegistrationSpec {
                 sm: sm.into(),
                 am: am.into(),
-                ssm: "homography".into(),
+                ssm: crate::spec::DEFAULT_TRACKER[2].into(),
                 params: Default::default(),
                 method: Default::default(),
             }),
@@ -130,8 +131,9 @@ impl Default for State {
         State {
             sequence: SequenceSource::Demo,
             trackers: vec![
-                entry("esm", "ssd", PALETTE[0]),
-                entry("iclk", "zncc", PALETTE[1]),
+                // The default tracker, and the paper's classic to compare it with.
+                entry(DEFAULT_TRACKER[0], DEFAULT_TRACKER[1], PALETTE[0]),
+                entry("esm", "ssd", PALETTE[1]),
             ],
             start_frame: 0,
             frame: 0,

@@ -117,6 +117,7 @@ fn sessions_load_and_every_bundled_session_is_valid() {
     state.trackers.truncate(1);
     let r = state.trackers[0].spec.registration_mut().unwrap();
     r.sm = "fclk".into();
+    r.am = "ssd".into();
     r.ssm = "affine".into();
     let session = d.path().join("s.toml");
     state.save(&session).unwrap();

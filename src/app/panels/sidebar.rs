@@ -153,7 +153,8 @@ fn tracker_kind_combo(ui: &mut egui::Ui, i: usize, spec: &TrackerSpec) -> Option
         return None;
     }
     if chosen == REGISTRATION {
-        TrackerSpec::from_names("esm", "ssd", "homography").ok()
+        let [sm, am, ssm] = crate::spec::DEFAULT_TRACKER;
+        TrackerSpec::from_names(sm, am, ssm).ok()
     } else {
         TrackerSpec::whole(&chosen).ok()
     }

@@ -5,6 +5,7 @@
 use clap::{Arg, ArgAction, ArgMatches, Args, FromArgMatches, Subcommand};
 use regtrack::Result;
 use regtrack::eval;
+use regtrack::spec::DEFAULT_TRACKER;
 use regtrack::spec::{TRACKER_FLAGS, TRACKER_PARAMS};
 use regtrack::tracker::{self, TrackerSpec};
 use std::path::PathBuf;
@@ -60,7 +61,7 @@ pub enum Command {
         /// Sequences (default: all).
         #[arg(long, value_delimiter = ',')]
         seqs: Option<Vec<String>>,
-        // The trackers (default: esm x ssd x homography).
+        // The trackers (default: regtrack::spec::DEFAULT_TRACKER).
         #[command(flatten)]
         select: SelectArgs,
         /// Output folder.
@@ -162,11 +163,11 @@ pub struct TrackerArgs {
     #[arg(long)]
     pub tracker: Option<String>,
     /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`.
-    #[arg(long, default_value = "esm")]
+    #[arg(long, default_value = DEFAULT_TRACKER[0])]
     pub sm: String,
-    #[arg(long, default_value = "ssd")]
+    #[arg(long, default_value = DEFAULT_TRACKER[1])]
     pub am: String,
-    #[arg(long, default_value = "homography")]
+    #[arg(long, default_value = DEFAULT_TRACKER[2])]
     pub ssm: String,
     #[command(flatten)]
     pub params: ParamArgs,

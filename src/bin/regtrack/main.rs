@@ -73,7 +73,7 @@ fn main() -> Result<()> {
                 error: eval::ErrorKind::parse(&error)?,
                 ..EvalOptions::default()
             };
-            let specs = select.specs(["esm", "ssd", "homography"])?;
+            let specs = select.specs(regtrack::spec::DEFAULT_TRACKER)?;
             let sequences = dataset::discover(&dataset, seqs.as_deref())?;
             let batch = Batch {
                 options,

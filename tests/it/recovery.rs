@@ -417,7 +417,13 @@ fn an_illumination_model_recovers_a_known_warp_with_every_gradient_method() {
     for s in sm::REGISTRY {
         for m in ssm::REGISTRY {
             for ilm in ["pgb", "rbf"] {
-                if !full_tests() && ilm == "rbf" && m.name != "homography" {
+                // By default pgb on 2, 4 and 8 DOF and rbf on the homography; every pair with
+                // REGTRACK_FULL_TESTS=1.
+                let quick = match ilm {
+                    "pgb" => ["translation", "similitude", "homography"].contains(&m.name),
+                    _ => m.name == "homography",
+                };
+                if !full_tests() && !quick {
                     continue;
                 }
                 let mut spec = TrackerSpec::from_names(s.name, "ssd", m.name).unwrap();
@@ -432,15 +438,16 @@ fn an_illumination_model_recovers_a_known_warp_with_every_gradient_method() {
             }
         }
     }
-    assert!(combos.iter().filter(|(_, _, sampled)| !sampled).count() >= 30);
+    assert!(combos.iter().filter(|(_, _, sampled)| !sampled).count() >= 20);
     let failures: Vec<(String, usize)> = combos
         .par_iter()
         .map(|(spec, ilm, sampled)| {
-            let (n, tol) = if *sampled { (10, 3.0) } else { (trials, 0.1) };
+            // The sampling methods (PF: thousands of evaluations a frame) on 3 trials.
+            let (n, tol) = if *sampled { (3, 3.0) } else { (trials, 0.1) };
             let ok = converged(spec, 2.0, n, tol, 42);
             (format!("{} ilm={ilm}", spec.label()), n - ok)
         })
-        .filter(|(_, missed)| *missed > trials / 20)
+        .filter(|(label, missed)| *missed > trials / 20 || (label.starts_with("pf") && *missed > 0))
         .collect();
     assert!(failures.is_empty(), "missed trials: {failures:?}");
     let mut zncc = TrackerSpec::from_names("esm", "zncc", "homography").unwrap();

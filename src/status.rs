@@ -77,6 +77,25 @@ pub struct FrameOutcome {
     pub timing: FrameTiming,
 }
 
+impl FrameOutcome {
+    /// The outcome of a frame a tracker did not search (not initialised, or lost and stopped):
+    /// its status and corners as they are.
+    pub fn idle(frame: usize, status: TrackStatus, corners: Quad) -> Self {
+        FrameOutcome {
+            frame,
+            status,
+            corners,
+            iterations: 0,
+            converged: false,
+            similarity: f64::NAN,
+            searched: false,
+            estimate: None,
+            confidence: None,
+            timing: FrameTiming::default(),
+        }
+    }
+}
+
 /// Where the time of one update went.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameTiming {

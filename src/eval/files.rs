@@ -193,8 +193,8 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
             r.live_fps,
             r.error_type,
             r.gt,
-            fraction(r.lost_when_off),
-            fraction(r.lost_when_on)
+            fraction(r.lost_when_off, 4, ""),
+            fraction(r.lost_when_on, 4, "")
         ));
     }
     write_atomic(&out.join("summary.csv"), csv.as_bytes())?;
@@ -203,12 +203,12 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     write_atomic(&out.join("summary.json"), json.as_bytes())
 }
 
-/// A fraction for the CSV: four decimals, empty when undefined.
-fn fraction(v: f64) -> String {
+/// A fraction with `decimals`, or `missing` when it is undefined (`NaN`).
+fn fraction(v: f64, decimals: usize, missing: &str) -> String {
     if v.is_nan() {
-        String::new()
+        missing.to_string()
     } else {
-        format!("{v:.4}")
+        format!("{v:.decimals$}")
     }
 }
 
@@ -242,18 +242,9 @@ pub fn summary_table(rows: &[Summary]) -> String {
             r.iterations_per_frame,
             r.tracker_fps,
             r.live_fps,
-            fraction_short(r.lost_when_off),
-            fraction_short(r.lost_when_on)
+            fraction(r.lost_when_off, 3, "-"),
+            fraction(r.lost_when_on, 3, "-")
         ));
     }
     out
-}
-
-/// A fraction for the table: three decimals, `-` when undefined.
-fn fraction_short(v: f64) -> String {
-    if v.is_nan() {
-        "-".into()
-    } else {
-        format!("{v:.3}")
-    }
 }

@@ -29,17 +29,12 @@ mod infinite_as_null {
     }
 }
 
-/// A fraction that may be undefined (`NaN`, written as `null`).
+/// A fraction that may be undefined (`NaN`, written as `null` as [`infinite_as_null`] writes
+/// every non-finite value).
 mod nan_as_null {
-    use serde::{Deserialize, Deserializer, Serializer};
+    use serde::{Deserialize, Deserializer};
 
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_nan() {
-            s.serialize_none()
-        } else {
-            s.serialize_f64(*v)
-        }
-    }
+    pub use super::infinite_as_null::serialize;
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
         Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))

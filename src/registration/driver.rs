@@ -74,6 +74,34 @@ pub struct RegistrationTracker {
     loss: super::LossCheck,
     /// Where the last search ended when only its confidence failed (see `update`).
     lost_at: Option<Params>,
+    /// What `on_loss=redetect` ranks its candidates with (set with the template).
+    detector: Detector,
+}
+
+/// The grid samples `on_loss=redetect` ranks its candidates on (every other one per axis, a
+/// quarter of the work), the template there, and a buffer for a candidate's patch: made when
+/// the template is sampled, so that a lost frame does not allocate either.
+#[derive(Debug, Default)]
+struct Detector {
+    side: usize,
+    picks: Vec<usize>,
+    template: Vec<f32>,
+    patch: Vec<f32>,
+}
+
+impl Detector {
+    fn new(res: usize, template: &[f32]) -> Self {
+        let side = res.div_ceil(2);
+        let picks: Vec<usize> = (0..side)
+            .flat_map(|j| (0..side).map(move |i| 2 * j * res + 2 * i))
+            .collect();
+        Detector {
+            side,
+            template: picks.iter().map(|&k| template[k]).collect(),
+            patch: vec![0.0; picks.len()],
+            picks,
+        }
+    }
 }
 
 impl RegistrationTracker {
@@ -116,6 +144,7 @@ impl RegistrationTracker {
             initial_area: 0.0,
             loss: super::LossCheck::default(),
             lost_at: None,
+            detector: Detector::default(),
         })
     }
 
@@ -335,17 +364,7 @@ impl RegistrationTracker {
         let t1 = Instant::now();
         {
             let view = Self::view(&self.pre, &self.pre_copy, input, 0);
-            let ctx = &self.ctx;
-            // Candidates are ranked on every other sample of the grid (a quarter of the work).
-            let res = self.params.res;
-            let sub = res.div_ceil(2);
-            let picks: Vec<usize> = (0..sub)
-                .flat_map(|j| {
-                    (0..sub).map(move |i| (2 * j).min(res - 1) * res + (2 * i).min(res - 1))
-                })
-                .collect();
-            let template: Vec<f32> = picks.iter().map(|&k| ctx.template[k]).collect();
-            let mut patch = vec![0.0f32; picks.len()];
+            let (ctx, det) = (&self.ctx, &mut self.detector);
             for scale in REDETECT_SCALES {
                 let mut cy = step / 2.0;
                 while cy < fh as f64 {
@@ -360,7 +379,7 @@ impl RegistrationTracker {
                         let target = q.map(|p| ctx.norm.to_norm(p));
                         if let Some(p) = ctx.ssm.fit(&ctx.template_corners.0, &target.0) {
                             let m = ctx.pixel_matrix(&p);
-                            for (v, &k) in patch.iter_mut().zip(&picks) {
+                            for (v, &k) in det.patch.iter_mut().zip(&det.picks) {
                                 let pt = apply_homography(
                                     &m,
                                     crate::geometry::Point::new(
@@ -371,9 +390,9 @@ impl RegistrationTracker {
                                 *v = crate::imaging::sample_value(&view, pt.x as f32, pt.y as f32);
                             }
                             let conf = crate::am::block_correlation(
-                                &template,
-                                &patch,
-                                sub,
+                                &det.template,
+                                &det.patch,
+                                det.side,
                                 CONFIDENCE_BLOCKS,
                             );
                             // Keep the best few, best first.
@@ -394,12 +413,10 @@ impl RegistrationTracker {
                 break;
             }
             let from = self.ctx.corners(&p);
+            // A candidate is the target only if it looks like it, whatever the SSM: the confidence
+            // is checked for every SSM here.
             if let Ok(out) = self.search_from(input, p, &from, observer, started, timing)
-                && self.check_quad(&out.corners, fw, fh).is_ok()
-                && self
-                    .loss
-                    .judge(out.confidence, out.converged, &self.params)
-                    .is_ok()
+                && self.accept(&out, fw, fh, true).is_ok()
             {
                 return Some(out);
             }
@@ -556,6 +573,23 @@ impl RegistrationTracker {
         sm.model_updated(ctx);
     }
 
+    /// The checks a frame's search must pass to be tracked: its quad's, then (if `confidence`)
+    /// its confidence's, which a passing frame joins the history of.
+    fn accept(
+        &mut self,
+        out: &Searched,
+        fw: usize,
+        fh: usize,
+        confidence: bool,
+    ) -> std::result::Result<(), LossReason> {
+        self.check_quad(&out.corners, fw, fh)?;
+        if confidence {
+            self.loss
+                .judge(out.confidence, out.converged, &self.params)?;
+        }
+        Ok(())
+    }
+
     /// The loss-of-track checks on a frame's final quad.
     fn check_quad(&self, q: &Quad, fw: usize, fh: usize) -> std::result::Result<(), LossReason> {
         if !q.is_finite() {
@@ -646,6 +680,7 @@ impl VisualTracker for RegistrationTracker {
         self.frame = 0;
         self.corners = self.ctx.corners(&self.ctx.params);
         self.initial_area = quad.signed_area().abs();
+        self.detector = Detector::new(self.params.res, &self.ctx.template);
         self.loss.reset();
         self.lost_at = None;
         Ok(())
@@ -683,18 +718,7 @@ impl VisualTracker for RegistrationTracker {
         let resume =
             matches!(self.status, TrackStatus::Lost(_)) && self.params.on_loss != LossPolicy::Stop;
         if self.status != TrackStatus::Tracking && !resume {
-            return FrameOutcome {
-                frame: self.frame,
-                status: self.status,
-                corners: self.corners,
-                iterations: 0,
-                converged: false,
-                similarity: f64::NAN,
-                searched: false,
-                estimate: None,
-                confidence: None,
-                timing: FrameTiming::default(),
-            };
+            return FrameOutcome::idle(self.frame, self.status, self.corners);
         }
         self.frame += 1;
         let mut timing = FrameTiming::default();
@@ -725,13 +749,8 @@ impl VisualTracker for RegistrationTracker {
             }
         }
         let checked = result.and_then(|out| {
-            self.check_quad(&out.corners, fw, fh)
-                .and_then(|()| {
-                    if self.ctx.dof < super::confidence::MIN_DOF {
-                        return Ok(());
-                    }
-                    self.loss.judge(out.confidence, out.converged, &self.params)
-                })
+            let confidence = self.ctx.dof >= super::confidence::MIN_DOF;
+            self.accept(&out, fw, fh, confidence)
                 .map(|()| out)
                 .map_err(|r| (r, Some(out)))
         });

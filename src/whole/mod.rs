@@ -236,18 +236,7 @@ impl Base {
 
     /// The outcome of a frame on which the tracker does not run (not initialised, or lost).
     pub fn idle(&self) -> FrameOutcome {
-        FrameOutcome {
-            frame: self.frame,
-            status: self.status,
-            corners: self.quad(),
-            iterations: 0,
-            converged: false,
-            similarity: f64::NAN,
-            searched: false,
-            estimate: None,
-            confidence: None,
-            timing: FrameTiming::default(),
-        }
+        FrameOutcome::idle(self.frame, self.status, self.quad())
     }
 
     /// Ends a frame: checks the new pose (finite, a scale within 1/20..20 of the initial size,

@@ -294,82 +294,122 @@ pub fn dot(a: &[f32], b: &[f32]) -> f64 {
 pub const MAX_BLOCKS: usize = 8;
 
 /// The confidence that `current` shows what `template` shows, both `res x res` patches stored
-/// row by row, in -1..1. The patches are cut into `cells x cells` blocks; in each, a plane
-/// (bias and slopes along both axes) is fitted to each patch and removed, and the residuals are
-/// correlated. The blocks' correlations are averaged with the template's residual variance as
-/// weight. So it is insensitive to light that varies smoothly across the target (a lamp's spot,
-/// a face turning to the light: in each block that is nearly a gain, a bias and a slope), and
-/// blocks the template has no texture in (only noise) weigh little. 0 when the template is flat.
-/// Does not allocate.
+/// row by row, in -1..1 (see [`BlockCorrelation`], which this makes for one use).
 pub fn block_correlation(template: &[f32], current: &[f32], res: usize, cells: usize) -> f64 {
-    let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
-    if res == 0 || template.len() < res * res || current.len() < res * res {
-        return 0.0;
-    }
-    // Per block, sums of: 1, x, y, xx, xy, yy, t, tx, ty, c, cx, cy, tt, cc, tc.
-    let mut acc = [[0.0f64; 15]; MAX_BLOCKS * MAX_BLOCKS];
-    for r in 0..res {
-        let br = r * cells / res;
-        let row = r * res;
-        // Block-local coordinates keep the sums small.
-        let y = (r - br * res / cells) as f64;
-        for c in 0..res {
-            let bc = c * cells / res;
-            let x = (c - bc * res / cells) as f64;
-            let b = &mut acc[br * cells + bc];
-            let (t, v) = (template[row + c] as f64, current[row + c] as f64);
-            for (k, term) in [
-                1.0,
-                x,
-                y,
-                x * x,
-                x * y,
-                y * y,
-                t,
-                t * x,
-                t * y,
-                v,
-                v * x,
-                v * y,
-                t * t,
-                v * v,
-                t * v,
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                b[k] += term;
+    BlockCorrelation::new(template, res, cells).of(current)
+}
+
+/// The confidence that a patch shows what a template shows, both `res x res` stored row by row,
+/// in -1..1. The patches are cut into `cells x cells` blocks; in each, a plane (bias and slopes
+/// along both axes) is fitted to each patch and removed, and the residuals are correlated. The
+/// blocks' correlations are averaged with the template's residual variance as weight. So it is
+/// insensitive to light that varies smoothly across the target (a lamp's spot, a face turning
+/// to the light: in each block that is nearly a gain, a bias and a slope), and blocks the
+/// template has no texture in (only noise) weigh little. 0 when the template is flat.
+///
+/// What depends on the template and the grid only (each block's plane fit, the template's
+/// moments) is computed once, by [`BlockCorrelation::new`]; [`BlockCorrelation::of`] then makes
+/// five sums per sample and does not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct BlockCorrelation {
+    /// Per sample: its block and its coordinates in the block.
+    samples: Vec<(u8, f32, f32)>,
+    template: Vec<f32>,
+    blocks: Vec<Block>,
+}
+
+/// One block of [`BlockCorrelation`]: `(M, u_t, v_t, n)` with `M` the plane fit's normal matrix
+/// inverted, `u_t` the template's moments `(sum t, sum t x, sum t y)`, `v_t` its residual
+/// variance and `n` the block's samples (`None` for a block without texture, left out).
+type Block = Option<(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>, f64, f64)>;
+
+impl BlockCorrelation {
+    /// Prepares the confidence against `template` (`res x res`) with `cells x cells` blocks
+    /// (at most [`MAX_BLOCKS`] per side); a template shorter than `res x res` gives 0 always.
+    pub fn new(template: &[f32], res: usize, cells: usize) -> Self {
+        let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
+        if res == 0 || template.len() < res * res {
+            return Self::default();
+        }
+        let mut samples = Vec::with_capacity(res * res);
+        // Per block, sums of: 1, x, y, xx, xy, yy, t, tx, ty, tt.
+        let mut acc = vec![[0.0f64; 10]; cells * cells];
+        for r in 0..res {
+            let br = r * cells / res;
+            // Block-local coordinates keep the sums small.
+            let y = (r - br * res / cells) as f64;
+            for c in 0..res {
+                let bc = c * cells / res;
+                let x = (c - bc * res / cells) as f64;
+                let b = br * cells + bc;
+                samples.push((b as u8, x as f32, y as f32));
+                let t = template[r * res + c] as f64;
+                let terms = [1.0, x, y, x * x, x * y, y * y, t, t * x, t * y, t * t];
+                for (a, v) in acc[b].iter_mut().zip(terms) {
+                    *a += v;
+                }
             }
         }
-    }
-    let (mut num, mut den) = (0.0, 0.0);
-    for b in &acc[..cells * cells] {
-        let n = b[0];
-        if n < 4.0 {
-            continue;
+        let blocks = acc
+            .iter()
+            .map(|b| {
+                let n = b[0];
+                if n < 4.0 {
+                    return None;
+                }
+                let m =
+                    nalgebra::Matrix3::new(b[0], b[1], b[2], b[1], b[3], b[4], b[2], b[4], b[5]);
+                let inv = m.try_inverse()?;
+                let ut = nalgebra::Vector3::new(b[6], b[7], b[8]);
+                let vt = b[9] - ut.dot(&(inv * ut));
+                (vt.is_finite() && vt > 1e-6 * n).then_some((inv, ut, vt, n))
+            })
+            .collect();
+        BlockCorrelation {
+            samples,
+            template: template[..res * res].to_vec(),
+            blocks,
         }
-        let m = nalgebra::Matrix3::new(b[0], b[1], b[2], b[1], b[3], b[4], b[2], b[4], b[5]);
-        let Some(inv) = m.try_inverse() else {
-            continue;
-        };
-        let ut = nalgebra::Vector3::new(b[6], b[7], b[8]);
-        let uc = nalgebra::Vector3::new(b[9], b[10], b[11]);
-        // Inner products of the residuals after the planes are removed.
-        let vt = b[12] - ut.dot(&(inv * ut));
-        let vc = b[13] - uc.dot(&(inv * uc));
-        let cov = b[14] - ut.dot(&(inv * uc));
-        if !(vt.is_finite() && vc.is_finite() && cov.is_finite()) || vt <= 1e-6 * n {
-            continue;
-        }
-        let rho = if vc <= 1e-6 * n {
-            0.0
-        } else {
-            (cov / (vt * vc).sqrt()).clamp(-1.0, 1.0)
-        };
-        num += vt * rho;
-        den += vt;
     }
-    if den > 0.0 { num / den } else { 0.0 }
+
+    /// The confidence of `current` (0 when it is shorter than the template, flat or not finite).
+    pub fn of(&self, current: &[f32]) -> f64 {
+        if current.len() < self.samples.len() {
+            return 0.0;
+        }
+        // Per block, sums of: c, cx, cy, cc, tc.
+        let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
+        for ((&(b, x, y), &t), &v) in self.samples.iter().zip(&self.template).zip(current) {
+            let (x, y, t, v) = (x as f64, y as f64, t as f64, v as f64);
+            let a = &mut acc[b as usize];
+            a[0] += v;
+            a[1] += v * x;
+            a[2] += v * y;
+            a[3] += v * v;
+            a[4] += t * v;
+        }
+        let (mut num, mut den) = (0.0, 0.0);
+        for (block, a) in self.blocks.iter().zip(&acc) {
+            let Some((inv, ut, vt, n)) = block else {
+                continue;
+            };
+            let uc = nalgebra::Vector3::new(a[0], a[1], a[2]);
+            // Inner products of the residuals after the planes are removed.
+            let vc = a[3] - uc.dot(&(inv * uc));
+            let cov = a[4] - ut.dot(&(inv * uc));
+            if !(vc.is_finite() && cov.is_finite()) {
+                continue;
+            }
+            let rho = if vc <= 1e-6 * n {
+                0.0
+            } else {
+                (cov / (vt * vc).sqrt()).clamp(-1.0, 1.0)
+            };
+            num += vt * rho;
+            den += vt;
+        }
+        if den > 0.0 { num / den } else { 0.0 }
+    }
 }
 
 /// The sum of a patch (vectorised like [`dot`]).

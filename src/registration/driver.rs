@@ -4,6 +4,7 @@
 //! search method makes one iteration at a time ([`SearchMethod::iterate`]).
 
 use super::{Context, Control, SearchMethod, sweep};
+use crate::am::BlockCorrelation;
 use crate::error::{Error, Result};
 use crate::geometry::{Quad, apply_homography};
 use crate::imaging::{ImageView, Preprocessor, gaussian_kernel};
@@ -20,7 +21,7 @@ use std::time::Instant;
 /// own are searched before it.
 pub const HIERARCHY: [&str; 3] = ["translation", "similitude", "affine"];
 
-/// The confidence's blocks per side (see [`crate::am::block_correlation`]): 4 x 4 blocks of
+/// The confidence's blocks per side (see [`BlockCorrelation`]): 4 x 4 blocks of
 /// about 12 x 12 samples on the default 50 x 50 grid.
 const CONFIDENCE_BLOCKS: usize = 4;
 
@@ -74,7 +75,9 @@ pub struct RegistrationTracker {
     loss: super::LossCheck,
     /// Where the last search ended when only its confidence failed (see `update`).
     lost_at: Option<Params>,
-    /// What `on_loss=redetect` ranks its candidates with (set with the template).
+    /// The confidence against the template, and what `on_loss=redetect` ranks its candidates
+    /// with (both made with the template).
+    confidence: BlockCorrelation,
     detector: Detector,
 }
 
@@ -83,9 +86,8 @@ pub struct RegistrationTracker {
 /// the template is sampled, so that a lost frame does not allocate either.
 #[derive(Debug, Default)]
 struct Detector {
-    side: usize,
     picks: Vec<usize>,
-    template: Vec<f32>,
+    confidence: BlockCorrelation,
     patch: Vec<f32>,
 }
 
@@ -95,9 +97,9 @@ impl Detector {
         let picks: Vec<usize> = (0..side)
             .flat_map(|j| (0..side).map(move |i| 2 * j * res + 2 * i))
             .collect();
+        let picked: Vec<f32> = picks.iter().map(|&k| template[k]).collect();
         Detector {
-            side,
-            template: picks.iter().map(|&k| template[k]).collect(),
+            confidence: BlockCorrelation::new(&picked, side, CONFIDENCE_BLOCKS),
             patch: vec![0.0; picks.len()],
             picks,
         }
@@ -144,6 +146,7 @@ impl RegistrationTracker {
             initial_area: 0.0,
             loss: super::LossCheck::default(),
             lost_at: None,
+            confidence: BlockCorrelation::default(),
             detector: Detector::default(),
         })
     }
@@ -328,12 +331,7 @@ impl RegistrationTracker {
                 iterations: iters + done,
                 converged,
                 similarity,
-                confidence: crate::am::block_correlation(
-                    &self.ctx.template,
-                    &self.ctx.work.values,
-                    params.res,
-                    CONFIDENCE_BLOCKS,
-                ),
+                confidence: self.confidence.of(&self.ctx.work.values),
             }
         });
         timing.search += t1.elapsed();
@@ -389,12 +387,7 @@ impl RegistrationTracker {
                                 );
                                 *v = crate::imaging::sample_value(&view, pt.x as f32, pt.y as f32);
                             }
-                            let conf = crate::am::block_correlation(
-                                &det.template,
-                                &det.patch,
-                                det.side,
-                                CONFIDENCE_BLOCKS,
-                            );
+                            let conf = det.confidence.of(&det.patch);
                             // Keep the best few, best first.
                             if conf > best[REDETECT_REFINED - 1].0 {
                                 best[REDETECT_REFINED - 1] = (conf, p);
@@ -680,6 +673,8 @@ impl VisualTracker for RegistrationTracker {
         self.frame = 0;
         self.corners = self.ctx.corners(&self.ctx.params);
         self.initial_area = quad.signed_area().abs();
+        self.confidence =
+            BlockCorrelation::new(&self.ctx.template, self.params.res, CONFIDENCE_BLOCKS);
         self.detector = Detector::new(self.params.res, &self.ctx.template);
         self.loss.reset();
         self.lost_at = None;

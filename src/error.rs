@@ -76,3 +76,25 @@ impl Error {
         }
     }
 }
+
+/// A number for a message: `decimals` places, or scientific notation when it is too large or
+/// too small to read that way (1e308 is not printed with 309 digits).
+pub fn short_number(x: f64, decimals: usize) -> String {
+    if x.is_finite() && x != 0.0 && !(1e-3..1e7).contains(&x.abs()) {
+        format!("{x:.3e}")
+    } else {
+        format!("{x:.decimals$}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn short_numbers_stay_short() {
+        assert_eq!(super::short_number(1e308, 2), "1.000e308");
+        assert_eq!(super::short_number(-2.5, 2), "-2.50");
+        assert_eq!(super::short_number(0.0, 1), "0.0");
+        assert_eq!(super::short_number(f64::NAN, 2), "NaN");
+        assert_eq!(super::short_number(1.5e-9, 2), "1.500e-9");
+    }
+}

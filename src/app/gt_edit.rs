@@ -128,7 +128,7 @@ impl InspectorApp {
         self.rt.gt.frame_image = None;
         match Corrections::open(&path, &seq.name, seq.len()) {
             Ok((c, rec)) => {
-                if rec.edits > 0 || rec.truncated_tail {
+                if rec.edits > 0 || rec.damaged() {
                     let mut per_ssm: std::collections::BTreeMap<&str, usize> = Default::default();
                     for s in ssm::REGISTRY.iter().map(|e| e.name) {
                         let n = c.corrected_frames(s).len();
@@ -151,6 +151,17 @@ impl InspectorApp {
                             ""
                         }
                     );
+                    if !rec.skipped.is_empty() {
+                        let shown: Vec<&str> =
+                            rec.skipped.iter().take(3).map(String::as_str).collect();
+                        self.error(format!(
+                            "the corrections journal is damaged: {} part(s) skipped, every \
+                             intact record restored ({}{})",
+                            rec.skipped.len(),
+                            shown.join("; "),
+                            if rec.skipped.len() > 3 { "; ..." } else { "" }
+                        ));
+                    }
                 }
                 *self.rt.gt.corrections.edit() = c;
             }

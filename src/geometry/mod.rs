@@ -155,11 +155,19 @@ impl Quad {
 
 impl std::fmt::Display for Quad {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = |v: f64| crate::error::short_number(v, 2);
         let c = &self.0;
         write!(
             f,
-            "[({:.2}, {:.2}) ({:.2}, {:.2}) ({:.2}, {:.2}) ({:.2}, {:.2})]",
-            c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y
+            "[({}, {}) ({}, {}) ({}, {}) ({}, {})]",
+            n(c[0].x),
+            n(c[0].y),
+            n(c[1].x),
+            n(c[1].y),
+            n(c[2].x),
+            n(c[2].y),
+            n(c[3].x),
+            n(c[3].y)
         )
     }
 }

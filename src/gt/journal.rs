@@ -65,67 +65,128 @@ pub enum Record {
     },
 }
 
-/// The records of a journal, and whether its last line was cut short (a crash mid-write).
+/// The records of a journal, what was skipped, and whether its last line was cut short (a crash
+/// mid-write).
 #[derive(Debug, Default)]
 pub struct Parsed {
     /// Records with their 1-based line numbers.
     pub records: Vec<(usize, Record)>,
+    /// The last line is incomplete and does not parse (a crash mid-write): ignored.
     pub truncated_tail: bool,
+    /// Lines (or parts of lines) that were not records and were skipped, each as
+    /// `file:line: why`. Every intact record around them is read.
+    pub skipped: Vec<String>,
 }
 
-/// Parses journal bytes; errors name `path` and the 1-based line.
+/// Where a record begins: serde writes the tag first.
+const RECORD_START: &[u8] = b"{\"kind\":";
+
+fn parse_record(raw: &[u8]) -> std::result::Result<Option<Record>, String> {
+    let text = std::str::from_utf8(raw)
+        .map_err(|e| format!("not UTF-8 text (byte {})", e.valid_up_to() + 1))?;
+    let text = text.trim();
+    if text.is_empty() {
+        return Ok(None);
+    }
+    serde_json::from_str::<Record>(text)
+        .map(Some)
+        .map_err(|e| format!("not a journal record: {e}"))
+}
+
+/// Parses journal bytes. A line that is not a record is skipped and reported (naming `path` and
+/// the 1-based line); when a record follows a fragment on the same line (a write cut short, then
+/// a later append), the record is read. The last line counts even without its newline. Errors
+/// (naming `path` and the line) only for a journal that cannot be read at all: a newer format, a
+/// first record that is not the header, or no record in a non-empty file.
 pub fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
     let mut out = Parsed::default();
     let complete = bytes.last().is_none_or(|&b| b == b'\n');
     let lines: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
     let last = lines.len().saturating_sub(1);
+    let mut first_bad: Option<(usize, String)> = None;
     for (i, raw) in lines.iter().enumerate() {
         let line_no = i + 1;
-        let err = |message: String| Error::Parse {
-            path: path.to_path_buf(),
-            line: line_no,
-            message,
-        };
-        let parsed = std::str::from_utf8(raw)
-            .map_err(|e| format!("not UTF-8 text (byte {})", e.valid_up_to() + 1))
-            .and_then(|text| {
-                let text = text.trim();
-                if text.is_empty() {
-                    return Ok(None);
-                }
-                serde_json::from_str::<Record>(text)
-                    .map(Some)
-                    .map_err(|e| format!("not a journal record: {e}"))
-            });
-        match parsed {
+        match parse_record(raw) {
             Ok(Some(r)) => out.records.push((line_no, r)),
             Ok(None) => {}
             // A crash while appending leaves at most the last line incomplete.
             Err(_) if i == last && !complete => out.truncated_tail = true,
-            Err(m) => return Err(err(m)),
+            Err(m) => {
+                // A fragment, then a whole record appended after it on the same line.
+                let recovered = (1..raw.len())
+                    .filter(|&k| raw[k..].starts_with(RECORD_START))
+                    .find_map(|k| parse_record(&raw[k..]).ok().flatten().map(|r| (k, r)));
+                let what = match &recovered {
+                    Some((k, _)) => format!("{} byte(s) before a record skipped ({m})", k),
+                    None => format!("skipped, {m}"),
+                };
+                first_bad.get_or_insert((line_no, m));
+                out.skipped
+                    .push(format!("{}:{line_no}: {what}", path.display()));
+                if let Some((_, r)) = recovered {
+                    out.records.push((line_no, r));
+                }
+            }
         }
     }
+    let err = |line: usize, message: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
     match out.records.first() {
-        None => {}
+        None => {
+            if let Some((line, m)) = first_bad {
+                return Err(err(line, format!("not a corrections journal ({m})")));
+            }
+        }
         Some((_, Record::Header { format, .. })) if *format <= FORMAT => {}
-        Some((_, Record::Header { format, .. })) => {
-            return Err(Error::Parse {
-                path: path.to_path_buf(),
-                line: 1,
-                message: format!(
-                    "journal format {format} is newer than this regtrack reads ({FORMAT})"
-                ),
-            });
+        Some((line, Record::Header { format, .. })) => {
+            return Err(err(
+                *line,
+                format!("journal format {format} is newer than this regtrack reads ({FORMAT})"),
+            ));
         }
         Some((line, _)) => {
-            return Err(Error::Parse {
-                path: path.to_path_buf(),
-                line: *line,
-                message: "the journal does not start with its header".into(),
-            });
+            return Err(err(
+                *line,
+                "the journal does not start with its header".into(),
+            ));
         }
     }
     Ok(out)
+}
+
+/// The sequence a parsed journal's header names.
+pub fn sequence_of(parsed: &Parsed) -> Option<&str> {
+    match parsed.records.first() {
+        Some((_, Record::Header { sequence, .. })) => Some(sequence),
+        _ => None,
+    }
+}
+
+/// The largest coordinate a correction may have (px): far beyond any frame, small enough that
+/// every computation on it stays finite.
+pub const MAX_COORDINATE: f64 = 1e7;
+
+/// Checks a correction: an occlusion, or a finite, convex, not tiny quad within
+/// [`MAX_COORDINATE`] (what the editor can make and the evaluation can use).
+pub fn check_mark(m: &Mark) -> std::result::Result<(), String> {
+    let Mark::Quad(v) = m else {
+        return Ok(());
+    };
+    if let Some(x) = v
+        .iter()
+        .find(|x| !x.is_finite() || x.abs() > MAX_COORDINATE)
+    {
+        return Err(format!(
+            "a corner coordinate of {} is not a pixel position (at most {MAX_COORDINATE:e} px)",
+            crate::error::short_number(*x, 2)
+        ));
+    }
+    crate::geometry::Quad::from_array(*v)
+        .validate()
+        .map_err(|e| e.to_string())
 }
 
 /// Reads a journal file (`Ok(None)` when there is none).
@@ -138,61 +199,81 @@ pub fn read(path: &Path) -> Result<Option<Parsed>> {
 }
 
 /// Appends records to a journal file, each synced to disk before [`Writer::append`] returns.
+///
+/// Opening writes nothing: the file (with its header) is created by the first append. The
+/// journal is never rewritten; it is only ever cut back to the end of its last intact record,
+/// and only before an append: a last line cut short by a crash (it does not parse: its edit was
+/// never acknowledged) before the first, and what a failed append left (a full disk) before the
+/// next. A last record that is whole but lacks its newline is kept and ended first.
 #[derive(Debug)]
 pub struct Writer {
     path: PathBuf,
-    file: std::fs::File,
+    sequence: String,
+    file: Option<std::fs::File>,
+    /// The journal's length up to the end of its last intact record.
+    good_len: u64,
+    /// What must be repaired before the next record is written.
+    pending: Pending,
+    /// The intact part ends with a newline (else one is written before the next record).
+    ends_with_newline: bool,
+    /// The journal has no header yet (a new file).
+    needs_header: bool,
+    faults: Faults,
+}
+
+/// Faults injected into a [`Writer`], for the tests that kill and starve it: a disk of
+/// `capacity` bytes (a write past it writes what fits, then fails as a full disk does), and a
+/// pause between a record's write and its sync (where a kill lands between the two).
+#[doc(hidden)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Faults {
+    pub capacity: Option<u64>,
+    pub pause_before_sync: std::time::Duration,
+}
+
+/// The state of a journal's end, before the next append.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Pending {
+    /// It ends with a whole line.
+    Nothing,
+    /// Its last record is whole but has no newline: one is written first.
+    Newline,
+    /// It ends with part of a record (a crash, a failed append): cut back to `good_len` first.
+    Cut,
 }
 
 impl Writer {
-    /// Opens (or creates, with its header) the journal at `path`. A last line cut short by a
-    /// crash is ended first, so that new records start on a line of their own.
+    /// Prepares appending to the journal at `path` (which may not exist yet); writes nothing.
     pub fn open(path: &Path, sequence: &str) -> Result<Writer> {
-        if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
-        }
-        let existing = match std::fs::read(path) {
-            Ok(b) => Some(b),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        let (good_len, pending, needs_header) = match std::fs::read(path) {
+            Ok(b) if b.is_empty() => (0, Pending::Nothing, true),
+            Ok(b) => {
+                let tail_start = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
+                let (good_len, pending) = if tail_start == b.len() {
+                    (b.len(), Pending::Nothing)
+                } else if parse_record(&b[tail_start..]).is_ok_and(|r| r.is_some()) {
+                    (b.len(), Pending::Newline)
+                } else {
+                    (tail_start, Pending::Cut)
+                };
+                let header = b[..good_len]
+                    .split(|&c| c == b'\n')
+                    .any(|l| matches!(parse_record(l), Ok(Some(Record::Header { .. }))));
+                (good_len as u64, pending, !header)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => (0, Pending::Nothing, true),
             Err(e) => return Err(Error::io(path, e)),
         };
-        // A record cut short by a crash was never acknowledged (its edit never took effect):
-        // it is cut off, so that new records start on a line of their own.
-        if let Some(b) = &existing
-            && b.last().is_some_and(|&c| c != b'\n')
-        {
-            let keep = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
-            let f = std::fs::OpenOptions::new()
-                .write(true)
-                .open(path)
-                .map_err(|e| Error::io(path, e))?;
-            f.set_len(keep as u64)
-                .and_then(|()| f.sync_all())
-                .map_err(|e| Error::io(path, e))?;
-        }
-        let file = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(path)
-            .map_err(|e| Error::io(path, e))?;
-        let mut w = Writer {
+        Ok(Writer {
             path: path.to_path_buf(),
-            file,
-        };
-        let has_header = existing.as_ref().is_some_and(|b| b.contains(&b'\n'));
-        if !has_header {
-            w.append(&Record::Header {
-                format: FORMAT,
-                sequence: sequence.to_string(),
-            })?;
-        }
-        // The journal's folder entry must reach the disk too.
-        if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty())
-            && let Ok(dir) = std::fs::File::open(d)
-        {
-            let _ = dir.sync_all();
-        }
-        Ok(w)
+            sequence: sequence.to_string(),
+            file: None,
+            good_len,
+            pending,
+            ends_with_newline: pending != Pending::Newline,
+            needs_header,
+            faults: Faults::default(),
+        })
     }
 
     /// The journal's path.
@@ -200,18 +281,120 @@ impl Writer {
         &self.path
     }
 
-    fn write_raw(&mut self, bytes: &[u8]) -> Result<()> {
-        self.file
-            .write_all(bytes)
-            .and_then(|()| self.file.sync_data())
-            .map_err(|e| Error::io(&self.path, e))
+    /// Injects faults (tests only).
+    #[doc(hidden)]
+    pub fn inject(&mut self, faults: Faults) {
+        self.faults = faults;
     }
 
-    /// Appends one record and syncs it to disk.
-    pub fn append(&mut self, r: &Record) -> Result<()> {
-        let mut line =
-            serde_json::to_string(r).map_err(|e| Error::InvalidParameter(e.to_string()))?;
-        line.push('\n');
-        self.write_raw(line.as_bytes())
+    /// The file, opened for appending (created, with its folder, on the first append).
+    fn file(&mut self) -> Result<&mut std::fs::File> {
+        if self.file.is_none() {
+            let created = !self.path.exists();
+            if let Some(d) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+            }
+            let f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&self.path)
+                .map_err(|e| Error::io(&self.path, e))?;
+            // A new journal's folder entry must reach the disk too.
+            if created
+                && let Some(d) = self.path.parent().filter(|d| !d.as_os_str().is_empty())
+                && let Ok(dir) = std::fs::File::open(d)
+            {
+                let _ = dir.sync_all();
+            }
+            self.file = Some(f);
+        }
+        Ok(self.file.as_mut().expect("opened above"))
     }
+
+    /// Cuts the journal back to the end of its last intact record.
+    fn cut(&mut self) -> Result<()> {
+        let len = self.good_len;
+        let path = self.path.clone();
+        let f = self.file()?;
+        f.set_len(len)
+            .and_then(|()| f.sync_all())
+            .map_err(|e| Error::io(&path, e))?;
+        self.pending = if self.ends_with_newline {
+            Pending::Nothing
+        } else {
+            Pending::Newline
+        };
+        Ok(())
+    }
+
+    /// Appends one record and syncs it to disk. When that fails, nothing of it is left (or what
+    /// is left is cut off before the next append), so the journal stays readable.
+    pub fn append(&mut self, r: &Record) -> Result<()> {
+        let line = |r: &Record| {
+            serde_json::to_string(r)
+                .map(|mut l| {
+                    l.push('\n');
+                    l
+                })
+                .map_err(|e| Error::InvalidParameter(e.to_string()))
+        };
+        let mut bytes = String::new();
+        if self.pending == Pending::Cut {
+            self.cut()?;
+        }
+        if self.pending == Pending::Newline {
+            bytes.push('\n');
+        }
+        if self.needs_header {
+            bytes += &line(&Record::Header {
+                format: FORMAT,
+                sequence: self.sequence.clone(),
+            })?;
+        }
+        bytes += &line(r)?;
+        let path = self.path.clone();
+        let (good_len, faults) = (self.good_len, self.faults);
+        let f = self.file()?;
+        let written =
+            write_synced(f, bytes.as_bytes(), good_len, faults).map_err(|e| Error::io(&path, e));
+        match written {
+            Ok(()) => {
+                self.good_len += bytes.len() as u64;
+                self.pending = Pending::Nothing;
+                self.ends_with_newline = true;
+                self.needs_header = false;
+                Ok(())
+            }
+            Err(e) => {
+                // Part of the record may be on disk: cut it off now, or before the next append.
+                self.pending = Pending::Cut;
+                let _ = self.cut();
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Writes `bytes` at the end of `f` (which is `len` bytes long) and syncs them, under `faults`.
+fn write_synced(
+    f: &mut std::fs::File,
+    bytes: &[u8],
+    len: u64,
+    faults: Faults,
+) -> std::io::Result<()> {
+    let room = faults
+        .capacity
+        .map_or(bytes.len() as u64, |c| c.saturating_sub(len));
+    if room < bytes.len() as u64 {
+        f.write_all(&bytes[..room as usize])?;
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::StorageFull,
+            "No space left on device (injected)",
+        ));
+    }
+    f.write_all(bytes)?;
+    if !faults.pause_before_sync.is_zero() {
+        std::thread::sleep(faults.pause_before_sync);
+    }
+    f.sync_data()
 }

@@ -73,6 +73,17 @@ pub struct Recovery {
     pub corrected: usize,
     /// The last line was cut short by a crash and ignored.
     pub truncated_tail: bool,
+    /// What was skipped, each as `file:line: why`: lines that are not records, and records that
+    /// cannot be applied (a frame beyond the sequence, an unusable quad, an undo of an edit that
+    /// was skipped). Every other record was applied.
+    pub skipped: Vec<String>,
+}
+
+impl Recovery {
+    /// Whether anything was skipped or dropped (the user should be told).
+    pub fn damaged(&self) -> bool {
+        self.truncated_tail || !self.skipped.is_empty()
+    }
 }
 
 impl Corrections {
@@ -89,19 +100,34 @@ impl Corrections {
         }
     }
 
-    /// Opens the journal at `path` for a sequence of `frames` frames, replaying what it holds
-    /// (creating it on the first edit's write). Errors name the file and line.
+    /// Opens the journal at `path` of the sequence `sequence` of `frames` frames, replaying every
+    /// intact record it holds (see [`Recovery`] for what is skipped); nothing is written until
+    /// the first edit. Opening never changes the file. Errors (naming the file and line) for a
+    /// journal that cannot be used at all: another sequence's, a newer format's, or not a
+    /// journal.
     pub fn open(path: &Path, sequence: &str, frames: usize) -> Result<(Self, Recovery)> {
         let mut c = Corrections::in_memory(frames);
         let mut rec = Recovery::default();
         if let Some(parsed) = journal::read(path)? {
-            rec.truncated_tail = parsed.truncated_tail;
-            for (line, r) in parsed.records {
-                c.replay(r).map_err(|message| Error::Parse {
+            if let Some(other) = journal::sequence_of(&parsed)
+                && other != sequence
+            {
+                return Err(Error::Parse {
                     path: path.to_path_buf(),
-                    line,
-                    message,
-                })?;
+                    line: 1,
+                    message: format!(
+                        "this is the journal of sequence '{other}', not of '{sequence}' \
+                         (move it away to start a new one)"
+                    ),
+                });
+            }
+            rec.truncated_tail = parsed.truncated_tail;
+            rec.skipped = parsed.skipped;
+            for (line, r) in parsed.records {
+                if let Err(message) = c.replay(r) {
+                    rec.skipped
+                        .push(format!("{}:{line}: skipped, {message}", path.display()));
+                }
             }
         }
         c.journal = Some(Writer::open(path, sequence)?);
@@ -110,6 +136,7 @@ impl Corrections {
         Ok((c, rec))
     }
 
+    /// Applies one record; an error leaves the corrections as they were.
     fn replay(&mut self, r: Record) -> std::result::Result<(), String> {
         match r {
             Record::Header { .. } => {}
@@ -118,11 +145,18 @@ impl Corrections {
                     if ch.frame >= self.frames {
                         return Err(format!(
                             "frame {} is beyond the sequence's {} frames",
-                            ch.frame + 1,
+                            ch.frame as u128 + 1,
                             self.frames
                         ));
                     }
                     ssm_key(&ch.ssm).map_err(|e| e.to_string())?;
+                    for m in [&ch.before, &ch.after].into_iter().flatten() {
+                        journal::check_mark(m)
+                            .map_err(|e| format!("frame {}: {e}", ch.frame + 1))?;
+                    }
+                }
+                if id == u64::MAX {
+                    return Err(format!("edit id {id} is out of range"));
                 }
                 let e = Edit { id, label, changes };
                 self.set(&e, false);
@@ -131,16 +165,18 @@ impl Corrections {
                 self.next_id = self.next_id.max(id + 1);
                 self.since_export += 1;
             }
-            Record::Undo { id } => match self.done.pop() {
+            Record::Undo { id } => match self.done.last() {
                 Some(e) if e.id == id => {
+                    let e = self.done.pop().expect("checked");
                     self.set(&e, true);
                     self.undone.push(e);
                     self.since_export += 1;
                 }
                 _ => return Err(format!("undo of edit {id}, which is not the last edit")),
             },
-            Record::Redo { id } => match self.undone.pop() {
+            Record::Redo { id } => match self.undone.last() {
                 Some(e) if e.id == id => {
+                    let e = self.undone.pop().expect("checked");
                     self.set(&e, false);
                     self.done.push(e);
                     self.since_export += 1;
@@ -176,6 +212,14 @@ impl Corrections {
         match self.journal.as_mut() {
             Some(w) => w.append(r),
             None => Ok(()),
+        }
+    }
+
+    /// Injects faults into the journal's writes (tests only).
+    #[doc(hidden)]
+    pub fn inject_faults(&mut self, faults: journal::Faults) {
+        if let Some(w) = self.journal.as_mut() {
+            w.inject(faults);
         }
     }
 
@@ -227,6 +271,10 @@ impl Corrections {
                 )));
             }
             let ssm = ssm_key(s)?;
+            if let Some(m) = after {
+                journal::check_mark(m)
+                    .map_err(|e| Error::InvalidRegion(format!("frame {}: {e}", f + 1)))?;
+            }
             // The state before this edit (an earlier change of the same frame counts).
             let before = out
                 .iter()

@@ -106,39 +106,219 @@ fn a_line_cut_by_a_crash_is_ignored_and_the_journal_goes_on() {
 }
 
 #[test]
-fn a_malformed_journal_names_the_file_and_line() {
+fn a_malformed_record_is_skipped_and_named_by_file_and_line() {
     let d = tmp("bad");
     let j = d.join("s_corrections.jsonl");
     let header = "{\"kind\":\"header\",\"format\":1,\"sequence\":\"s\"}\n";
-    for (body, line, what) in [
-        ("{\"kind\":\"edit\",\"id\":1}\n", 2, "not a journal record"),
+    let good = "{\"kind\":\"edit\",\"id\":7,\"label\":\"ok\",\"changes\":[{\"ssm\":\"affine\",\"frame\":1,\"before\":null,\"after\":\"occluded\"}]}\n";
+    let q = |v: &str| {
+        format!(
+            "{{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{{\"ssm\":\"affine\",\"frame\":1,\"before\":null,\"after\":{{\"quad\":[{v}]}}}}]}}\n"
+        )
+    };
+    for (body, what) in [
+        ("{\"kind\":\"edit\",\"id\":1}\n".to_string(), "not a journal record"),
+        ("garbage\n".to_string(), "not a journal"),
+        ("{\"kind\":\"undo\",\"id\":4}\n".to_string(), "not the last edit"),
         (
-            "garbage\n{\"kind\":\"undo\",\"id\":1}\n",
-            2,
-            "not a journal",
-        ),
-        ("{\"kind\":\"undo\",\"id\":4}\n", 2, "not the last edit"),
-        (
-            "{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{\"ssm\":\"affine\",\"frame\":99,\"before\":null,\"after\":\"occluded\"}]}\n",
-            2,
+            "{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{\"ssm\":\"affine\",\"frame\":99,\"before\":null,\"after\":\"occluded\"}]}\n".to_string(),
             "beyond",
         ),
         (
-            "{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{\"ssm\":\"warp9\",\"frame\":1,\"before\":null,\"after\":\"occluded\"}]}\n",
-            2,
+            "{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{\"ssm\":\"warp9\",\"frame\":1,\"before\":null,\"after\":\"occluded\"}]}\n".to_string(),
             "warp9",
         ),
+        (
+            "{\"kind\":\"edit\",\"id\":1,\"label\":\"x\",\"changes\":[{\"ssm\":\"affine\",\"frame\":18446744073709551615,\"before\":null,\"after\":\"occluded\"}]}\n".to_string(),
+            "frame 18446744073709551616 is beyond",
+        ),
+        (q("1e308,0,10,0,10,10,0,10"), "1.000e308"),
+        (q("5,5,5,5,5,5,5,5"), "convex"),
+        (q("0,0,10,0,20,0,30,0"), "convex"),
+        (q("0,0,10,10,10,0,0,10"), "convex"),
     ] {
-        std::fs::write(&j, format!("{header}{body}")).unwrap();
-        let e = Corrections::open(&j, "s", 10).unwrap_err().to_string();
+        // The bad record between a header and a good edit.
+        std::fs::write(&j, format!("{header}{body}{good}")).unwrap();
+        let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+        assert_eq!(rec.skipped.len(), 1, "{body}: {:?}", rec.skipped);
+        let m = &rec.skipped[0];
         assert!(
-            e.contains(&format!("s_corrections.jsonl:{line}")) && e.contains(what),
-            "{body}: {e}"
+            m.contains("s_corrections.jsonl:2") && m.contains(what) && m.len() < 400,
+            "{body}: {m}"
+        );
+        assert_eq!(c.mark("affine", 1), Some(Mark::Occluded), "{body}: the good edit");
+    }
+    // Not a journal at all, or no header: refused (nothing would be appended to it).
+    for (bytes, what) in [
+        ("{\"kind\":\"undo\",\"id\":1}\n", "header"),
+        ("some notes\nof mine\n", "not a corrections journal"),
+    ] {
+        std::fs::write(&j, bytes).unwrap();
+        let e = Corrections::open(&j, "s", 10).unwrap_err().to_string();
+        assert!(e.contains(":1") && e.contains(what), "{e}");
+    }
+    // Another sequence's journal.
+    std::fs::write(&j, header.replace("\"s\"", "\"other\"")).unwrap();
+    let e = Corrections::open(&j, "s", 10).unwrap_err().to_string();
+    assert!(e.contains("'other'") && e.contains("not of 's'"), "{e}");
+}
+
+/// The journal's bytes and what two successive opens restore.
+fn open_twice(j: &Path) -> (Vec<u8>, Recovery, Recovery, Vec<usize>) {
+    let before = std::fs::read(j).unwrap();
+    let (c1, r1) = Corrections::open(j, "s", 10).unwrap();
+    assert_eq!(
+        std::fs::read(j).unwrap(),
+        before,
+        "the first open changed the journal"
+    );
+    let (c2, r2) = Corrections::open(j, "s", 10).unwrap();
+    assert_eq!(
+        std::fs::read(j).unwrap(),
+        before,
+        "the second open changed the journal"
+    );
+    assert_eq!(c1.corrected_frames("affine"), c2.corrected_frames("affine"));
+    (before, r1, r2, c2.corrected_frames("affine"))
+}
+
+#[test]
+fn a_whole_last_record_without_its_newline_is_kept() {
+    let d = tmp("nonl");
+    let j = d.join("s_corrections.jsonl");
+    {
+        let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+        c.edit("a", &[set("affine", 1, 1.0)]).unwrap();
+        c.edit("b", &[set("affine", 2, 1.0)]).unwrap();
+    }
+    // An editor or a copy drops the final newline.
+    let mut bytes = std::fs::read(&j).unwrap();
+    assert_eq!(bytes.pop(), Some(b'\n'));
+    std::fs::write(&j, &bytes).unwrap();
+    let (_, r1, r2, frames) = open_twice(&j);
+    assert_eq!((r1.edits, r2.edits), (2, 2));
+    assert!(!r1.damaged(), "{r1:?}");
+    assert_eq!(frames, vec![1, 2]);
+    // The next edit ends the line first.
+    let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+    c.edit("c", &[set("affine", 3, 1.0)]).unwrap();
+    let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!((rec.edits, rec.damaged()), (3, false), "{rec:?}");
+    assert_eq!(c.corrected_frames("affine"), vec![1, 2, 3]);
+}
+
+#[test]
+fn reopening_changes_nothing_whatever_the_journal_holds() {
+    let d = tmp("twice");
+    let j = d.join("s_corrections.jsonl");
+    let header = "{\"kind\":\"header\",\"format\":1,\"sequence\":\"s\"}\n";
+    let edit = |id: u64, f: usize| {
+        format!(
+            "{{\"kind\":\"edit\",\"id\":{id},\"label\":\"x\",\"changes\":[{{\"ssm\":\"affine\",\"frame\":{f},\"before\":null,\"after\":\"occluded\"}}]}}\n"
+        )
+    };
+    let cases = [
+        (format!("{header}{}{}", edit(1, 1), edit(2, 2)), vec![1, 2]),
+        (format!("{header}{}{{\"kind\":\"ed", edit(1, 1)), vec![1]),
+        (
+            format!("{header}{}{}", edit(1, 1), edit(2, 2).trim_end()),
+            vec![1, 2],
+        ),
+        (
+            format!("{header}{}\u{0}\u{0}\n{}", edit(1, 1), edit(2, 2)),
+            vec![1, 2],
+        ),
+        (format!("{header}"), vec![]),
+    ];
+    for (bytes, frames) in cases {
+        std::fs::write(&j, &bytes).unwrap();
+        let (_, r1, r2, got) = open_twice(&j);
+        assert_eq!(r1, r2, "{bytes}");
+        assert_eq!(got, frames, "{bytes}");
+    }
+}
+
+#[test]
+fn a_record_after_a_torn_one_on_the_same_line_is_recovered() {
+    // What a failed append (a full disk) left before this version repaired it: part of a
+    // record, then the next records, the first of them on the same line.
+    let d = tmp("torn");
+    let j = d.join("s_corrections.jsonl");
+    let header = "{\"kind\":\"header\",\"format\":1,\"sequence\":\"s\"}\n";
+    let edit = |id: u64, f: usize| {
+        format!(
+            "{{\"kind\":\"edit\",\"id\":{id},\"label\":\"x\",\"changes\":[{{\"ssm\":\"affine\",\"frame\":{f},\"before\":null,\"after\":\"occluded\"}}]}}\n"
+        )
+    };
+    let torn = &edit(2, 9)[..40];
+    std::fs::write(
+        &j,
+        format!("{header}{}{torn}{}{}", edit(1, 1), edit(3, 3), edit(4, 4)),
+    )
+    .unwrap();
+    let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!(c.corrected_frames("affine"), vec![1, 3, 4]);
+    assert_eq!(rec.skipped.len(), 1, "{:?}", rec.skipped);
+    assert!(
+        rec.skipped[0].contains(":3: 40 byte(s) before a record skipped"),
+        "{:?}",
+        rec.skipped
+    );
+}
+
+#[test]
+fn a_failed_append_leaves_nothing_and_later_edits_are_kept() {
+    let d = tmp("full");
+    let j = d.join("s_corrections.jsonl");
+    let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+    c.edit("a", &[set("affine", 1, 1.0)]).unwrap();
+    let len = std::fs::metadata(&j).unwrap().len();
+    // The disk fills up in the middle of the next record.
+    c.inject_faults(journal::Faults {
+        capacity: Some(len + 30),
+        ..Default::default()
+    });
+    for f in [2, 3] {
+        let e = c
+            .edit("b", &[set("affine", f, 1.0)])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("No space left"), "{e}");
+        assert_eq!(
+            c.corrected_frames("affine"),
+            vec![1],
+            "a failed edit takes no effect"
+        );
+        assert_eq!(
+            std::fs::metadata(&j).unwrap().len(),
+            len,
+            "the torn record is cut off"
         );
     }
-    std::fs::write(&j, "{\"kind\":\"undo\",\"id\":1}\n").unwrap();
-    let e = Corrections::open(&j, "s", 10).unwrap_err().to_string();
-    assert!(e.contains(":1") && e.contains("header"), "{e}");
+    // Space is freed; three more edits.
+    c.inject_faults(journal::Faults::default());
+    for f in [4, 5, 6] {
+        c.edit("c", &[set("affine", f, 1.0)]).unwrap();
+    }
+    c.undo().unwrap();
+    drop(c);
+    let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert!(!rec.damaged(), "{rec:?}");
+    assert_eq!(c.corrected_frames("affine"), vec![1, 4, 5]);
+}
+
+#[test]
+fn opening_a_sequence_writes_no_journal_until_the_first_edit() {
+    let d = tmp("lazy");
+    let j = d.join("sub").join("s_corrections.jsonl");
+    let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+    assert!(!j.exists());
+    c.edit("a", &[set("affine", 1, 1.0)]).unwrap();
+    let text = std::fs::read_to_string(&j).unwrap();
+    assert!(
+        text.starts_with("{\"kind\":\"header\"") && text.lines().count() == 2,
+        "{text}"
+    );
 }
 
 proptest! {

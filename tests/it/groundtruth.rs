@@ -239,72 +239,173 @@ fn a_corrupt_frame_keeps_what_was_tracked() {
     assert!(!String::from_utf8_lossy(&out.stdout).contains("already finished"));
 }
 
-/// Run by [`the_journal_survives_kill_9`] in a child process: makes edits forever, printing
-/// each one's number once it is applied (so once its journal record is synced).
+/// The frames of the journal the kill test writes (one edit per frame, never reused).
+const KILL_FRAMES: usize = 100_000;
+
+/// The correction that edit `k` of the kill test makes: its SSM key and its mark.
+fn kill_edit(k: usize) -> (&'static str, Mark) {
+    let ssm = ["similitude", "homography", "translation"][k % 3];
+    let q = Quad::from_rect((k % 500) as f64, 2.0 + (k % 300) as f64, 50.0, 40.0);
+    (ssm, Mark::Quad(q.to_array()))
+}
+
+/// Run by [`the_journal_survives_200_kills_and_a_full_disk`] in a child process: makes edits
+/// `from`, `from + 1`, ... forever (every 7th undone right after), printing each one's number
+/// once it is applied (so once its journal record is synced). With `full:N` in
+/// `REGTRACK_JOURNAL_FAULT` the disk holds only N more bytes: edits fail (`fail k`) until, after
+/// three failures, space is freed and the failed edit is made again; with `pause` every record
+/// waits 2 ms between its write and its sync, where the kills land.
 #[test]
-#[ignore = "child process of the_journal_survives_kill_9"]
+#[ignore = "child process of the_journal_survives_200_kills_and_a_full_disk"]
 fn journal_child() {
     let Ok(path) = std::env::var("REGTRACK_JOURNAL_CHILD") else {
         return;
     };
-    let (mut c, _) = Corrections::open(std::path::Path::new(&path), "kill", 1000).unwrap();
-    for k in 0.. {
-        let q = Quad::from_rect(k as f64, 2.0 * k as f64, 50.0, 40.0);
-        let ssm = ["similitude", "homography", "translation"][k % 3];
-        c.edit(
-            &format!("edit {k}"),
-            &[(ssm.into(), k % 1000, Some(Mark::Quad(q.to_array())))],
-        )
-        .unwrap();
-        if k % 7 == 6 {
-            c.undo().unwrap();
-            println!("undo {k}");
+    let path = std::path::Path::new(&path);
+    let from: usize = std::env::var("REGTRACK_JOURNAL_FROM")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    let fault = std::env::var("REGTRACK_JOURNAL_FAULT").unwrap_or_default();
+    let (mut c, _) = Corrections::open(path, "kill", KILL_FRAMES).unwrap();
+    let len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    let mut faults = gt::journal::Faults::default();
+    if let Some(n) = fault.strip_prefix("full:") {
+        faults.capacity = Some(len + n.parse::<u64>().unwrap());
+    } else if fault == "pause" {
+        faults.pause_before_sync = std::time::Duration::from_millis(2);
+    }
+    c.inject_faults(faults);
+    let mut failures = 0;
+    let mut k = from;
+    while k < KILL_FRAMES {
+        let (ssm, mark) = kill_edit(k);
+        match c.edit(&format!("edit {k}"), &[(ssm.into(), k, Some(mark))]) {
+            Ok(_) => {}
+            Err(e) => {
+                assert!(e.to_string().contains("No space left"), "{e}");
+                assert_eq!(
+                    c.mark(&gt::ssm_key(ssm).unwrap(), k),
+                    None,
+                    "a failed edit took effect"
+                );
+                println!("fail {k}");
+                failures += 1;
+                if failures == 3 {
+                    faults.capacity = None;
+                    c.inject_faults(faults);
+                }
+                continue;
+            }
+        }
+        while k % 7 == 6 && c.mark(&gt::ssm_key(ssm).unwrap(), k).is_some() {
+            if let Err(e) = c.undo() {
+                assert!(e.to_string().contains("No space left"), "{e}");
+                println!("fail undo {k}");
+                failures += 1;
+                if failures == 3 {
+                    faults.capacity = None;
+                    c.inject_faults(faults);
+                }
+            }
         }
         println!("edit {k}");
+        k += 1;
     }
 }
 
 #[test]
-fn the_journal_survives_kill_9() {
+fn the_journal_survives_200_kills_and_a_full_disk() {
     use std::io::BufRead;
     let d = TempDir::new("kill9");
     let path = d.path().join("kill_corrections.jsonl");
-    let mut child = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([
-            "--ignored",
-            "--exact",
-            "groundtruth::journal_child",
-            "--nocapture",
-            "--test-threads",
-            "1",
-        ])
-        .env("REGTRACK_JOURNAL_CHILD", &path)
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let mut acknowledged = Vec::new();
-    for line in std::io::BufReader::new(stdout).lines() {
-        let line = line.unwrap();
-        if let Some(k) = line.strip_prefix("edit ") {
-            acknowledged.push(k.parse::<usize>().unwrap());
-            if acknowledged.len() == 40 {
-                // SIGKILL: no destructor, no flush.
-                child.kill().unwrap();
-                break;
+    // Seeded: the same kills on every run.
+    let mut rng = regtrack::rng::Rng::new(17);
+    let mut acknowledged: Vec<usize> = Vec::new();
+    let (mut failed, mut paused, mut starved) = (0, 0, 0);
+    for kill in 0..200 {
+        let from = acknowledged.last().map_or(0, |k| k + 1);
+        let fault = match kill % 4 {
+            1 => {
+                starved += 1;
+                format!("full:{}", rng.range(0.0, 400.0) as u64)
+            }
+            2 => {
+                paused += 1;
+                "pause".to_string()
+            }
+            _ => String::new(),
+        };
+        let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--ignored",
+                "--exact",
+                "groundtruth::journal_child",
+                "--nocapture",
+                "--test-threads",
+                "1",
+            ])
+            .env("REGTRACK_JOURNAL_CHILD", &path)
+            .env("REGTRACK_JOURNAL_FROM", from.to_string())
+            .env("REGTRACK_JOURNAL_FAULT", &fault)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let wanted = rng.range(0.0, 12.0) as usize;
+        let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+        let mut seen = 0;
+        let mut note = |line: &str, acknowledged: &mut Vec<usize>, failed: &mut usize| {
+            if let Some(k) = line.strip_prefix("edit ") {
+                acknowledged.push(k.parse().unwrap());
+            } else if line.starts_with("fail ") {
+                *failed += 1;
+            }
+        };
+        if wanted > 0 {
+            for line in lines.by_ref() {
+                let line = line.unwrap();
+                note(&line, &mut acknowledged, &mut failed);
+                seen += line.starts_with("edit ") as usize;
+                if seen >= wanted {
+                    break;
+                }
             }
         }
+        // Anywhere: in a write, between a write and its sync, between two records.
+        std::thread::sleep(std::time::Duration::from_micros(
+            rng.range(0.0, 3000.0) as u64
+        ));
+        // SIGKILL: no destructor, no flush.
+        let _ = child.kill();
+        for line in lines {
+            note(&line.unwrap(), &mut acknowledged, &mut failed);
+        }
+        let _ = child.wait();
+        let (c, rec) = Corrections::open(&path, "kill", KILL_FRAMES)
+            .unwrap_or_else(|e| panic!("after kill {kill}: {e}"));
+        assert!(
+            rec.skipped.is_empty(),
+            "after kill {kill}: {:?}",
+            rec.skipped
+        );
+        // Every acknowledged edit is there (every 7th as undone).
+        for &k in &acknowledged {
+            let (ssm, mark) = kill_edit(k);
+            let expect = (k % 7 != 6).then_some(mark);
+            assert_eq!(
+                c.mark(&gt::ssm_key(ssm).unwrap(), k),
+                expect,
+                "after kill {kill}: edit {k}"
+            );
+        }
     }
-    let _ = child.wait();
-    assert_eq!(acknowledged.len(), 40, "the child did not make its edits");
-    let (c, rec) = Corrections::open(&path, "kill", 1000).unwrap();
-    // Every acknowledged edit is there (undone ones as undone); at most the edit in flight
-    // when the process died is beyond them.
-    for &k in &acknowledged {
-        let ssm = gt::ssm_key(["similitude", "homography", "translation"][k % 3]).unwrap();
-        let q = Quad::from_rect(k as f64, 2.0 * k as f64, 50.0, 40.0);
-        let expect = (k % 7 != 6).then_some(Mark::Quad(q.to_array()));
-        assert_eq!(c.mark(&ssm, k), expect, "edit {k}");
-    }
-    assert!(rec.edits >= 40 - 40 / 7 - 1, "{rec:?}");
+    assert!(
+        acknowledged.len() > 400,
+        "{} edits acknowledged",
+        acknowledged.len()
+    );
+    assert!(
+        failed > 20 && starved == 50 && paused == 50,
+        "{failed} failed edits"
+    );
 }

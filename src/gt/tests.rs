@@ -228,7 +228,7 @@ fn reopening_changes_nothing_whatever_the_journal_holds() {
             format!("{header}{}\u{0}\u{0}\n{}", edit(1, 1), edit(2, 2)),
             vec![1, 2],
         ),
-        (format!("{header}"), vec![]),
+        (header.to_string(), vec![]),
     ];
     for (bytes, frames) in cases {
         std::fs::write(&j, &bytes).unwrap();

@@ -354,7 +354,7 @@ fn the_journal_survives_200_kills_and_a_full_disk() {
         let wanted = rng.range(0.0, 12.0) as usize;
         let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
         let mut seen = 0;
-        let mut note = |line: &str, acknowledged: &mut Vec<usize>, failed: &mut usize| {
+        let note = |line: &str, acknowledged: &mut Vec<usize>, failed: &mut usize| {
             if let Some(k) = line.strip_prefix("edit ") {
                 acknowledged.push(k.parse().unwrap());
             } else if line.starts_with("fail ") {

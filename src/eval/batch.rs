@@ -109,11 +109,14 @@ impl<'a> Batch<'a> {
             todo: Vec::new(),
             selected: 0,
         };
+        let mut stamps: Vec<Option<String>> = vec![None; self.sequences.len()];
         for (s, p) in pairs {
             plan.selected += 1;
             // A run file is written last and atomically: it exists only for a complete run.
             let done = self.out.filter(|_| self.resume).and_then(|out| {
-                files::finished_run(out, &self.sequences[s].name, &self.specs[p], &self.options)
+                let seq = &self.sequences[s];
+                let stamp = stamps[s].get_or_insert_with(|| files::input_stamp(seq));
+                files::finished_run(out, seq, stamp, &self.specs[p], &self.options)
             });
             match done {
                 Some(r) => plan.finished.push(r),

@@ -54,19 +54,92 @@ pub fn run_file(out: &Path, sequence: &str, spec: &crate::spec::TrackerSpec) -> 
         .join(format!("{}_run.json", spec.label()))
 }
 
-/// A finished run of `spec` on `sequence` with the same options, saved under `out` (for
-/// resuming a batch): its run file (written last, atomically) exists, reads back, and the run
-/// reached the end of the sequence. Anything else means the run must be made again.
+/// A finished run of `spec` on `seq` with the same options and the same inputs, saved under
+/// `out` (for resuming a batch): its run file (written last, atomically) exists, reads back, the
+/// run reached the end of the sequence and its [`input_stamp`] is `stamp`. Anything else (a
+/// ground truth or frame list changed since, a run file of an older version without a stamp)
+/// means the run must be made again.
 pub fn finished_run(
     out: &Path,
-    sequence: &str,
+    seq: &crate::dataset::Sequence,
+    stamp: &str,
     spec: &crate::spec::TrackerSpec,
     opts: &super::EvalOptions,
 ) -> Option<RunResult> {
-    let text = std::fs::read_to_string(run_file(out, sequence, spec)).ok()?;
+    let text = std::fs::read_to_string(run_file(out, &seq.name, spec)).ok()?;
     let run: RunResult = serde_json::from_str(&text).ok()?;
-    (run.error.is_none() && &run.spec == spec && &run.options == opts && run.sequence == sequence)
-        .then_some(run)
+    (run.error.is_none()
+        && &run.spec == spec
+        && &run.options == opts
+        && run.sequence == seq.name
+        && run.inputs.as_deref() == Some(stamp))
+    .then_some(run)
+}
+
+/// 64-bit FNV-1a, for [`input_stamp`] (stable across builds and platforms).
+struct Fnv(u64);
+
+impl Fnv {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        // A separator, so that ("ab", "c") and ("a", "bc") differ.
+        self.0 = (self.0 ^ 0xff).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+}
+
+/// A fingerprint of what a run on `seq` reads: its frame list (each frame's name, size and
+/// modification time), its ground truth as loaded, and the low-DOF ground-truth files
+/// (`OptGT/<seq>_*.txt`) beside it. A resumed run is used only if this has not changed.
+pub fn input_stamp(seq: &crate::dataset::Sequence) -> String {
+    let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+    h.write(seq.name.as_bytes());
+    h.write(&(seq.frames.len() as u64).to_le_bytes());
+    for f in &seq.frames {
+        h.write(f.as_os_str().as_encoded_bytes());
+        match std::fs::metadata(f) {
+            Ok(m) => {
+                h.write(&m.len().to_le_bytes());
+                let t = m
+                    .modified()
+                    .ok()
+                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos());
+                h.write(&t.to_le_bytes());
+            }
+            Err(_) => h.write(b"missing"),
+        }
+    }
+    for q in &seq.ground_truth {
+        match q {
+            Some(q) => {
+                for v in q.to_array() {
+                    h.write(&v.to_bits().to_le_bytes());
+                }
+            }
+            None => h.write(b"none"),
+        }
+    }
+    let opt = crate::gt::ground_truth_dir(seq).join("OptGT");
+    let prefix = format!("{}_", seq.name);
+    let mut low: Vec<PathBuf> = std::fs::read_dir(&opt)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.file_name()
+                        .and_then(|n| n.to_str())
+                        .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(".txt"))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    low.sort();
+    for p in low {
+        h.write(p.as_os_str().as_encoded_bytes());
+        h.write(&std::fs::read(&p).unwrap_or_default());
+    }
+    format!("{:016x}", h.0)
 }
 
 /// Every run saved under `dir/tracking_data` (sorted by sequence, then tracker).
@@ -171,11 +244,11 @@ fn serde_plain<T: serde::Serialize>(v: &T) -> String {
 /// Writes `summary.csv` and `summary.json` in `out`.
 pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let mut csv = String::from(
-        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt,lost_when_off,lost_when_on\n",
+        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt,lost_when_off,lost_when_on,stopped\n",
     );
     for r in rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{},{},{},{}\n",
             r.sequence,
             r.tracker,
             r.sm,
@@ -194,7 +267,8 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
             r.error_type,
             r.gt,
             fraction(r.lost_when_off, 4, ""),
-            fraction(r.lost_when_on, 4, "")
+            fraction(r.lost_when_on, 4, ""),
+            r.stopped
         ));
     }
     write_atomic(&out.join("summary.csv"), csv.as_bytes())?;
@@ -215,7 +289,7 @@ fn fraction(v: f64, decimals: usize, missing: &str) -> String {
 /// The summary rows as the command line prints them: a header, then a line per row.
 pub fn summary_table(rows: &[Summary]) -> String {
     let mut out = format!(
-        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9} {:>7} {:>7}\n",
+        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9} {:>7} {:>7} {:>7}\n",
         "sequence",
         "tracker",
         "frames",
@@ -227,11 +301,12 @@ pub fn summary_table(rows: &[Summary]) -> String {
         "tracker FPS",
         "live FPS",
         "lost>20",
-        "lost<5"
+        "lost<5",
+        "stopped"
     );
     for r in rows {
         out.push_str(&format!(
-            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0} {:>7} {:>7}\n",
+            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0} {:>7} {:>7} {:>7}\n",
             r.sequence,
             r.tracker,
             r.frames,
@@ -243,7 +318,12 @@ pub fn summary_table(rows: &[Summary]) -> String {
             r.tracker_fps,
             r.live_fps,
             fraction(r.lost_when_off, 3, "-"),
-            fraction(r.lost_when_on, 3, "-")
+            fraction(r.lost_when_on, 3, "-"),
+            if r.stopped == 0 {
+                "-".to_string()
+            } else {
+                r.stopped.to_string()
+            }
         ));
     }
     out

@@ -8,7 +8,7 @@ mod files;
 
 pub use batch::{Batch, BatchOutcome, POOLED, Plan, Shard, by_tracker, summary_rows};
 pub use files::{
-    finished_run, merge_shards, read_all_runs, read_runs, run_file, summary_table, write_run_files,
+    finished_run, input_stamp, merge_shards, read_all_runs, read_runs, run_file, summary_table, write_run_files,
     write_summaries,
 };
 
@@ -226,6 +226,10 @@ pub struct RunResult {
     /// frames before it are kept.
     #[serde(default)]
     pub error: Option<String>,
+    /// The fingerprint of the inputs the run read ([`files::input_stamp`]): a batch resumes the
+    /// run only while they are unchanged.
+    #[serde(default)]
+    pub inputs: Option<String>,
 }
 
 fn default_threshold() -> f64 {
@@ -269,6 +273,10 @@ pub struct Summary {
     /// Of the frames searched whose estimate was within 5 px, the fraction reported lost.
     #[serde(with = "nan_as_null", default = "not_a_number")]
     pub lost_when_on: f64,
+    /// Runs (of the row's) that stopped before the end of their sequence, a frame that could not
+    /// be read: their rates are over the frames before it only.
+    #[serde(default)]
+    pub stopped: usize,
 }
 
 fn not_a_number() -> f64 {
@@ -386,6 +394,7 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
             .unwrap_or_else(|| "full".into()),
         lost_when_off,
         lost_when_on,
+        stopped: runs.iter().filter(|r| r.error.is_some()).count(),
     }
 }
 
@@ -421,6 +430,8 @@ pub fn run_sequence(
     init: Option<Quad>,
     observer: &mut dyn Observer,
 ) -> Result<RunResult> {
+    // Before anything is read: what the run is made from.
+    let inputs = files::input_stamp(seq);
     let gt_ssm = match opts.gt_ssm.as_deref() {
         // Each tracker against its own SSM's low-DOF ground truth (a whole tracker: the full one).
         Some(OWN_SSM) => spec.registration().map(|r| r.ssm.as_str()),
@@ -549,5 +560,6 @@ pub fn run_sequence(
         failure_threshold: opts.failure_threshold,
         options: opts.clone(),
         error: stopped,
+        inputs: Some(inputs),
     })
 }

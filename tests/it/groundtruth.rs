@@ -159,6 +159,42 @@ fn eval_scores_against_low_dof_ground_truth_and_resumes() {
     let other = eval(&["--gt-ssm", "translation", "--error", "center"]);
     succeed(other.clone());
     assert!(!String::from_utf8_lossy(&other.stdout).contains("already finished"));
+    // A resumed run is tied to its inputs: change the ground truth (shift it, cut it short)
+    // and the run is made again, against the new one.
+    succeed(eval(&[]));
+    let gt_file = data.join("zm.txt");
+    let text = std::fs::read_to_string(&gt_file).unwrap();
+    let shifted: String = text
+        .lines()
+        .enumerate()
+        .filter(|(i, _)| *i < 9)
+        .map(|(i, l)| {
+            if i == 0 {
+                return format!("{l}\n");
+            }
+            let mut t: Vec<String> = l.split_whitespace().map(str::to_string).collect();
+            for v in t.iter_mut().skip(1).step_by(2) {
+                *v = format!("{:.4}", v.parse::<f64>().unwrap() + 30.0);
+            }
+            format!("{}\n", t.join(" "))
+        })
+        .collect();
+    let before_shift = read_ground_truth(&gt_file).unwrap();
+    std::fs::write(&gt_file, &shifted).unwrap();
+    let redone = eval(&[]);
+    assert!(
+        !String::from_utf8_lossy(&redone.stdout).contains("already finished"),
+        "{}",
+        String::from_utf8_lossy(&redone.stdout)
+    );
+    let runs = regtrack::eval::read_runs(&out).unwrap();
+    let last = runs[0].frames.last().unwrap();
+    assert_eq!(runs[0].frames.len(), 8, "the frames of the cut ground truth");
+    let gt_x = last.ground_truth.unwrap().0[0].x;
+    let was = before_shift[last.frame].quad.unwrap().0[0].x;
+    assert!((gt_x - was - 30.0).abs() < 1e-3, "scored against {gt_x}, the new ground truth is {was} + 30");
+    std::fs::write(&gt_file, text).unwrap();
+    succeed(eval(&["--no-resume"]));
     // An OptGT file is read when present: shift it and the errors follow.
     succeed(regtrack(&[
         "gt-fit",
@@ -235,6 +271,14 @@ fn a_corrupt_frame_keeps_what_was_tracked() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("frame00006.jpg"));
     let runs = regtrack::eval::read_runs(&res).unwrap();
     assert_eq!(runs[0].frames.len(), 5);
+    // The summary says the run is partial.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("stopped"), "{stdout}");
+    let csv = std::fs::read_to_string(res.join("summary.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "stopped").unwrap();
+    let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[col], "1", "{csv}");
     let out = regtrack(&args);
     assert!(!String::from_utf8_lossy(&out.stdout).contains("already finished"));
 }

@@ -238,6 +238,7 @@ fn tracker(sm: &str, am: &str, ssm: &str, mean_sr: f64) -> TrackerResult {
             gt: "full".into(),
             lost_when_off: 1.0,
             lost_when_on: 0.0,
+            stopped: 0,
         },
         sequences: vec!["a".into()],
         curve: regtrack::eval::thresholds()

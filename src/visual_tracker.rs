@@ -31,6 +31,19 @@ impl FrameInput<'_> {
     }
 }
 
+/// Checks that `quad` can start a tracker on a `width x height` frame: a usable quad
+/// ([`Quad::validate`]) at least part of which is in the frame.
+pub fn check_initial_region(quad: &Quad, width: usize, height: usize) -> Result<()> {
+    quad.validate()?;
+    let (x0, y0, x1, y1) = quad.bbox();
+    if x1 <= 0.0 || y1 <= 0.0 || x0 >= width as f64 || y0 >= height as f64 {
+        return Err(crate::Error::InvalidRegion(format!(
+            "{quad} lies outside the {width}x{height} frame"
+        )));
+    }
+    Ok(())
+}
+
 impl<'a> From<&'a GrayU8> for FrameInput<'a> {
     fn from(i: &'a GrayU8) -> Self {
         FrameInput::Gray8(i)

@@ -304,6 +304,15 @@ impl InspectorApp {
                     // Errors of an earlier attempt are stale now.
                     self.rt.msg.errors.clear();
                     self.rt.seq.bad_frame = None;
+                    if let Some(w) = seq.warnings.first() {
+                        self.error(format!(
+                            "{w}{}",
+                            match seq.warnings.len() {
+                                1 => String::new(),
+                                n => format!(" (and {} more such lines)", n - 1),
+                            }
+                        ));
+                    }
                     self.open_corrections(&seq);
                     let restore = self.rt.seq.restore_frame.take();
                     let n = seq.len();

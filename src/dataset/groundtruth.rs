@@ -19,6 +19,8 @@ pub struct GtEntry {
     pub frame: Option<String>,
     /// The corners (`None` for a frame marked lost or unannotated).
     pub quad: Option<Quad>,
+    /// The 1-based line it was read from.
+    pub line: usize,
 }
 
 /// Words that mark a frame without corners.
@@ -72,7 +74,11 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
                 (None, &tokens[..])
             };
         if nums.len() == 1 && NO_CORNERS.contains(&nums[0].to_ascii_lowercase().as_str()) {
-            out.push(GtEntry { frame, quad: None });
+            out.push(GtEntry {
+                frame,
+                quad: None,
+                line: line_no,
+            });
             continue;
         }
         if nums.len() != 8 {
@@ -101,6 +107,7 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
         out.push(GtEntry {
             frame,
             quad: Some(Quad::from_array(v)),
+            line: line_no,
         });
     }
     Ok(out)

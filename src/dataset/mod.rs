@@ -38,6 +38,10 @@ pub struct Sequence {
     pub ground_truth: Vec<Option<Quad>>,
     /// The ground-truth file, if any.
     pub gt_path: Option<PathBuf>,
+    /// What was wrong but could be read around, each naming the file and line: ground-truth
+    /// corners that are not a usable quad (the frame is then not annotated). Shown by the
+    /// command line and the inspector.
+    pub warnings: Vec<String>,
 }
 
 fn is_image(p: &Path) -> bool {
@@ -159,10 +163,37 @@ impl Sequence {
                 frames: listed,
                 ground_truth: Vec::new(),
                 gt_path: None,
+                warnings: Vec::new(),
             });
         };
-        let entries = read_ground_truth(gt)?;
+        let mut entries = read_ground_truth(gt)?;
+        // Corners that cannot be a target's (folded, collinear, tiny, far beyond any frame):
+        // the frame is read as not annotated, and said so.
+        let mut warnings = Vec::new();
+        for e in entries.iter_mut() {
+            if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {
+                warnings.push(format!(
+                    "{}:{}: {why}: the frame is read as not annotated",
+                    gt.display(),
+                    e.line
+                ));
+                e.quad = None;
+            }
+        }
         let named = entries.iter().all(|e| e.frame.is_some()) && !entries.is_empty();
+        if named {
+            let mut seen: std::collections::HashMap<&str, usize> = Default::default();
+            for e in &entries {
+                let f = e.frame.as_deref().unwrap_or_default();
+                if let Some(first) = seen.insert(f, e.line) {
+                    return Err(Error::Parse {
+                        path: gt.to_path_buf(),
+                        line: e.line,
+                        message: format!("{f} is listed twice (also on line {first})"),
+                    });
+                }
+            }
+        }
         let (frames, ground_truth) = if named {
             // MTF: every named frame must exist.
             let mut frames = Vec::with_capacity(entries.len());
@@ -212,6 +243,7 @@ impl Sequence {
             frames,
             ground_truth,
             gt_path: Some(gt.to_path_buf()),
+            warnings,
         })
     }
 
@@ -237,6 +269,13 @@ impl Sequence {
     }
 }
 
+/// Why ground-truth corners cannot be a target's, if they cannot: coordinates beyond
+/// [`crate::gt::journal::MAX_COORDINATE`], or a quad that is not convex (folded, collinear) or
+/// is tiny.
+pub fn unusable_quad(q: &Quad) -> Option<String> {
+    crate::gt::journal::check_mark(&crate::gt::Mark::Quad(q.to_array())).err()
+}
+
 /// Whether a ground-truth file is in the POT naming (`<seq>_gt_points.txt`).
 fn is_pot(gt: &Path) -> bool {
     gt.file_name()
@@ -252,8 +291,10 @@ fn file_name(p: &Path) -> String {
 /// One sequence (a ground-truth file, or a folder that is not a dataset root) or the sequences
 /// of a dataset root ([`discover`]).
 pub fn open_or_discover(path: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
+    // A folder is a dataset root when it holds `<seq>.txt` beside `<seq>/`: then its
+    // sequences' own errors are reported, not "no image here".
     let single =
-        path.is_file() || (path.is_dir() && names.is_none() && discover(path, None).is_err());
+        path.is_file() || (path.is_dir() && names.is_none() && dataset_entries(path)?.is_empty());
     if single {
         Ok(vec![Sequence::open(path)?])
     } else {
@@ -261,10 +302,9 @@ pub fn open_or_discover(path: &Path, names: Option<&[String]>) -> Result<Vec<Seq
     }
 }
 
-/// The sequences of a dataset root in the MTF layout: every `<root>/<seq>.txt` with a folder
-/// `<root>/<seq>/` beside it, sorted by name; with `names`, only those (in that order; an unknown
-/// name is an error listing what exists).
-pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
+/// The `(name, ground-truth file)` of every sequence of a dataset root in the MTF layout (every
+/// `<root>/<seq>.txt` with a folder `<root>/<seq>/` beside it), sorted by name.
+fn dataset_entries(root: &Path) -> Result<Vec<(String, PathBuf)>> {
     let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
     let mut found: Vec<(String, PathBuf)> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -279,6 +319,14 @@ pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> 
         })
         .collect();
     found.sort();
+    Ok(found)
+}
+
+/// The sequences of a dataset root in the MTF layout: every `<root>/<seq>.txt` with a folder
+/// `<root>/<seq>/` beside it, sorted by name; with `names`, only those (in that order; an unknown
+/// name is an error listing what exists).
+pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
+    let found = dataset_entries(root)?;
     let chosen: Vec<&(String, PathBuf)> = match names {
         None => found.iter().collect(),
         Some(names) => names

@@ -347,6 +347,20 @@ pub fn fit_sequences(
                 message: format!("sequence '{}' has no ground truth to fit", seq.name),
             });
         }
+        if seq.ground_truth.first().copied().flatten().is_none() {
+            return Err(Error::Sequence {
+                path: seq.gt_path.clone().unwrap_or_default(),
+                message: format!(
+                    "the first frame of '{}' has no usable ground truth, and the low-DOF ground \
+                     truth is fitted from it{}",
+                    seq.name,
+                    seq.warnings
+                        .first()
+                        .map(|w| format!(" ({w})"))
+                        .unwrap_or_default()
+                ),
+            });
+        }
         let dir = ground_truth_dir(seq);
         for name in ssms {
             let low = fit_ground_truth(name, &seq.ground_truth)?;

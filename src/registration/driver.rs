@@ -626,6 +626,8 @@ impl VisualTracker for RegistrationTracker {
     fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         // Until it succeeds the tracker is not usable (its context is being replaced).
         self.status = TrackStatus::Uninitialized;
+        let (w, h) = input.size();
+        crate::visual_tracker::check_initial_region(quad, w, h)?;
         self.ctx
             .set_region(quad, self.params.res, self.params.grid)?;
         let region = self.region_around(quad);

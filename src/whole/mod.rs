@@ -97,6 +97,8 @@ impl<T: WholeTracker> VisualTracker for T {
         &self.base().spec
     }
     fn initialize(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
+        let (w, h) = input.size();
+        crate::visual_tracker::check_initial_region(quad, w, h)?;
         self.base_mut().start(quad, T::MIN_SIDE)?;
         self.start(input, quad)
     }

@@ -269,3 +269,100 @@ fn errors_are_clear() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("16..=8192"));
 }
+
+/// Bad input gets one clear message naming what is wrong (issue 18): the documented `--init`
+/// form, a quad outside the frame, unusable and duplicated ground-truth lines, a malformed
+/// ground-truth file in a dataset, and no backtrace for a user error even under RUST_BACKTRACE.
+#[test]
+fn bad_input_gets_one_clear_message() {
+    let d = TempDir::new("badin");
+    let data = d.path().join("data");
+    succeed(synth("ucsb_bricks_rt.txt", &data, "rt", &["--frames", "6"]));
+    let gt = data.join("rt.txt");
+    let text = std::fs::read_to_string(&gt).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let first: Vec<f64> = lines[1]
+        .split_whitespace()
+        .skip(1)
+        .map(|t| t.parse().unwrap())
+        .collect();
+    let corners: Vec<String> = first.iter().map(|v| v.to_string()).collect();
+    let out = d.path().join("c.txt");
+    let track = |init: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_regtrack"))
+            .args(["track", "--seq", gt.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--init", init])
+            .env("RUST_BACKTRACE", "1")
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    // The documented comma-separated form.
+    let (ok, err) = track(&corners.join(","));
+    assert!(ok, "{err}");
+    // Wholly outside the frame: said so, in one line, without a backtrace.
+    let (ok, err) = track("-500,-500,-400,-500,-400,-400,-500,-400");
+    assert!(!ok && err.contains("lies outside the"), "{err}");
+    assert!(
+        !err.contains("backtrace") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    // A folded quad on a later frame is read as not annotated, with a warning naming the line;
+    // a frame listed twice is an error naming both lines.
+    let mut bad: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    let name3 = bad[3].split_whitespace().next().unwrap().to_string();
+    bad[3] = format!("{name3} 10 10 50 50 50 10 10 50");
+    std::fs::write(&gt, bad.join("\n") + "\n").unwrap();
+    let (ok, err) = track(&corners.join(","));
+    assert!(
+        ok && err.contains("rt.txt:4: ") && err.contains("not annotated"),
+        "{err}"
+    );
+    let mut dup = bad.clone();
+    dup[4] = dup[2].clone();
+    std::fs::write(&gt, dup.join("\n") + "\n").unwrap();
+    let (ok, err) = track(&corners.join(","));
+    assert!(
+        !ok && err.contains("rt.txt:5: ") && err.contains("listed twice (also on line 3)"),
+        "{err}"
+    );
+    // gt-fit: an unusable first quad is refused; a malformed file in a dataset is named.
+    let mut first_bad = lines.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+    let name1 = first_bad[1].split_whitespace().next().unwrap().to_string();
+    first_bad[1] = format!("{name1} 5 5 5 5 5 5 5 5");
+    std::fs::write(&gt, first_bad.join("\n") + "\n").unwrap();
+    let fit = regtrack(&[
+        "gt-fit",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--ssm",
+        "translation",
+    ]);
+    let err = String::from_utf8_lossy(&fit.stderr);
+    assert!(
+        !fit.status.success() && err.contains("first frame") && err.contains("rt.txt:2"),
+        "{err}"
+    );
+    let mut malformed = lines.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+    malformed[4] = format!(
+        "{} 1.2.3 0 0 0 0 0 0 0",
+        malformed[4].split_whitespace().next().unwrap()
+    );
+    std::fs::write(&gt, malformed.join("\n") + "\n").unwrap();
+    let fit = regtrack(&[
+        "gt-fit",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--ssm",
+        "translation",
+    ]);
+    let err = String::from_utf8_lossy(&fit.stderr);
+    assert!(
+        !fit.status.success() && err.contains("rt.txt:5: '1.2.3' is not a number"),
+        "{err}"
+    );
+}

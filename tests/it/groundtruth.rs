@@ -189,10 +189,17 @@ fn eval_scores_against_low_dof_ground_truth_and_resumes() {
     );
     let runs = regtrack::eval::read_runs(&out).unwrap();
     let last = runs[0].frames.last().unwrap();
-    assert_eq!(runs[0].frames.len(), 8, "the frames of the cut ground truth");
+    assert_eq!(
+        runs[0].frames.len(),
+        8,
+        "the frames of the cut ground truth"
+    );
     let gt_x = last.ground_truth.unwrap().0[0].x;
     let was = before_shift[last.frame].quad.unwrap().0[0].x;
-    assert!((gt_x - was - 30.0).abs() < 1e-3, "scored against {gt_x}, the new ground truth is {was} + 30");
+    assert!(
+        (gt_x - was - 30.0).abs() < 1e-3,
+        "scored against {gt_x}, the new ground truth is {was} + 30"
+    );
     std::fs::write(&gt_file, text).unwrap();
     succeed(eval(&["--no-resume"]));
     // An OptGT file is read when present: shift it and the errors follow.

@@ -44,11 +44,11 @@ pub enum Command {
         /// Initial corners `ulx,uly,urx,ury,lrx,lry,llx,lly` (default: the first ground truth).
         #[arg(
             long,
-            value_delimiter = ',',
-            num_args = 8,
-            allow_negative_numbers = true
+            value_name = "ULX,ULY,URX,URY,LRX,LRY,LLX,LLY",
+            value_parser = parse_corners,
+            allow_hyphen_values = true
         )]
-        init: Option<Vec<f64>>,
+        init: Option<Corners>,
         /// Output corners file.
         #[arg(long)]
         out: PathBuf,
@@ -331,3 +331,29 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
+
+/// Eight corner coordinates, separated by commas or spaces (`--init 10,20,...` or
+/// `--init "10 20 ..."`).
+fn parse_corners(s: &str) -> Result<Corners, String> {
+    let v: Vec<f64> = s
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            t.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("'{t}' is not a finite number"))
+        })
+        .collect::<Result<_, _>>()?;
+    if v.len() != 8 {
+        return Err(format!(
+            "expected 8 numbers ulx,uly,urx,ury,lrx,lry,llx,lly, got {}",
+            v.len()
+        ));
+    }
+    Ok(Corners(v))
+}
+
+/// The corners `--init` gives.
+#[derive(Clone, Debug)]
+pub struct Corners(pub Vec<f64>);

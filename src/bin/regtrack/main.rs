@@ -29,7 +29,19 @@ struct Cli {
     command: Option<Command>,
 }
 
-fn main() -> Result<()> {
+/// A user error is printed as one message (its causes joined), never with a backtrace, even
+/// under `RUST_BACKTRACE`: backtraces are for panics, which are bugs.
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("Error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let cli = Cli::parse();
     let command = cli.command.unwrap_or(Command::Inspect {
         session: None,
@@ -50,7 +62,7 @@ fn main() -> Result<()> {
             tracker,
             init,
             out,
-        } => run_track(&seq, &tracker, init, &out),
+        } => run_track(&seq, &tracker, init.map(|c| c.0), &out),
         Command::Eval {
             dataset,
             seqs,
@@ -75,6 +87,7 @@ fn main() -> Result<()> {
             };
             let specs = select.specs(regtrack::spec::DEFAULT_TRACKER)?;
             let sequences = dataset::discover(&dataset, seqs.as_deref())?;
+            warn_about(&sequences);
             let batch = Batch {
                 options,
                 jobs,
@@ -207,8 +220,26 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// Prints what could be read around in the sequences' ground truth (a few lines each).
+fn warn_about(sequences: &[Sequence]) {
+    const SHOWN: usize = 5;
+    for seq in sequences {
+        for w in seq.warnings.iter().take(SHOWN) {
+            eprintln!("warning: {w}");
+        }
+        if seq.warnings.len() > SHOWN {
+            eprintln!(
+                "warning: ... and {} more in the ground truth of {}",
+                seq.warnings.len() - SHOWN,
+                seq.name
+            );
+        }
+    }
+}
+
 fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) -> Result<()> {
     let seq = Sequence::open(seq)?;
+    warn_about(std::slice::from_ref(&seq));
     let mut spec = match &t.tracker {
         Some(name) => TrackerSpec::whole(name)?,
         None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
@@ -248,6 +279,7 @@ fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) ->
 
 fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bool) -> Result<()> {
     let sequences = dataset::open_or_discover(root, seqs.as_deref())?;
+    warn_about(&sequences);
     let outcomes = gt::fit_sequences(&sequences, ssms, force)?;
     println!(
         "{:<24} {:<12} {:>8} {:>10} {:>10}  worst frame",

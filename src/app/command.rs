@@ -207,7 +207,17 @@ impl InspectorApp {
                     self.rt.worker.send(Job::Show(self.state.frame));
                 }
             }
-            Command::SetPlaybackFps(f) => self.state.playback_fps = f.max(0.0),
+            Command::SetPlaybackFps(f) => {
+                // 0 (as fast as possible), or a speed in the widget's range.
+                self.state.playback_fps = if f > 0.0 {
+                    f.clamp(
+                        *super::state::PLAYBACK_FPS.start(),
+                        *super::state::PLAYBACK_FPS.end(),
+                    )
+                } else {
+                    0.0
+                }
+            }
             Command::RerunFrom(f) => {
                 // Re-tracking from here, and playing on.
                 self.restart(f);

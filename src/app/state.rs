@@ -30,6 +30,7 @@ pub enum InitSource {
 
 /// One tracker of the session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TrackerEntry {
     pub spec: TrackerSpec,
     /// Drawing colour (RGB).
@@ -41,7 +42,7 @@ pub struct TrackerEntry {
 
 /// The frame view's zoom and pan.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct View {
     /// Screen pixels per image pixel; 0 = fit the frame to the panel.
     pub zoom: f32,
@@ -85,7 +86,7 @@ impl Default for View {
 
 /// A session, saved as `sessions/*.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct State {
     pub sequence: SequenceSource,
     pub trackers: Vec<TrackerEntry>,
@@ -101,6 +102,17 @@ pub struct State {
     /// The SSM the ground truth is shown and corrected in (`homography` = full 8 DOF).
     pub gt_ssm: String,
 }
+
+/// The frame view's zoom (screen pixels per image pixel) besides 0 (fit): what the scroll wheel
+/// reaches and a session may hold.
+pub const ZOOM: std::ops::RangeInclusive<f32> = 0.05..=40.0;
+
+/// Playback speeds besides 0 (as fast as the trackers go), frames per second: the speed widget's
+/// range and a session's.
+pub const PLAYBACK_FPS: std::ops::RangeInclusive<f32> = 0.1..=1000.0;
+
+/// The largest image coordinate a session's view centre may have.
+const MAX_CENTER: f32 = 1e7;
 
 /// Distinct colours for trackers.
 pub const PALETTE: [[u8; 3]; 8] = [
@@ -153,7 +165,13 @@ impl State {
             path: path.to_path_buf(),
             line: e
                 .span()
-                .map(|s| text[..s.start].lines().count().max(1))
+                .map(|s| {
+                    text.as_bytes()[..s.start]
+                        .iter()
+                        .filter(|&&b| b == b'\n')
+                        .count()
+                        + 1
+                })
                 .unwrap_or(0),
             message: e.message().to_string(),
         })?;
@@ -169,8 +187,87 @@ impl State {
                 line: tracker_line(&text, i),
                 message: format!("tracker {}: {e}", t.spec.label()),
             })?;
+            if let InitSource::Quad(q) = &t.init
+                && let Some(why) = crate::dataset::unusable_quad(q)
+            {
+                return Err(Error::Parse {
+                    path: path.to_path_buf(),
+                    line: tracker_line(&text, i),
+                    message: format!("tracker {}: its initial corners: {why}", t.spec.label()),
+                });
+            }
         }
+        state.validate().map_err(|(key, message)| Error::Parse {
+            path: path.to_path_buf(),
+            line: key_line(&text, key),
+            message,
+        })?;
         Ok(state)
+    }
+
+    /// Checks every value against the ranges the widgets allow; the error names the key.
+    fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
+        let fps = self.playback_fps;
+        if !(fps == 0.0 || PLAYBACK_FPS.contains(&fps)) {
+            return Err((
+                "playback_fps",
+                format!(
+                    "playback_fps = {} must be 0 (as fast as possible) or in {}..={}",
+                    crate::error::short_number(fps as f64, 2),
+                    PLAYBACK_FPS.start(),
+                    PLAYBACK_FPS.end()
+                ),
+            ));
+        }
+        let zoom = self.view.zoom;
+        if !(zoom == 0.0 || ZOOM.contains(&zoom)) {
+            return Err((
+                "zoom",
+                format!(
+                    "zoom = {} must be 0 (fit) or in {}..={}",
+                    crate::error::short_number(zoom as f64, 2),
+                    ZOOM.start(),
+                    ZOOM.end()
+                ),
+            ));
+        }
+        if let Some(c) = self
+            .view
+            .center
+            .iter()
+            .find(|c| !c.is_finite() || c.abs() > MAX_CENTER)
+        {
+            return Err((
+                "center",
+                format!(
+                    "center coordinate {} is not an image position",
+                    crate::error::short_number(*c as f64, 2)
+                ),
+            ));
+        }
+        if self.selected_tracker > 0 && self.selected_tracker >= self.trackers.len() {
+            return Err((
+                "selected_tracker",
+                format!(
+                    "selected_tracker = {} but the session has {} tracker(s)",
+                    self.selected_tracker,
+                    self.trackers.len()
+                ),
+            ));
+        }
+        if let Some((a, b)) = self.view.ab
+            && (a >= self.trackers.len() || b >= self.trackers.len())
+        {
+            return Err((
+                "ab",
+                format!(
+                    "ab = [{a}, {b}] but the session has {} tracker(s)",
+                    self.trackers.len()
+                ),
+            ));
+        }
+        crate::gt::ssm_key(&self.gt_ssm).map_err(|e| ("gt_ssm", e.to_string()))?;
+        Ok(())
     }
 
     /// Writes the session atomically.
@@ -179,6 +276,17 @@ impl State {
             toml::to_string_pretty(self).map_err(|e| Error::InvalidParameter(e.to_string()))?;
         crate::dataset::write_atomic(path, text.as_bytes())
     }
+}
+
+/// The line (1-based) of the first `key = ...` of a session file (1 if not found).
+fn key_line(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|l| {
+            l.trim_start()
+                .strip_prefix(key)
+                .is_some_and(|r| r.trim_start().starts_with('='))
+        })
+        .map_or(1, |n| n + 1)
 }
 
 /// The line (1-based) of the `i`-th `[[trackers]]` table of a session file (1 if not found).

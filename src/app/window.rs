@@ -20,6 +20,10 @@ pub enum AppError {
     Screenshot { path: PathBuf, message: String },
     #[error("the window closed before the screenshot was taken")]
     NoScreenshot,
+    /// The planned frames could not be shown (the sequence did not open, a frame could not be
+    /// read); the screenshot shows the window with the error.
+    #[error("{message} (the screenshot {} shows the window)", path.display())]
+    Failed { path: PathBuf, message: String },
 }
 
 /// Where a screenshot's outcome is reported (`None` until it is taken).
@@ -57,10 +61,45 @@ impl InspectorApp {
             self.state.start_frame,
             self.rt.run.generation,
         );
+        // What stops the planned frames from being shown: the window is captured as it is, with
+        // the error, and the screenshot reports the failure (rather than wait forever).
+        let failed = if self.rt.seq.sequence.is_none() && self.rt.seq.opening.is_none() {
+            self.rt.msg.errors.first().cloned()
+        } else if !self.rt.run.playing {
+            self.rt
+                .seq
+                .bad_frame
+                .as_ref()
+                .map(|(i, m)| format!("frame {}: {m}", i + 1))
+        } else {
+            None
+        };
         let Some(plan) = self.rt.screenshot.as_mut() else {
             return;
         };
-        if plan.requested || n == 0 {
+        if plan.requested {
+            return;
+        }
+        if let Some(message) = failed {
+            plan.requested = true;
+            let path = plan.path.clone();
+            let result = plan.result.clone();
+            let ctx2 = ctx.clone();
+            ctx.request_screenshot(move |img| {
+                let saved = save_png(&path, &img).and(Err(AppError::Failed {
+                    path: path.clone(),
+                    message,
+                }));
+                if let Ok(mut r) = result.lock() {
+                    *r = Some(saved);
+                }
+                ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+                ctx2.request_repaint();
+            });
+            return;
+        }
+        if n == 0 {
+            ctx.request_repaint();
             return;
         }
         ctx.request_repaint();

@@ -647,8 +647,16 @@ impl<W: Fn() + Sync> Thread<W> {
                 image: send_image.then_some(image),
                 catch_up: false,
             });
-            if fps > 0.0 {
-                let due = started + Duration::from_secs_f32((i + 1 - first) as f32 / fps);
+            // The slowest speed the widget and a session allow, whatever was sent.
+            let fps = if fps > 0.0 {
+                fps.max(*super::state::PLAYBACK_FPS.start())
+            } else {
+                0.0
+            };
+            if fps > 0.0
+                && let Ok(after) = Duration::try_from_secs_f32((i + 1 - first) as f32 / fps)
+            {
+                let due = started + after;
                 if let Some(wait) = due.checked_duration_since(Instant::now()) {
                     std::thread::sleep(wait);
                 }

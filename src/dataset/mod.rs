@@ -15,8 +15,8 @@ mod groundtruth;
 pub mod synth;
 
 pub use groundtruth::{
-    GtEntry, parse_ground_truth, parse_ground_truth_bytes, read_ground_truth, write_atomic,
-    write_corners, write_corners_named, write_ground_truth,
+    GtEntry, parse_ground_truth, parse_ground_truth_bytes, read_ground_truth,
+    remove_stale_temporaries, write_atomic, write_corners, write_corners_named, write_ground_truth,
 };
 
 use crate::error::{Error, Result};
@@ -90,6 +90,11 @@ impl Sequence {
             Self::from_parts(&name, &frames_dir, gt.as_deref())
         } else if path.is_file() {
             Self::open_gt_file(path)
+        } else if path.exists() {
+            Err(Error::Sequence {
+                path: path.to_path_buf(),
+                message: "is neither a ground-truth file nor a folder of frames".into(),
+            })
         } else {
             Err(Error::Missing {
                 path: path.to_path_buf(),
@@ -265,7 +270,25 @@ impl Sequence {
             path: self.gt_path.clone().unwrap_or_default(),
             message: format!("frame index {i} out of range (0..{})", self.len()),
         })?;
-        imaging::load_gray(p)
+        let img = imaging::load_gray(p)?;
+        // Every frame has the first one's size (a tracker's coordinates are the first's).
+        if i > 0 {
+            let first = imaging::image_size(&self.frames[0])?;
+            if (img.width, img.height) != first {
+                return Err(Error::Image {
+                    path: p.clone(),
+                    message: format!(
+                        "frame {} is {}x{}, but the sequence's first frame is {}x{}",
+                        i + 1,
+                        img.width,
+                        img.height,
+                        first.0,
+                        first.1
+                    ),
+                });
+            }
+        }
+        Ok(img)
     }
 }
 

@@ -132,6 +132,10 @@ impl<'a> Batch<'a> {
         plan: Plan,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<BatchOutcome> {
+        // What a killed batch left half-written in the folder goes first.
+        if let Some(out) = self.out {
+            crate::dataset::remove_stale_temporaries(out);
+        }
         let total = plan.todo.len();
         let done = AtomicUsize::new(0);
         let pool = rayon::ThreadPoolBuilder::new()

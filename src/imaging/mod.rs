@@ -142,23 +142,97 @@ pub fn gray_from_dynamic(img: &image::DynamicImage) -> GrayU8 {
     }
 }
 
+/// The size of an image file, read from its header.
+pub fn image_size(path: &Path) -> Result<(usize, usize)> {
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?
+        .into_dimensions()
+        .map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    Ok((w as usize, h as usize))
+}
+
+/// Checks that a JPEG or PNG file is whole: it ends with its end marker (a file cut short by a
+/// copy or a crash decodes in part, without an error, otherwise).
+fn check_complete(
+    path: &Path,
+    format: Option<image::ImageFormat>,
+) -> std::result::Result<(), String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let (end, what): (&[u8], &str) = match format {
+        Some(image::ImageFormat::Jpeg) => (&[0xFF, 0xD9], "JPEG end-of-image marker"),
+        Some(image::ImageFormat::Png) => (b"IEND\xAE\x42\x60\x82", "PNG IEND chunk"),
+        _ => return Ok(()),
+    };
+    let mut f = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let len = f.metadata().map_err(|e| e.to_string())?.len();
+    let n = len.min(256);
+    f.seek(SeekFrom::Start(len - n))
+        .map_err(|e| e.to_string())?;
+    let mut tail = vec![0u8; n as usize];
+    f.read_exact(&mut tail).map_err(|e| e.to_string())?;
+    // Some writers pad after the marker.
+    while tail
+        .last()
+        .is_some_and(|&b| b == 0 || b.is_ascii_whitespace())
+    {
+        tail.pop();
+    }
+    if tail.ends_with(end) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the file is cut short (no {what} at its end; {len} bytes)"
+        ))
+    }
+}
+
 /// Reads an image file (png, jpeg, pgm/ppm) as 8-bit grayscale; the error names the path.
 pub fn load_gray(path: &Path) -> Result<GrayU8> {
     let img = load_dynamic(path)?;
     Ok(gray_from_dynamic(&img))
 }
 
-/// Reads an image file as decoded by the `image` crate; the error names the path.
+/// The most pixels a frame may have (64 megapixels, e.g. 8192 x 8192), whatever its pixel
+/// type: larger images are refused before they are decoded.
+pub const MAX_PIXELS: u64 = 64 << 20;
+
+/// Reads an image file as decoded by the `image` crate; the error names the path. Images of
+/// more than [`MAX_PIXELS`] are refused before decoding, and a JPEG or PNG file cut short (no
+/// end marker) is refused rather than decoded in part.
 pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
     if !path.exists() {
         return Err(Error::Missing {
             path: path.to_path_buf(),
         });
     }
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
+    let bad = |message: String| Error::Image {
+        path: path.to_path_buf(),
+        message,
+    };
+    let open = || -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+        image::ImageReader::open(path)
+            .map_err(|e| Error::io(path, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(path, e))
+    };
+    let (w, h) = open()?.into_dimensions().map_err(|e| bad(e.to_string()))?;
+    if w as u64 * h as u64 > MAX_PIXELS {
+        return Err(bad(format!(
+            "{w}x{h} is more than the {} megapixels a frame may have",
+            MAX_PIXELS >> 20
+        )));
+    }
+    let mut reader = open()?;
+    check_complete(path, reader.format()).map_err(bad)?;
+    let mut limits = image::Limits::default();
+    // Room for the largest pixel type (16-bit RGBA) of the largest frame.
+    limits.max_alloc = Some(MAX_PIXELS * 8 + (1 << 20));
+    reader.limits(limits);
     reader.decode().map_err(|e| Error::Image {
         path: path.to_path_buf(),
         message: e.to_string(),

@@ -35,6 +35,9 @@ use crate::registry::Entry;
 use crate::rng::Rng;
 use crate::ssm::{Params, random_warp};
 
+/// The most memory NN's sampled patches may take (bytes).
+pub const MAX_STORE_BYTES: u64 = 4 << 30;
+
 /// The parameters of the NN family (`samples`'s default differs per entry).
 const fn params(samples: f64) -> [ParamDef; 6] {
     [
@@ -90,7 +93,7 @@ pub const ENTRY: Entry<SmDef> = Entry {
     description: "nearest-neighbour search over random warps of the first frame (samples as a parameter)",
     build: SmDef {
         params: &NN_PARAMS,
-        build: |cfg| Ok(Box::new(Nn::new("nn", &NN_PARAMS, cfg))),
+        build: |cfg| Ok(Box::new(Nn::new("nn", &NN_PARAMS, cfg)?)),
     },
 };
 
@@ -100,7 +103,7 @@ pub const ENTRY_1K: Entry<SmDef> = Entry {
     description: "nearest-neighbour search, 1000 samples",
     build: SmDef {
         params: &NN_PARAMS,
-        build: |cfg| Ok(Box::new(Nn::new("nn1k", &NN_PARAMS, cfg))),
+        build: |cfg| Ok(Box::new(Nn::new("nn1k", &NN_PARAMS, cfg)?)),
     },
 };
 
@@ -110,7 +113,7 @@ pub const ENTRY_10K: Entry<SmDef> = Entry {
     description: "nearest-neighbour search, 10000 samples",
     build: SmDef {
         params: &NN10K_PARAMS,
-        build: |cfg| Ok(Box::new(Nn::new("nn10k", &NN10K_PARAMS, cfg))),
+        build: |cfg| Ok(Box::new(Nn::new("nn10k", &NN10K_PARAMS, cfg)?)),
     },
 };
 
@@ -159,10 +162,27 @@ pub struct Nn {
 }
 
 impl Nn {
-    pub(super) fn new(name: &'static str, defs: &[ParamDef; 6], cfg: &SmConfig) -> Self {
-        Nn {
+    /// The method, if its store of sampled patches (`samples x res^2` values) fits in
+    /// [`MAX_STORE_BYTES`]: parameters that are each in range must not combine into an abort.
+    pub(super) fn new(
+        name: &'static str,
+        defs: &[ParamDef; 6],
+        cfg: &SmConfig,
+    ) -> crate::error::Result<Self> {
+        let samples = cfg.get(&defs[0]) as usize;
+        let res = cfg.tracker.res;
+        let bytes = samples as u128 * (res * res) as u128 * 4;
+        if bytes > MAX_STORE_BYTES as u128 {
+            return Err(crate::Error::InvalidParameter(format!(
+                "{name}: {samples} samples of {res}x{res} values would need {:.1} GB of \
+                 memory, more than the {} GB allowed: lower samples or res",
+                bytes as f64 / 1e9,
+                MAX_STORE_BYTES >> 30
+            )));
+        }
+        Ok(Nn {
             name,
-            samples: cfg.get(&defs[0]) as usize,
+            samples,
             sigma: cfg.get(&defs[1]),
             exact: cfg.get(&defs[2]) == 1.0,
             dims: cfg.get(&defs[3]) as usize,
@@ -189,7 +209,7 @@ impl Nn {
             unit: Vec::new(),
             vis_quads: Vec::new(),
             vis_weights: Vec::new(),
-        }
+        })
     }
 
     /// `out[j] = sum_t sign_jt e[idx_jt]` for every projected dimension.

@@ -15,7 +15,7 @@ pub const ENTRY: Entry<SmDef> = Entry {
         params: &NN_PARAMS,
         build: |cfg| {
             let stages: Vec<Box<dyn SearchMethod>> = vec![
-                Box::new(Nn::new("nn", &NN_PARAMS, cfg)),
+                Box::new(Nn::new("nn", &NN_PARAMS, cfg)?),
                 Box::new(Iclk::default()),
             ];
             Ok(Box::new(Cascade::new("nnic".into(), stages, cfg)))

@@ -366,3 +366,106 @@ fn bad_input_gets_one_clear_message() {
         "{err}"
     );
 }
+
+/// Frames that cannot be tracked as they are, and parameters that cannot work together, are
+/// named in one message (issue 18): a frame of another size, a JPEG cut short, an image too
+/// large to decode (grey or colour alike), NN samples that would not fit in memory, `--sm` with
+/// a whole tracker, and a path that is neither a file nor a folder.
+#[test]
+fn bad_frames_and_parameters_get_one_clear_message() {
+    let d = TempDir::new("badframes");
+    let data = d.path().join("data");
+    succeed(synth("ucsb_bricks_rt.txt", &data, "rt", &["--frames", "6"]));
+    let gt = data.join("rt.txt");
+    let out = d.path().join("c.txt");
+    let track = |extra: &[&str]| {
+        let o = regtrack(
+            &[
+                &[
+                    "track",
+                    "--seq",
+                    gt.to_str().unwrap(),
+                    "--out",
+                    out.to_str().unwrap(),
+                ],
+                extra,
+            ]
+            .concat(),
+        );
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let frame = |k: usize| data.join(format!("rt/frame{k:05}.jpg"));
+    let original = std::fs::read(frame(1)).unwrap();
+    // A JPEG cut short as the first frame.
+    std::fs::write(frame(1), &original[..original.len() / 2]).unwrap();
+    let (ok, err) = track(&[]);
+    assert!(
+        !ok && err.contains("frame00001.jpg") && err.contains("cut short"),
+        "{err}"
+    );
+    std::fs::write(frame(1), &original).unwrap();
+    // A frame of another size.
+    let small = image::GrayImage::from_fn(64, 48, |x, y| image::Luma([(x * 5 + y * 3) as u8]));
+    small
+        .save_with_format(frame(4), image::ImageFormat::Jpeg)
+        .unwrap();
+    let (ok, err) = track(&[]);
+    assert!(
+        !ok && err.contains("frame00004.jpg")
+            && err.contains("frame 4 is 64x48, but the sequence's first frame is"),
+        "{err}"
+    );
+    // Too large to decode, grey and colour alike: refused from the header, before decoding.
+    for (magic, what) in [("P5", "grey"), ("P6", "colour")] {
+        let big = d.path().join(format!("big_{what}.pgm"));
+        std::fs::write(&big, format!("{magic}\n20000 20000\n255\n")).unwrap();
+        let e = regtrack::imaging::load_gray(&big).unwrap_err().to_string();
+        assert!(
+            e.contains("20000x20000 is more than the 64 megapixels"),
+            "{what}: {e}"
+        );
+    }
+    // NN's samples times the grid: refused with what it would need, not an abort.
+    let (ok, err) = track(&["--sm", "nn", "--param", "samples=100000", "--res", "1000"]);
+    assert!(
+        !ok && err.contains("400.0 GB") && err.contains("lower samples or res"),
+        "{err}"
+    );
+    // --sm means nothing to a whole tracker.
+    let (ok, err) = track(&["--tracker", "kcf", "--sm", "iclk"]);
+    assert!(!ok && err.contains("cannot be used with"), "{err}");
+    // Not a file, not a folder.
+    let o = regtrack(&[
+        "track",
+        "--seq",
+        "/dev/null",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("neither a ground-truth file nor a folder"),
+        "{err}"
+    );
+}
+
+/// A killed batch's half-written files are removed by the next batch into the folder; a live
+/// process's are kept.
+#[test]
+fn stale_temporaries_of_a_killed_batch_are_removed() {
+    let d = TempDir::new("stale");
+    let sub = d.path().join("tracking_data/s");
+    std::fs::create_dir_all(&sub).unwrap();
+    // A process id that is not running (beyond Linux's pid_max), and this process's own.
+    let dead = sub.join(".esm_ssd_homography_run.json.tmp4194999");
+    let live = sub.join(format!(".x.txt.tmp{}", std::process::id()));
+    let other = sub.join("notes.tmp123");
+    for p in [&dead, &live, &other] {
+        std::fs::write(p, b"partial").unwrap();
+    }
+    assert_eq!(regtrack::dataset::remove_stale_temporaries(d.path()), 1);
+    assert!(!dead.exists() && live.exists() && other.exists());
+}

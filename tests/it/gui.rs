@@ -829,3 +829,74 @@ fn several_presses_within_one_frame_of_the_window_all_count() {
     h.run_steps(2);
     assert_eq!(h.state().state.frame, 2);
 }
+
+/// Every value read from a session is checked against the widgets' ranges, and unknown keys are
+/// refused, each error naming the file and the line (issue 18: a playback speed of 1e-30 used
+/// to panic the worker, a zoom of 1e30 to allocate until the machine ran out of memory).
+#[test]
+fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
+    let d = TempDir::new("gui-badsession");
+    let session = d.path().join("s.toml");
+    State::default().save(&session).unwrap();
+    let good = std::fs::read_to_string(&session).unwrap();
+    assert!(State::load(&session).is_ok());
+    let set = |key: &str, value: &str| -> String {
+        good.lines()
+            .map(|l| {
+                if l.trim_start().starts_with(&format!("{key} =")) {
+                    format!("{key} = {value}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let line_of = |text: &str, key: &str| {
+        text.lines()
+            .position(|l| l.trim_start().starts_with(&format!("{key} ")))
+            .unwrap()
+            + 1
+    };
+    for (key, value, what) in [
+        (
+            "playback_fps",
+            "1e-30",
+            "playback_fps = 1.000e-30 must be 0",
+        ),
+        ("playback_fps", "nan", "playback_fps = NaN"),
+        (
+            "zoom",
+            "1e30",
+            "zoom = 1.000e30 must be 0 (fit) or in 0.05..=40",
+        ),
+        ("selected_tracker", "7", "the session has 2 tracker(s)"),
+        ("gt_ssm", "\"warp9\"", "warp9"),
+    ] {
+        let text = set(key, value);
+        assert_ne!(text, good, "{key} is in the saved session");
+        std::fs::write(&session, &text).unwrap();
+        let e = State::load(&session).unwrap_err().to_string();
+        let line = line_of(&text, key);
+        assert!(
+            e.contains(&format!("s.toml:{line}:")) && e.contains(what),
+            "{key}: {e}"
+        );
+    }
+    // An unknown key, at the top and in a table.
+    for (text, key) in [
+        (format!("colour_scheme = 2\n{good}"), "colour_scheme"),
+        (
+            good.replace("[view]", "[view]\nzoom_speed = 3"),
+            "zoom_speed",
+        ),
+    ] {
+        std::fs::write(&session, &text).unwrap();
+        let e = State::load(&session).unwrap_err().to_string();
+        let line = line_of(&text, key);
+        assert!(
+            e.contains(&format!("s.toml:{line}:")) && e.contains(key),
+            "{key}: {e}"
+        );
+    }
+}

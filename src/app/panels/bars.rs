@@ -178,7 +178,7 @@ pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
             if ui
                 .add(
                     egui::DragValue::new(&mut fps)
-                        .range(0.0..=1000.0)
+                        .range(0.0..=*crate::app::state::PLAYBACK_FPS.end())
                         .suffix(" fps"),
                 )
                 .on_hover_text("0 = as fast as the trackers go")

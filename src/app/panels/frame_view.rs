@@ -143,7 +143,10 @@ fn zoom(
         let scroll = ui.input(|i| i.smooth_scroll_delta.y);
         if scroll != 0.0 {
             let anchor = t.to_image(pos);
-            let scale = (t.scale * (scroll * 0.003).exp()).clamp(0.05, 40.0);
+            let scale = (t.scale * (scroll * 0.003).exp()).clamp(
+                *crate::app::state::ZOOM.start(),
+                *crate::app::state::ZOOM.end(),
+            );
             let d = pos - t.rect.center();
             let mut view = app.state.view.clone();
             view.zoom = scale;

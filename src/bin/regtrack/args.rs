@@ -160,7 +160,7 @@ pub enum Command {
 #[derive(Args)]
 pub struct TrackerArgs {
     /// A whole tracker (instead of --sm/--am/--ssm).
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["sm", "am", "ssm"])]
     pub tracker: Option<String>,
     /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`.
     #[arg(long, default_value = DEFAULT_TRACKER[0])]

@@ -57,6 +57,7 @@ pub mod registration;
 pub mod registry;
 pub mod report;
 pub mod rng;
+pub mod session;
 pub mod sm;
 pub mod spec;
 pub mod ssm;

@@ -97,7 +97,11 @@ impl ParamDef {
                 if whole { "a whole number" } else { "a number" },
                 self.format(self.min),
                 self.format(self.max),
-                v
+                if v == 0.0 || (1e-3..1e7).contains(&v.abs()) || !v.is_finite() {
+                    format!("{v}")
+                } else {
+                    format!("{v:.3e}")
+                }
             )));
         }
         Ok(())

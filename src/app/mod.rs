@@ -14,7 +14,7 @@ mod gt_edit;
 mod panels;
 mod queries;
 mod runtime;
-pub mod state;
+pub use crate::session as state;
 mod window;
 pub mod worker;
 

@@ -434,6 +434,17 @@ fn bad_frames_and_parameters_get_one_clear_message() {
         !ok && err.contains("400.0 GB") && err.contains("lower samples or res"),
         "{err}"
     );
+    // Numbers in messages stay short; a negative value is a value, not a flag.
+    let (ok, err) = track(&["--eps", "1e308"]);
+    assert!(
+        !ok && err.contains("got 1.000e308") && err.len() < 300,
+        "{err}"
+    );
+    let (ok, err) = track(&["--eps", "-1"]);
+    assert!(
+        !ok && err.contains("eps must be a number in 0..=1000, got -1"),
+        "{err}"
+    );
     // --sm means nothing to a whole tracker.
     let (ok, err) = track(&["--tracker", "kcf", "--sm", "iclk"]);
     assert!(!ok && err.contains("cannot be used with"), "{err}");

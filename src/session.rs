@@ -1,5 +1,7 @@
-//! The saved state of the inspector (a session): the sequence, the trackers and their parameters,
-//! the current frame and the view. Everything else (textures, worker, results) is runtime state.
+//! A session of the inspector (its saved state, `sessions/*.toml`): the sequence, the trackers and
+//! their parameters, the current frame and the view. Everything else (textures, worker, results)
+//! is the inspector's runtime state. In the core (no GUI needed) so that the readers are checked
+//! and fuzzed without a window; the inspector re-exports it as `app::state`.
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;

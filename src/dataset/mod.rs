@@ -292,11 +292,9 @@ impl Sequence {
     }
 }
 
-/// Why ground-truth corners cannot be a target's, if they cannot: coordinates beyond
-/// [`crate::gt::journal::MAX_COORDINATE`], or a quad that is not convex (folded, collinear) or
-/// is tiny.
+/// Why ground-truth corners cannot be a target's, if they cannot ([`Quad::unusable`]).
 pub fn unusable_quad(q: &Quad) -> Option<String> {
-    crate::gt::journal::check_mark(&crate::gt::Mark::Quad(q.to_array())).err()
+    q.unusable()
 }
 
 /// Whether a ground-truth file is in the POT naming (`<seq>_gt_points.txt`).

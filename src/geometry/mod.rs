@@ -131,6 +131,23 @@ impl Quad {
             .sum::<f64>()
             .sqrt()
     }
+    /// Why the quad cannot be a target's, if it cannot: a coordinate that is not finite or
+    /// beyond [`MAX_COORDINATE`], or a quad that is not convex (folded, collinear) or is tiny
+    /// ([`Quad::validate`]). What ground truth, corrections and sessions may hold.
+    pub fn unusable(&self) -> Option<String> {
+        if let Some(x) = self
+            .to_array()
+            .into_iter()
+            .find(|x| !x.is_finite() || x.abs() > MAX_COORDINATE)
+        {
+            return Some(format!(
+                "a corner coordinate of {} is not a pixel position (at most {MAX_COORDINATE:e} px)",
+                crate::error::short_number(x, 2)
+            ));
+        }
+        self.validate().err().map(|e| e.to_string())
+    }
+
     /// Checks that a quad can start a tracker: finite, convex and not tiny.
     pub fn validate(&self) -> crate::Result<()> {
         if !self.is_finite() {
@@ -171,6 +188,10 @@ impl std::fmt::Display for Quad {
         )
     }
 }
+
+/// The largest coordinate a usable quad may have (px): far beyond any frame, small enough that
+/// every computation on it stays finite.
+pub const MAX_COORDINATE: f64 = 1e7;
 
 /// Applies a homography to a point (`None`-free: a point at infinity gives non-finite values).
 #[inline]

@@ -165,28 +165,16 @@ pub fn sequence_of(parsed: &Parsed) -> Option<&str> {
     }
 }
 
-/// The largest coordinate a correction may have (px): far beyond any frame, small enough that
-/// every computation on it stays finite.
-pub const MAX_COORDINATE: f64 = 1e7;
-
-/// Checks a correction: an occlusion, or a finite, convex, not tiny quad within
-/// [`MAX_COORDINATE`] (what the editor can make and the evaluation can use).
+/// Checks a correction: an occlusion, or a usable quad ([`crate::geometry::Quad::unusable`]:
+/// what the editor can make and the evaluation can use).
 pub fn check_mark(m: &Mark) -> std::result::Result<(), String> {
-    let Mark::Quad(v) = m else {
-        return Ok(());
-    };
-    if let Some(x) = v
-        .iter()
-        .find(|x| !x.is_finite() || x.abs() > MAX_COORDINATE)
-    {
-        return Err(format!(
-            "a corner coordinate of {} is not a pixel position (at most {MAX_COORDINATE:e} px)",
-            crate::error::short_number(*x, 2)
-        ));
+    match m {
+        Mark::Quad(v) => match crate::geometry::Quad::from_array(*v).unusable() {
+            Some(why) => Err(why),
+            None => Ok(()),
+        },
+        Mark::Occluded => Ok(()),
     }
-    crate::geometry::Quad::from_array(*v)
-        .validate()
-        .map_err(|e| e.to_string())
 }
 
 /// Reads a journal file (`Ok(None)` when there is none).

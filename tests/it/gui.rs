@@ -405,6 +405,37 @@ fn screenshot_under_xvfb_is_not_blank() {
         colours.insert(p.0);
     }
     assert!(colours.len() > 500, "only {} colours", colours.len());
+    // A sequence that cannot be shown: the window with the error is captured and the command
+    // fails, instead of waiting for frames forever.
+    let empty = d.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let malformed = d.path().join("bad.txt");
+    std::fs::write(&malformed, "1 2 3\n").unwrap();
+    for (bad, what) in [(&empty, "no png"), (&malformed, "bad.txt:1")] {
+        let shot = d.path().join("bad_shot.png");
+        let _ = std::fs::remove_file(&shot);
+        let out = std::process::Command::new("timeout")
+            .args(["120", "xvfb-run", "-a", "-s", "-screen 0 1400x900x24"])
+            .arg(env!("CARGO_BIN_EXE_regtrack"))
+            .args(["inspect", "--seq"])
+            .arg(bad)
+            .args(["--frames", "1", "--screenshot"])
+            .arg(&shot)
+            .env("XDG_RUNTIME_DIR", &runtime)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_ne!(
+            out.status.code(),
+            Some(124),
+            "{what}: the inspector did not exit"
+        );
+        assert!(!out.status.success() && err.contains(what), "{what}: {err}");
+        assert!(
+            shot.is_file(),
+            "{what}: the window with the error is captured"
+        );
+    }
 }
 
 #[test]

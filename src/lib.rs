@@ -53,6 +53,8 @@ pub mod landscape;
 pub mod linalg;
 pub mod observe;
 pub mod params;
+#[cfg(feature = "python")]
+pub mod python;
 pub mod registration;
 pub mod registry;
 pub mod report;

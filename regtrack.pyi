@@ -1,0 +1,82 @@
+"""Type stubs of the Python module `regtrack` (the crate's `python` feature)."""
+
+from os import PathLike
+from typing import Any, Iterator, Optional, Sequence as Seq, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+Frame = Union[npt.NDArray[np.uint8], npt.NDArray[np.float32]]
+"""Grey (H, W) or BGR (H, W, 3) (OpenCV's order), uint8 or float32, any strides."""
+
+Corners = Union[npt.ArrayLike, Seq[Seq[float]]]
+"""Four points (x, y), shape (4, 2): top-left, top-right, bottom-right, bottom-left."""
+
+class Error(Exception):
+    """An error of the library, with the command line's message."""
+
+class Tracker:
+    """A registration tracker (search method, appearance model, state space model) or a whole
+    tracker (``tracker="kcf"``); keyword arguments set any of its parameters by name."""
+
+    def __init__(
+        self,
+        sm: Optional[str] = None,
+        am: Optional[str] = None,
+        ssm: Optional[str] = None,
+        *,
+        tracker: Optional[str] = None,
+        **params: Any,
+    ) -> None: ...
+    def initialize(self, frame: Frame, corners: Corners) -> None:
+        """Starts tracking ``corners`` in ``frame``."""
+    def update(
+        self, frame: Frame, record: bool = False
+    ) -> Tuple[npt.NDArray[np.float64], str]:
+        """Tracks one frame: ``(corners (4, 2), status)``; status is ``"tracking"``,
+        ``"lost: <reason>"`` or ``"uninitialized"``."""
+    def set_corners(self, corners: Corners) -> None:
+        """Moves the tracker to ``corners``, keeping its template; resumes a lost tracker."""
+    @property
+    def corners(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def label(self) -> str: ...
+    @property
+    def last_update_us(self) -> float:
+        """The library's own time in the last initialize or update, microseconds."""
+    @property
+    def iterations(self) -> Optional[dict[str, npt.NDArray[Any]]]:
+        """The last ``update(frame, record=True)``'s iterations: ``level``, ``similarity``,
+        ``step``, ``params`` (n, DOF) and ``corners`` (n, 4, 2)."""
+
+class Sequence:
+    """A sequence in any layout the command line reads, as ``(frame, ground_truth)`` pairs."""
+
+    def __init__(self, path: Union[str, PathLike[str]]) -> None: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def ground_truth(self) -> npt.NDArray[np.float64]:
+        """(n, 4, 2), NaN where a frame is not annotated."""
+    def __len__(self) -> int: ...
+    def __getitem__(
+        self, i: int
+    ) -> Tuple[npt.NDArray[np.uint8], Optional[npt.NDArray[np.float64]]]: ...
+    def __iter__(
+        self,
+    ) -> Iterator[Tuple[npt.NDArray[np.uint8], Optional[npt.NDArray[np.float64]]]]: ...
+
+def list_methods() -> dict[str, list[dict[str, Any]]]:
+    """Every method by kind (``sm``, ``am``, ``ssm``, ``tracker``): name, aliases, description."""
+
+def list_text() -> str:
+    """What ``regtrack list`` prints: every method with its parameters."""
+
+def alignment_error(a: Corners, b: Corners) -> float:
+    """The mean distance of the corners of two quads, px."""

@@ -1,0 +1,543 @@
+//! The Python module `regtrack` (feature `python`; built by maturin from `pyproject.toml`).
+//!
+//! A thin layer over the library: trackers are built from the same registries and parameter
+//! definitions as the command line ([`TrackerSpec::from_names`], [`TrackerSpec::set_param`]),
+//! so nothing is listed twice. Frames are numpy arrays (`uint8` or `float32`, grey `(H, W)` or
+//! OpenCV's BGR `(H, W, 3)`, any strides); corners are `(4, 2)` arrays. The GIL is released while
+//! a tracker initialises or updates, so trackers in several Python threads run in parallel.
+//!
+//! Errors: a frame or corners of the wrong type or shape, or non-finite corners, raise
+//! `ValueError` naming what was expected; a library error raises `regtrack.Error` with the
+//! command line's text. A loss of track is a status, not an exception.
+
+use crate::geometry::{Point, Quad};
+use crate::imaging::{GrayF32, GrayU8, Image, luma};
+use crate::observe::{NoObserver, Recorder};
+use crate::status::TrackStatus;
+use crate::tracker::{FrameInput, Tracker, TrackerSpec};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArray2, PyArray3, PyArrayLike2, PyArrayMethods,
+    PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyException, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+pyo3::create_exception!(
+    regtrack,
+    Error,
+    PyException,
+    "An error of the regtrack library (an unknown method, a parameter out of range, a region a \
+     tracker cannot start from...), with the command line's message."
+);
+
+fn library_error(e: crate::Error) -> PyErr {
+    Error::new_err(e.to_string())
+}
+
+/// A frame converted for the tracker, in buffers the tracker object keeps (no allocation per
+/// frame once their size is known).
+#[derive(Default)]
+struct FrameBuffers {
+    gray: GrayU8,
+    float: GrayF32,
+    /// Which of the two holds the frame.
+    is_float: bool,
+}
+
+impl FrameBuffers {
+    fn input(&self) -> FrameInput<'_> {
+        if self.is_float {
+            FrameInput::Gray32(&self.float)
+        } else {
+            FrameInput::Gray8(&self.gray)
+        }
+    }
+
+    /// Copies (and for colour, converts to grey) a numpy frame.
+    fn load(&mut self, frame: &Bound<'_, PyAny>) -> PyResult<()> {
+        let expected = "a numpy array of uint8 or float32, grey (H, W) or BGR (H, W, 3)";
+        if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, u8>>() {
+            let (h, w, c) = shape_of(a.shape(), expected)?;
+            self.is_float = false;
+            fill(&mut self.gray, w, h);
+            // A C-ordered frame is read as it is; another layout is made C-ordered first.
+            let view = a.as_array();
+            let standard = view.as_standard_layout();
+            let flat = standard.as_slice().expect("standard layout");
+            if c == 1 {
+                self.gray.data.copy_from_slice(flat);
+            } else {
+                for (v, bgr) in self.gray.data.iter_mut().zip(flat.chunks_exact(3)) {
+                    *v = luma(bgr[2], bgr[1], bgr[0]);
+                }
+            }
+            return Ok(());
+        }
+        if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, f32>>() {
+            let (h, w, c) = shape_of(a.shape(), expected)?;
+            self.is_float = true;
+            fill(&mut self.float, w, h);
+            let view = a.as_array();
+            let standard = view.as_standard_layout();
+            let flat = standard.as_slice().expect("standard layout");
+            if c == 1 {
+                self.float.data.copy_from_slice(flat);
+            } else {
+                for (v, bgr) in self.float.data.iter_mut().zip(flat.chunks_exact(3)) {
+                    // BT.601, as `luma` for 8-bit frames.
+                    *v = 0.299 * bgr[2] + 0.587 * bgr[1] + 0.114 * bgr[0];
+                }
+            }
+            return Ok(());
+        }
+        let what = match frame.getattr("dtype") {
+            Ok(d) => format!("an array of dtype {d}"),
+            Err(_) => format!("a {}", frame.get_type().name()?),
+        };
+        Err(PyValueError::new_err(format!(
+            "frame must be {expected}, got {what}"
+        )))
+    }
+}
+
+/// `(height, width, channels)` of a frame's shape: `(H, W)`, `(H, W, 1)` or `(H, W, 3)`.
+fn shape_of(shape: &[usize], expected: &str) -> PyResult<(usize, usize, usize)> {
+    let (h, w, c) = match shape {
+        [h, w] => (*h, *w, 1),
+        [h, w, 1] => (*h, *w, 1),
+        [h, w, 3] => (*h, *w, 3),
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "frame must be {expected}, got shape {shape:?}"
+            )));
+        }
+    };
+    if h == 0 || w == 0 {
+        return Err(PyValueError::new_err(format!(
+            "frame is empty: shape {shape:?}"
+        )));
+    }
+    Ok((h, w, c))
+}
+
+fn fill<T: Default + Clone>(img: &mut Image<T>, w: usize, h: usize) {
+    img.width = w;
+    img.height = h;
+    img.data.resize(w * h, T::default());
+}
+
+/// Corners `(4, 2)` (array, list or tuple; any numeric dtype), finite.
+fn quad_from(corners: &Bound<'_, PyAny>) -> PyResult<Quad> {
+    let expected = "corners must be 4 points (x, y): an array of shape (4, 2)";
+    let a: PyArrayLike2<'_, f64, AllowTypeChange> = corners
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("{expected}, got {corners}")))?;
+    if a.shape() != [4, 2] {
+        return Err(PyValueError::new_err(format!(
+            "{expected}, got shape {:?}",
+            a.shape()
+        )));
+    }
+    let v = a.as_array();
+    let q = Quad([0, 1, 2, 3].map(|i| Point::new(v[[i, 0]], v[[i, 1]])));
+    if !q.is_finite() {
+        return Err(PyValueError::new_err(format!(
+            "corners must be finite, got {q}"
+        )));
+    }
+    Ok(q)
+}
+
+fn quad_to<'py>(py: Python<'py>, q: &Quad) -> Bound<'py, PyArray2<f64>> {
+    let rows: Vec<Vec<f64>> = q.0.iter().map(|p| vec![p.x, p.y]).collect();
+    PyArray2::from_vec2(py, &rows).expect("4 rows of 2")
+}
+
+/// `f()` and the time it took, µs.
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let started = std::time::Instant::now();
+    let out = f();
+    (out, started.elapsed().as_secs_f64() * 1e6)
+}
+
+fn status_text(s: &TrackStatus) -> String {
+    match s {
+        TrackStatus::Uninitialized => "uninitialized".into(),
+        TrackStatus::Tracking => "tracking".into(),
+        TrackStatus::Lost(r) => format!("lost: {r}"),
+    }
+}
+
+/// A value given as a keyword argument, in the typed form parameters are written in.
+fn param_text(v: &Bound<'_, PyAny>) -> PyResult<String> {
+    if let Ok(b) = v.extract::<bool>() {
+        return Ok(if b { "1" } else { "0" }.into());
+    }
+    Ok(v.str()?.to_string())
+}
+
+/// A tracker: a registration tracker (search method, appearance model, state space model) or a
+/// whole tracker (`tracker="kcf"`), with any of its parameters as keyword arguments.
+///
+/// >>> t = regtrack.Tracker("esm", "zncc", "homography", levels=3)
+/// >>> t.initialize(frame, corners)          # corners: (4, 2), clockwise from top-left
+/// >>> corners, status = t.update(next_frame)
+#[pyclass(name = "Tracker", module = "regtrack")]
+pub struct PyTracker {
+    /// Behind a mutex so that the object is `Sync` (a Python object may be shared between
+    /// threads); `&mut self` methods reach it without locking.
+    inner: std::sync::Mutex<Tracker>,
+    frames: FrameBuffers,
+    recorder: Option<Recorder>,
+    /// The library's own time in the last `initialize` or `update` (µs).
+    last_us: f64,
+}
+
+impl PyTracker {
+    fn tracker(&self) -> std::sync::MutexGuard<'_, Tracker> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    fn tracker_mut(&mut self) -> &mut Tracker {
+        self.inner.get_mut().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[pymethods]
+impl PyTracker {
+    /// Builds a tracker. Without names, the default tracker (FCLK-ZNCC-homography). Keyword
+    /// arguments set parameters by name (`regtrack.list_methods()` lists them), checked against
+    /// their definitions.
+    #[new]
+    #[pyo3(signature = (sm=None, am=None, ssm=None, *, tracker=None, **params))]
+    fn new(
+        sm: Option<&str>,
+        am: Option<&str>,
+        ssm: Option<&str>,
+        tracker: Option<&str>,
+        params: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let d = crate::spec::DEFAULT_TRACKER;
+        let mut spec = match tracker {
+            Some(name) => {
+                if sm.is_some() || am.is_some() || ssm.is_some() {
+                    return Err(PyValueError::new_err(format!(
+                        "give either a whole tracker ('{name}') or sm, am, ssm, not both"
+                    )));
+                }
+                TrackerSpec::whole(name)
+            }
+            None => {
+                TrackerSpec::from_names(sm.unwrap_or(d[0]), am.unwrap_or(d[1]), ssm.unwrap_or(d[2]))
+            }
+        }
+        .map_err(library_error)?;
+        if let Some(params) = params {
+            for (k, v) in params.iter() {
+                let name: String = k.extract()?;
+                spec.set_param(&name, &param_text(&v)?)
+                    .map_err(library_error)?;
+            }
+        }
+        Ok(PyTracker {
+            inner: std::sync::Mutex::new(Tracker::new(&spec).map_err(library_error)?),
+            frames: FrameBuffers::default(),
+            recorder: None,
+            last_us: 0.0,
+        })
+    }
+
+    /// Starts tracking `corners` (4 x 2) in `frame`.
+    fn initialize(
+        &mut self,
+        py: Python<'_>,
+        frame: &Bound<'_, PyAny>,
+        corners: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let q = quad_from(corners)?;
+        self.frames.load(frame)?;
+        let (t, f) = (
+            self.inner.get_mut().unwrap_or_else(|e| e.into_inner()),
+            &self.frames,
+        );
+        let started = std::time::Instant::now();
+        let r = py.detach(|| t.initialize(f.input(), &q));
+        self.last_us = started.elapsed().as_secs_f64() * 1e6;
+        r.map_err(library_error)
+    }
+
+    /// Tracks one frame; returns `(corners, status)`: the corners (4 x 2; when lost, the last
+    /// good ones) and `"tracking"`, `"lost: <reason>"` or `"uninitialized"`. With
+    /// `record=True`, the frame's iterations are kept for [`Tracker.iterations`].
+    #[pyo3(signature = (frame, record=false))]
+    fn update<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+        record: bool,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, String)> {
+        self.frames.load(frame)?;
+        let (t, f) = (
+            self.inner.get_mut().unwrap_or_else(|e| e.into_inner()),
+            &self.frames,
+        );
+        let out = if record {
+            let rec = self.recorder.get_or_insert_with(Recorder::default);
+            py.detach(|| timed(|| t.update(f.input(), rec)))
+        } else {
+            self.recorder = None;
+            py.detach(|| timed(|| t.update(f.input(), &mut NoObserver)))
+        };
+        let (out, us) = out;
+        self.last_us = us;
+        Ok((quad_to(py, &out.corners), status_text(&out.status)))
+    }
+
+    /// The current corners (4 x 2).
+    #[getter]
+    fn corners<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        quad_to(py, &self.tracker().corners())
+    }
+
+    /// `"tracking"`, `"lost: <reason>"` or `"uninitialized"`.
+    #[getter]
+    fn status(&self) -> String {
+        status_text(&self.tracker().status())
+    }
+
+    /// Moves the tracker to `corners` (4 x 2), keeping its template; resumes a lost tracker.
+    fn set_corners(&mut self, corners: &Bound<'_, PyAny>) -> PyResult<()> {
+        let q = quad_from(corners)?;
+        self.tracker_mut().set_corners(&q).map_err(library_error)
+    }
+
+    /// The time the library itself took in the last `initialize` or `update`, µs (the rest of
+    /// a call's time is the binding's: reading the frame, the GIL, the result arrays).
+    #[getter]
+    fn last_update_us(&self) -> f64 {
+        self.last_us
+    }
+
+    /// The tracker's label (`sm_am_ssm`, or a whole tracker's name).
+    #[getter]
+    fn label(&self) -> String {
+        self.tracker().spec().label()
+    }
+
+    /// The iterations of the last `update(frame, record=True)`, as numpy arrays: `level`,
+    /// `similarity` (before each step), `step` (the corners' change, px), `params` (n x DOF,
+    /// normalised frame) and `corners` (n x 4 x 2). `None` when the last update did not record.
+    #[getter]
+    fn iterations<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(rec) = &self.recorder else {
+            return Ok(None);
+        };
+        let its = &rec.iterations;
+        let d = PyDict::new(py);
+        d.set_item(
+            "level",
+            PyArray1::from_vec(py, its.iter().map(|i| i.level as i64).collect()),
+        )?;
+        d.set_item(
+            "similarity",
+            PyArray1::from_vec(py, its.iter().map(|i| i.similarity).collect()),
+        )?;
+        d.set_item(
+            "step",
+            PyArray1::from_vec(py, its.iter().map(|i| i.step).collect()),
+        )?;
+        let dof = its.first().map_or(0, |i| i.params.len());
+        let params: Vec<Vec<f64>> = its.iter().map(|i| i.params.clone()).collect();
+        d.set_item(
+            "params",
+            if params.is_empty() {
+                PyArray2::<f64>::zeros(py, [0, dof], false)
+            } else {
+                PyArray2::from_vec2(py, &params).map_err(|e| Error::new_err(e.to_string()))?
+            },
+        )?;
+        let corners: Vec<Vec<Vec<f64>>> = its
+            .iter()
+            .map(|i| i.corners.0.iter().map(|p| vec![p.x, p.y]).collect())
+            .collect();
+        d.set_item(
+            "corners",
+            if corners.is_empty() {
+                PyArray3::<f64>::zeros(py, [0, 4, 2], false)
+            } else {
+                PyArray3::from_vec3(py, &corners).map_err(|e| Error::new_err(e.to_string()))?
+            },
+        )?;
+        Ok(Some(d))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "regtrack.Tracker('{}', status='{}')",
+            self.label(),
+            self.status()
+        )
+    }
+}
+
+/// A frame (grey, `H x W`) and its ground truth (`4 x 2`, `None` when not annotated).
+type FrameAndTruth<'py> = (Bound<'py, PyArray2<u8>>, Option<Bound<'py, PyArray2<f64>>>);
+
+/// A sequence (any layout `regtrack track --seq` reads: MTF, a folder of images, POT), as
+/// `(frame, ground_truth)` pairs: the frame as a grey `uint8` array `(H, W)`, the ground truth as
+/// `(4, 2)` corners or `None` where the frame is not annotated.
+///
+/// >>> seq = regtrack.Sequence("data/bookI.txt")
+/// >>> for frame, gt in seq: ...
+#[pyclass(name = "Sequence", module = "regtrack")]
+pub struct PySequence {
+    seq: crate::dataset::Sequence,
+}
+
+#[pymethods]
+impl PySequence {
+    #[new]
+    fn new(path: std::path::PathBuf) -> PyResult<Self> {
+        Ok(PySequence {
+            seq: crate::dataset::Sequence::open(&path).map_err(library_error)?,
+        })
+    }
+
+    /// The sequence's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.seq.name.clone()
+    }
+
+    /// What the ground truth held that could be read around (each naming file and line).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.seq.warnings.clone()
+    }
+
+    /// Every frame's ground truth, `(n, 4, 2)`, NaN where a frame is not annotated.
+    #[getter]
+    fn ground_truth<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let rows: Vec<Vec<Vec<f64>>> = (0..self.seq.len())
+            .map(|i| match self.seq.ground_truth(i) {
+                Some(q) => q.0.iter().map(|p| vec![p.x, p.y]).collect(),
+                None => vec![vec![f64::NAN; 2]; 4],
+            })
+            .collect();
+        PyArray3::from_vec3(py, &rows).map_err(|e| Error::new_err(e.to_string()))
+    }
+
+    fn __len__(&self) -> usize {
+        self.seq.len()
+    }
+
+    /// Frame `i` and its ground truth (negative indices count from the end).
+    fn __getitem__<'py>(&self, py: Python<'py>, i: isize) -> PyResult<FrameAndTruth<'py>> {
+        let n = self.seq.len() as isize;
+        let k = if i < 0 { i + n } else { i };
+        if !(0..n).contains(&k) {
+            return Err(pyo3::exceptions::PyIndexError::new_err(format!(
+                "frame {i} of a sequence of {n}"
+            )));
+        }
+        let k = k as usize;
+        let seq = &self.seq;
+        let img = py.detach(|| seq.load_gray(k)).map_err(library_error)?;
+        let frame = numpy::PyArray1::from_vec(py, img.data)
+            .reshape([img.height, img.width])
+            .map_err(|e| Error::new_err(e.to_string()))?;
+        Ok((frame, self.seq.ground_truth(k).map(|q| quad_to(py, &q))))
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> SequenceIter {
+        SequenceIter {
+            seq: slf.into(),
+            next: 0,
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "regtrack.Sequence('{}', {} frames)",
+            self.seq.name,
+            self.seq.len()
+        )
+    }
+}
+
+/// The iterator over a [`PySequence`].
+#[pyclass(module = "regtrack")]
+pub struct SequenceIter {
+    seq: Py<PySequence>,
+    next: usize,
+}
+
+#[pymethods]
+impl SequenceIter {
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<FrameAndTruth<'py>>> {
+        let seq = self.seq.borrow(py);
+        if self.next >= seq.seq.len() {
+            return Ok(None);
+        }
+        self.next += 1;
+        seq.__getitem__(py, self.next as isize - 1).map(Some)
+    }
+}
+
+/// Every method of the registries, by kind (`sm`, `am`, `ssm`, `tracker`): a list of dicts with
+/// `name`, `aliases` and `description`; the parameters are in `regtrack.list_text()`.
+#[pyfunction]
+fn list_methods(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    fn entries<'py, B>(
+        py: Python<'py>,
+        reg: &[crate::registry::Entry<B>],
+    ) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for e in reg {
+            let d = PyDict::new(py);
+            d.set_item("name", e.name)?;
+            d.set_item("aliases", e.aliases.to_vec())?;
+            d.set_item("description", e.description)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+    let d = PyDict::new(py);
+    d.set_item("sm", entries(py, crate::sm::REGISTRY)?)?;
+    d.set_item("am", entries(py, crate::am::REGISTRY)?)?;
+    d.set_item("ssm", entries(py, crate::ssm::REGISTRY)?)?;
+    d.set_item("tracker", entries(py, crate::whole::REGISTRY)?)?;
+    Ok(d)
+}
+
+/// What `regtrack list` prints: every method with its parameters (name, range, default, help).
+#[pyfunction]
+fn list_text() -> String {
+    crate::catalogue::listing()
+}
+
+/// The alignment error of two quads (4 x 2 each): the mean distance of their corners, px.
+#[pyfunction]
+fn alignment_error(a: &Bound<'_, PyAny>, b: &Bound<'_, PyAny>) -> PyResult<f64> {
+    Ok(crate::geometry::alignment_error(
+        &quad_from(a)?,
+        &quad_from(b)?,
+    ))
+}
+
+/// The Python module.
+#[pymodule]
+fn regtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyTracker>()?;
+    m.add_class::<PySequence>()?;
+    m.add("Error", m.py().get_type::<Error>())?;
+    m.add_function(wrap_pyfunction!(list_methods, m)?)?;
+    m.add_function(wrap_pyfunction!(list_text, m)?)?;
+    m.add_function(wrap_pyfunction!(alignment_error, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,209 @@
+"""The Python package: tracking a rendered sequence to the command line's corners, the error
+paths, threads, a whole tracker, the per-iteration record and the sequence reader.
+
+Run after `pip install .` (or `maturin develop`): `pytest tests/python`. The command line's
+binary is found in target/{debug,release}/ (or `REGTRACK_BIN`).
+"""
+
+import os
+import pathlib
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import regtrack
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def cli():
+    env = os.environ.get("REGTRACK_BIN")
+    if env:
+        return env
+    for profile in ("debug", "release"):
+        p = ROOT / "target" / profile / "regtrack"
+        if p.is_file():
+            return str(p)
+    pytest.skip("the regtrack binary is not built (cargo build)")
+
+
+@pytest.fixture(scope="session")
+def rendered(tmp_path_factory):
+    """A rendered sequence (MTF layout) with exact ground truth, by the command line."""
+    out = tmp_path_factory.mktemp("data")
+    subprocess.run(
+        [
+            cli(), "synth",
+            "--texture", str(ROOT / "assets/textures/skimage_coffee.png"),
+            "--motion", str(ROOT / "assets/motion/ucsb_bricks_rt.txt"),
+            "--out", str(out), "--name", "rt", "--frames", "20",
+        ],
+        check=True,
+        capture_output=True,
+    )
+    return out / "rt.txt"
+
+
+def read_corners(path):
+    rows = []
+    for line in pathlib.Path(path).read_text().splitlines()[1:]:
+        t = line.split()
+        rows.append(None if t[1] == "lost" else np.array([float(v) for v in t[1:]]).reshape(4, 2))
+    return rows
+
+
+def test_a_tracker_follows_a_rendered_sequence_to_the_command_lines_corners(rendered, tmp_path):
+    seq = regtrack.Sequence(rendered)
+    assert len(seq) == 20 and seq.name == "rt"
+    frames = [f for f, _ in seq]
+    gt = seq.ground_truth
+    assert gt.shape == (20, 4, 2)
+    t = regtrack.Tracker("esm", "ssd", "homography")
+    t.initialize(frames[0], gt[0])
+    ours = [t.corners]
+    for f in frames[1:]:
+        corners, status = t.update(f)
+        assert status == "tracking"
+        assert corners.shape == (4, 2)
+        ours.append(corners)
+    out = tmp_path / "cli.txt"
+    subprocess.run(
+        [cli(), "track", "--seq", str(rendered), "--sm", "esm", "--am", "ssd",
+         "--ssm", "homography", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    theirs = read_corners(out)
+    assert len(theirs) == 20
+    for k, (a, b) in enumerate(zip(ours, theirs)):
+        # The file holds 4 decimals.
+        assert np.abs(a - b).max() < 1e-3, f"frame {k + 1}: {a} vs {b}"
+    assert max(regtrack.alignment_error(a, g) for a, g in zip(ours, gt)) < 1.0
+
+
+def test_colour_and_float_frames_and_any_strides(rendered):
+    seq = regtrack.Sequence(rendered)
+    f0, g0 = seq[0]
+    f1, _ = seq[1]
+    results = []
+    for convert in (
+        lambda f: f,
+        lambda f: np.ascontiguousarray(np.stack([f, f, f], axis=2)),  # BGR, grey content
+        lambda f: f.astype(np.float32),
+        lambda f: np.asfortranarray(f),
+        lambda f: np.pad(f, ((0, 0), (0, 3)))[:, :-3],  # a strided view
+    ):
+        t = regtrack.Tracker("fclk", "zncc", "homography")
+        t.initialize(convert(f0), g0)
+        c, s = t.update(convert(f1))
+        assert s == "tracking"
+        results.append(c)
+    for c in results[1:]:
+        assert np.abs(c - results[0]).max() < 1e-3
+
+
+def test_errors_name_what_was_expected():
+    frame = np.zeros((60, 80), np.uint8)
+    frame[20:40, 30:50] = np.arange(400, dtype=np.uint8).reshape(20, 20)
+    quad = np.array([[30, 20], [50, 20], [50, 40], [30, 40]], float)
+    t = regtrack.Tracker()
+    for bad in (np.zeros((6, 8), np.int16), np.zeros((6, 8, 4), np.uint8), np.zeros((0, 8), np.uint8), "frame"):
+        with pytest.raises(ValueError, match="frame"):
+            t.initialize(bad, quad)
+    for bad in ([[0, 0], [1, 1]], np.full((4, 2), np.nan), "corners"):
+        with pytest.raises(ValueError, match="corners"):
+            t.initialize(frame, bad)
+    with pytest.raises(regtrack.Error, match="unknown search method 'nosuch'"):
+        regtrack.Tracker("nosuch")
+    with pytest.raises(regtrack.Error, match="res must be"):
+        regtrack.Tracker(res=100000)
+    with pytest.raises(regtrack.Error, match="has no parameter 'bogus'"):
+        regtrack.Tracker("esm", "ssd", "homography", bogus=1)
+    with pytest.raises(ValueError, match="either a whole tracker"):
+        regtrack.Tracker("esm", tracker="kcf")
+    with pytest.raises(regtrack.Error, match="lies outside"):
+        t.initialize(frame, quad + 1000)
+    # Not initialised: a status, not an exception.
+    c, s = regtrack.Tracker().update(frame)
+    assert s == "uninitialized"
+
+
+def test_parameters_are_the_command_lines(rendered):
+    t = regtrack.Tracker("iclk", "ssd", "affine", res=30, max_iters=10, on_loss="continue")
+    assert t.label == "iclk_ssd_affine"
+    names = {e["name"] for e in regtrack.list_methods()["sm"]}
+    assert {"esm", "iclk", "fclk", "nn", "pf"} <= names
+    assert "kcf" in {e["name"] for e in regtrack.list_methods()["tracker"]}
+    assert "max_iters" in regtrack.list_text()
+
+
+def test_a_whole_tracker(rendered):
+    seq = regtrack.Sequence(rendered)
+    t = regtrack.Tracker(tracker="kcf")
+    f0, g0 = seq[0]
+    t.initialize(f0, g0)
+    for f, g in list(seq)[1:6]:
+        c, s = t.update(f)
+        assert s == "tracking"
+        assert regtrack.alignment_error(c, g) < 20
+
+
+def test_the_iterations_of_a_frame(rendered):
+    seq = regtrack.Sequence(rendered)
+    t = regtrack.Tracker("esm", "ssd", "homography")
+    t.initialize(*seq[0])
+    t.update(seq[1][0], record=True)
+    it = t.iterations
+    n = len(it["similarity"])
+    assert n >= 1
+    assert it["params"].shape == (n, 8) and it["corners"].shape == (n, 4, 2)
+    assert it["step"][-1] < it["step"][0] or n == 1
+    t.update(seq[2][0])
+    assert t.iterations is None
+
+
+def test_set_corners_and_a_lost_tracker_says_so(rendered):
+    seq = regtrack.Sequence(rendered)
+    t = regtrack.Tracker()
+    f0, g0 = seq[0]
+    t.initialize(f0, g0)
+    # A flat frame: the target is gone.
+    c, s = t.update(np.full_like(f0, 128))
+    assert s.startswith("lost"), s
+    assert np.isfinite(c).all()
+    t.set_corners(g0)
+    c, s = t.update(f0)
+    assert s == "tracking"
+
+
+def test_trackers_in_threads_run_in_parallel(rendered):
+    seq = regtrack.Sequence(rendered)
+    frames = [f for f, _ in seq]
+    g0 = seq[0][1]
+
+    def work(rounds):
+        t = regtrack.Tracker("esm", "ssd", "homography", res=80)
+        for _ in range(rounds):
+            t.initialize(frames[0], g0)
+            for f in frames[1:]:
+                t.update(f)
+
+    rounds = 3
+    start = time.perf_counter()
+    work(rounds)
+    work(rounds)
+    serial = time.perf_counter() - start
+    threads = [threading.Thread(target=work, args=(rounds,)) for _ in range(2)]
+    start = time.perf_counter()
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    parallel = time.perf_counter() - start
+    speedup = serial / parallel
+    print(f"2 threads: {speedup:.2f}x")
+    if (os.cpu_count() or 1) >= 2:
+        assert speedup > 1.3, f"2 threads ran {speedup:.2f}x as fast as one"

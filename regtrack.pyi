@@ -80,3 +80,28 @@ def list_text() -> str:
 
 def alignment_error(a: Corners, b: Corners) -> float:
     """The mean distance of the corners of two quads, px."""
+
+def eval(
+    dataset: Union[str, PathLike[str]],
+    sm: Optional[list[str]] = None,
+    am: Optional[list[str]] = None,
+    ssm: Optional[list[str]] = None,
+    trackers: list[str] = ...,
+    seqs: Optional[list[str]] = None,
+    out: Optional[Union[str, PathLike[str]]] = None,
+    reinit: bool = False,
+    gt_ssm: Optional[str] = None,
+    error: str = "alignment",
+    jobs: int = 0,
+    **params: Any,
+) -> list[dict[str, Any]]:
+    """Evaluates trackers on an MTF-layout dataset as ``regtrack eval`` does: the summary rows."""
+
+def synth(
+    texture: Union[str, PathLike[str]],
+    motion: Union[str, PathLike[str]],
+    out: Union[str, PathLike[str]],
+    name: str,
+    **options: Any,
+) -> Sequence:
+    """Renders a sequence with exact ground truth (MTF layout), as ``regtrack synth`` does."""

@@ -529,6 +529,125 @@ fn alignment_error(a: &Bound<'_, PyAny>, b: &Bound<'_, PyAny>) -> PyResult<f64> 
     ))
 }
 
+/// A Python object as serde would read it (through its JSON form).
+fn from_python<T: serde::de::DeserializeOwned>(obj: &Bound<'_, PyAny>) -> PyResult<T> {
+    let text: String = obj
+        .py()
+        .import("json")?
+        .call_method1("dumps", (obj,))?
+        .extract()?;
+    serde_json::from_str(&text).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// A value made for Python from its JSON form (dicts, lists, numbers, `None` for NaN).
+fn to_python<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(v).map_err(|e| Error::new_err(e.to_string()))?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// Evaluates trackers on a dataset in the MTF layout, as `regtrack eval` does, and returns the
+/// summary rows (a list of dicts, one per run and, for trackers on several sequences, one pooled
+/// row `sequence="ALL"`; `pandas.DataFrame(rows)` takes them as they are). Without `sm`, `am`,
+/// `ssm` or `trackers`, the default tracker. With `out`, the run files and summaries are written
+/// there (and a later call resumes the runs it finished). Keyword arguments set parameters.
+#[pyfunction]
+#[pyo3(signature = (dataset, sm=None, am=None, ssm=None, trackers=Vec::new(), seqs=None, out=None, reinit=false, gt_ssm=None, error="alignment", jobs=0, **params))]
+#[allow(clippy::too_many_arguments)]
+fn eval<'py>(
+    py: Python<'py>,
+    dataset: std::path::PathBuf,
+    sm: Option<Vec<String>>,
+    am: Option<Vec<String>>,
+    ssm: Option<Vec<String>>,
+    trackers: Vec<String>,
+    seqs: Option<Vec<String>>,
+    out: Option<std::path::PathBuf>,
+    reinit: bool,
+    gt_ssm: Option<String>,
+    error: &str,
+    jobs: usize,
+    params: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let d = crate::spec::DEFAULT_TRACKER;
+    let only_whole = !trackers.is_empty() && sm.is_none() && am.is_none() && ssm.is_none();
+    let list = |v: Option<Vec<String>>, default: &str| match v {
+        _ if only_whole => Vec::new(),
+        Some(v) => v,
+        None => vec![default.to_string()],
+    };
+    let mut specs = crate::tracker::product(
+        &list(sm, d[0]),
+        &list(am, d[1]),
+        &list(ssm, d[2]),
+        &trackers,
+    )
+    .map_err(library_error)?;
+    let mut assignments = Vec::new();
+    if let Some(params) = params {
+        for (k, v) in params.iter() {
+            assignments.push((k.extract::<String>()?, param_text(&v)?));
+        }
+    }
+    crate::tracker::set_params(&mut specs, &assignments).map_err(library_error)?;
+    let gt_ssm = match gt_ssm {
+        Some(g) if g != crate::eval::OWN_SSM => {
+            Some(crate::gt::ssm_key(&g).map_err(library_error)?)
+        }
+        g => g,
+    };
+    let options = crate::eval::EvalOptions {
+        reinit,
+        gt_ssm,
+        error: crate::eval::ErrorKind::parse(error).map_err(library_error)?,
+        ..crate::eval::EvalOptions::default()
+    };
+    let rows = py
+        .detach(|| -> crate::Result<Vec<crate::eval::Summary>> {
+            let sequences = crate::dataset::discover(&dataset, seqs.as_deref())?;
+            let batch = crate::eval::Batch {
+                options,
+                jobs,
+                out: out.as_deref(),
+                resume: out.is_some(),
+                ..crate::eval::Batch::new(&sequences, &specs)
+            };
+            let plan = batch.plan();
+            let outcome = batch.execute(plan, &|_, _| {})?;
+            let rows = outcome.rows();
+            if let Some(out) = out.as_deref() {
+                crate::eval::write_summaries(out, &rows)?;
+            }
+            Ok(rows)
+        })
+        .map_err(library_error)?;
+    to_python(py, &rows)
+}
+
+/// Renders a synthetic sequence with exact ground truth in the MTF layout (`out/name.txt`,
+/// `out/name/`), as `regtrack synth` does; options are `SynthConfig`'s fields (`noise`,
+/// `max_frames`, `step`, `local_light`, `jpeg_quality`, `seed`...). Returns the sequence.
+#[pyfunction]
+#[pyo3(signature = (texture, motion, out, name, **options))]
+fn synth(
+    py: Python<'_>,
+    texture: std::path::PathBuf,
+    motion: std::path::PathBuf,
+    out: std::path::PathBuf,
+    name: &str,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PySequence> {
+    let mut cfg: crate::dataset::synth::SynthConfig = match options {
+        Some(o) => from_python(o.as_any())?,
+        None => Default::default(),
+    };
+    cfg.texture = texture;
+    cfg.motion = motion;
+    let seq = py
+        .detach(|| crate::dataset::synth::render_sequence(&cfg, &out, name, &|_, _| {}))
+        .map_err(library_error)?;
+    Ok(PySequence { seq })
+}
+
 /// The Python module.
 #[pymodule]
 fn regtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -538,6 +657,8 @@ fn regtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(list_methods, m)?)?;
     m.add_function(wrap_pyfunction!(list_text, m)?)?;
     m.add_function(wrap_pyfunction!(alignment_error, m)?)?;
+    m.add_function(wrap_pyfunction!(eval, m)?)?;
+    m.add_function(wrap_pyfunction!(synth, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

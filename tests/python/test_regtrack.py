@@ -207,3 +207,30 @@ def test_trackers_in_threads_run_in_parallel(rendered):
     print(f"2 threads: {speedup:.2f}x")
     if (os.cpu_count() or 1) >= 2:
         assert speedup > 1.3, f"2 threads ran {speedup:.2f}x as fast as one"
+
+
+def test_synth_and_eval_give_the_command_lines_rows(tmp_path):
+    seq = regtrack.synth(
+        ROOT / "assets/textures/skimage_coffee.png",
+        ROOT / "assets/motion/ucsb_bricks_rt.txt",
+        tmp_path / "data",
+        "rt",
+        max_frames=10,
+        noise=1.0,
+    )
+    assert len(seq) == 10 and seq.name == "rt"
+    with pytest.raises(ValueError, match="unknown field `nois`"):
+        regtrack.synth(ROOT / "assets/textures/skimage_coffee.png",
+                       ROOT / "assets/motion/ucsb_bricks_rt.txt", tmp_path / "x", "x", nois=1)
+    rows = regtrack.eval(tmp_path / "data", sm=["esm", "iclk"], am=["ssd"], ssm=["homography"],
+                         out=tmp_path / "res", res=40)
+    assert [r["tracker"] for r in rows] == ["esm_ssd_homography", "iclk_ssd_homography"]
+    assert all(r["sequence"] == "rt" and r["frames"] == 9 for r in rows)
+    assert rows[0]["sr5"] == 1.0
+    import json
+    written = json.loads((tmp_path / "res/summary.json").read_text())
+    assert [r["sr5"] for r in written] == [r["sr5"] for r in rows]
+    whole = regtrack.eval(tmp_path / "data", trackers=["kcf"])
+    assert [r["tracker"] for r in whole] == ["kcf"]
+    with pytest.raises(regtrack.Error, match="no sequence 'nosuch'"):
+        regtrack.eval(tmp_path / "data", seqs=["nosuch"])

@@ -450,6 +450,10 @@ fn the_journal_survives_200_kills_and_a_full_disk() {
             );
         }
     }
+    println!(
+        "200 kills: {} edits acknowledged and read back, {failed} refused by a full disk",
+        acknowledged.len()
+    );
     assert!(
         acknowledged.len() > 400,
         "{} edits acknowledged",

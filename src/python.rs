@@ -195,6 +195,31 @@ pub struct PyTracker {
 }
 
 impl PyTracker {
+    /// Runs `f` on the tracker and `frame` with the GIL released: a C-ordered grey `uint8`
+    /// frame is read where it is (numpy's buffer; do not write to it from another thread
+    /// meanwhile), any other is first converted into the tracker object's buffers.
+    fn with_frame<R: Send>(
+        &mut self,
+        py: Python<'_>,
+        frame: &Bound<'_, PyAny>,
+        f: impl FnOnce(&mut Tracker, FrameInput<'_>) -> R + Send,
+    ) -> PyResult<(R, f64)> {
+        let t = self.inner.get_mut().unwrap_or_else(|e| e.into_inner());
+        if let Ok(a) = frame.extract::<numpy::PyReadonlyArray2<'_, u8>>()
+            && a.is_c_contiguous()
+            && let Ok(data) = a.as_slice()
+        {
+            let [h, w] = [a.shape()[0], a.shape()[1]];
+            if let Some(view) = crate::imaging::ImageRef::new(w, h, data).filter(|_| w > 0 && h > 0)
+            {
+                return Ok(py.detach(|| timed(|| f(t, FrameInput::View8(view)))));
+            }
+        }
+        self.frames.load(frame)?;
+        let frames = &self.frames;
+        Ok(py.detach(|| timed(|| f(t, frames.input()))))
+    }
+
     fn tracker(&self) -> std::sync::MutexGuard<'_, Tracker> {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -255,14 +280,8 @@ impl PyTracker {
         corners: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
         let q = quad_from(corners)?;
-        self.frames.load(frame)?;
-        let (t, f) = (
-            self.inner.get_mut().unwrap_or_else(|e| e.into_inner()),
-            &self.frames,
-        );
-        let started = std::time::Instant::now();
-        let r = py.detach(|| t.initialize(f.input(), &q));
-        self.last_us = started.elapsed().as_secs_f64() * 1e6;
+        let (r, us) = self.with_frame(py, frame, |t, input| t.initialize(input, &q))?;
+        self.last_us = us;
         r.map_err(library_error)
     }
 
@@ -276,19 +295,16 @@ impl PyTracker {
         frame: &Bound<'py, PyAny>,
         record: bool,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, String)> {
-        self.frames.load(frame)?;
-        let (t, f) = (
-            self.inner.get_mut().unwrap_or_else(|e| e.into_inner()),
-            &self.frames,
-        );
-        let out = if record {
-            let rec = self.recorder.get_or_insert_with(Recorder::default);
-            py.detach(|| timed(|| t.update(f.input(), rec)))
+        let mut rec = if record {
+            Some(self.recorder.take().unwrap_or_default())
         } else {
-            self.recorder = None;
-            py.detach(|| timed(|| t.update(f.input(), &mut NoObserver)))
+            None
         };
-        let (out, us) = out;
+        let (out, us) = self.with_frame(py, frame, |t, input| match rec.as_mut() {
+            Some(r) => t.update(input, r),
+            None => t.update(input, &mut NoObserver),
+        })?;
+        self.recorder = rec;
         self.last_us = us;
         Ok((quad_to(py, &out.corners), status_text(&out.status)))
     }

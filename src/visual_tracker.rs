@@ -4,7 +4,7 @@
 
 use crate::error::Result;
 use crate::geometry::Quad;
-use crate::imaging::{GrayF32, GrayU8};
+use crate::imaging::{GrayF32, GrayU8, ImageRef};
 use crate::landscape::{Landscape, LandscapeSpec};
 use crate::observe::Observer;
 use crate::spec::TrackerSpec;
@@ -19,6 +19,9 @@ pub enum FrameInput<'a> {
     Gray32(&'a GrayF32),
     /// A float frame already smoothed by the caller: used as it is (tracker-only timing).
     Smoothed(&'a GrayF32),
+    /// An 8-bit frame in someone else's buffer (numpy's, a decoder's), read where it is: as
+    /// `Gray8` otherwise.
+    View8(ImageRef<'a, u8>),
 }
 
 impl FrameInput<'_> {
@@ -27,6 +30,7 @@ impl FrameInput<'_> {
         match self {
             FrameInput::Gray8(i) => (i.width, i.height),
             FrameInput::Gray32(i) | FrameInput::Smoothed(i) => (i.width, i.height),
+            FrameInput::View8(i) => (i.width, i.height),
         }
     }
 }

@@ -1,7 +1,7 @@
 //! Separable Gaussian smoothing (of a whole image or only a region), half-size downsampling and
 //! Gaussian pyramids.
 
-use super::{GrayF32, Image, ImageView, Pixel};
+use super::{GrayF32, Image, ImageRef, ImageView, Pixel};
 
 /// A normalised 1-D Gaussian kernel (odd size). A size of 1 or a zero sigma means no smoothing.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,7 +41,7 @@ pub fn gaussian_kernel(size: usize, sigma: f32) -> GaussianKernel {
 /// buffers that keep their allocation between calls.
 #[allow(clippy::too_many_arguments)]
 fn blur_region<T: Pixel>(
-    src: &Image<T>,
+    src: ImageRef<'_, T>,
     kernel: &GaussianKernel,
     (x0, y0, x1, y1): (usize, usize, usize, usize),
     out: &mut Vec<f32>,
@@ -164,7 +164,7 @@ pub fn gaussian_blur<T: Pixel>(src: &Image<T>, kernel: &GaussianKernel) -> GrayF
     let mut out = Vec::new();
     let (mut tmp, mut line) = (Vec::new(), Vec::new());
     blur_region(
-        src,
+        src.into(),
         kernel,
         (0, 0, src.width, src.height),
         &mut out,
@@ -273,7 +273,15 @@ impl Preprocessor {
 
     /// Smooths the region `[x0, x1) x [y0, y1)` (real coordinates, clipped to the image and
     /// rounded outwards) of `src`.
-    pub fn process<T: Pixel>(&mut self, src: &Image<T>, x0: f64, y0: f64, x1: f64, y1: f64) {
+    pub fn process<'a, T: Pixel>(
+        &mut self,
+        src: impl Into<ImageRef<'a, T>>,
+        x0: f64,
+        y0: f64,
+        x1: f64,
+        y1: f64,
+    ) {
+        let src = src.into();
         let clip = |v: f64, hi: usize| -> usize {
             if v.is_nan() {
                 0

@@ -31,6 +31,42 @@ pub struct Image<T> {
     pub data: Vec<T>,
 }
 
+/// An image whose pixels belong to someone else (a frame from numpy, a decoder's buffer): the
+/// width, the height and `width * height` pixels row by row.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageRef<'a, T> {
+    pub width: usize,
+    pub height: usize,
+    pub data: &'a [T],
+}
+
+impl<'a, T> ImageRef<'a, T> {
+    /// A view of `data` as `width x height` pixels (`None` when the lengths disagree).
+    pub fn new(width: usize, height: usize, data: &'a [T]) -> Option<Self> {
+        (width.checked_mul(height) == Some(data.len())).then_some(ImageRef {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// One row.
+    #[inline]
+    pub fn row(&self, y: usize) -> &'a [T] {
+        &self.data[y * self.width..(y + 1) * self.width]
+    }
+}
+
+impl<'a, T> From<&'a Image<T>> for ImageRef<'a, T> {
+    fn from(i: &'a Image<T>) -> Self {
+        ImageRef {
+            width: i.width,
+            height: i.height,
+            data: &i.data,
+        }
+    }
+}
+
 /// 8-bit grayscale image (the live input of a tracker).
 pub type GrayU8 = Image<u8>;
 /// 32-bit float grayscale image, intensities in 0..255.

@@ -178,6 +178,10 @@ impl RegistrationTracker {
                 self.pre.process(img, x0, y0, x1, y1);
                 &mut self.pre
             }
+            FrameInput::View8(img) => {
+                self.pre.process(img, x0, y0, x1, y1);
+                &mut self.pre
+            }
             FrameInput::Smoothed(img) => {
                 if levels == 0 {
                     return;
@@ -441,7 +445,10 @@ impl RegistrationTracker {
                 .map_err(|r| (r, None));
             // The search left the pre-processed region (or failed in it): redo the frame once on
             // a larger region, or on the whole frame after a failure.
-            let raw = matches!(input, FrameInput::Gray8(_) | FrameInput::Gray32(_));
+            let raw = matches!(
+                input,
+                FrameInput::Gray8(_) | FrameInput::Gray32(_) | FrameInput::View8(_)
+            );
             if attempt == 0 && raw {
                 let (rx0, ry0, rx1, ry1) = {
                     let (a, b, c, d) = self.pre.region();

@@ -360,6 +360,11 @@ pub(crate) fn components(n: usize, linked: impl Fn(usize, usize) -> bool) -> Vec
 pub(crate) fn frame_f32(input: FrameInput<'_>) -> Cow<'_, GrayF32> {
     match input {
         FrameInput::Gray8(i) => Cow::Owned(i.to_f32()),
+        FrameInput::View8(i) => Cow::Owned(crate::imaging::Image {
+            width: i.width,
+            height: i.height,
+            data: i.data.iter().map(|&v| v as f32).collect(),
+        }),
         FrameInput::Gray32(i) | FrameInput::Smoothed(i) => Cow::Borrowed(i),
     }
 }

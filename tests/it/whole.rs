@@ -258,3 +258,47 @@ fn kcf_follows_a_contrasted_target_with_raw_pixels() {
         .count();
     assert!(good >= 54, "KCF raw: {good} of 59 frames within 5 px");
 }
+
+/// A frame in someone else's buffer (`FrameInput::View8`, what the Python binding passes for
+/// numpy frames) is tracked exactly as the same frame owned (`Gray8`), by a registration tracker
+/// and a whole tracker.
+#[test]
+fn a_borrowed_frame_tracks_as_an_owned_one() {
+    use regtrack::dataset::synth::{SynthConfig, render_frames};
+    use regtrack::imaging::ImageRef;
+    use regtrack::observe::NoObserver;
+    use regtrack::tracker::{FrameInput, Tracker, TrackerSpec};
+    let cfg = SynthConfig {
+        texture: crate::common::root().join("assets/textures/skimage_coffee.png"),
+        motion: crate::common::root().join("assets/motion/ucsb_bricks_rt.txt"),
+        max_frames: Some(6),
+        ..SynthConfig::default()
+    };
+    let (frames, quads) = render_frames(&cfg).unwrap();
+    for spec in [
+        TrackerSpec::from_names("fclk", "zncc", "homography").unwrap(),
+        TrackerSpec::whole("kcf").unwrap(),
+    ] {
+        let (mut owned, mut borrowed) =
+            (Tracker::new(&spec).unwrap(), Tracker::new(&spec).unwrap());
+        let view = |k: usize| {
+            FrameInput::View8(
+                ImageRef::new(frames[k].width, frames[k].height, &frames[k].data).unwrap(),
+            )
+        };
+        owned
+            .initialize(FrameInput::Gray8(&frames[0]), &quads[0])
+            .unwrap();
+        borrowed.initialize(view(0), &quads[0]).unwrap();
+        for k in 1..frames.len() {
+            let a = owned.update(FrameInput::Gray8(&frames[k]), &mut NoObserver);
+            let b = borrowed.update(view(k), &mut NoObserver);
+            assert_eq!(
+                (a.status, a.corners),
+                (b.status, b.corners),
+                "{}: frame {k}",
+                spec.label()
+            );
+        }
+    }
+}

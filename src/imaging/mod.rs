@@ -269,8 +269,19 @@ pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
     // Room for the largest pixel type (16-bit RGBA) of the largest frame.
     limits.max_alloc = Some(MAX_PIXELS * 8 + (1 << 20));
     reader.limits(limits);
-    reader.decode().map_err(|e| Error::Image {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })
+    // A decoder that panics on a malformed file (zune-jpeg 0.5 overflows on some, found by
+    // fuzzing) is a bad frame, not a crash.
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.decode()))
+        .unwrap_or_else(|_| {
+            Err(image::ImageError::Decoding(
+                image::error::DecodingError::new(
+                    image::error::ImageFormatHint::Unknown,
+                    "the decoder failed on this file (it is malformed)",
+                ),
+            ))
+        })
+        .map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
 }

@@ -168,3 +168,35 @@ fn corners_round_trip_with_lost_frames() {
     assert_eq!(back[1].quad, None);
     assert_eq!(back[2].frame.as_deref(), Some("frame00003.jpg"));
 }
+
+/// The crashes the fuzz targets found, as regression tests: each input of
+/// `tests/fuzz/corpus/image/crash_*` (first byte: the extension, as the `image` target reads it)
+/// is refused with an error naming the file, never a panic. zune-jpeg 0.5 overflows on
+/// `crash_zune_jpeg_overflow` (a multiplication in its bit reader).
+#[test]
+fn images_that_crashed_a_decoder_are_bad_frames() {
+    let d = crate::common::TempDir::new("crashes");
+    let corpus = crate::common::root().join("tests/fuzz/corpus/image");
+    let mut seen = 0;
+    for e in std::fs::read_dir(&corpus).unwrap() {
+        let p = e.unwrap().path();
+        if !p
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("crash_")
+        {
+            continue;
+        }
+        let bytes = std::fs::read(&p).unwrap();
+        let ext = ["png", "jpg", "pgm"][bytes[0] as usize % 3];
+        let frame = d.path().join(format!("frame.{ext}"));
+        std::fs::write(&frame, &bytes[1..]).unwrap();
+        let e = regtrack::imaging::load_gray(&frame)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("frame."), "{}: {e}", p.display());
+        seen += 1;
+    }
+    assert!(seen >= 1);
+}

@@ -25,6 +25,21 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameIma
             seq.len()
         ))
     })?;
+    if seq.video.is_some() {
+        // A video's frames are decoded grey; they are shown grey.
+        let gray = seq.load_gray(i)?;
+        let rgba = gray.data.iter().flat_map(|&v| [v, v, v, 255]).collect();
+        let (width, height) = (gray.width, gray.height);
+        return Ok((
+            gray,
+            FrameImage {
+                index: i,
+                width,
+                height,
+                rgba,
+            },
+        ));
+    }
     let img = load_dynamic(path)?;
     let gray = gray_from_dynamic(&img);
     let rgba = img.to_rgba8();

@@ -13,6 +13,7 @@
 pub mod demo;
 mod groundtruth;
 pub mod synth;
+pub mod video;
 
 pub use groundtruth::{
     GtEntry, parse_ground_truth, parse_ground_truth_bytes, read_ground_truth,
@@ -42,6 +43,8 @@ pub struct Sequence {
     /// corners that are not a usable quad (the frame is then not annotated). Shown by the
     /// command line and the inspector.
     pub warnings: Vec<String>,
+    /// The video the frames are decoded from (`frames` then names them `<video>#<n>`).
+    pub video: Option<std::sync::Arc<video::Video>>,
 }
 
 fn is_image(p: &Path) -> bool {
@@ -88,6 +91,8 @@ impl Sequence {
                 dir.to_path_buf()
             };
             Self::from_parts(&name, &frames_dir, gt.as_deref())
+        } else if path.is_file() && video::is_video(path) {
+            Self::from_video(path)
         } else if path.is_file() {
             Self::open_gt_file(path)
         } else if path.exists() {
@@ -130,6 +135,13 @@ impl Sequence {
             name = base;
         }
         let parent = parent.as_path();
+        // A video with the ground truth's name beside it (`clip.txt` and `clip.mp4`), when there
+        // is no folder of frames.
+        if !parent.join(&name).is_dir()
+            && let Some(v) = video_beside(parent, &name)
+        {
+            return Self::from_video(&v);
+        }
         let candidates = [
             parent.join(&name).join("img"),
             parent.join(&name),
@@ -153,6 +165,60 @@ impl Sequence {
         Self::from_parts(&name, &frames_dir, Some(gt))
     }
 
+    /// A sequence from a video file, with the ground truth beside it (`clip.txt` for
+    /// `clip.mp4`: MTF format, its lines taken in order whatever frames they name, or 8 numbers
+    /// per line), if any.
+    pub fn from_video(path: &Path) -> Result<Self> {
+        let v = video::Video::open(path)?;
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "video".into());
+        let frames: Vec<PathBuf> = (1..=v.frames)
+            .map(|k| PathBuf::from(format!("{}#{k:05}", path.display())))
+            .collect();
+        let gt = path.with_extension("txt");
+        let (ground_truth, gt_path, warnings) = if gt.is_file() {
+            let mut entries = read_ground_truth(&gt)?;
+            let mut warnings = Vec::new();
+            // A video cut short (a copy, a recording that stopped) keeps the frames it has.
+            if entries.len() > frames.len() {
+                warnings.push(format!(
+                    "{}: {} ground-truth lines but {} has {} frames (cut short?): the \
+                     sequence ends there",
+                    gt.display(),
+                    entries.len(),
+                    path.display(),
+                    frames.len()
+                ));
+                entries.truncate(frames.len());
+            }
+            for e in entries.iter_mut() {
+                if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {
+                    warnings.push(format!(
+                        "{}:{}: {why}: the frame is read as not annotated",
+                        gt.display(),
+                        e.line
+                    ));
+                    e.quad = None;
+                }
+            }
+            let mut quads: Vec<Option<Quad>> = entries.iter().map(|e| e.quad).collect();
+            quads.resize(frames.len(), None);
+            (quads, Some(gt), warnings)
+        } else {
+            (Vec::new(), None, Vec::new())
+        };
+        Ok(Sequence {
+            name,
+            frames,
+            ground_truth,
+            gt_path,
+            warnings,
+            video: Some(std::sync::Arc::new(v)),
+        })
+    }
+
     /// A sequence from a folder of frames and an optional ground-truth file.
     pub fn from_parts(name: &str, frames_dir: &Path, gt: Option<&Path>) -> Result<Self> {
         let listed = list_images(frames_dir)?;
@@ -169,6 +235,7 @@ impl Sequence {
                 ground_truth: Vec::new(),
                 gt_path: None,
                 warnings: Vec::new(),
+                video: None,
             });
         };
         let mut entries = read_ground_truth(gt)?;
@@ -249,6 +316,7 @@ impl Sequence {
             ground_truth,
             gt_path: Some(gt.to_path_buf()),
             warnings,
+            video: None,
         })
     }
 
@@ -270,6 +338,9 @@ impl Sequence {
             path: self.gt_path.clone().unwrap_or_default(),
             message: format!("frame index {i} out of range (0..{})", self.len()),
         })?;
+        if let Some(v) = &self.video {
+            return v.frame(i);
+        }
         let img = imaging::load_gray(p)?;
         // Every frame has the first one's size (a tracker's coordinates are the first's).
         if i > 0 {
@@ -295,6 +366,14 @@ impl Sequence {
 /// Why ground-truth corners cannot be a target's, if they cannot ([`Quad::unusable`]).
 pub fn unusable_quad(q: &Quad) -> Option<String> {
     q.unusable()
+}
+
+/// The video `dir/<name>.<ext>` for a video extension, if there is one.
+fn video_beside(dir: &Path, name: &str) -> Option<PathBuf> {
+    video::VIDEO_EXTENSIONS
+        .iter()
+        .map(|e| dir.join(format!("{name}.{e}")))
+        .find(|p| p.is_file())
 }
 
 /// Whether a ground-truth file is in the POT naming (`<seq>_gt_points.txt`).
@@ -329,7 +408,14 @@ fn dataset_entries(root: &Path) -> Result<Vec<(String, PathBuf)>> {
     let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
     let mut found: Vec<(String, PathBuf)> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "txt") && p.with_extension("").is_dir())
+        .filter(|p| {
+            p.extension().is_some_and(|e| e == "txt")
+                && (p.with_extension("").is_dir()
+                    || p.file_stem()
+                        .and_then(|s| s.to_str())
+                        .and_then(|s| video_beside(p.parent().unwrap_or(Path::new(".")), s))
+                        .is_some())
+        })
         .map(|p| {
             (
                 p.file_stem()

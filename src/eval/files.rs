@@ -96,6 +96,19 @@ pub fn input_stamp(seq: &crate::dataset::Sequence) -> String {
     let mut h = Fnv(0xcbf2_9ce4_8422_2325);
     h.write(seq.name.as_bytes());
     h.write(&(seq.frames.len() as u64).to_le_bytes());
+    // A video's frames are in the video file.
+    if let Some(v) = &seq.video {
+        h.write(v.path.as_os_str().as_encoded_bytes());
+        if let Ok(m) = std::fs::metadata(&v.path) {
+            h.write(&m.len().to_le_bytes());
+            let t = m
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos());
+            h.write(&t.to_le_bytes());
+        }
+    }
     for f in &seq.frames {
         h.write(f.as_os_str().as_encoded_bytes());
         match std::fs::metadata(f) {

@@ -200,3 +200,150 @@ fn images_that_crashed_a_decoder_are_bad_frames() {
     }
     assert!(seen >= 1);
 }
+
+/// Whether FFmpeg's programs are here (CI installs them; elsewhere the video tests say they are
+/// skipped).
+fn have_ffmpeg() -> bool {
+    let ok = ["ffmpeg", "ffprobe"].iter().all(|p| {
+        std::process::Command::new(p)
+            .arg("-version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if !ok {
+        assert!(std::env::var_os("CI").is_none(), "ffmpeg is missing on CI");
+        eprintln!("skipped: ffmpeg is not installed");
+    }
+    ok
+}
+
+/// A video made from a rendered sequence (x264, near-lossless) is a sequence: its ground truth
+/// beside it, any frame reached by seeking equal to the same frame decoded in order, tracked as
+/// its frames are (within the codec's loss) by `track` and `eval`; a video cut short is the
+/// frames it has, with a warning naming it, and a frame that cannot be decoded ends the run
+/// naming the file and the frame, keeping the frames before it; a file that is not a video is
+/// one line naming it.
+#[test]
+fn a_video_is_a_sequence() {
+    if !have_ffmpeg() {
+        return;
+    }
+    use crate::cli::{regtrack, succeed, synth};
+    let d = TempDir::new("video");
+    let data = d.path().join("data");
+    succeed(synth(
+        "ucsb_bricks_rt.txt",
+        &data,
+        "rt",
+        &["--frames", "30", "--jpeg-quality", "0"],
+    ));
+    let videos = d.path().join("videos");
+    std::fs::create_dir_all(&videos).unwrap();
+    let clip = videos.join("rt.mp4");
+    let made = std::process::Command::new("ffmpeg")
+        .args(["-v", "error", "-framerate", "25", "-i"])
+        .arg(data.join("rt/frame%05d.png"))
+        .args([
+            "-c:v", "libx264", "-crf", "4", "-g", "10", "-pix_fmt", "yuv420p",
+        ])
+        // The index first: a copy cut short still opens (and fails at the frame it lacks).
+        .args(["-movflags", "+faststart"])
+        .arg(&clip)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    std::fs::copy(data.join("rt.txt"), videos.join("rt.txt")).unwrap();
+    let seq = Sequence::open(&clip).unwrap();
+    assert_eq!((seq.len(), seq.name.as_str()), (30, "rt"));
+    assert!(seq.ground_truth(29).is_some());
+    // Seeking lands on the frame decoding in order gives.
+    let in_order: Vec<_> = (0..30).map(|i| seq.load_gray(i).unwrap()).collect();
+    let frames = Sequence::open(&data.join("rt.txt")).unwrap();
+    for i in [25, 3, 4, 17, 0, 29, 28, 12] {
+        let g = seq.load_gray(i).unwrap();
+        assert_eq!(
+            g.data,
+            in_order[i].data,
+            "frame {} reached by seeking",
+            i + 1
+        );
+        // And it is the rendered frame, within the codec's loss.
+        let png = frames.load_gray(i).unwrap();
+        let mean = g
+            .data
+            .iter()
+            .zip(&png.data)
+            .map(|(&a, &b)| (a as f64 - b as f64).abs())
+            .sum::<f64>()
+            / g.data.len() as f64;
+        assert!(mean < 3.0, "frame {}: mean difference {mean}", i + 1);
+    }
+    // `eval` over a dataset of videos gives the frames' success rates.
+    let res = |root: &Path, out: &str| {
+        let out = d.path().join(out);
+        succeed(regtrack(&[
+            "eval",
+            "--dataset",
+            root.to_str().unwrap(),
+            "--sm",
+            "esm,fclk",
+            "--am",
+            "ssd",
+            "--out",
+            out.to_str().unwrap(),
+        ]));
+        regtrack::eval::read_runs(&out).unwrap()
+    };
+    let (v, f) = (res(&videos, "rv"), res(&data, "rf"));
+    for (a, b) in v.iter().zip(&f) {
+        let (sa, sb) = (a.summary(), b.summary());
+        assert_eq!(sa.sr5, sb.sr5, "{}", sa.tracker);
+        assert!(
+            (sa.mean_error - sb.mean_error).abs() < 0.5,
+            "{} vs {}",
+            sa.mean_error,
+            sb.mean_error
+        );
+    }
+    // Cut short: the run ends at the frame that cannot be decoded, keeping what was tracked.
+    let bytes = std::fs::read(&clip).unwrap();
+    let cut = d.path().join("cut");
+    std::fs::create_dir_all(&cut).unwrap();
+    std::fs::write(cut.join("rt.mp4"), &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = d.path().join("c.txt");
+    std::fs::copy(data.join("rt.txt"), cut.join("rt.txt")).unwrap();
+    let o = regtrack(&[
+        "track",
+        "--seq",
+        cut.join("rt.mp4").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("rt.mp4 has") && err.contains("cut short"),
+        "{err}"
+    );
+    // Its last packet is partial: the run ends there, naming the file and the frame.
+    if !o.status.success() {
+        assert!(
+            err.contains("rt.mp4: frame") && err.contains("could not be decoded"),
+            "{err}"
+        );
+    }
+    let kept = read_ground_truth(&out).unwrap();
+    assert!(
+        kept.len() >= 5 && kept.len() < 30,
+        "{} frames kept",
+        kept.len()
+    );
+    // Not a video at all: one line naming the file.
+    std::fs::write(cut.join("bad.mp4"), b"not a video").unwrap();
+    let e = Sequence::open(&cut.join("bad.mp4"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bad.mp4") && e.contains("not a video") && !e.contains('\n'),
+        "{e}"
+    );
+}

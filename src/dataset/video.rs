@@ -1,0 +1,230 @@
+//! Video files as sequences, decoded by the `ffmpeg` program as a subprocess (grey raw frames on
+//! a pipe), with `ffprobe` for the size, the frame rate and the frame count.
+//!
+//! Why a subprocess (README, "Video"): it needs nothing at build time, so `cargo run` and
+//! `cargo test` keep working on a machine without FFmpeg's development packages, and it has
+//! FFmpeg's whole coverage of containers and codecs. Decoding is sequential. A frame other than
+//! the next one restarts the decoder with an input seek (`-ss` before `-i`: to the keyframe
+//! before it, then decoded up to it), so stepping back or jumping does not decode from the
+//! start. A missing program is an error that names the package to install.
+
+use crate::error::{Error, Result};
+use crate::imaging::GrayU8;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::sync::Mutex;
+
+/// File extensions read as videos.
+pub const VIDEO_EXTENSIONS: &[&str] = &[
+    "mp4", "m4v", "mov", "avi", "mkv", "webm", "mpg", "mpeg", "ts", "wmv", "flv", "ogv",
+];
+
+/// Whether `p` names a video file (by its extension).
+pub fn is_video(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// A video file: its first video stream's size, frame rate and frame count, and the decoder.
+#[derive(Debug)]
+pub struct Video {
+    pub path: PathBuf,
+    pub width: usize,
+    pub height: usize,
+    /// Frames per second (the stream's nominal rate).
+    pub fps: f64,
+    /// Frames in the stream (its packets, counted by `ffprobe`).
+    pub frames: usize,
+    /// The stream's first timestamp, seconds.
+    start: f64,
+    decoder: Mutex<Option<Decoder>>,
+}
+
+impl PartialEq for Video {
+    fn eq(&self, other: &Self) -> bool {
+        self.path == other.path
+    }
+}
+
+#[derive(Debug)]
+struct Decoder {
+    child: Child,
+    out: ChildStdout,
+    /// The frame the next read gives.
+    next: usize,
+}
+
+impl Drop for Decoder {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs an FFmpeg program; its absence is an error naming the package.
+fn command(program: &str) -> Command {
+    let mut c = Command::new(program);
+    c.stdin(Stdio::null());
+    c
+}
+
+fn missing(program: &str, e: std::io::Error) -> Error {
+    Error::InvalidParameter(format!(
+        "cannot run `{program}` ({e}): videos are decoded by FFmpeg's programs; install them \
+         (Debian/Ubuntu: apt-get install ffmpeg)"
+    ))
+}
+
+impl Video {
+    /// Probes a video file.
+    pub fn open(path: &Path) -> Result<Video> {
+        if !path.is_file() {
+            return Err(Error::Missing {
+                path: path.to_path_buf(),
+            });
+        }
+        let out = command("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-select_streams",
+                "v:0",
+                "-count_packets",
+                "-show_entries",
+                "stream=width,height,r_frame_rate,nb_read_packets,start_time",
+                "-of",
+                "default=noprint_wrappers=1",
+            ])
+            .arg(path)
+            .output()
+            .map_err(|e| missing("ffprobe", e))?;
+        let bad = |message: String| Error::Sequence {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = String::from_utf8_lossy(&out.stdout);
+        if !out.status.success() {
+            let why: Vec<String> = String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .map(|l| l.trim().to_string())
+                .filter(|l| !l.is_empty())
+                .collect();
+            return Err(bad(format!(
+                "not a video FFmpeg can read: {}",
+                why.join("; ")
+            )));
+        }
+        let field = |k: &str| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(&format!("{k}=")))
+                .map(str::trim)
+        };
+        let number = |k: &str| -> Result<usize> {
+            field(k)
+                .and_then(|v| v.parse::<usize>().ok())
+                .ok_or_else(|| bad(format!("no video stream (ffprobe gave no {k})")))
+        };
+        let (width, height, frames) = (
+            number("width")?,
+            number("height")?,
+            number("nb_read_packets")?,
+        );
+        let fps = field("r_frame_rate")
+            .and_then(|r| {
+                let (a, b) = r.split_once('/')?;
+                let (a, b) = (a.parse::<f64>().ok()?, b.parse::<f64>().ok()?);
+                (a > 0.0 && b > 0.0).then_some(a / b)
+            })
+            .ok_or_else(|| bad("the video stream has no frame rate".into()))?;
+        let start = field("start_time")
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0);
+        if width == 0 || height == 0 || frames == 0 {
+            return Err(bad("the video stream has no frames".into()));
+        }
+        if (width as u64) * (height as u64) > crate::imaging::MAX_PIXELS {
+            return Err(bad(format!(
+                "{width}x{height} is more than the {} megapixels a frame may have",
+                crate::imaging::MAX_PIXELS >> 20
+            )));
+        }
+        Ok(Video {
+            path: path.to_path_buf(),
+            width,
+            height,
+            fps,
+            frames,
+            start,
+            decoder: Mutex::new(None),
+        })
+    }
+
+    /// Starts decoding at frame `i`.
+    fn spawn(&self, i: usize) -> Result<Decoder> {
+        let mut c = command("ffmpeg");
+        c.args(["-v", "error", "-nostdin"]);
+        if i > 0 {
+            // Half a frame before the frame's timestamp: the decoder lands on it exactly.
+            let t = self.start + (i as f64 - 0.5) / self.fps;
+            c.args(["-ss", &format!("{t:.6}")]);
+        }
+        c.arg("-i")
+            .arg(&self.path)
+            .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray", "-"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null());
+        let mut child = c.spawn().map_err(|e| missing("ffmpeg", e))?;
+        let out = child.stdout.take().expect("piped");
+        Ok(Decoder {
+            child,
+            out,
+            next: i,
+        })
+    }
+
+    /// Frame `i` (0-based) as 8-bit grey. The error names the file and the frame.
+    pub fn frame(&self, i: usize) -> Result<GrayU8> {
+        if i >= self.frames {
+            return Err(Error::Sequence {
+                path: self.path.clone(),
+                message: format!(
+                    "frame {} is beyond the video's {} frames",
+                    i + 1,
+                    self.frames
+                ),
+            });
+        }
+        let mut guard = self.decoder.lock().unwrap_or_else(|e| e.into_inner());
+        // Close frames ahead are decoded through; anything else restarts at the frame.
+        let reuse = guard
+            .as_ref()
+            .is_some_and(|d| d.next <= i && i < d.next + 2 * self.fps.max(1.0) as usize);
+        if !reuse {
+            *guard = Some(self.spawn(i)?);
+        }
+        let d = guard.as_mut().expect("set above");
+        let mut img = GrayU8 {
+            width: self.width,
+            height: self.height,
+            data: vec![0; self.width * self.height],
+        };
+        while d.next <= i {
+            if let Err(e) = d.out.read_exact(&mut img.data) {
+                let at = d.next;
+                *guard = None;
+                return Err(Error::Sequence {
+                    path: self.path.clone(),
+                    message: format!(
+                        "frame {} could not be decoded (the video is cut short or corrupt: {e})",
+                        at + 1
+                    ),
+                });
+            }
+            d.next += 1;
+        }
+        Ok(img)
+    }
+}

@@ -234,3 +234,32 @@ def test_synth_and_eval_give_the_command_lines_rows(tmp_path):
     assert [r["tracker"] for r in whole] == ["kcf"]
     with pytest.raises(regtrack.Error, match="no sequence 'nosuch'"):
         regtrack.eval(tmp_path / "data", seqs=["nosuch"])
+
+
+def test_a_video_tracks_from_python(rendered, tmp_path):
+    import shutil
+    if shutil.which("ffmpeg") is None:
+        assert not os.environ.get("CI"), "ffmpeg is missing on CI"
+        pytest.skip("ffmpeg is not installed")
+    clip = tmp_path / "rt.mp4"
+    subprocess.run(
+        ["ffmpeg", "-v", "error", "-framerate", "25", "-i", str(rendered.parent / "rt/frame%05d.jpg"),
+         "-c:v", "libx264", "-crf", "8", "-pix_fmt", "yuv420p", str(clip)],
+        check=True,
+    )
+    shutil.copy(rendered, tmp_path / "rt.txt")
+    video = regtrack.Sequence(clip)
+    assert len(video) == 20
+    gt = video.ground_truth
+    t = regtrack.Tracker()
+    frame, g0 = video[0]
+    # As OpenCV would give it: BGR.
+    t.initialize(np.stack([frame] * 3, axis=2), g0)
+    errors = []
+    for k, (frame, g) in enumerate(video):
+        if k == 0:
+            continue
+        c, s = t.update(np.stack([frame] * 3, axis=2))
+        assert s == "tracking"
+        errors.append(regtrack.alignment_error(c, g))
+    assert max(errors) < 2.0, max(errors)

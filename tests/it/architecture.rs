@@ -35,6 +35,7 @@ const LAYERS: &[&str] = &[
     "report",
     "session",
     "app",
+    "python",
 ];
 
 /// The crate root's re-exports (`crate::Error` is `crate::error::Error`).

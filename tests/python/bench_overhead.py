@@ -64,6 +64,37 @@ def main():
         wall, lib, over = measure(t, frames, g0, convert)
         print(f"{t.label}, {label}: update {wall:.1f} us from Python, {lib:.1f} us in the "
               f"library, overhead {over:.1f} us (median)")
+    print(f"two trackers in two threads: {threads(frames, g0):.2f}x the speed of one thread "
+          f"({os.cpu_count()} cores)")
+
+
+def threads(frames, g0, rounds=10):
+    """The speed-up of two trackers in two threads over the same work in one (best of 3)."""
+    import threading
+
+    def work():
+        t = regtrack.Tracker("esm", "ssd", "homography", res=80)
+        for _ in range(rounds):
+            t.initialize(frames[0], g0)
+            for f in frames[1:]:
+                t.update(f)
+
+    def serial():
+        start = time.perf_counter()
+        work()
+        work()
+        return time.perf_counter() - start
+
+    def parallel():
+        ths = [threading.Thread(target=work) for _ in range(2)]
+        start = time.perf_counter()
+        for th in ths:
+            th.start()
+        for th in ths:
+            th.join()
+        return time.perf_counter() - start
+
+    return min(serial() for _ in range(3)) / min(parallel() for _ in range(3))
 
 
 if __name__ == "__main__":

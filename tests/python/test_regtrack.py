@@ -179,34 +179,43 @@ def test_set_corners_and_a_lost_tracker_says_so(rendered):
     assert s == "tracking"
 
 
-def test_trackers_in_threads_run_in_parallel(rendered):
+def test_the_gil_is_released_while_a_tracker_works(rendered):
+    """Another Python thread runs while a tracker updates (the speed-up of two trackers in two
+    threads is measured by tests/python/bench_overhead.py, not asserted: timings are noisy)."""
     seq = regtrack.Sequence(rendered)
     frames = [f for f, _ in seq]
-    g0 = seq[0][1]
+    t = regtrack.Tracker("esm", "ssd", "homography", res=200, max_iters=100, eps=0)
+    t.initialize(frames[0], seq[0][1])
 
-    def work(rounds):
-        t = regtrack.Tracker("esm", "ssd", "homography", res=80)
-        for _ in range(rounds):
-            t.initialize(frames[0], g0)
-            for f in frames[1:]:
-                t.update(f)
+    def spin(seconds):
+        n, end = 0, time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            n += 1
+        return n
 
-    rounds = 3
-    start = time.perf_counter()
-    work(rounds)
-    work(rounds)
-    serial = time.perf_counter() - start
-    threads = [threading.Thread(target=work, args=(rounds,)) for _ in range(2)]
-    start = time.perf_counter()
-    for th in threads:
-        th.start()
-    for th in threads:
-        th.join()
-    parallel = time.perf_counter() - start
-    speedup = serial / parallel
-    print(f"2 threads: {speedup:.2f}x")
-    if (os.cpu_count() or 1) >= 2:
-        assert speedup > 1.3, f"2 threads ran {speedup:.2f}x as fast as one"
+    alone = spin(0.05) / 0.05
+    done = threading.Event()
+    calls = []
+
+    def track():
+        for f in frames[1:]:
+            start = time.perf_counter()
+            t.update(f)
+            calls.append(time.perf_counter() - start)
+        done.set()
+
+    th = threading.Thread(target=track)
+    ticks, start = 0, time.perf_counter()
+    th.start()
+    while not done.is_set():
+        ticks += 1
+        time.perf_counter()
+    th.join()
+    elapsed = time.perf_counter() - start
+    assert sum(calls) > 0.5 * elapsed, "the updates took most of the time"
+    # Held, the GIL would stop this thread for the whole of each update.
+    rate = ticks / elapsed
+    assert rate > 0.2 * alone, f"{rate:.0f} loops/s while tracking against {alone:.0f} alone"
 
 
 def test_synth_and_eval_give_the_command_lines_rows(tmp_path):

@@ -3,10 +3,11 @@
 //!
 //! Why a subprocess (README, "Video"): it needs nothing at build time, so `cargo run` and
 //! `cargo test` keep working on a machine without FFmpeg's development packages, and it has
-//! FFmpeg's whole coverage of containers and codecs. Decoding is sequential. A frame other than
-//! the next one restarts the decoder with an input seek (`-ss` before `-i`: to the keyframe
-//! before it, then decoded up to it), so stepping back or jumping does not decode from the
-//! start. A missing program is an error that names the package to install.
+//! FFmpeg's whole coverage of containers and codecs. Decoding is sequential. The frames decoded
+//! last are kept (a bounded cache: stepping back a little decodes nothing); a frame further
+//! away restarts the decoder with an input seek (`-ss` before `-i`: to the keyframe before it,
+//! then decoded up to it), so a jump does not decode from the start. A missing program is an
+//! error that names the package to install.
 
 use crate::error::{Error, Result};
 use crate::imaging::GrayU8;
@@ -40,7 +41,13 @@ pub struct Video {
     /// The stream's first timestamp, seconds.
     start: f64,
     decoder: Mutex<Option<Decoder>>,
+    /// The frames decoded last (newest at the back), at most [`CACHE_BYTES`] of them: stepping
+    /// back a little, as the inspector does, decodes nothing.
+    cache: Mutex<std::collections::VecDeque<(usize, GrayU8)>>,
 }
+
+/// The memory the recently decoded frames of a video may take (at least 4 frames are kept).
+pub const CACHE_BYTES: usize = 64 << 20;
 
 impl PartialEq for Video {
     fn eq(&self, other: &Self) -> bool {
@@ -159,6 +166,7 @@ impl Video {
             frames,
             start,
             decoder: Mutex::new(None),
+            cache: Mutex::new(Default::default()),
         })
     }
 
@@ -197,6 +205,12 @@ impl Video {
                 ),
             });
         }
+        {
+            let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some((_, img)) = cache.iter().find(|(k, _)| *k == i) {
+                return Ok(img.clone());
+            }
+        }
         let mut guard = self.decoder.lock().unwrap_or_else(|e| e.into_inner());
         // Close frames ahead are decoded through; anything else restarts at the frame.
         let reuse = guard
@@ -224,7 +238,21 @@ impl Video {
                 });
             }
             d.next += 1;
+            self.remember(d.next - 1, &img);
         }
         Ok(img)
+    }
+
+    /// Keeps a decoded frame in the cache, dropping the oldest beyond [`CACHE_BYTES`].
+    fn remember(&self, i: usize, img: &GrayU8) {
+        let keep = (CACHE_BYTES / (self.width * self.height).max(1)).max(4);
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        if cache.iter().any(|(k, _)| *k == i) {
+            return;
+        }
+        while cache.len() >= keep {
+            cache.pop_front();
+        }
+        cache.push_back((i, img.clone()));
     }
 }

@@ -256,3 +256,133 @@ impl Video {
         cache.push_back((i, img.clone()));
     }
 }
+
+/// Colours of [`render`]: the tracker's quad, the ground truth's.
+pub const TRACKED_RGB: [u8; 3] = [255, 60, 60];
+pub const TRUTH_RGB: [u8; 3] = [60, 220, 90];
+
+/// Draws the segment `a`-`b` on an RGB image, 2 px wide (samples every half pixel).
+fn draw_segment(
+    rgb: &mut [u8],
+    w: usize,
+    h: usize,
+    a: crate::geometry::Point,
+    b: crate::geometry::Point,
+    c: [u8; 3],
+) {
+    let steps = ((b.x - a.x).hypot(b.y - a.y) * 2.0).ceil().clamp(1.0, 1e5) as usize;
+    for s in 0..=steps {
+        let t = s as f64 / steps as f64;
+        let (x, y) = (a.x + t * (b.x - a.x), a.y + t * (b.y - a.y));
+        for (dx, dy) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+            let (px, py) = ((x - 0.5 + dx).floor(), (y - 0.5 + dy).floor());
+            if px >= 0.0 && py >= 0.0 && (px as usize) < w && (py as usize) < h {
+                let k = 3 * (py as usize * w + px as usize);
+                rgb[k..k + 3].copy_from_slice(&c);
+            }
+        }
+    }
+}
+
+/// Draws a quad's outline, with a dot on its first corner (the orientation).
+pub fn draw_quad(rgb: &mut [u8], w: usize, h: usize, q: &crate::geometry::Quad, c: [u8; 3]) {
+    if !q.is_finite() {
+        return;
+    }
+    for k in 0..4 {
+        draw_segment(rgb, w, h, q.0[k], q.0[(k + 1) % 4], c);
+    }
+    let p = q.0[0];
+    for (dx, dy) in [(-2.0, 0.0), (2.0, 0.0), (0.0, -2.0), (0.0, 2.0)] {
+        draw_segment(
+            rgb,
+            w,
+            h,
+            p,
+            crate::geometry::Point::new(p.x + dx, p.y + dy),
+            c,
+        );
+    }
+}
+
+/// Writes an annotated video of `seq`: each frame with the tracked quad (`tracked[i]`, none
+/// where lost) and the ground truth drawn, encoded by the `ffmpeg` program to `out` (its
+/// extension picks the container and codec FFmpeg defaults to), at the video's frame rate or
+/// 30 fps. Frames past `tracked` are not written.
+pub fn render(
+    seq: &super::Sequence,
+    tracked: &[Option<crate::geometry::Quad>],
+    out: &Path,
+) -> Result<()> {
+    let n = tracked.len().min(seq.len());
+    if n == 0 {
+        return Err(Error::InvalidParameter("no frame to render".into()));
+    }
+    let first = seq.load_gray(0)?;
+    let (w, h) = (first.width, first.height);
+    let fps = seq.video.as_ref().map_or(30.0, |v| v.fps);
+    if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+    }
+    let mut child = command("ffmpeg")
+        .args([
+            "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s",
+        ])
+        .arg(format!("{w}x{h}"))
+        .args(["-r", &format!("{fps}"), "-i", "-"])
+        // Codecs for yuv420p need even sizes.
+        .args([
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .arg(out)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| missing("ffmpeg", e))?;
+    let mut stdin = child.stdin.take().expect("piped");
+    let mut rgb = vec![0u8; 3 * w * h];
+    let mut failed = None;
+    for i in 0..n {
+        let g = if i == 0 {
+            first.clone()
+        } else {
+            seq.load_gray(i)?
+        };
+        if (g.width, g.height) != (w, h) {
+            failed = Some(format!("frame {} has another size", i + 1));
+            break;
+        }
+        for (px, &v) in rgb.chunks_exact_mut(3).zip(&g.data) {
+            px.fill(v);
+        }
+        if let Some(q) = seq.ground_truth(i) {
+            draw_quad(&mut rgb, w, h, &q, TRUTH_RGB);
+        }
+        if let Some(q) = tracked[i] {
+            draw_quad(&mut rgb, w, h, &q, TRACKED_RGB);
+        }
+        if let Err(e) = std::io::Write::write_all(&mut stdin, &rgb) {
+            failed = Some(e.to_string());
+            break;
+        }
+    }
+    drop(stdin);
+    let done = child.wait_with_output().map_err(|e| Error::io(out, e))?;
+    if let Some(why) = failed.or_else(|| {
+        (!done.status.success()).then(|| {
+            String::from_utf8_lossy(&done.stderr)
+                .trim()
+                .replace('\n', "; ")
+        })
+    }) {
+        return Err(Error::Image {
+            path: out.to_path_buf(),
+            message: format!("cannot write the annotated video: {why}"),
+        });
+    }
+    Ok(())
+}

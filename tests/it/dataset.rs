@@ -350,3 +350,91 @@ fn a_video_is_a_sequence() {
         "{e}"
     );
 }
+
+/// `track --render` and `eval --render` write annotated videos: every tracked frame, with the
+/// tracked quad drawn in red where the tracker put it.
+#[test]
+fn an_annotated_video_shows_the_tracked_quad() {
+    if !have_ffmpeg() {
+        return;
+    }
+    use crate::cli::{regtrack, succeed, synth};
+    let d = TempDir::new("render");
+    let data = d.path().join("data");
+    succeed(synth(
+        "ucsb_bricks_rt.txt",
+        &data,
+        "rt",
+        &["--frames", "12"],
+    ));
+    let video = d.path().join("out/rt.mp4");
+    let corners = d.path().join("c.txt");
+    succeed(regtrack(&[
+        "track",
+        "--seq",
+        data.join("rt.txt").to_str().unwrap(),
+        "--out",
+        corners.to_str().unwrap(),
+        "--render",
+        video.to_str().unwrap(),
+    ]));
+    let clip = Sequence::open(&video).unwrap();
+    assert_eq!(clip.len(), 12);
+    // Frame 6 as RGB: red along the tracked quad's top edge, not elsewhere.
+    let raw = std::process::Command::new("ffmpeg")
+        .args(["-v", "error", "-i"])
+        .arg(&video)
+        .args([
+            "-vf",
+            "select=eq(n\\,5)",
+            "-frames:v",
+            "1",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+            "-",
+        ])
+        .output()
+        .unwrap()
+        .stdout;
+    let (w, h) = (
+        clip.load_gray(0).unwrap().width,
+        clip.load_gray(0).unwrap().height,
+    );
+    assert_eq!(raw.len(), 3 * w * h);
+    let tracked = read_ground_truth(&corners).unwrap()[5].quad.unwrap();
+    let red = |x: f64, y: f64| {
+        let k = 3 * (y.round() as usize * w + x.round() as usize);
+        raw[k] > 150 && raw[k + 1] < 120 && raw[k + 2] < 120
+    };
+    let (a, b) = (tracked.0[0], tracked.0[1]);
+    let on_edge = (1..10)
+        .filter(|&s| {
+            let t = s as f64 / 10.0;
+            red(a.x + t * (b.x - a.x), a.y + t * (b.y - a.y))
+        })
+        .count();
+    assert!(
+        on_edge >= 7,
+        "{on_edge} of 9 points of the top edge are red"
+    );
+    let c = tracked.centroid();
+    assert!(!red(c.x, c.y), "the quad's centre is not drawn on");
+    // eval: one video per run beside its files.
+    let res = d.path().join("res");
+    succeed(regtrack(&[
+        "eval",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--sm",
+        "esm",
+        "--am",
+        "ssd",
+        "--out",
+        res.to_str().unwrap(),
+        "--render",
+    ]));
+    let per_run = res.join("tracking_data/rt/esm_ssd_homography.mp4");
+    assert_eq!(Sequence::open(&per_run).unwrap().len(), 12);
+}

@@ -52,6 +52,10 @@ pub enum Command {
         /// Output corners file.
         #[arg(long)]
         out: PathBuf,
+        /// Also write an annotated video (`out.mp4`, `.webm`, `.avi`...): the frames with the
+        /// tracked quad (red) and the ground truth (green), encoded by FFmpeg.
+        #[arg(long)]
+        render: Option<PathBuf>,
     },
     /// Evaluate every (sequence, SM, AM, SSM) of a dataset in the MTF layout.
     Eval {
@@ -89,6 +93,10 @@ pub enum Command {
         /// Run everything again, even the runs a previous (killed) batch in --out finished.
         #[arg(long)]
         no_resume: bool,
+        /// Also write an annotated video of each run, `tracking_data/<seq>/<tracker>.mp4`: the
+        /// frames with the tracked quad (red) and the ground truth (green), encoded by FFmpeg.
+        #[arg(long)]
+        render: bool,
     },
     /// Low-DOF ground truth (the paper's protocol): per sequence and SSM, the warp of the first
     /// frame's quad with the least alignment error to each frame's 8-DOF ground truth, written

@@ -62,7 +62,8 @@ fn run() -> Result<()> {
             tracker,
             init,
             out,
-        } => run_track(&seq, &tracker, init.map(|c| c.0), &out),
+            render,
+        } => run_track(&seq, &tracker, init.map(|c| c.0), &out, render.as_deref()),
         Command::Eval {
             dataset,
             seqs,
@@ -74,6 +75,7 @@ fn run() -> Result<()> {
             gt_ssm,
             error,
             no_resume,
+            render,
         } => {
             let gt_ssm = match gt_ssm {
                 Some(g) if g != eval::OWN_SSM => Some(gt::ssm_key(&g)?),
@@ -96,7 +98,7 @@ fn run() -> Result<()> {
                 resume: !no_resume,
                 ..Batch::new(&sequences, &specs)
             };
-            run_eval(&batch, &out)
+            run_eval(&batch, &out, render)
         }
         Command::GtFit {
             dataset,
@@ -220,6 +222,17 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// A run's corners by frame index (`None` where lost or not tracked), for the first `n` frames.
+fn by_frame(run: &eval::RunResult, n: usize) -> Vec<Option<Quad>> {
+    let mut out = vec![None; n];
+    for f in &run.frames {
+        if let Some(slot) = out.get_mut(f.frame) {
+            *slot = f.corners;
+        }
+    }
+    out
+}
+
 /// Prints what could be read around in the sequences' ground truth (a few lines each).
 fn warn_about(sequences: &[Sequence]) {
     const SHOWN: usize = 5;
@@ -237,7 +250,13 @@ fn warn_about(sequences: &[Sequence]) {
     }
 }
 
-fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) -> Result<()> {
+fn run_track(
+    seq: &Path,
+    t: &TrackerArgs,
+    init: Option<Vec<f64>>,
+    out: &Path,
+    render: Option<&Path>,
+) -> Result<()> {
     let seq = Sequence::open(seq)?;
     warn_about(std::slice::from_ref(&seq));
     let mut spec = match &t.tracker {
@@ -267,6 +286,10 @@ fn run_track(seq: &Path, t: &TrackerArgs, init: Option<Vec<f64>>, out: &Path) ->
     );
     if !seq.ground_truth.is_empty() {
         print!("{}", eval::summary_table(&[run.summary()]));
+    }
+    if let Some(video) = render {
+        dataset::video::render(&seq, &by_frame(&run, run.frames.len()), video)?;
+        println!("wrote {}", video.display());
     }
     if let Some(e) = &run.error {
         bail!(
@@ -320,7 +343,7 @@ fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bo
     Ok(())
 }
 
-fn run_eval(batch: &Batch, out: &Path) -> Result<()> {
+fn run_eval(batch: &Batch, out: &Path, render: bool) -> Result<()> {
     let plan = batch.plan();
     if !plan.finished.is_empty() {
         println!(
@@ -337,6 +360,17 @@ fn run_eval(batch: &Batch, out: &Path) -> Result<()> {
     eval::write_summaries(out, &rows)?;
     print!("{}", eval::summary_table(&rows));
     println!("wrote {}", out.join("summary.csv").display());
+    if render {
+        for run in &outcome.runs {
+            let Some(seq) = batch.sequences.iter().find(|s| s.name == run.sequence) else {
+                continue;
+            };
+            let video = eval::run_file(out, &run.sequence, &run.spec)
+                .with_file_name(format!("{}.mp4", run.spec.label()));
+            dataset::video::render(seq, &by_frame(run, seq.len()), &video)?;
+            println!("wrote {}", video.display());
+        }
+    }
     if !outcome.failures.is_empty() {
         bail!(
             "{} run(s) failed:\n  {}",

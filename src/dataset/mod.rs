@@ -12,6 +12,7 @@
 
 pub mod demo;
 mod groundtruth;
+pub mod live;
 pub mod synth;
 pub mod video;
 

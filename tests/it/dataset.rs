@@ -438,3 +438,94 @@ fn an_annotated_video_shows_the_tracked_quad() {
     let per_run = res.join("tracking_data/rt/esm_ssd_homography.mp4");
     assert_eq!(Sequence::open(&per_run).unwrap().len(), 12);
 }
+
+/// The live path, on FFmpeg's `testsrc` (which arrives as a live stream through the same code
+/// as a camera): frames as they come, those that arrive while a slow tracker works dropped and
+/// counted, the run recorded as an MTF sequence that opens and replays, and a source that stops
+/// early is an error naming it and the frame, keeping what was tracked.
+#[test]
+fn a_live_source_is_tracked_dropped_recorded_and_its_end_reported() {
+    if !have_ffmpeg() {
+        return;
+    }
+    use crate::cli::{regtrack, succeed};
+    let d = TempDir::new("live");
+    let out = d.path().join("c.txt");
+    let rec = d.path().join("rec");
+    let live = |source: &str, frames: &str, extra: &[&str]| {
+        regtrack(
+            &[
+                &[
+                    "track",
+                    "--camera",
+                    source,
+                    "--size",
+                    "320x240",
+                    "--init",
+                    "100,60,220,60,220,180,100,180",
+                    "--frames",
+                    frames,
+                    "--out",
+                    out.to_str().unwrap(),
+                ][..],
+                extra,
+            ]
+            .concat(),
+        )
+    };
+    let o = live(
+        "lavfi:testsrc=size=320x240:rate=30",
+        "20",
+        &["--record", rec.to_str().unwrap()],
+    );
+    succeed(o.clone());
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("20 frames tracked"), "{said}");
+    let recorded = Sequence::open(&rec.join("live.txt")).unwrap();
+    assert_eq!(recorded.len(), 20);
+    assert!(recorded.ground_truth(0).is_some());
+    assert_eq!(read_ground_truth(&out).unwrap().len(), 20);
+    // A tracker slower than the camera (a 200x200 grid, 100 iterations a frame, no early stop)
+    // drops frames, and says how many.
+    let o = live(
+        "lavfi:testsrc=size=320x240:rate=120",
+        "15",
+        &[
+            "--sm",
+            "esm",
+            "--am",
+            "ssd",
+            "--res",
+            "200",
+            "--max_iters",
+            "100",
+            "--eps",
+            "0",
+        ],
+    );
+    succeed(o.clone());
+    let said = String::from_utf8_lossy(&o.stdout);
+    let dropped: u64 = said
+        .split(", ")
+        .find_map(|p| p.strip_suffix(" dropped"))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(dropped > 0, "{said}");
+    // The source stops after 10 frames of the 30 asked for.
+    let o = live(
+        "lavfi:testsrc=size=320x240:rate=30:duration=0.34",
+        "30",
+        &[],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("stopped after") && err.contains("(frame "),
+        "{err}"
+    );
+    assert!(
+        err.contains("testsrc") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    let kept = read_ground_truth(&out).unwrap().len();
+    assert!((5..30).contains(&kept), "{kept} frames kept");
+}

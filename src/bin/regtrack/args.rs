@@ -36,9 +36,25 @@ pub enum Command {
     },
     /// Track one sequence and write the corners in the MTF format.
     Track {
-        /// A ground-truth file (MTF `<seq>.txt`, POT `_gt_points.txt`) or a folder of images.
+        /// A ground-truth file (MTF `<seq>.txt`, POT `_gt_points.txt`), a folder of images or a
+        /// video file.
+        #[arg(long, required_unless_present = "camera")]
+        seq: Option<PathBuf>,
+        /// A live camera instead: `/dev/video0` (V4L2), or an FFmpeg test source
+        /// `lavfi:testsrc=size=320x240:rate=30`. Needs --init; frames arriving while the
+        /// tracker works are dropped (and counted).
+        #[arg(long, conflicts_with = "seq", requires = "init")]
+        camera: Option<String>,
+        /// The camera's frame size, WxH.
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// With --camera: stop after this many frames (default: until the camera stops).
         #[arg(long)]
-        seq: PathBuf,
+        frames: Option<usize>,
+        /// With --camera: record the frames and the tracked corners as a sequence in the MTF
+        /// layout (`DIR/live.txt`, `DIR/live/`), to evaluate, correct and replay later.
+        #[arg(long, requires = "camera")]
+        record: Option<PathBuf>,
         #[command(flatten)]
         tracker: TrackerArgs,
         /// Initial corners `ulx,uly,urx,ury,lrx,lry,llx,lly` (default: the first ground truth).

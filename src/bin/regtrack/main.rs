@@ -59,11 +59,27 @@ fn run() -> Result<()> {
         Command::Demo { cache } => run_demo(cache.as_deref()),
         Command::Track {
             seq,
+            camera,
+            size,
+            frames,
+            record,
             tracker,
             init,
             out,
             render,
-        } => run_track(&seq, &tracker, init.map(|c| c.0), &out, render.as_deref()),
+        } => match (seq, camera) {
+            (Some(seq), _) => run_track(&seq, &tracker, init.map(|c| c.0), &out, render.as_deref()),
+            (None, Some(camera)) => run_live(
+                &camera,
+                &size,
+                frames,
+                record.as_deref(),
+                &tracker,
+                init.map(|c| c.0).unwrap_or_default(),
+                &out,
+            ),
+            (None, None) => bail!("give --seq or --camera"),
+        },
         Command::Eval {
             dataset,
             seqs,
@@ -298,6 +314,101 @@ fn run_track(
         );
     }
     Ok(())
+}
+
+/// `track --camera`: frames as they come, the newest each time (those that came meanwhile are
+/// dropped and counted), until `frames` or the camera stops; optionally recorded as a sequence.
+fn run_live(
+    camera: &str,
+    size: &str,
+    frames: Option<usize>,
+    record: Option<&Path>,
+    t: &TrackerArgs,
+    init: Vec<f64>,
+    out: &Path,
+) -> Result<()> {
+    let (w, h) = size
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .context("--size must be WxH, e.g. 640x480")?;
+    let mut spec = match &t.tracker {
+        Some(name) => TrackerSpec::whole(name)?,
+        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
+    };
+    tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
+    let arr: [f64; 8] = init
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("--init needs 8 numbers"))?;
+    let quad = Quad::from_array(arr);
+    let mut tracker = tracker::Tracker::new(&spec)?;
+    let mut live = dataset::live::Live::open(camera, w, h)?;
+    let frames_dir = record.map(|d| d.join("live"));
+    if let Some(d) = &frames_dir {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    let (mut corners, mut names) = (Vec::new(), Vec::new());
+    let (mut dropped, mut lost) = (0u64, 0usize);
+    let started = std::time::Instant::now();
+    let mut stopped = None;
+    while frames.is_none_or(|n| corners.len() < n) {
+        let f = match live.next() {
+            Ok(f) => f,
+            Err(e) => {
+                stopped = Some(e);
+                break;
+            }
+        };
+        let input = regtrack::tracker::FrameInput::Gray8(&f.image);
+        let q = if corners.is_empty() {
+            tracker.initialize(input, &quad)?;
+            Some(quad)
+        } else {
+            dropped += f.dropped;
+            let o = tracker.update(input, &mut NoObserver);
+            (o.status == regtrack::tracker::TrackStatus::Tracking).then_some(o.corners)
+        };
+        lost += q.is_none() as usize;
+        if let Some(d) = &frames_dir {
+            let name = format!("frame{:05}.jpg", corners.len() + 1);
+            image::GrayImage::from_raw(w as u32, h as u32, f.image.data)
+                .context("frame size")?
+                .save(d.join(&name))
+                .with_context(|| format!("cannot record {}", d.join(&name).display()))?;
+            names.push(name);
+        }
+        corners.push(q);
+    }
+    let secs = started.elapsed().as_secs_f64();
+    dataset::write_corners(out, &corners, "jpg")?;
+    println!(
+        "{camera}: {} frames tracked in {secs:.1} s ({:.1} fps), {dropped} dropped, {lost} lost; \
+         wrote {}",
+        corners.len(),
+        corners.len() as f64 / secs.max(1e-9),
+        out.display()
+    );
+    if let Some(root) = record {
+        let gt = root.join("live.txt");
+        dataset::write_corners_named(&gt, &corners, &names)?;
+        println!(
+            "recorded {} frames as a sequence: {}",
+            names.len(),
+            gt.display()
+        );
+    }
+    match stopped {
+        // Asked for more frames than came: the camera went away (what was tracked is kept).
+        Some(e) if corners.is_empty() || frames.is_some() => Err(anyhow::anyhow!(
+            "{e} (frame {}); the frames tracked before it are in {}",
+            corners.len() + 1,
+            out.display()
+        )),
+        Some(e) => {
+            println!("{e}");
+            Ok(())
+        }
+        None => Ok(()),
+    }
 }
 
 fn run_gt_fit(root: &Path, seqs: Option<Vec<String>>, ssms: &[String], force: bool) -> Result<()> {

@@ -132,7 +132,7 @@ impl Live {
 
     /// The newest frame not handed out yet, waiting for one if needed; an error once the
     /// source has stopped (naming it and how many frames it gave).
-    pub fn next(&mut self) -> Result<LiveFrame> {
+    pub fn newest(&mut self) -> Result<LiveFrame> {
         let (lock, cv) = &*self.shared;
         let mut slot = lock.lock().unwrap_or_else(|e| e.into_inner());
         loop {

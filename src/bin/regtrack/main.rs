@@ -351,7 +351,7 @@ fn run_live(
     let started = std::time::Instant::now();
     let mut stopped = None;
     while frames.is_none_or(|n| corners.len() < n) {
-        let f = match live.next() {
+        let f = match live.newest() {
             Ok(f) => f,
             Err(e) => {
                 stopped = Some(e);

@@ -602,7 +602,12 @@ impl InspectorApp {
             Reply::Picked(if folder {
                 d.pick_folder()
             } else {
-                d.add_filter("ground truth", &["txt"]).pick_file()
+                let mut exts = vec!["txt"];
+                exts.extend_from_slice(crate::dataset::video::VIDEO_EXTENSIONS);
+                d.add_filter("ground truth or video", &exts)
+                    .add_filter("ground truth", &["txt"])
+                    .add_filter("video", crate::dataset::video::VIDEO_EXTENSIONS)
+                    .pick_file()
             })
         });
         match spawned {

@@ -29,8 +29,11 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 out.push(Command::OpenDialog { folder: true });
             }
             if ui
-                .button("Open ground truth…")
-                .on_hover_text("An MTF <seq>.txt or a POT _gt_points.txt file")
+                .button("Open file…")
+                .on_hover_text(
+                    "An MTF <seq>.txt, a POT _gt_points.txt, or a video (mp4, mkv, avi, webm...) \
+                     with its ground truth beside it",
+                )
                 .clicked()
             {
                 out.push(Command::OpenDialog { folder: false });

@@ -105,3 +105,18 @@ def synth(
     **options: Any,
 ) -> Sequence:
     """Renders a sequence with exact ground truth (MTF layout), as ``regtrack synth`` does."""
+
+class Camera:
+    """A live source (``"/dev/video0"``, or ``"lavfi:testsrc=size=320x240:rate=30"``) read by
+    ffmpeg, as an iterator of grey uint8 frames (H, W), always the newest."""
+
+    def __init__(self, source: str, size: Tuple[int, int] = (640, 480)) -> None: ...
+    @property
+    def dropped(self) -> int:
+        """Frames the source sent that were never handed out."""
+    @property
+    def stopped(self) -> Optional[str]:
+        """Why the source stopped (None while it runs)."""
+    def close(self) -> None: ...
+    def __iter__(self) -> Iterator[npt.NDArray[np.uint8]]: ...
+    def __next__(self) -> npt.NDArray[np.uint8]: ...

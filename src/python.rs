@@ -504,6 +504,86 @@ impl SequenceIter {
     }
 }
 
+/// A live source: a V4L2 camera (`"/dev/video0"`) or an FFmpeg test source
+/// (`"lavfi:testsrc=size=320x240:rate=30"`), read by `ffmpeg`, as an iterator of grey `uint8`
+/// frames `(H, W)`, always the newest: frames that arrive while Python works are dropped and
+/// counted (`dropped`). Iteration ends when the source stops (`stopped` says why); a source
+/// that stops before its first frame raises `regtrack.Error`.
+///
+/// >>> for frame in regtrack.Camera("/dev/video0", size=(640, 480)): ...
+#[pyclass(name = "Camera", module = "regtrack")]
+pub struct PyCamera {
+    live: Option<crate::dataset::live::Live>,
+    dropped: u64,
+    stopped: Option<String>,
+    /// Frames handed out.
+    given: u64,
+}
+
+#[pymethods]
+impl PyCamera {
+    #[new]
+    #[pyo3(signature = (source, size=(640, 480)))]
+    fn new(source: &str, size: (usize, usize)) -> PyResult<Self> {
+        Ok(PyCamera {
+            live: Some(
+                crate::dataset::live::Live::open(source, size.0, size.1).map_err(library_error)?,
+            ),
+            dropped: 0,
+            stopped: None,
+            given: 0,
+        })
+    }
+
+    /// Frames the source sent that were never handed out.
+    #[getter]
+    fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Why the source stopped (`None` while it runs).
+    #[getter]
+    fn stopped(&self) -> Option<String> {
+        self.stopped.clone()
+    }
+
+    /// Stops the source.
+    fn close(&mut self) {
+        self.live = None;
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<u8>>>> {
+        let Some(live) = self.live.as_mut() else {
+            return Ok(None);
+        };
+        match py.detach(|| live.newest()) {
+            Ok(f) => {
+                self.dropped += f.dropped;
+                self.given += 1;
+                let (w, h) = (f.image.width, f.image.height);
+                Ok(Some(
+                    numpy::PyArray1::from_vec(py, f.image.data)
+                        .reshape([h, w])
+                        .map_err(|e| Error::new_err(e.to_string()))?,
+                ))
+            }
+            Err(e) => {
+                self.stopped = Some(e.to_string());
+                self.live = None;
+                // A source that never gave a frame is an error (no camera there, a bad graph).
+                if self.given == 0 {
+                    return Err(library_error(e));
+                }
+                Ok(None)
+            }
+        }
+    }
+}
+
 /// Every method of the registries, by kind (`sm`, `am`, `ssm`, `tracker`): a list of dicts with
 /// `name`, `aliases` and `description`; the parameters are in `regtrack.list_text()`.
 #[pyfunction]
@@ -669,6 +749,7 @@ fn synth(
 fn regtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyTracker>()?;
     m.add_class::<PySequence>()?;
+    m.add_class::<PyCamera>()?;
     m.add("Error", m.py().get_type::<Error>())?;
     m.add_function(wrap_pyfunction!(list_methods, m)?)?;
     m.add_function(wrap_pyfunction!(list_text, m)?)?;

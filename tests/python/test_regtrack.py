@@ -272,3 +272,21 @@ def test_a_video_tracks_from_python(rendered, tmp_path):
         assert s == "tracking"
         errors.append(regtrack.alignment_error(c, g))
     assert max(errors) < 2.0, max(errors)
+
+
+def test_a_live_source_from_python():
+    import shutil
+    if shutil.which("ffmpeg") is None:
+        assert not os.environ.get("CI"), "ffmpeg is missing on CI"
+        pytest.skip("ffmpeg is not installed")
+    cam = regtrack.Camera("lavfi:testsrc=size=320x240:rate=30:duration=1", size=(320, 240))
+    frames = list(cam)
+    assert 5 <= len(frames) <= 30
+    assert frames[0].shape == (240, 320) and frames[0].dtype == np.uint8
+    assert "stopped after" in cam.stopped
+    t = regtrack.Tracker()
+    t.initialize(frames[0], [[100, 60], [220, 60], [220, 180], [100, 180]])
+    c, s = t.update(frames[1])
+    assert c.shape == (4, 2)
+    with pytest.raises(regtrack.Error, match="cannot|not"):
+        list(regtrack.Camera("/dev/nosuchcamera", size=(320, 240)))

@@ -58,38 +58,17 @@ impl FrameBuffers {
     fn load(&mut self, frame: &Bound<'_, PyAny>) -> PyResult<()> {
         let expected = "a numpy array of uint8 or float32, grey (H, W) or BGR (H, W, 3)";
         if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, u8>>() {
-            let (h, w, c) = shape_of(a.shape(), expected)?;
             self.is_float = false;
-            fill(&mut self.gray, w, h);
-            // A C-ordered frame is read as it is; another layout is made C-ordered first.
-            let view = a.as_array();
-            let standard = view.as_standard_layout();
-            let flat = standard.as_slice().expect("standard layout");
-            if c == 1 {
-                self.gray.data.copy_from_slice(flat);
-            } else {
-                for (v, bgr) in self.gray.data.iter_mut().zip(flat.chunks_exact(3)) {
-                    *v = luma(bgr[2], bgr[1], bgr[0]);
-                }
-            }
-            return Ok(());
+            return copy_frame(&mut self.gray, &a, expected, |bgr| {
+                luma(bgr[2], bgr[1], bgr[0])
+            });
         }
         if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, f32>>() {
-            let (h, w, c) = shape_of(a.shape(), expected)?;
             self.is_float = true;
-            fill(&mut self.float, w, h);
-            let view = a.as_array();
-            let standard = view.as_standard_layout();
-            let flat = standard.as_slice().expect("standard layout");
-            if c == 1 {
-                self.float.data.copy_from_slice(flat);
-            } else {
-                for (v, bgr) in self.float.data.iter_mut().zip(flat.chunks_exact(3)) {
-                    // BT.601, as `luma` for 8-bit frames.
-                    *v = 0.299 * bgr[2] + 0.587 * bgr[1] + 0.114 * bgr[0];
-                }
-            }
-            return Ok(());
+            // BT.601, as `luma` for 8-bit frames.
+            return copy_frame(&mut self.float, &a, expected, |bgr| {
+                0.299 * bgr[2] + 0.587 * bgr[1] + 0.114 * bgr[0]
+            });
         }
         let what = match frame.getattr("dtype") {
             Ok(d) => format!("an array of dtype {d}"),
@@ -99,6 +78,29 @@ impl FrameBuffers {
             "frame must be {expected}, got {what}"
         )))
     }
+}
+
+/// Copies a grey frame into `dst`, or converts a BGR one with `grey` (a C-ordered frame is read
+/// as it is; another layout is made C-ordered first).
+fn copy_frame<T: numpy::Element + Copy + Default>(
+    dst: &mut Image<T>,
+    a: &PyReadonlyArrayDyn<'_, T>,
+    expected: &str,
+    grey: impl Fn(&[T]) -> T,
+) -> PyResult<()> {
+    let (h, w, c) = shape_of(a.shape(), expected)?;
+    fill(dst, w, h);
+    let view = a.as_array();
+    let standard = view.as_standard_layout();
+    let flat = standard.as_slice().expect("standard layout");
+    if c == 1 {
+        dst.data.copy_from_slice(flat);
+    } else {
+        for (v, bgr) in dst.data.iter_mut().zip(flat.chunks_exact(3)) {
+            *v = grey(bgr);
+        }
+    }
+    Ok(())
 }
 
 /// `(height, width, channels)` of a frame's shape: `(H, W)`, `(H, W, 1)` or `(H, W, 3)`.

@@ -10,7 +10,7 @@
 use crate::error::{Error, Result};
 use crate::imaging::GrayU8;
 use std::io::Read;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
 
 /// A live source: `/dev/videoN` (V4L2) or `lavfi:<graph>` (an FFmpeg test source).
@@ -46,7 +46,7 @@ impl Live {
         if width == 0 || height == 0 {
             return Err(Error::InvalidParameter("a live source needs a size".into()));
         }
-        let mut c = Command::new("ffmpeg");
+        let mut c = super::video::command("ffmpeg");
         c.args(["-v", "error", "-nostdin"]);
         match source.strip_prefix("lavfi:") {
             Some(graph) => {
@@ -72,15 +72,9 @@ impl Live {
             "gray",
             "-",
         ])
-        .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-        let mut child = c.spawn().map_err(|e| {
-            Error::InvalidParameter(format!(
-                "cannot run `ffmpeg` ({e}): cameras are read by FFmpeg; install it \
-                 (Debian/Ubuntu: apt-get install ffmpeg)"
-            ))
-        })?;
+        let mut child = c.spawn().map_err(|e| super::video::missing("ffmpeg", e))?;
         let mut out = child.stdout.take().expect("piped");
         let mut err = child.stderr.take().expect("piped");
         let shared: Arc<(Mutex<Slot>, Condvar)> = Arc::default();

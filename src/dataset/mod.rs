@@ -46,6 +46,8 @@ pub struct Sequence {
     pub warnings: Vec<String>,
     /// The video the frames are decoded from (`frames` then names them `<video>#<n>`).
     pub video: Option<std::sync::Arc<video::Video>>,
+    /// The first frame's size, read once (every frame must have it).
+    first_size: std::sync::OnceLock<(usize, usize)>,
 }
 
 fn is_image(p: &Path) -> bool {
@@ -194,16 +196,7 @@ impl Sequence {
                 ));
                 entries.truncate(frames.len());
             }
-            for e in entries.iter_mut() {
-                if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {
-                    warnings.push(format!(
-                        "{}:{}: {why}: the frame is read as not annotated",
-                        gt.display(),
-                        e.line
-                    ));
-                    e.quad = None;
-                }
-            }
+            warnings.extend(drop_unusable(&gt, &mut entries));
             let mut quads: Vec<Option<Quad>> = entries.iter().map(|e| e.quad).collect();
             quads.resize(frames.len(), None);
             (quads, Some(gt), warnings)
@@ -217,6 +210,7 @@ impl Sequence {
             gt_path,
             warnings,
             video: Some(std::sync::Arc::new(v)),
+            first_size: Default::default(),
         })
     }
 
@@ -237,22 +231,11 @@ impl Sequence {
                 gt_path: None,
                 warnings: Vec::new(),
                 video: None,
+                first_size: Default::default(),
             });
         };
         let mut entries = read_ground_truth(gt)?;
-        // Corners that cannot be a target's (folded, collinear, tiny, far beyond any frame):
-        // the frame is read as not annotated, and said so.
-        let mut warnings = Vec::new();
-        for e in entries.iter_mut() {
-            if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {
-                warnings.push(format!(
-                    "{}:{}: {why}: the frame is read as not annotated",
-                    gt.display(),
-                    e.line
-                ));
-                e.quad = None;
-            }
-        }
+        let warnings = drop_unusable(gt, &mut entries);
         let named = entries.iter().all(|e| e.frame.is_some()) && !entries.is_empty();
         if named {
             let mut seen: std::collections::HashMap<&str, usize> = Default::default();
@@ -318,6 +301,7 @@ impl Sequence {
             gt_path: Some(gt.to_path_buf()),
             warnings,
             video: None,
+            first_size: Default::default(),
         })
     }
 
@@ -345,7 +329,13 @@ impl Sequence {
         let img = imaging::load_gray(p)?;
         // Every frame has the first one's size (a tracker's coordinates are the first's).
         if i > 0 {
-            let first = imaging::image_size(&self.frames[0])?;
+            let first = match self.first_size.get() {
+                Some(&s) => s,
+                None => {
+                    let s = imaging::image_size(&self.frames[0])?;
+                    *self.first_size.get_or_init(|| s)
+                }
+            };
             if (img.width, img.height) != first {
                 return Err(Error::Image {
                     path: p.clone(),
@@ -367,6 +357,23 @@ impl Sequence {
 /// Why ground-truth corners cannot be a target's, if they cannot ([`Quad::unusable`]).
 pub fn unusable_quad(q: &Quad) -> Option<String> {
     q.unusable()
+}
+
+/// Reads corners that cannot be a target's (folded, collinear, tiny, far beyond any frame) as
+/// not annotated; returns a warning for each, naming `gt` and the line.
+fn drop_unusable(gt: &Path, entries: &mut [GtEntry]) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for e in entries.iter_mut() {
+        if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {
+            warnings.push(format!(
+                "{}:{}: {why}: the frame is read as not annotated",
+                gt.display(),
+                e.line
+            ));
+            e.quad = None;
+        }
+    }
+    warnings
 }
 
 /// The video `dir/<name>.<ext>` for a video extension, if there is one.

@@ -71,16 +71,16 @@ impl Drop for Decoder {
 }
 
 /// Runs an FFmpeg program; its absence is an error naming the package.
-fn command(program: &str) -> Command {
+pub(super) fn command(program: &str) -> Command {
     let mut c = Command::new(program);
     c.stdin(Stdio::null());
     c
 }
 
-fn missing(program: &str, e: std::io::Error) -> Error {
+pub(super) fn missing(program: &str, e: std::io::Error) -> Error {
     Error::InvalidParameter(format!(
-        "cannot run `{program}` ({e}): videos are decoded by FFmpeg's programs; install them \
-         (Debian/Ubuntu: apt-get install ffmpeg)"
+        "cannot run `{program}` ({e}): videos and cameras are read by FFmpeg's programs; \
+         install them (Debian/Ubuntu: apt-get install ffmpeg)"
     ))
 }
 

@@ -87,6 +87,23 @@ impl Fnv {
         // A separator, so that ("ab", "c") and ("a", "bc") differ.
         self.0 = (self.0 ^ 0xff).wrapping_mul(0x0000_0100_0000_01b3);
     }
+
+    /// A file's path, size and modification time (or that it is missing).
+    fn file(&mut self, path: &Path) {
+        self.write(path.as_os_str().as_encoded_bytes());
+        match std::fs::metadata(path) {
+            Ok(m) => {
+                self.write(&m.len().to_le_bytes());
+                let t = m
+                    .modified()
+                    .ok()
+                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos());
+                self.write(&t.to_le_bytes());
+            }
+            Err(_) => self.write(b"missing"),
+        }
+    }
 }
 
 /// A fingerprint of what a run on `seq` reads: its frame list (each frame's name, size and
@@ -98,31 +115,10 @@ pub fn input_stamp(seq: &crate::dataset::Sequence) -> String {
     h.write(&(seq.frames.len() as u64).to_le_bytes());
     // A video's frames are in the video file.
     if let Some(v) = &seq.video {
-        h.write(v.path.as_os_str().as_encoded_bytes());
-        if let Ok(m) = std::fs::metadata(&v.path) {
-            h.write(&m.len().to_le_bytes());
-            let t = m
-                .modified()
-                .ok()
-                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                .map_or(0, |d| d.as_nanos());
-            h.write(&t.to_le_bytes());
-        }
+        h.file(&v.path);
     }
     for f in &seq.frames {
-        h.write(f.as_os_str().as_encoded_bytes());
-        match std::fs::metadata(f) {
-            Ok(m) => {
-                h.write(&m.len().to_le_bytes());
-                let t = m
-                    .modified()
-                    .ok()
-                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                    .map_or(0, |d| d.as_nanos());
-                h.write(&t.to_le_bytes());
-            }
-            Err(_) => h.write(b"missing"),
-        }
+        h.file(f);
     }
     for q in &seq.ground_truth {
         match q {

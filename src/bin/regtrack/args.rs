@@ -375,9 +375,10 @@ fn parse_corners(s: &str) -> Result<Corners, String> {
             v.len()
         ));
     }
-    Ok(Corners(v))
+    let arr: [f64; 8] = v.try_into().expect("8 numbers, checked above");
+    Ok(Corners(regtrack::geometry::Quad::from_array(arr)))
 }
 
 /// The corners `--init` gives.
 #[derive(Clone, Debug)]
-pub struct Corners(pub Vec<f64>);
+pub struct Corners(pub regtrack::geometry::Quad);

@@ -75,7 +75,7 @@ fn run() -> Result<()> {
                 frames,
                 record.as_deref(),
                 &tracker,
-                init.map(|c| c.0).unwrap_or_default(),
+                init.context("--camera needs --init")?.0,
                 &out,
             ),
             (None, None) => bail!("give --seq or --camera"),
@@ -238,6 +238,23 @@ fn run_demo(cache: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// The tracker `--tracker` or `--sm/--am/--ssm` name, with its parameters set.
+fn spec_of(t: &TrackerArgs) -> Result<TrackerSpec> {
+    let mut spec = match &t.tracker {
+        Some(name) => TrackerSpec::whole(name)?,
+        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
+    };
+    tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
+    Ok(spec)
+}
+
+/// `WxH`, e.g. `640x480`.
+fn parse_size(s: &str) -> Result<(usize, usize)> {
+    s.split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .with_context(|| format!("--size must be WxH, e.g. 640x480, got '{s}'"))
+}
+
 /// A run's corners by frame index (`None` where lost or not tracked), for the first `n` frames.
 fn by_frame(run: &eval::RunResult, n: usize) -> Vec<Option<Quad>> {
     let mut out = vec![None; n];
@@ -269,26 +286,13 @@ fn warn_about(sequences: &[Sequence]) {
 fn run_track(
     seq: &Path,
     t: &TrackerArgs,
-    init: Option<Vec<f64>>,
+    init: Option<Quad>,
     out: &Path,
     render: Option<&Path>,
 ) -> Result<()> {
     let seq = Sequence::open(seq)?;
     warn_about(std::slice::from_ref(&seq));
-    let mut spec = match &t.tracker {
-        Some(name) => TrackerSpec::whole(name)?,
-        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
-    };
-    tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
-    let init = match init {
-        Some(v) => {
-            let arr: [f64; 8] = v
-                .try_into()
-                .map_err(|_| anyhow::anyhow!("--init needs 8 numbers"))?;
-            Some(Quad::from_array(arr))
-        }
-        None => None,
-    };
+    let spec = spec_of(t)?;
     let run = eval::run_sequence(&seq, &spec, &EvalOptions::default(), init, &mut NoObserver)?;
     let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
     dataset::write_corners(out, &corners, "jpg")?;
@@ -324,22 +328,11 @@ fn run_live(
     frames: Option<usize>,
     record: Option<&Path>,
     t: &TrackerArgs,
-    init: Vec<f64>,
+    init: Quad,
     out: &Path,
 ) -> Result<()> {
-    let (w, h) = size
-        .split_once(['x', 'X'])
-        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
-        .context("--size must be WxH, e.g. 640x480")?;
-    let mut spec = match &t.tracker {
-        Some(name) => TrackerSpec::whole(name)?,
-        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
-    };
-    tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
-    let arr: [f64; 8] = init
-        .try_into()
-        .map_err(|_| anyhow::anyhow!("--init needs 8 numbers"))?;
-    let quad = Quad::from_array(arr);
+    let (w, h) = parse_size(size)?;
+    let spec = spec_of(t)?;
     let mut tracker = tracker::Tracker::new(&spec)?;
     let mut live = dataset::live::Live::open(camera, w, h)?;
     let frames_dir = record.map(|d| d.join("live"));
@@ -360,8 +353,8 @@ fn run_live(
         };
         let input = regtrack::tracker::FrameInput::Gray8(&f.image);
         let q = if corners.is_empty() {
-            tracker.initialize(input, &quad)?;
-            Some(quad)
+            tracker.initialize(input, &init)?;
+            Some(init)
         } else {
             dropped += f.dropped;
             let o = tracker.update(input, &mut NoObserver);
@@ -493,15 +486,7 @@ fn run_eval(batch: &Batch, out: &Path, render: bool) -> Result<()> {
 }
 
 fn run_synth(a: SynthArgs) -> Result<()> {
-    let size = match a.size {
-        Some(s) => {
-            let (w, h) = s
-                .split_once(['x', 'X'])
-                .context("--size must be WxH, e.g. 640x480")?;
-            Some((w.trim().parse()?, h.trim().parse()?))
-        }
-        None => None,
-    };
+    let size = a.size.as_deref().map(parse_size).transpose()?;
     let cfg = synth::SynthConfig {
         texture: a.texture,
         background: a.background,

@@ -86,7 +86,7 @@ pub fn bench_tracker(
     // a whole tracker's pre-processing is its own business (timed): it gets the frame as floats.
     let smoothed: Vec<GrayF32> = match spec.params() {
         Some(p) => {
-            let kernel = gaussian_kernel(p.blur_size, p.blur_sigma);
+            let kernel = gaussian_kernel(p.blur_size, p.blur_sigma as f32);
             frames
                 .gray
                 .iter()

@@ -87,6 +87,18 @@ impl ParamDef {
         }
     }
 
+    /// A choice among `names` whose default is `names[default]`.
+    pub const fn choice_default(
+        name: &'static str,
+        help: &'static str,
+        names: &'static [&'static str],
+        default: usize,
+    ) -> Self {
+        let mut def = Self::choice(name, help, names);
+        def.default = default as f64;
+        def
+    }
+
     /// Checks `v` against the range (and whole-ness); the error names the parameter.
     pub fn check(&self, owner: &str, v: f64) -> Result<()> {
         let whole = !matches!(self.kind, ParamKind::Float);

@@ -158,7 +158,7 @@ impl RegistrationTracker {
         // The AM takes its own parameters; the search method gets (and checks) the others.
         let am_defs: Vec<&ParamDef> = am::param_defs(&spec.am)?.iter().collect();
         let sm_method = spec.method.split(&am_defs).1;
-        let build = |ssm_name: &str| -> Result<Stage> {
+        let build = |ssm_name: &str, res: usize| -> Result<Stage> {
             let cfg = SmConfig {
                 method: &sm_method,
                 tracker: &spec.params,
@@ -166,15 +166,10 @@ impl RegistrationTracker {
             let model = appearance_model(spec)?;
             let sm = sm::build(&spec.sm, &cfg)?;
             check_capabilities(&*sm, &*model)?;
-            let ctx = Context::new(
-                ssm::build(ssm_name)?,
-                model,
-                spec.params.hessian,
-                spec.params.res,
-            );
+            let ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
             Ok(Stage { ctx, sm })
         };
-        let main = build(&spec.ssm)?;
+        let main = build(&spec.ssm, spec.params.res)?;
         let mut canonical = spec.clone();
         canonical.sm = main.sm.name().to_string();
         canonical.am = main.ctx.am.name().to_string();

@@ -327,13 +327,23 @@ impl BlockCorrelation {
     /// Prepares the confidence against `template` (`res x res`) with `cells x cells` blocks
     /// (at most [`MAX_BLOCKS`] per side); a template shorter than `res x res` gives 0 always.
     pub fn new(template: &[f32], res: usize, cells: usize) -> Self {
+        let mut bc = Self::default();
+        bc.set_template(template, res, cells);
+        bc
+    }
+
+    /// [`BlockCorrelation::new`] in place: once its buffers have grown to `res x res`, it does
+    /// not allocate (the tracker makes one of every frame's patch).
+    pub fn set_template(&mut self, template: &[f32], res: usize, cells: usize) {
         let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
+        self.samples.clear();
+        self.template.clear();
+        self.blocks.clear();
         if res == 0 || template.len() < res * res {
-            return Self::default();
+            return;
         }
-        let mut samples = Vec::with_capacity(res * res);
         // Per block, sums of: 1, x, y, xx, xy, yy, t, tx, ty, tt.
-        let mut acc = vec![[0.0f64; 10]; cells * cells];
+        let mut acc = [[0.0f64; 10]; MAX_BLOCKS * MAX_BLOCKS];
         for r in 0..res {
             let br = r * cells / res;
             // Block-local coordinates keep the sums small.
@@ -342,7 +352,7 @@ impl BlockCorrelation {
                 let bc = c * cells / res;
                 let x = (c - bc * res / cells) as f64;
                 let b = br * cells + bc;
-                samples.push((b as u8, x as f32, y as f32));
+                self.samples.push((b as u8, x as f32, y as f32));
                 let t = template[r * res + c] as f64;
                 let terms = [1.0, x, y, x * x, x * y, y * y, t, t * x, t * y, t * t];
                 for (a, v) in acc[b].iter_mut().zip(terms) {
@@ -350,26 +360,18 @@ impl BlockCorrelation {
                 }
             }
         }
-        let blocks = acc
-            .iter()
-            .map(|b| {
-                let n = b[0];
-                if n < 4.0 {
-                    return None;
-                }
-                let m =
-                    nalgebra::Matrix3::new(b[0], b[1], b[2], b[1], b[3], b[4], b[2], b[4], b[5]);
-                let inv = m.try_inverse()?;
-                let ut = nalgebra::Vector3::new(b[6], b[7], b[8]);
-                let vt = b[9] - ut.dot(&(inv * ut));
-                (vt.is_finite() && vt > 1e-6 * n).then_some((inv, ut, vt, n))
-            })
-            .collect();
-        BlockCorrelation {
-            samples,
-            template: template[..res * res].to_vec(),
-            blocks,
-        }
+        self.blocks.extend(acc[..cells * cells].iter().map(|b| {
+            let n = b[0];
+            if n < 4.0 {
+                return None;
+            }
+            let m = nalgebra::Matrix3::new(b[0], b[1], b[2], b[1], b[3], b[4], b[2], b[4], b[5]);
+            let inv = m.try_inverse()?;
+            let ut = nalgebra::Vector3::new(b[6], b[7], b[8]);
+            let vt = b[9] - ut.dot(&(inv * ut));
+            (vt.is_finite() && vt > 1e-6 * n).then_some((inv, ut, vt, n))
+        }));
+        self.template.extend_from_slice(&template[..res * res]);
     }
 
     /// The confidence of `current` (0 when it is shorter than the template, flat or not finite).

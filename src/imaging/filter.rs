@@ -179,7 +179,8 @@ pub fn gaussian_blur<T: Pixel>(src: &Image<T>, kernel: &GaussianKernel) -> GrayF
 }
 
 /// Halves `src` (`w x h`) into `out`: binomial (1 4 6 4 1)/16 smoothing, then every other
-/// pixel (pixel `i` of the result is pixel `2 i` of the source). `scratch` keeps its allocation.
+/// pixel (pixel `i` of the result is pixel `2 i` of the source), the border replicated.
+/// `scratch` keeps its allocation.
 fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut Vec<f32>) {
     let (ow, oh) = (w.div_ceil(2).max(1), h.div_ceil(2).max(1));
     out.resize(ow, oh);
@@ -187,31 +188,35 @@ fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut V
         out.data.fill(0.0);
         return;
     }
-    let k = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    // Horizontal pass at the kept columns, for every row.
+    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    // Horizontal pass at the kept columns, for every row: the columns whose five taps are all
+    // inside the row without clamping, the others (at most two on each side) with it.
     scratch.resize(ow * h, 0.0);
-    for y in 0..h {
-        let row = &src[y * w..(y + 1) * w];
-        for x in 0..ow {
+    let inner = 1..ow.min((w.saturating_sub(3)) / 2 + 1).max(1);
+    for (row, line) in src.chunks_exact(w).zip(scratch.chunks_exact_mut(ow)) {
+        let tap = |c: isize| row[c.clamp(0, w as isize - 1) as usize];
+        for x in (0..ow).filter(|x| !inner.contains(x)) {
             let c = 2 * x as isize;
-            let mut acc = 0.0;
-            for (t, &kt) in k.iter().enumerate() {
-                let sx = (c + t as isize - 2).clamp(0, w as isize - 1) as usize;
-                acc += kt * row[sx];
-            }
-            scratch[y * ow + x] = acc;
+            line[x] = K[0] * tap(c - 2)
+                + K[1] * tap(c - 1)
+                + K[2] * tap(c)
+                + K[3] * tap(c + 1)
+                + K[4] * tap(c + 2);
+        }
+        for x in inner.clone() {
+            let r = &row[2 * x - 2..2 * x + 3];
+            line[x] = K[0] * (r[0] + r[4]) + K[1] * (r[1] + r[3]) + K[2] * r[2];
         }
     }
-    // Vertical pass at the kept rows.
-    for y in 0..oh {
-        let c = 2 * y as isize;
+    // Vertical pass at the kept rows: five whole rows of the scratch, weighted.
+    for (y, dst) in out.data.chunks_exact_mut(ow).enumerate() {
+        let row = |t: isize| {
+            let sy = (2 * y as isize + t).clamp(0, h as isize - 1) as usize;
+            &scratch[sy * ow..(sy + 1) * ow]
+        };
+        let (a, b, c, d, e) = (row(-2), row(-1), row(0), row(1), row(2));
         for x in 0..ow {
-            let mut acc = 0.0;
-            for (t, &kt) in k.iter().enumerate() {
-                let sy = (c + t as isize - 2).clamp(0, h as isize - 1) as usize;
-                acc += kt * scratch[sy * ow + x];
-            }
-            out.data[y * ow + x] = acc;
+            dst[x] = K[0] * (a[x] + e[x]) + K[1] * (b[x] + d[x]) + K[2] * c[x];
         }
     }
 }
@@ -403,6 +408,49 @@ mod tests {
                 for x in 0..21 {
                     let got = crate::imaging::sample_value(&v, x as f32, y as f32);
                     assert!((got - whole8.get(x, y)).abs() < 1e-3);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn halving_matches_the_clamped_binomial_filter_at_every_size() {
+        // The reference: every tap clamped to the image, pixel 2 i of the smoothed source.
+        let k = [1.0f64, 4.0, 6.0, 4.0, 1.0].map(|v| v / 16.0);
+        let mut rng = Rng::new(3);
+        for (w, h) in [
+            (1, 1),
+            (2, 3),
+            (3, 2),
+            (4, 4),
+            (5, 7),
+            (6, 5),
+            (16, 9),
+            (33, 20),
+        ] {
+            let data: Vec<f32> = (0..w * h).map(|_| 255.0 * rng.uniform() as f32).collect();
+            let mut out = Image::default();
+            half_into(&data, w, h, &mut out, &mut Vec::new());
+            let at = |x: i64, y: i64| {
+                data[(y.clamp(0, h as i64 - 1) * w as i64 + x.clamp(0, w as i64 - 1)) as usize]
+                    as f64
+            };
+            assert_eq!((out.width, out.height), (w.div_ceil(2), h.div_ceil(2)));
+            for y in 0..out.height {
+                for x in 0..out.width {
+                    let mut v = 0.0;
+                    for (j, kj) in k.iter().enumerate() {
+                        for (i, ki) in k.iter().enumerate() {
+                            v += kj
+                                * ki
+                                * at(2 * x as i64 + i as i64 - 2, 2 * y as i64 + j as i64 - 2);
+                        }
+                    }
+                    let got = out.data[y * out.width + x] as f64;
+                    assert!(
+                        (got - v).abs() < 1e-3,
+                        "{w}x{h} at ({x}, {y}): {got} != {v}"
+                    );
                 }
             }
         }

@@ -52,6 +52,9 @@ pub struct Context {
     pub dwdp0: Vec<f32>,
     /// Per-iteration buffers.
     pub work: Workspace,
+    /// The last step [`Context::apply`] made, and how: the driver's line search shortens it
+    /// when the next iteration finds the similarity lower.
+    pub last_step: Option<(Params, Update)>,
 }
 
 /// The buffers of one iteration (allocated once, with the grid): the warped grid, the sampled
@@ -110,6 +113,7 @@ impl Context {
                 grad: z(n),
                 jac: z(n * dof),
             },
+            last_step: None,
         }
     }
 
@@ -240,6 +244,14 @@ impl Context {
         );
     }
 
+    /// The forward-compositional (FCLK) step from `p`, once the frame's values and gradients
+    /// have been sampled there ([`Context::sample_gradients_at`]); returns the similarity at `p`.
+    pub fn forward_compositional_step(&mut self, p: &Params) -> Result<f64, LossReason> {
+        self.warped_gradient(p);
+        self.project_gradients(None);
+        self.forward_step(Update::Compose)
+    }
+
     /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
     /// current pixels `values`, through the pixel Jacobian `jac`; returns the similarity before
     /// the step.
@@ -310,6 +322,7 @@ impl Context {
             return Err(LossReason::NonFinite);
         }
         self.params = next;
+        self.last_step = Some((dp, update));
         Ok(())
     }
 

@@ -14,7 +14,6 @@ use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
 use crate::ssm::Params;
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::visual_tracker::{FrameInput, Inspection, VisualTracker};
-use std::cmp::Ordering;
 use std::time::Instant;
 
 /// The SSMs of the hierarchy (`ssm_hierarchy=on`), fewer DOF first; those below the tracker's
@@ -27,6 +26,27 @@ const CONFIDENCE_BLOCKS: usize = 4;
 
 /// A frame's search: where it ended, or why it failed (with where it ended when a check failed).
 type SearchResult = std::result::Result<Searched, (LossReason, Option<Searched>)>;
+
+/// The fewest grid points per side of a pyramid level (each coarser level halves `res`).
+pub const MIN_LEVEL_RES: usize = 10;
+
+/// The grid points per side of pyramid level `level` (0 = the finest) of a tracker of `res`:
+/// half the finer level's, so that every level samples its own pixels alike.
+pub fn level_res(res: usize, level: usize) -> usize {
+    (res >> level.min(31)).max(MIN_LEVEL_RES.min(res))
+}
+
+/// A frame whose search, started from the coarse levels' estimate, ends less like the template
+/// than this fraction of the recent frames' median confidence is searched again at the finest
+/// level from where the frame started, and the more confident end is kept.
+const RETRY_BELOW: f64 = 0.95;
+
+/// The stop threshold of a coarse pyramid level, in that level's pixels (px of corner motion
+/// at the finest level: 0.1 at level 1, 0.2 at level 2...).
+const COARSE_EPS: f64 = 0.05;
+
+/// How many times the line search halves a step before the frame ends at its best point.
+const LINE_SEARCH_HALVINGS: i32 = 4;
 
 /// The scales of the last good quad at which `on_loss=redetect` searches the frame.
 const REDETECT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
@@ -43,6 +63,17 @@ struct Searched {
     similarity: f64,
     /// The correlation of the patch there with the template.
     confidence: f64,
+    /// Its correlation with the last tracked frame's patch (`None` without one).
+    frame_confidence: Option<f64>,
+}
+
+/// Where [`RegistrationTracker::polish`] ended: the confidence there, the similarity of its
+/// last accepted step's start, and its iterations.
+#[derive(Clone, Copy, Debug)]
+struct Polished {
+    confidence: f64,
+    similarity: f64,
+    iterations: usize,
 }
 
 /// One search: a search method and its context (models, grid, template, buffers).
@@ -79,6 +110,11 @@ pub struct RegistrationTracker {
     /// with (both made with the template).
     confidence: BlockCorrelation,
     detector: Detector,
+    /// The confidence against the last tracked frame's patch (`None` after an initialisation or a
+    /// loss), and the patch where the last search ended.
+    previous: BlockCorrelation,
+    has_previous: bool,
+    last_patch: Vec<f32>,
 }
 
 /// The grid samples `on_loss=redetect` ranks its candidates on (every other one per axis, a
@@ -92,6 +128,22 @@ struct Detector {
 }
 
 impl Detector {
+    /// The confidence of the target at `q` (frame pixels) in `view`, on the detector's grid,
+    /// and the SSM's parameters there (`None` if the SSM cannot fit `q`).
+    fn candidate(&mut self, ctx: &Context, view: &ImageView, q: &Quad) -> Option<(f64, Params)> {
+        let target = q.map(|p| ctx.norm.to_norm(p));
+        let p = ctx.ssm.fit(&ctx.template_corners.0, &target.0)?;
+        let m = ctx.pixel_matrix(&p);
+        for (v, &k) in self.patch.iter_mut().zip(&self.picks) {
+            let pt = apply_homography(
+                &m,
+                crate::geometry::Point::new(ctx.grid_x[k] as f64, ctx.grid_y[k] as f64),
+            );
+            *v = crate::imaging::sample_value(view, pt.x as f32, pt.y as f32);
+        }
+        Some((self.confidence.of(&self.patch), p))
+    }
+
     fn new(res: usize, template: &[f32]) -> Self {
         let side = res.div_ceil(2);
         let picks: Vec<usize> = (0..side)
@@ -114,23 +166,30 @@ impl RegistrationTracker {
     pub fn from_stages(
         spec: RegistrationSpec,
         main: Stage,
-        build: &dyn Fn(&str) -> Result<Stage>,
+        build: &dyn Fn(&str, usize) -> Result<Stage>,
     ) -> Result<Self> {
         let p = spec.params.clone();
-        let coarse = (1..p.pyramid_levels)
-            .map(|_| build(&spec.ssm))
+        // The coarse levels widen the basin of the methods that descend a gradient; the sampling
+        // methods (NN, PF) search the spread of their own samples, at the finest level only.
+        let levels = if main.sm.requires().derivatives {
+            p.pyramid_levels
+        } else {
+            1
+        };
+        let coarse = (1..levels)
+            .map(|l| build(&spec.ssm, level_res(p.res, l)))
             .collect::<Result<Vec<_>>>()?;
         let mut lower = Vec::new();
         if p.ssm_hierarchy {
             let dof = main.ctx.dof;
             for name in HIERARCHY {
-                let stage = build(name)?;
+                let stage = build(name, p.res)?;
                 if stage.ctx.dof < dof {
                     lower.push(stage);
                 }
             }
         }
-        let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma));
+        let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma as f32));
         Ok(RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
             params: p,
@@ -148,6 +207,9 @@ impl RegistrationTracker {
             lost_at: None,
             confidence: BlockCorrelation::default(),
             detector: Detector::default(),
+            previous: BlockCorrelation::default(),
+            has_previous: false,
+            last_patch: Vec::new(),
         })
     }
 
@@ -279,13 +341,20 @@ impl RegistrationTracker {
         let start = p;
         // Coarse to fine: each level starts from the parameters the coarser one found (the
         // parameters live in the normalised frame, the same at every level).
+        // A coarse level stops once its corners move less than COARSE_EPS of its own pixels, or
+        // after a third of `max_iters`: it only has to bring the search into the finer level's
+        // basin (and where it cannot see the target, a star field, it would wander for all of
+        // them).
+        let mut coarse_params = params.clone();
         for (l, Stage { ctx, sm }) in self.coarse.iter_mut().enumerate().rev() {
             ctx.params = p;
             let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
+            coarse_params.eps = params.eps.max(COARSE_EPS * (1 << (l + 1)) as f64);
+            coarse_params.max_iters = params.max_iters.div_ceil(3);
             let (_, iters, _, _) = Self::search(
                 ctx,
                 &mut **sm,
-                params,
+                &coarse_params,
                 self.frame,
                 l + 1,
                 done,
@@ -297,49 +366,239 @@ impl RegistrationTracker {
             p = ctx.params;
         }
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
-        // A check between the levels: the coarse levels' estimate is kept only if the finest
-        // level finds it more similar than where the frame started. Marks finer than the coarse
-        // levels' pixels (a star field) vanish there, and the coarse search then follows the
-        // light instead of the target.
-        if !self.coarse.is_empty() && p != start {
-            let coarse = self.ctx.similarity_at(&view, &p);
-            let at_start = self.ctx.similarity_at(&view, &start);
+        // A check between the levels: the coarse levels' estimate is kept only if, at the finest
+        // level, the patch there looks at least as much like the template (the confidence,
+        // which light does not sway as it sways SSD) as where the frame started. Marks finer
+        // than the coarse levels' pixels (a star field) vanish there, and the coarse search
+        // then follows the light instead of the target.
+        let coarse_moved = !self.coarse.is_empty() && p != start;
+        if coarse_moved {
+            let (ctx, conf) = (&mut self.ctx, &self.confidence);
+            let at_coarse = Self::confidence_at(ctx, conf, &view, &p);
+            let at_start = Self::confidence_at(ctx, conf, &view, &start);
             // Also when either is NaN: the start is the safe side.
-            if !matches!(
-                coarse.partial_cmp(&at_start),
-                Some(Ordering::Greater | Ordering::Equal)
-            ) {
+            if !(at_coarse >= at_start) {
                 p = start;
             }
         }
-        self.ctx.params = p;
-        let result = Self::search(
+        let mut result = Self::finish(
             &mut self.ctx,
             &mut *self.sm,
+            &self.confidence,
             params,
-            self.frame,
-            0,
-            done,
+            (self.frame, done),
             &view,
             observer,
             started,
-        )
-        .map(|(corners, iters, converged, similarity)| {
-            // The confidence: how much the patch where the search ended looks like the template,
-            // whatever the AM (one more sampling of the grid).
-            let p = self.ctx.params;
-            self.ctx.sample_at(&view, &p);
-            Searched {
-                params: p,
-                corners,
-                iterations: iters + done,
-                converged,
-                similarity,
-                confidence: self.confidence.of(&self.ctx.work.values),
+            p,
+        );
+        // Ended less like the template than the track's recent frames, from the coarse estimate:
+        // the finest level is searched again from where the frame started, and the more
+        // confident end is kept. (A coarse level that followed the light may still have looked
+        // better than the start, and the finest level then settles on a look-alike nearby.)
+        if p != start
+            && let Ok(first) = result
+            && self
+                .loss
+                .reference()
+                .is_some_and(|r| !(first.confidence >= RETRY_BELOW * r))
+        {
+            let again = Self::finish(
+                &mut self.ctx,
+                &mut *self.sm,
+                &self.confidence,
+                params,
+                (self.frame, first.iterations),
+                &view,
+                observer,
+                started,
+                start,
+            );
+            result = Ok(match again {
+                Ok(second) if second.confidence > first.confidence => second,
+                Ok(second) => Searched {
+                    iterations: second.iterations,
+                    ..first
+                },
+                Err(_) => first,
+            });
+            if let Ok(out) = &result {
+                self.ctx.params = out.params;
             }
-        });
+        }
+        // The patch where the frame ended, which the next frame's patch is compared with.
+        if let Ok(out) = &mut result {
+            let q = out.params;
+            self.ctx.sample_at(&view, &q);
+            self.last_patch.clear();
+            self.last_patch.extend_from_slice(&self.ctx.work.values);
+            out.frame_confidence = self
+                .has_previous
+                .then(|| self.previous.of(&self.ctx.work.values));
+        }
         timing.search += t1.elapsed();
         result
+    }
+
+    /// The confidence of the patch of `view` under `p` (one sampling of the grid).
+    fn confidence_at(
+        ctx: &mut Context,
+        confidence: &BlockCorrelation,
+        view: &ImageView,
+        p: &Params,
+    ) -> f64 {
+        ctx.sample_at(view, p);
+        confidence.of(&ctx.work.values)
+    }
+
+    /// The finest level's search from `from` (then the polish, for the methods that need it),
+    /// and the confidence where it ended. `(frame, done)`: the frame and the iterations the
+    /// frame has made so far.
+    #[allow(clippy::too_many_arguments)]
+    fn finish(
+        ctx: &mut Context,
+        sm: &mut dyn SearchMethod,
+        confidence: &BlockCorrelation,
+        params: &TrackerParams,
+        (frame, done): (usize, usize),
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        started: Instant,
+        from: Params,
+    ) -> std::result::Result<Searched, LossReason> {
+        ctx.params = from;
+        let (mut corners, mut iters, converged, mut similarity) =
+            Self::search(ctx, sm, params, frame, 0, done, view, observer, started)?;
+        let conf = if params.polish && sm.template_linearised() {
+            let polished = Self::polish(
+                ctx,
+                confidence,
+                params,
+                (frame, done + iters),
+                view,
+                observer,
+                started,
+            );
+            iters += polished.iterations;
+            if polished.iterations > 0 {
+                corners = ctx.corners(&ctx.params);
+                similarity = polished.similarity;
+            }
+            polished.confidence
+        } else {
+            let p = ctx.params;
+            Self::confidence_at(ctx, confidence, view, &p)
+        };
+        Ok(Searched {
+            params: ctx.params,
+            corners,
+            iterations: iters + done,
+            converged,
+            similarity,
+            confidence: conf,
+            frame_confidence: None,
+        })
+    }
+
+    /// Forward-compositional steps from where a method that linearises with the template's
+    /// gradients converged, toward the AM's own optimum (FCLK's fixed point), as long as each
+    /// step leaves a patch more like the template than the last (the confidence): under light
+    /// that changes across the target the AM's optimum itself may leave a sparse target, and
+    /// the template's half of ESM's Jacobian, which no light reaches, held it better there.
+    /// Ends at the most confident point it visited.
+    fn polish(
+        ctx: &mut Context,
+        confidence: &BlockCorrelation,
+        params: &TrackerParams,
+        (frame, first): (usize, usize),
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        started: Instant,
+    ) -> Polished {
+        let mut prev = ctx.corners(&ctx.params);
+        // The most confident point so far, its confidence and similarity.
+        let mut best: Option<(Params, f64, f64)> = None;
+        let mut iterations = 0;
+        for it in 0..params.max_iters {
+            let p = ctx.params;
+            ctx.sample_gradients_at(view, &p);
+            let c = confidence.of(&ctx.work.values);
+            if let Some((bp, bc, bf)) = best
+                && !(c > bc)
+            {
+                ctx.params = bp;
+                return Polished {
+                    confidence: bc,
+                    similarity: bf,
+                    iterations,
+                };
+            }
+            let Ok(f) = ctx.forward_compositional_step(&p) else {
+                ctx.params = p;
+                return Polished {
+                    confidence: c,
+                    similarity: best.map_or(f64::NAN, |b| b.2),
+                    iterations,
+                };
+            };
+            best = Some((p, c, f));
+            let corners = ctx.corners(&ctx.params);
+            if !corners.is_finite() || f.is_nan() {
+                ctx.params = p;
+                return Polished {
+                    confidence: c,
+                    similarity: f,
+                    iterations,
+                };
+            }
+            iterations = it + 1;
+            let step = corners.change_norm(&prev);
+            prev = corners;
+            let patch = if observer.wants_patches() {
+                let q = ctx.params;
+                ctx.sample_at(view, &q);
+                Some(&ctx.work.values[..])
+            } else {
+                None
+            };
+            observer.iteration(&Iteration {
+                frame,
+                level: 0,
+                iteration: first + it,
+                params: &ctx.params[..ctx.dof],
+                corners,
+                similarity: f,
+                step,
+                elapsed: started.elapsed(),
+                patch,
+            });
+            if step < params.eps {
+                break;
+            }
+        }
+        // Settled or out of iterations: the last step's end is kept if it is the most confident.
+        let q = ctx.params;
+        let c = Self::confidence_at(ctx, confidence, view, &q);
+        match best {
+            Some((bp, bc, bf)) if !(c >= bc) => {
+                ctx.params = bp;
+                Polished {
+                    confidence: bc,
+                    similarity: bf,
+                    iterations,
+                }
+            }
+            Some((_, _, bf)) => Polished {
+                confidence: c,
+                similarity: bf,
+                iterations,
+            },
+            None => Polished {
+                confidence: c,
+                similarity: f64::NAN,
+                iterations,
+            },
+        }
     }
 
     /// Searches the whole frame for the template: the last good quad moved over the frame in
@@ -378,20 +637,7 @@ impl RegistrationTracker {
                                 cy + scale * (p.y - c.y),
                             )
                         });
-                        let target = q.map(|p| ctx.norm.to_norm(p));
-                        if let Some(p) = ctx.ssm.fit(&ctx.template_corners.0, &target.0) {
-                            let m = ctx.pixel_matrix(&p);
-                            for (v, &k) in det.patch.iter_mut().zip(&det.picks) {
-                                let pt = apply_homography(
-                                    &m,
-                                    crate::geometry::Point::new(
-                                        ctx.grid_x[k] as f64,
-                                        ctx.grid_y[k] as f64,
-                                    ),
-                                );
-                                *v = crate::imaging::sample_value(&view, pt.x as f32, pt.y as f32);
-                            }
-                            let conf = det.confidence.of(&det.patch);
+                        if let Some((conf, p)) = det.candidate(ctx, &view, &q) {
                             // Keep the best few, best first.
                             if conf > best[REDETECT_REFINED - 1].0 {
                                 best[REDETECT_REFINED - 1] = (conf, p);
@@ -503,9 +749,39 @@ impl RegistrationTracker {
         sm.start_frame(ctx);
         let budget = sm.max_iterations(params.max_iters);
         let mut relearnt = 0;
+        // The line search: the best start of an iteration this frame, its similarity and the
+        // step taken from it; how many times that step has been halved.
+        let line_search = params.line_search && sm.line_search();
+        let mut best: Option<(Params, f64, Params, super::Update)> = None;
+        let mut halvings = 0;
         for it in 0..budget {
+            let from = ctx.params;
+            ctx.last_step = None;
             let s = sm.iterate(ctx, view)?;
-            let f = s.similarity;
+            let mut f = s.similarity;
+            let mut exhausted = false;
+            if line_search && s.control == Control::Auto {
+                match (best, ctx.last_step) {
+                    // This iteration started lower than the best point (or at NaN): its own step
+                    // is dropped and the best point's is halved.
+                    (Some((bp, bf, dp, update)), _) if !(f >= bf) => {
+                        halvings += 1;
+                        ctx.params = bp;
+                        f = bf;
+                        if halvings > LINE_SEARCH_HALVINGS {
+                            exhausted = true;
+                        } else {
+                            let scale = 0.5f64.powi(halvings);
+                            ctx.apply(&dp.map(|v| v * scale), update)?;
+                        }
+                    }
+                    (_, Some((dp, update))) => {
+                        best = Some((from, f, dp, update));
+                        halvings = 0;
+                    }
+                    _ => {}
+                }
+            }
             let corners = ctx.corners(&ctx.params);
             if !corners.is_finite() || f.is_nan() {
                 return Err(LossReason::NonFinite);
@@ -539,11 +815,12 @@ impl RegistrationTracker {
             {
                 observer.method_visual(frame, first + it, &v);
             }
-            let stop = match s.control {
-                Control::Done => true,
-                Control::Continue => false,
-                Control::Auto => step < params.eps,
-            };
+            let stop = exhausted
+                || match s.control {
+                    Control::Done => true,
+                    Control::Continue => false,
+                    Control::Auto => step < params.eps,
+                };
             if stop {
                 // A model that follows the light (SCV's intensity map) was learnt on the previous
                 // frame: once the search has settled, it learns this frame's light there and the
@@ -552,6 +829,10 @@ impl RegistrationTracker {
                 // a steady change of light; learnt where the frame starts, it absorbs the motion.
                 if ctx.am.updates_model() && relearnt < 3 && it + 1 < budget {
                     relearnt += 1;
+                    // The similarity changes with the model: values before and after do not
+                    // compare.
+                    best = None;
+                    halvings = 0;
                     Self::learn_model(ctx, sm, view);
                     continue;
                 }
@@ -584,10 +865,23 @@ impl RegistrationTracker {
     ) -> std::result::Result<(), LossReason> {
         self.check_quad(&out.corners, fw, fh)?;
         if confidence {
-            self.loss
-                .judge(out.confidence, out.converged, &self.params)?;
+            self.loss.judge(
+                &super::Judged {
+                    confidence: out.confidence,
+                    frame_confidence: out.frame_confidence,
+                    converged: out.converged,
+                    resuming: self.status != TrackStatus::Tracking,
+                },
+                &self.params,
+            )?;
         }
         Ok(())
+    }
+
+    /// After an initialisation, a move by hand or a loss: the next frame has no previous
+    /// frame to be compared with (its previous patch is not the target's, or not near).
+    fn forget_previous(&mut self) {
+        self.has_previous = false;
     }
 
     /// The loss-of-track checks on a frame's final quad.
@@ -660,7 +954,7 @@ impl VisualTracker for RegistrationTracker {
             .initialize(&mut self.ctx, &view)
             .map_err(|r| Error::InvalidRegion(format!("cannot track {quad}: {r}")))?;
         for (l, Stage { ctx, sm }) in self.coarse.iter_mut().enumerate() {
-            ctx.set_region(quad, self.params.res, self.params.grid)?;
+            ctx.set_region(quad, level_res(self.params.res, l + 1), self.params.grid)?;
             let view = Self::view(&self.pre, &self.pre_copy, input, l + 1);
             ctx.sample_template(&view);
             sm.initialize(ctx, &view).map_err(|r| {
@@ -687,6 +981,7 @@ impl VisualTracker for RegistrationTracker {
         self.detector = Detector::new(self.params.res, &self.ctx.template);
         self.loss.reset();
         self.lost_at = None;
+        self.forget_previous();
         Ok(())
     }
 
@@ -711,6 +1006,7 @@ impl VisualTracker for RegistrationTracker {
         self.corners = self.ctx.corners(&p);
         self.status = TrackStatus::Tracking;
         self.loss.reset();
+        self.forget_previous();
         self.lost_at = None;
         Ok(())
     }
@@ -780,6 +1076,11 @@ impl VisualTracker for RegistrationTracker {
                 self.corners = out.corners;
                 self.status = TrackStatus::Tracking;
                 self.lost_at = None;
+                // The next frame's patch is compared with this one's (made in place: a frame's
+                // update does not allocate once the buffers have grown).
+                self.previous
+                    .set_template(&self.last_patch, self.params.res, CONFIDENCE_BLOCKS);
+                self.has_previous = true;
                 FrameOutcome {
                     frame: self.frame,
                     status: TrackStatus::Tracking,
@@ -794,6 +1095,7 @@ impl VisualTracker for RegistrationTracker {
                 }
             }
             Err((reason, out)) => {
+                self.forget_previous();
                 self.ctx.params = start_params;
                 self.status = TrackStatus::Lost(reason);
                 self.lost_at = lost_at;

@@ -63,6 +63,18 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     fn initialize(&mut self, _ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         Ok(())
     }
+    /// Whether the driver's line search (tracker parameter `line_search`) applies: the
+    /// method's iteration is a Newton step from where it started, which a shorter step along
+    /// the same direction may improve on (the Lucas-Kanade methods).
+    fn line_search(&self) -> bool {
+        false
+    }
+    /// Whether the method linearises with the template's gradients (ICLK, IALK, ESM in part),
+    /// so that its fixed point is the AM's optimum only where the frame looks like the
+    /// template: the driver then polishes its result (tracker parameter `polish`).
+    fn template_linearised(&self) -> bool {
+        false
+    }
     /// A new frame starts from `ctx.params`.
     fn start_frame(&mut self, _ctx: &mut Context) {}
     /// The AM's model was just updated ([`crate::am::Am::update_model`]): refresh what was computed from it

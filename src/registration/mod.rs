@@ -13,7 +13,7 @@ mod driver;
 mod method;
 mod sweep;
 
-pub use confidence::LossCheck;
+pub use confidence::{Judged, LossCheck};
 pub use context::{Context, Update, Workspace};
-pub use driver::{HIERARCHY, RegistrationTracker, Stage};
+pub use driver::{HIERARCHY, MIN_LEVEL_RES, RegistrationTracker, Stage, level_res};
 pub use method::{Control, SearchMethod, SmConfig, Step};

@@ -58,6 +58,10 @@ impl SearchMethod for Cascade {
     fn requires(&self) -> Capabilities {
         union(&self.stages)
     }
+    fn template_linearised(&self) -> bool {
+        // The frame ends with the last stage.
+        self.stages.last().is_some_and(|s| s.template_linearised())
+    }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         for s in &mut self.stages {
             s.initialize(ctx, img)?;
@@ -247,6 +251,9 @@ impl SearchMethod for LevenbergMarquardt {
     }
     fn requires(&self) -> Capabilities {
         self.inner.requires()
+    }
+    fn template_linearised(&self) -> bool {
+        self.inner.template_linearised()
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         self.inner.initialize(ctx, img)

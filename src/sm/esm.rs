@@ -78,6 +78,9 @@ impl SearchMethod for Esm {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn template_linearised(&self) -> bool {
+        true
+    }
     fn start_frame(&mut self, _ctx: &mut Context) {
         self.last = None;
         self.best = None;

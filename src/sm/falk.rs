@@ -22,6 +22,9 @@ impl SearchMethod for Falk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn line_search(&self) -> bool {
+        true
+    }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.sample_gradients_at(img, &p);

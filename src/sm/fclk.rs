@@ -1,7 +1,7 @@
 //! Forward compositional Lucas-Kanade (FCLK): linearise `I_t(w(w(x, dp), p))` at `dp = 0` with
 //! the gradient of the warped current frame and `dw/dp` at the identity; `p <- p o dp`.
 
-use super::{Context, SearchMethod, SmDef, Step, Update};
+use super::{Context, SearchMethod, SmDef, Step};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
@@ -22,11 +22,12 @@ impl SearchMethod for Fclk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn line_search(&self) -> bool {
+        true
+    }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.sample_gradients_at(img, &p);
-        ctx.warped_gradient(&p);
-        ctx.project_gradients(None);
-        ctx.forward_step(Update::Compose).map(Step::auto)
+        ctx.forward_compositional_step(&p).map(Step::auto)
     }
 }

@@ -24,6 +24,12 @@ impl SearchMethod for Ialk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn line_search(&self) -> bool {
+        true
+    }
+    fn template_linearised(&self) -> bool {
+        true
+    }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
         let p = ctx.params;
         ctx.sample_at(img, &p);

@@ -63,6 +63,12 @@ impl SearchMethod for Iclk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn line_search(&self) -> bool {
+        true
+    }
+    fn template_linearised(&self) -> bool {
+        true
+    }
     fn initialize(&mut self, ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         self.jac.resize(ctx.len() * ctx.dof, 0.0);
         Context::project(

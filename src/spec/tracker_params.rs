@@ -155,27 +155,41 @@ tracker_params! {
         "stop when the corners move less than this in an iteration (L2 norm of the 8 coordinates, px)";
     blur_size: usize = int(1.0, 31.0, 5.0), flag "blur",
         "Gaussian pre-smoothing kernel size (1 = none)";
-    blur_sigma: f32 = float(0.0, 100.0, 3.0), flag "sigma",
-        "Gaussian pre-smoothing standard deviation (px)";
+    /// Of the finest level, where each frame's search ends: light, so that marks as fine as a
+    /// pixel keep their contrast (the paper's 3 smooths a one-pixel mark to a few gray levels,
+    /// and under changing light SSD's optimum then leaves a sparse target). The coarser
+    /// `pyramid_levels` give the search the basin that heavier smoothing gave.
+    blur_sigma: f64 = float(0.0, 100.0, 0.7), flag "sigma",
+        "Gaussian pre-smoothing standard deviation (px) of the finest level (the paper's: 3)";
     hessian: HessianKind = choice(HessianKind::NAMES),
         "the Hessian of the Newton step (default: the AM's own)";
     roi_margin: f64 = float(0.0, 10.0, 0.25),
         "margin of the pre-processed region around the target, as a fraction of its size";
-    /// Each level is half the size of the previous one and has its own template.
-    pyramid_levels: usize = int(1.0, 6.0, 1.0), flag "levels",
-        "coarse-to-fine pyramid levels (1 = none)";
+    /// Each level is half the size of the previous one and has its own template, sampled by a
+    /// grid of half the previous level's `res` per side (the same density in its own pixels; at
+    /// least 10). A coarse estimate is kept only if the finest level finds it at least as like
+    /// the template as where the frame started (a star field's marks vanish at the coarse
+    /// levels, whose search then follows the light).
+    pyramid_levels: usize = int(1.0, 6.0, 3.0), flag "levels",
+        "coarse-to-fine pyramid levels of the gradient methods (1 = none; the paper's: 1; NN and PF search at the finest level)";
     seed: u64 = int(0.0, 9_007_199_254_740_991.0, 0.0),
         "seed of the random generators (NN samples, PF particles)";
-    on_loss: LossPolicy = choice(LossPolicy::NAMES),
+    on_loss: LossPolicy = choice_default(LossPolicy::NAMES, 2),
         "after a loss of track: stop (until re-initialised), continue from the last good estimate, or redetect (continue, else search the whole frame for the template)";
     /// The confidence of a frame is the correlation of the patch where the search ended with the
     /// template, block by block (insensitive to light that varies across the target, whatever
     /// the AM). A search that ran out of iterations needs 0.1 more.
     min_confidence: f64 = float(-1.0, 1.0, 0.5),
         "a frame whose confidence (the patch's block-wise correlation with the template, -1..1) is below this is reported lost (-1 = never)";
-    /// The median is over the last 10 frames tracked.
+    /// The median is over the last 10 frames tracked on from a tracked frame. A frame found
+    /// again after a loss needs 0.85 times that median (`registration::confidence::RESUME`).
     confidence_drop: f64 = float(0.0, 1.0, 0.75),
         "a frame whose confidence falls below this times the median of the last frames' is reported lost (0 = never)";
+    /// Light, blur and scale change little from one frame to the next, so on the target this
+    /// stays near 1 where the confidence against the template has fallen; a slip to a
+    /// look-alike (the next rows of a brick wall) makes it fall at once.
+    min_frame_confidence: f64 = float(-1.0, 1.0, 0.8),
+        "a frame whose patch correlates (block-wise) less than this with the previous tracked frame's patch is reported lost (-1 = never)";
     /// MTF's `hrch`: each frame is first searched with the SSMs of 2, 4 and 6 DOF below the
     /// tracker's own, each from the previous one's result.
     ssm_hierarchy: bool = choice(OFF_ON),
@@ -189,6 +203,20 @@ tracker_params! {
         "cells per side of the illumination model's grid";
     grid: GridLayout = choice(GridLayout::NAMES),
         "sampling grid: centres (of a res x res tiling, inside the target) or border (corner to corner, as MTF)";
+    /// For the Lucas-Kanade methods (FCLK, FALK, ICLK, IALK): when an iteration finds the
+    /// similarity lower than where the previous step started, that step is halved from there,
+    /// up to four times, and the frame ends at the best point if none helps. Gauss-Newton steps
+    /// overshoot when the residual is large (a target that darkened by 40 %) and may then cycle
+    /// between two points for all the iterations. ESM has its own rule (`max_falls`).
+    line_search: bool = choice_default(OFF_ON, 1),
+        "off (the classic methods), or on: a step after which the similarity is lower is halved, up to four times (the Lucas-Kanade methods)";
+    /// ICLK, IALK and ESM linearise with the template's gradients: where the frame no longer
+    /// looks like the template (light across the target, blur, a change of scale) their fixed
+    /// point is not the AM's optimum, and they drift. Polishing takes forward-compositional
+    /// steps (FCLK's) from where they converged while the patch grows more like the template
+    /// (its confidence), at most `max_iters` of them.
+    polish: bool = choice_default(OFF_ON, 1),
+        "off (the classic methods), or on: after ICLK, IALK or ESM converge, forward steps toward the AM's own optimum while the patch grows more like the template";
 }
 
 choice_param!(Illumination {
@@ -226,14 +254,15 @@ choice_param!(GridLayout {
 pub enum LossPolicy {
     /// Stays lost until it is initialised again (or moved with `set_corners`); the evaluation's
     /// reinit protocol restarts it from the ground truth.
-    #[default]
     Stop,
     /// Keeps searching each frame from the last good estimate, reporting `Lost` until a frame
     /// passes the checks again (as MTF does).
     Continue,
     /// As `Continue`, and when that fails, searches the whole frame for the template (the last
     /// good quad moved over the frame at three scales, ranked by confidence), refines the best
-    /// candidates and resumes with the first that passes the checks.
+    /// candidates and resumes with the first that passes the checks (the default: a lost
+    /// tracker comes back when the target does, as a live user expects).
+    #[default]
     Redetect,
 }
 choice_param!(LossPolicy {

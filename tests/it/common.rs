@@ -54,3 +54,18 @@ pub fn write_png(path: &std::path::Path, w: u32, h: u32, seed: u8) {
     });
     img.save(path).expect("png");
 }
+
+/// The paper's single-level tracker: smoothing 5x5 with sigma 3, no pyramid, and the classic
+/// methods (no line search, no polish). The tests that study how the classic methods behave
+/// (where their drift comes from, what a rule of theirs changes) pin it; the defaults are the
+/// robust tracker of issue 17 (docs/robustness.md).
+pub fn paper_settings(spec: &mut regtrack::tracker::TrackerSpec) {
+    for (k, v) in [
+        ("blur_sigma", "3"),
+        ("pyramid_levels", "1"),
+        ("line_search", "off"),
+        ("polish", "off"),
+    ] {
+        spec.set_param(k, v).unwrap();
+    }
+}

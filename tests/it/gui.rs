@@ -649,12 +649,19 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     });
     let r = h.state().result(0, 3).unwrap().clone();
     assert!(r.iterations.len() > 1, "{} iterations", r.iterations.len());
+    // Each pyramid level samples its own grid (half the finer level's per side).
     for it in &r.iterations {
-        assert_eq!(it.patch.len(), r.res * r.res);
+        let side = regtrack::registration::level_res(r.res, it.level);
+        assert_eq!(it.patch.len(), side * side, "level {}", it.level);
     }
+    assert!(r.iterations.iter().any(|it| it.level > 0));
     // The first iteration starts off the target, the last ends on it: their patches differ, and
     // the last is (to 8-bit rounding) the tracker's final patch.
-    let (first, last) = (&r.iterations[0].patch, &r.iterations.last().unwrap().patch);
+    let fine = r.iterations.iter().position(|it| it.level == 0).unwrap();
+    let (first, last) = (
+        &r.iterations[fine].patch,
+        &r.iterations.last().unwrap().patch,
+    );
     assert_ne!(first, last);
     let off: f32 = last
         .iter()
@@ -664,9 +671,17 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     assert!(off <= 0.5 + 1e-3, "{off}");
     // The slider picks an iteration; the frame view and the panel follow it.
     h.state_mut().send(Command::Seek(3));
+    h.state_mut().send(Command::SelectIteration(Some(fine)));
+    h.run_steps(3);
+    let label = format!("warped patch, iteration {}", fine + 1);
+    assert!(h.query_by_label(&label).is_some(), "{label}");
+    // An iteration of the coarsest level shows its own, smaller patch.
     h.state_mut().send(Command::SelectIteration(Some(0)));
     h.run_steps(3);
-    assert!(h.query_by_label("warped patch, iteration 1").is_some());
+    let level = r.iterations[0].level;
+    let side = regtrack::registration::level_res(r.res, level);
+    let label = format!("iteration 1: pyramid level {level}, {side}x{side}");
+    assert!(h.query_by_label(&label).is_some(), "{label}");
 }
 
 #[test]

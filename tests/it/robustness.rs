@@ -1,7 +1,7 @@
 //! Robustness on real-footage conditions the reference implementation handles: light that
 //! changes over a static target, and fast motion.
 
-use crate::common::texture;
+use crate::common::{paper_settings, texture};
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::imaging::GrayU8;
 use regtrack::observe::NoObserver;
@@ -83,9 +83,11 @@ fn under_moving_light_the_drift_of_ssd_and_zncc_is_in_their_cost_not_the_search(
     // On this sequence ESM with SSD or ZNCC drifts away from the static target. Started from the
     // truth on a later frame, the search still ends where the similarity is higher than at the
     // truth: the optimum of the cost itself moved with the light (see docs/robustness.md).
+    // The paper's tracker (the robust defaults end 0.6 px off on this frame with ZNCC).
     let (frames, truth) = lit_static_sequence(22, 1);
     for am in ["ssd", "zncc"] {
         let mut spec = TrackerSpec::from_names("esm", am, "homography").unwrap();
+        paper_settings(&mut spec);
         // Where the search ends, even where the confidence checks would call the frame lost.
         spec.set_param("min_confidence", "-1").unwrap();
         spec.set_param("confidence_drop", "0").unwrap();
@@ -180,7 +182,9 @@ fn iclk_follows_an_updated_intensity_map() {
     };
     let run = |am: &str| {
         let (sm, am) = am.split_once(' ').unwrap();
-        let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+        // The single-level tracker: the iterations counted are those of the relearning.
+        let mut spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+        paper_settings(&mut spec);
         let mut t = Tracker::new(&spec).unwrap();
         t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
         let mut worst: f64 = 0.0;
@@ -375,7 +379,11 @@ fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
         ("esm", "zncc", "translation"),
         ("iclk", "ssd", "translation"),
     ] {
-        let spec = TrackerSpec::from_names(sm, am, ssm).unwrap();
+        // The paper's tracker, whose drift this looks for; the robust defaults hold the sequence
+        // at least as well.
+        let mut spec = TrackerSpec::from_names(sm, am, ssm).unwrap();
+        let default = worst(&run(&spec, &frames, &truth), 120);
+        paper_settings(&mut spec);
         let tracked = run(&spec, &frames, &truth);
         let cost = from_truth(&spec, &frames, &truth);
         // Per frame, the tracked error beyond the from-truth one; and over the last 20 frames on
@@ -385,12 +393,12 @@ fn ssd_and_zncc_hold_a_sparse_target_under_moving_light() {
         let late = extra[100..].iter().sum::<f64>() / 20.0;
         let held = worst(&tracked, 120);
         report.push(format!(
-            "{sm}-{am}-{ssm}: worst {held:.2}, from the truth {:.2}, extra {most:.2} (last 20 frames {late:.3})",
+            "{sm}-{am}-{ssm}: worst {held:.2}, from the truth {:.2}, extra {most:.2} (last 20 frames {late:.3}); defaults: worst {default:.2}",
             worst(&cost, 120)
         ));
         let bound = if ssm == "translation" { 1.0 } else { 5.0 };
         assert!(
-            most < 1.0 && late.abs() < 0.1 && held < bound,
+            most < 1.0 && late.abs() < 0.1 && held < bound && default < bound.min(held + 0.5),
             "{report:#?}"
         );
     }
@@ -443,6 +451,7 @@ fn esm_does_not_run_away_when_its_steps_lower_the_similarity() {
         let (frames, truth) = lit_sequence_with_contrast(121, 1, contrast);
         let held = |falls: &str| {
             let mut spec = TrackerSpec::from_names("esm", am, "homography").unwrap();
+            paper_settings(&mut spec);
             spec.set_param("max_falls", falls).unwrap();
             worst(&run(&spec, &frames, &truth), 120)
         };
@@ -586,13 +595,14 @@ fn a_lost_tracker_says_so_and_a_tracking_one_does_not() {
 }
 
 #[test]
-fn ssd_with_an_illumination_model_holds_the_star_field_at_the_default_smoothing() {
+fn ssd_with_an_illumination_model_holds_the_star_field_at_the_papers_smoothing() {
     // Without a model of the light, SSD's optimum follows the blob and the gain off the star
-    // field at the default smoothing (ESM, FCLK, ICLK: about half the frames within 5 px). With
+    // field at the paper's smoothing (ESM, FCLK, ICLK: about half the frames within 5 px). With
     // a gain and a bias estimated with the warp, per cell (pgb) or smoothly (rbf), each holds it.
     let (frames, truth) = star_field_sequence(79, 1);
     for sm in ["esm", "fclk", "iclk"] {
-        let plain = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        let mut plain = TrackerSpec::from_names(sm, "ssd", "homography").unwrap();
+        paper_settings(&mut plain);
         let lost = run(&plain, &frames, &truth)
             .iter()
             .filter(|e| **e > 5.0)

@@ -308,15 +308,22 @@ fn patches(
     if r.template.len() != n || r.patch.len() != n || n == 0 {
         return;
     }
-    // The patch after the selected iteration (recorded per iteration), else the final one.
+    // The patch after the selected iteration (recorded per iteration), else the final one. An
+    // iteration of a coarser pyramid level sampled its own, smaller grid: its patch is shown at
+    // its size, and the template and the error only at the finest level's.
     let selected = app.rt.ui.selected_iteration;
-    let recorded: Option<Vec<f32>> = selected
-        .and_then(|k| r.iterations.get(k))
-        .filter(|it| it.patch.len() == n)
+    let chosen = selected.and_then(|k| r.iterations.get(k));
+    let recorded: Option<Vec<f32>> = chosen
+        .filter(|it| !it.patch.is_empty())
         .map(|it| it.patch.iter().map(|&v| v as f32).collect());
     let missing = selected.is_some() && recorded.is_none();
     let current: &[f32] = recorded.as_deref().unwrap_or(&r.patch);
-    let size = [r.res, r.res];
+    let side = (current.len() as f64).sqrt().round() as usize;
+    let coarse = chosen.filter(|_| current.len() != n).map(|it| it.level);
+    if side * side != current.len() {
+        return;
+    }
+    let size = [side, side];
     // Made again only when the shown result changes (the run, its results, the iteration).
     let key = (
         frame,
@@ -333,15 +340,18 @@ fn patches(
             });
         let span = (hi - lo).max(1e-3);
         let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
-        let g: Vec<u8> = match kind {
-            0 => r.template.iter().map(|&v| to8(v)).collect(),
-            1 => current.iter().map(|&v| to8(v)).collect(),
-            _ => r
-                .template
-                .iter()
-                .zip(current)
-                .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
-                .collect(),
+        let (g, size): (Vec<u8>, _) = match kind {
+            0 => (r.template.iter().map(|&v| to8(v)).collect(), [r.res, r.res]),
+            1 => (current.iter().map(|&v| to8(v)).collect(), size),
+            _ if coarse.is_some() => (vec![0; n], [r.res, r.res]),
+            _ => (
+                r.template
+                    .iter()
+                    .zip(current)
+                    .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
+                    .collect(),
+                size,
+            ),
         };
         egui::ColorImage::from_gray(size, &g)
     };
@@ -354,8 +364,11 @@ fn patches(
             || image(kind),
         )
     });
-    let at = match selected {
-        Some(k) if !missing => format!("warped patch, iteration {}", k + 1),
+    let at = match (selected, coarse) {
+        (Some(k), Some(level)) => {
+            format!("iteration {}: pyramid level {level}, {side}x{side}", k + 1)
+        }
+        (Some(k), None) if !missing => format!("warped patch, iteration {}", k + 1),
         _ => "warped patch (final)".into(),
     };
     if missing {
@@ -368,10 +381,12 @@ fn patches(
         );
     }
     ui.horizontal(|ui| {
-        for (h, label) in handles
-            .iter()
-            .zip(["template".to_string(), at, "|error| x4".to_string()])
-        {
+        let error = if coarse.is_some() {
+            "|error|: finest level only".to_string()
+        } else {
+            "|error| x4".to_string()
+        };
+        for (h, label) in handles.iter().zip(["template".to_string(), at, error]) {
             ui.vertical(|ui| {
                 ui.label(label);
                 ui.image((h.id(), egui::Vec2::splat(120.0)));

@@ -5,7 +5,7 @@
 
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::imaging::{GrayF32, GrayU8, gaussian_blur, gaussian_kernel};
+use crate::imaging::{GrayF32, GrayU8, gaussian_blur};
 use crate::linalg::median;
 use crate::observe::IterationCounter;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
@@ -84,15 +84,12 @@ pub fn bench_tracker(
 ) -> Result<BenchRow> {
     // A registration tracker's tracker-only input is the frame smoothed as it would smooth it;
     // a whole tracker's pre-processing is its own business (timed): it gets the frame as floats.
-    let smoothed: Vec<GrayF32> = match spec.params() {
-        Some(p) => {
-            let kernel = gaussian_kernel(p.blur_size, p.blur_sigma as f32);
-            frames
-                .gray
-                .iter()
-                .map(|g| gaussian_blur(g, &kernel))
-                .collect()
-        }
+    let smoothed: Vec<GrayF32> = match spec.smoothing()? {
+        Some(kernel) => frames
+            .gray
+            .iter()
+            .map(|g| gaussian_blur(g, &kernel))
+            .collect(),
         None => frames
             .gray
             .iter()

@@ -56,6 +56,15 @@ impl std::ops::DerefMut for Tracker {
 }
 
 impl TrackerSpec {
+    /// The pre-smoothing a registration tracker of this spec applies to the region it reads
+    /// (`blur_sigma` resolved for its search method); `None` for a whole tracker.
+    pub fn smoothing(&self) -> Result<Option<crate::imaging::GaussianKernel>> {
+        let Some(spec) = self.registration() else {
+            return Ok(None);
+        };
+        Ok(Some(RegistrationTracker::new(spec)?.smoothing().clone()))
+    }
+
     /// A registration tracker from names or aliases, with the default parameters; names are
     /// made canonical. Fails with the list of what exists on an unknown name or an impossible
     /// combination.

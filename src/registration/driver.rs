@@ -14,6 +14,7 @@ use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
 use crate::ssm::Params;
 use crate::status::{FrameOutcome, FrameTiming, LossReason, TrackStatus};
 use crate::visual_tracker::{FrameInput, Inspection, VisualTracker};
+use std::cmp::Ordering;
 use std::time::Instant;
 
 /// The SSMs of the hierarchy (`ssm_hierarchy=on`), fewer DOF first; those below the tracker's
@@ -26,6 +27,11 @@ const CONFIDENCE_BLOCKS: usize = 4;
 
 /// A frame's search: where it ended, or why it failed (with where it ended when a check failed).
 type SearchResult = std::result::Result<Searched, (LossReason, Option<Searched>)>;
+
+/// `a >= b`, false when either is NaN.
+fn at_least(a: f64, b: f64) -> bool {
+    matches!(a.partial_cmp(&b), Some(Ordering::Greater | Ordering::Equal))
+}
 
 /// The fewest grid points per side of a pyramid level (each coarser level halves `res`).
 pub const MIN_LEVEL_RES: usize = 10;
@@ -110,11 +116,10 @@ pub struct RegistrationTracker {
     /// with (both made with the template).
     confidence: BlockCorrelation,
     detector: Detector,
-    /// The confidence against the last tracked frame's patch (`None` after an initialisation or a
-    /// loss), and the patch where the last search ended.
+    /// The confidence against the last tracked frame's patch, and whether there is one (not
+    /// after an initialisation, a move by hand or a loss).
     previous: BlockCorrelation,
     has_previous: bool,
-    last_patch: Vec<f32>,
 }
 
 /// The grid samples `on_loss=redetect` ranks its candidates on (every other one per axis, a
@@ -171,11 +176,8 @@ impl RegistrationTracker {
         let p = spec.params.clone();
         // The coarse levels widen the basin of the methods that descend a gradient; the sampling
         // methods (NN, PF) search the spread of their own samples, at the finest level only.
-        let levels = if main.sm.requires().derivatives {
-            p.pyramid_levels
-        } else {
-            1
-        };
+        let gradient = main.sm.requires().derivatives;
+        let levels = if gradient { p.pyramid_levels } else { 1 };
         let coarse = (1..levels)
             .map(|l| build(&spec.ssm, level_res(p.res, l)))
             .collect::<Result<Vec<_>>>()?;
@@ -189,7 +191,10 @@ impl RegistrationTracker {
                 }
             }
         }
-        let pre = Preprocessor::new(gaussian_kernel(p.blur_size, p.blur_sigma as f32));
+        let pre = Preprocessor::new(gaussian_kernel(
+            p.blur_size,
+            p.smoothing_sigma(gradient) as f32,
+        ));
         Ok(RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
             params: p,
@@ -209,7 +214,6 @@ impl RegistrationTracker {
             detector: Detector::default(),
             previous: BlockCorrelation::default(),
             has_previous: false,
-            last_patch: Vec::new(),
         })
     }
 
@@ -220,6 +224,11 @@ impl RegistrationTracker {
     /// The models and buffers, taken out of the tracker (for benchmarks of single stages).
     pub fn into_context(self) -> Context {
         self.ctx
+    }
+
+    /// The pre-smoothing kernel (of the finest level).
+    pub fn smoothing(&self) -> &crate::imaging::GaussianKernel {
+        self.pre.kernel()
     }
 
     /// The models and buffers (template, last sampled patch...), read-only.
@@ -377,7 +386,7 @@ impl RegistrationTracker {
             let at_coarse = Self::confidence_at(ctx, conf, &view, &p);
             let at_start = Self::confidence_at(ctx, conf, &view, &start);
             // Also when either is NaN: the start is the safe side.
-            if !(at_coarse >= at_start) {
+            if !at_least(at_coarse, at_start) {
                 p = start;
             }
         }
@@ -401,7 +410,7 @@ impl RegistrationTracker {
             && self
                 .loss
                 .reference()
-                .is_some_and(|r| !(first.confidence >= RETRY_BELOW * r))
+                .is_some_and(|r| !at_least(first.confidence, RETRY_BELOW * r))
         {
             let again = Self::finish(
                 &mut self.ctx,
@@ -426,15 +435,13 @@ impl RegistrationTracker {
                 self.ctx.params = out.params;
             }
         }
-        // The patch where the frame ended, which the next frame's patch is compared with.
-        if let Ok(out) = &mut result {
+        // The correlation with the last tracked frame's patch.
+        if let Ok(out) = &mut result
+            && self.has_previous
+        {
             let q = out.params;
             self.ctx.sample_at(&view, &q);
-            self.last_patch.clear();
-            self.last_patch.extend_from_slice(&self.ctx.work.values);
-            out.frame_confidence = self
-                .has_previous
-                .then(|| self.previous.of(&self.ctx.work.values));
+            out.frame_confidence = Some(self.previous.of(&self.ctx.work.values));
         }
         timing.search += t1.elapsed();
         result
@@ -524,7 +531,7 @@ impl RegistrationTracker {
             ctx.sample_gradients_at(view, &p);
             let c = confidence.of(&ctx.work.values);
             if let Some((bp, bc, bf)) = best
-                && !(c > bc)
+                && c.partial_cmp(&bc) != Some(Ordering::Greater)
             {
                 ctx.params = bp;
                 return Polished {
@@ -580,7 +587,7 @@ impl RegistrationTracker {
         let q = ctx.params;
         let c = Self::confidence_at(ctx, confidence, view, &q);
         match best {
-            Some((bp, bc, bf)) if !(c >= bc) => {
+            Some((bp, bc, bf)) if !at_least(c, bc) => {
                 ctx.params = bp;
                 Polished {
                     confidence: bc,
@@ -764,7 +771,7 @@ impl RegistrationTracker {
                 match (best, ctx.last_step) {
                     // This iteration started lower than the best point (or at NaN): its own step
                     // is dropped and the best point's is halved.
-                    (Some((bp, bf, dp, update)), _) if !(f >= bf) => {
+                    (Some((bp, bf, dp, update)), _) if !at_least(f, bf) => {
                         halvings += 1;
                         ctx.params = bp;
                         f = bf;
@@ -880,6 +887,23 @@ impl RegistrationTracker {
 
     /// After an initialisation, a move by hand or a loss: the next frame has no previous
     /// frame to be compared with (its previous patch is not the target's, or not near).
+    fn remember_patch(&mut self, input: FrameInput<'_>, out: &Searched) {
+        // The frame's last search may have pre-processed another region (a second start, a
+        // candidate of the frame search): the patch is sampled where the accepted one ended.
+        let (x0, y0, x1, y1) = out.corners.bbox();
+        let (rx0, ry0, rx1, ry1) = self.pre.region();
+        let inside = x0 >= rx0 as f64 && y0 >= ry0 as f64 && x1 <= rx1 as f64 && y1 <= ry1 as f64;
+        if !inside && !matches!(input, FrameInput::Smoothed(_)) {
+            let region = self.region_around(&out.corners);
+            self.prepare(input, region);
+        }
+        let view = Self::view(&self.pre, &self.pre_copy, input, 0);
+        self.ctx.sample_at(&view, &out.params);
+        self.previous
+            .set_template(&self.ctx.work.values, self.params.res, CONFIDENCE_BLOCKS);
+        self.has_previous = true;
+    }
+
     fn forget_previous(&mut self) {
         self.has_previous = false;
     }
@@ -1078,9 +1102,7 @@ impl VisualTracker for RegistrationTracker {
                 self.lost_at = None;
                 // The next frame's patch is compared with this one's (made in place: a frame's
                 // update does not allocate once the buffers have grown).
-                self.previous
-                    .set_template(&self.last_patch, self.params.res, CONFIDENCE_BLOCKS);
-                self.has_previous = true;
+                self.remember_patch(input, &out);
                 FrameOutcome {
                     frame: self.frame,
                     status: TrackStatus::Tracking,

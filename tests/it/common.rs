@@ -55,8 +55,8 @@ pub fn write_png(path: &std::path::Path, w: u32, h: u32, seed: u8) {
     img.save(path).expect("png");
 }
 
-/// The paper's single-level tracker: smoothing 5x5 with sigma 3, no pyramid, and the classic
-/// methods (no line search, no polish). The tests that study how the classic methods behave
+/// The paper's single-level tracker: smoothing 5x5 with sigma 3, no pyramid, the classic
+/// methods (no line search, no polish), and lost until initialised again. The tests that study how the classic methods behave
 /// (where their drift comes from, what a rule of theirs changes) pin it; the defaults are the
 /// robust tracker of issue 17 (docs/robustness.md).
 pub fn paper_settings(spec: &mut regtrack::tracker::TrackerSpec) {
@@ -65,6 +65,7 @@ pub fn paper_settings(spec: &mut regtrack::tracker::TrackerSpec) {
         ("pyramid_levels", "1"),
         ("line_search", "off"),
         ("polish", "off"),
+        ("on_loss", "stop"),
     ] {
         spec.set_param(k, v).unwrap();
     }

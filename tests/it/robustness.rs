@@ -2,6 +2,7 @@
 //! changes over a static target, and fast motion.
 
 use crate::common::{paper_settings, texture};
+use rayon::prelude::*;
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::imaging::GrayU8;
 use regtrack::observe::NoObserver;
@@ -671,5 +672,174 @@ fn redetection_finds_a_target_that_comes_back_elsewhere() {
         } else {
             assert!(errors.iter().all(|e| *e < 1.5), "redetect: {errors:?}");
         }
+    }
+}
+
+/// The eight combinations issue 17 holds to the peers: ESM, FCLK, FALK, ICLK x SSD, ZNCC.
+const PEER_COMBINATIONS: [(&str, &str); 8] = [
+    ("esm", "ssd"),
+    ("esm", "zncc"),
+    ("fclk", "ssd"),
+    ("fclk", "zncc"),
+    ("falk", "ssd"),
+    ("falk", "zncc"),
+    ("iclk", "ssd"),
+    ("iclk", "zncc"),
+];
+
+#[test]
+fn every_default_tracker_holds_the_star_field_that_the_papers_settings_lose() {
+    // The star field under a gain swing and a moving light blob, JPEG and noise (issue 17's
+    // first situation). With the paper's settings (5x5 sigma 3, one level) the SSD trackers
+    // and ICLK-ZNCC slide off it (half the frames within 5 px: what the issue measured); the
+    // defaults, a sharp finest level under a pyramid, hold it with every combination.
+    let (frames, truth) = star_field_sequence(79, 1);
+    let mut report = Vec::new();
+    let mut paper_lost = 0;
+    for (sm, am) in PEER_COMBINATIONS {
+        let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+        let e = run(&spec, &frames, &truth);
+        let held = e.iter().filter(|&&v| v <= 5.0).count();
+        let mut paper = spec.clone();
+        paper_settings(&mut paper);
+        let p = run(&paper, &frames, &truth);
+        let paper_held = p.iter().filter(|&&v| v <= 5.0).count();
+        paper_lost += usize::from(paper_held < 70);
+        report.push(format!(
+            "{sm}-{am}: {held}/78 within 5 px (worst {:.2}), paper's settings {paper_held}/78",
+            worst(&e, 78)
+        ));
+    }
+    eprintln!("{report:#?}");
+    assert!(report.iter().all(|r| r.contains(": 78/78")), "{report:#?}");
+    // The sequence is one the paper's settings lose: the test would have caught the loss.
+    assert!(paper_lost >= 4, "{report:#?}");
+}
+
+#[test]
+fn a_slip_to_a_look_alike_is_reported_lost() {
+    // The brick wall of the evidence set on the UCSB `uc` profile (jumps of up to 30 px a
+    // frame, an occluder, JPEG): the search lands on the next rows of bricks, whose patch looks
+    // like the template (confidence 0.6-0.8 against the track's 0.7-0.99). The patch's
+    // correlation with the previous frame's tells the slip: with it at least 95 % of the frames
+    // more than 20 px off are reported lost and at most 2 % of those within 5 px; without it
+    // (`min_frame_confidence=-1`, the checks before) about 70 % were.
+    use regtrack::dataset::synth::{SynthConfig, render_sequence};
+    use regtrack::eval::{self, EvalOptions};
+    let d = crate::common::TempDir::new("slip");
+    let root = crate::common::root();
+    let cfg = SynthConfig {
+        texture: root.join("assets/textures/skimage_brick.png"),
+        background: Some(root.join("assets/textures/skimage_grass.png")),
+        motion: root.join("assets/motion/ucsb_bricks_uc.txt"),
+        noise: 2.0,
+        occlusion: 0.15,
+        jpeg_quality: 80,
+        seed: 7,
+        ..SynthConfig::default()
+    };
+    let seq = render_sequence(&cfg, &d.path().join("uc"), "bricks_uc", &|_, _| {}).unwrap();
+    let opts = EvalOptions {
+        reinit: true,
+        ..EvalOptions::default()
+    };
+    let judge = |frame_check: bool| {
+        let runs: Vec<eval::RunResult> = PEER_COMBINATIONS
+            .par_iter()
+            .map(|(sm, am)| {
+                let mut spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+                if !frame_check {
+                    spec.set_param("min_frame_confidence", "-1").unwrap();
+                }
+                eval::run_sequence(&seq, &spec, &opts, None, &mut NoObserver).unwrap()
+            })
+            .collect();
+        let refs: Vec<&eval::RunResult> = runs.iter().collect();
+        let s = eval::summarize("ALL", &refs);
+        let off = runs
+            .iter()
+            .flat_map(|r| r.frames.iter())
+            .filter(|f| f.searched && !f.init && f.estimate_error > eval::LOSS_OFF)
+            .count();
+        (s.lost_when_off, s.lost_when_on, off)
+    };
+    let (off_lost, on_lost, off) = judge(true);
+    let (before, _, before_off) = judge(false);
+    eprintln!(
+        "frames > 20 px off reported lost: {off_lost:.3} of {off} (without the frame check \
+         {before:.3} of {before_off}); within 5 px reported lost: {on_lost:.4}"
+    );
+    assert!(off >= 30, "{off} frames off");
+    assert!(off_lost >= 0.95, "{off_lost} of {off}");
+    assert!(on_lost <= 0.02, "{on_lost}");
+    assert!(before < 0.9, "without the frame check: {before}");
+}
+
+#[test]
+fn the_polish_holds_a_blurred_wall_that_iclk_drifts_off() {
+    // The evidence set's `bricks_m1`: the brick wall on the UCSB `m1` profile (5 px a frame)
+    // with motion blur. ICLK linearises with the sharp template's gradients, the frames are
+    // blurred along the motion, and its fixed point is not the AM's optimum: it converges
+    // slowly to a point a fraction of a pixel off, frame after frame, and drifts off the wall's
+    // period (docs/robustness.md, "Fast motion"). The polish's forward steps, taken while the
+    // patch grows more like the template, hold it.
+    use regtrack::dataset::synth::{SynthConfig, render_sequence};
+    use regtrack::eval::{self, EvalOptions};
+    let d = crate::common::TempDir::new("polish");
+    let root = crate::common::root();
+    let cfg = SynthConfig {
+        texture: root.join("assets/textures/skimage_brick.png"),
+        background: Some(root.join("assets/textures/skimage_coffee.png")),
+        motion: root.join("assets/motion/ucsb_bricks_m1.txt"),
+        noise: 2.0,
+        motion_blur: 3,
+        seed: 7,
+        ..SynthConfig::default()
+    };
+    let seq = render_sequence(&cfg, &d.path().join("m1"), "bricks_m1", &|_, _| {}).unwrap();
+    for am in ["ssd", "zncc"] {
+        let sr = |polish: &str| {
+            let mut spec = TrackerSpec::from_names("iclk", am, "homography").unwrap();
+            spec.set_param("polish", polish).unwrap();
+            let run =
+                eval::run_sequence(&seq, &spec, &EvalOptions::default(), None, &mut NoObserver)
+                    .unwrap();
+            eval::summarize("m1", &[&run]).sr5
+        };
+        let (off, on) = (sr("off"), sr("on"));
+        eprintln!(
+            "iclk-{am} on the blurred wall: SR@5 {off:.3} without the polish, {on:.3} with it"
+        );
+        assert!(on >= 0.95 && off < 0.6, "{am}: {off} {on}");
+    }
+}
+
+#[test]
+fn the_line_search_settles_the_forward_methods_on_a_star_field() {
+    // Without it FCLK and FALK run out of iterations on a third to a half of the star field's
+    // frames (the Gauss-Newton step overshoots and cycles between two points); with it every
+    // frame settles, in fewer iterations, and the track holds.
+    let (frames, truth) = star_field_sequence(79, 1);
+    for (sm, am) in [("fclk", "ssd"), ("fclk", "zncc"), ("falk", "zncc")] {
+        let settle = |line_search: &str| {
+            let mut spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+            spec.set_param("line_search", line_search).unwrap();
+            let mut t = Tracker::new(&spec).unwrap();
+            t.initialize(FrameInput::Gray8(&frames[0]), &truth).unwrap();
+            let (mut unsettled, mut iterations, mut worst) = (0, 0, 0.0f64);
+            for f in &frames[1..] {
+                let out = t.update(FrameInput::Gray8(f), &mut NoObserver);
+                unsettled += usize::from(!out.converged);
+                iterations += out.iterations;
+                worst = worst.max(alignment_error(&out.corners, &truth));
+            }
+            (unsettled, iterations, worst)
+        };
+        let (off, on) = (settle("off"), settle("on"));
+        eprintln!(
+            "{sm}-{am}: without the line search {off:?}, with it {on:?} (unsettled frames, iterations, worst px)"
+        );
+        assert!(off.0 >= 20 && on.0 == 0, "{off:?} {on:?}");
+        assert!(on.1 < off.1 && on.2 < 2.0, "{off:?} {on:?}");
     }
 }

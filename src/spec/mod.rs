@@ -8,7 +8,8 @@
 mod tracker_params;
 
 pub use tracker_params::{
-    GridLayout, LossPolicy, OFF_ON, ParamValue, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, GridLayout, LossPolicy, OFF_ON, ParamValue,
+    TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the

@@ -232,7 +232,7 @@ impl PyTracker {
 
 #[pymethods]
 impl PyTracker {
-    /// Builds a tracker. Without names, the default tracker (FCLK-ZNCC-homography). Keyword
+    /// Builds a tracker. Without names, the default tracker (ICLK-ZNCC-homography). Keyword
     /// arguments set parameters by name (`regtrack.list_methods()` lists them), checked against
     /// their definitions.
     #[new]

@@ -15,7 +15,7 @@ pub use tracker_params::{
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the
 /// inspector's first tracker. Chosen by measurement over every kind of sequence measured, and
 /// fast enough live (docs/robustness.md, "The default tracker").
-pub const DEFAULT_TRACKER: [&str; 3] = ["fclk", "zncc", "homography"];
+pub const DEFAULT_TRACKER: [&str; 3] = ["iclk", "zncc", "homography"];
 
 use crate::params::MethodParams;
 use serde::{Deserialize, Serialize};

@@ -49,6 +49,9 @@ pub enum Error {
     /// A sequence or dataset that does not hold what it should.
     #[error("invalid sequence {}: {message}", path.display())]
     Sequence { path: PathBuf, message: String },
+    /// A live source (camera, test source) that stopped or cannot be read.
+    #[error("live source {name}: {message}")]
+    Live { name: String, message: String },
     /// A report that cannot be made: a folder without runs, a figure that cannot be drawn.
     #[error("{}: {message}", path.display())]
     Report { path: PathBuf, message: String },

@@ -7,6 +7,9 @@ use nalgebra::{Matrix3, SMatrix};
 /// The largest number of warp parameters.
 pub const MAX_DOF: usize = 8;
 
+/// The load added to the Newton system's diagonal, relative to its largest entry.
+pub const RIDGE: f64 = 1e-6;
+
 /// Solves `H x = -g` for the Newton step of a maximisation, with `H` (row-major, `n x n`) the
 /// Hessian, normally negative definite. Tries a Cholesky factorisation of `-H`, then LU with
 /// partial pivoting; `None` when the system is singular or the result is not finite.
@@ -22,6 +25,13 @@ pub fn newton_step(
             a[i * MAX_DOF + j] = -h[i * n + j];
         }
         b[i] = g[i];
+    }
+    // A ridge of RIDGE times the largest curvature: a direction the patch does not constrain
+    // (stripes along it) gets a step of the size of its gradient's noise over that load, not
+    // over a pivot as small as rounding.
+    let top = (0..n).map(|i| a[i * MAX_DOF + i]).fold(0.0f64, f64::max);
+    for i in 0..n {
+        a[i * MAX_DOF + i] += RIDGE * top;
     }
     let x = cholesky_solve(&a, &b, n).or_else(|| lu_solve(&a, &b, n))?;
     x[..n].iter().all(|v| v.is_finite()).then_some(x)
@@ -217,14 +227,23 @@ mod tests {
         g[0] = 1.0;
         g[1] = 2.0;
         let x = newton_step(&h, &g, 2).unwrap();
-        assert!((x[0] - 1.0 / 11.0).abs() < 1e-12 && (x[1] - 7.0 / 11.0).abs() < 1e-12);
+        // The ridge (1e-6 of the largest curvature) moves the solution by about as much.
+        assert!((x[0] - 1.0 / 11.0).abs() < 1e-5 && (x[1] - 7.0 / 11.0).abs() < 1e-5);
         // Indefinite: falls back to LU.
         h[..4].copy_from_slice(&[1.0, 0.0, 0.0, -1.0]);
         let x = newton_step(&h, &g, 2).unwrap();
-        assert!((x[0] + 1.0).abs() < 1e-12 && (x[1] - 2.0).abs() < 1e-12);
+        assert!((x[0] + 1.0).abs() < 1e-5 && (x[1] - 2.0).abs() < 1e-5);
         // Singular.
         h[..4].copy_from_slice(&[1.0, 1.0, 1.0, 1.0]);
         assert!(newton_step(&h, &g, 2).is_none());
+        // A direction with no curvature but rounding, and a gradient of noise along it (a
+        // patch of stripes): the step along it is the noise over the ridge, not over the
+        // rounding.
+        h[..4].copy_from_slice(&[-1e4, 0.0, 0.0, -1e-12]);
+        g[0] = 0.0;
+        g[1] = 1e-6;
+        let x = newton_step(&h, &g, 2).unwrap();
+        assert!(x[1].abs() < 1e-3, "{}", x[1]);
     }
 
     #[test]

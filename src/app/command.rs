@@ -50,6 +50,19 @@ pub enum Command {
     DismissError(usize),
     /// Show an error message.
     ReportError(String),
+    /// Open a live source: `/dev/videoN` (V4L2) or `lavfi:<graph>` (an FFmpeg test source),
+    /// at `width x height`.
+    OpenCamera {
+        source: String,
+        width: usize,
+        height: usize,
+    },
+    /// Close the live source.
+    StopCamera,
+    /// Start (`true`) or stop recording the live frames with the selected tracker's corners.
+    Record(bool),
+    /// The folder recordings go to.
+    SetRecordFolder(String),
 }
 
 /// The actions of the ground-truth mode ([`Command::Gt`]).
@@ -104,6 +117,18 @@ impl InspectorApp {
 
     /// The one handler of every command.
     pub fn apply(&mut self, cmd: Command) {
+        if self.is_live()
+            && matches!(
+                cmd,
+                Command::Play | Command::Step | Command::RerunFrom(_) | Command::Pause
+            )
+        {
+            self.rt.msg.status =
+                "live: the frames come from the source (Stop camera, then open the recording \
+                 to step through it)"
+                    .into();
+            return;
+        }
         match cmd {
             Command::OpenSequence(src) => {
                 // A new sequence: nothing of the old one's frames carries over.
@@ -267,6 +292,22 @@ impl InspectorApp {
                 Err(e) => self.error(format!("cannot load the session: {e}")),
             },
             Command::ReportError(e) => self.error(e),
+            Command::OpenCamera {
+                source,
+                width,
+                height,
+            } => self.open_live(source, width, height),
+            Command::StopCamera => self.rt.worker.send(Job::StopLive),
+            Command::Record(on) => {
+                let what = on.then(|| {
+                    (
+                        PathBuf::from(self.rt.live.record_folder.trim()),
+                        self.state.selected_tracker,
+                    )
+                });
+                self.rt.worker.send(Job::Record(what));
+            }
+            Command::SetRecordFolder(f) => self.rt.live.record_folder = f,
             Command::DismissError(i) => {
                 if i < self.rt.msg.errors.len() {
                     self.rt.msg.errors.remove(i);

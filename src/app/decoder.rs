@@ -28,17 +28,8 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameIma
     if seq.video.is_some() {
         // A video's frames are decoded grey; they are shown grey.
         let gray = seq.load_gray(i)?;
-        let rgba = gray.data.iter().flat_map(|&v| [v, v, v, 255]).collect();
-        let (width, height) = (gray.width, gray.height);
-        return Ok((
-            gray,
-            FrameImage {
-                index: i,
-                width,
-                height,
-                rgba,
-            },
-        ));
+        let image = gray_image(i, &gray);
+        return Ok((gray, image));
     }
     let img = load_dynamic(path)?;
     let gray = gray_from_dynamic(&img);
@@ -52,6 +43,16 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameIma
             rgba: rgba.into_raw(),
         },
     ))
+}
+
+/// A gray frame for display (a video's or a live source's).
+pub(super) fn gray_image(index: usize, gray: &GrayU8) -> FrameImage {
+    FrameImage {
+        index,
+        width: gray.width,
+        height: gray.height,
+        rgba: gray.data.iter().flat_map(|&v| [v, v, v, 255]).collect(),
+    }
 }
 
 pub(super) type Decoded = Result<(GrayU8, FrameImage)>;

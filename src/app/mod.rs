@@ -18,7 +18,7 @@ pub use crate::session as state;
 mod window;
 pub mod worker;
 
-use runtime::{DisplayRt, MessagesRt, RunRt, SequenceRt, UiRt};
+use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
 pub use runtime::{LandscapeSettings, LandscapeView, Runtime, Tool, Versioned};
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
@@ -40,6 +40,7 @@ impl InspectorApp {
             worker: Worker::spawn(wake),
             commands: Vec::new(),
             seq: SequenceRt::default(),
+            live: LiveRt::default(),
             run: RunRt::default(),
             display: DisplayRt::default(),
             msg: MessagesRt::default(),
@@ -89,18 +90,75 @@ impl InspectorApp {
 
     fn open(&mut self, src: SequenceSource) {
         self.rt.run.playing = false;
+        // A sequence replaces a live source (the worker closes it).
+        self.rt.live.info = None;
         self.rt.msg.progress = Some(("opening the sequence".into(), 0, 0));
         // The session and the recent list change once it opened (a failed open changes nothing).
         self.rt.seq.opening = Some(src.clone());
         self.rt.worker.send(Job::Open(src));
     }
 
+    /// Opens a live source (`/dev/videoN`, or `lavfi:<graph>` for an FFmpeg test source): its
+    /// frames are shown as they come; a box drawn on the image starts a tracker on the frame
+    /// it was drawn on.
+    fn open_live(&mut self, source: String, width: usize, height: usize) {
+        self.rt.run.playing = false;
+        self.rt.run.replaying = None;
+        self.rt.run.generation += 1;
+        self.rt.run.tracked_until = None;
+        self.rt.ui.selected_iteration = None;
+        self.rt.seq.sequence = None;
+        self.rt.seq.opening = None;
+        self.rt.seq.bad_frame = None;
+        self.rt.display.texture = None;
+        self.rt.display.texture_frame = None;
+        self.rt.display.pending_image = None;
+        self.state.start_frame = 0;
+        self.state.frame = 0;
+        // No ground truth live: every tracker waits for a box.
+        for t in &mut self.state.trackers {
+            t.init = InitSource::GroundTruth;
+        }
+        self.rt.run.starts = vec![0; self.state.trackers.len()];
+        *self.rt.run.results.edit() = vec![Vec::new(); self.state.trackers.len()];
+        self.rt.live.info = Some(worker::LiveInfo {
+            source: source.clone(),
+            ..Default::default()
+        });
+        self.rt.msg.errors.clear();
+        self.rt.msg.status = format!(
+            "live: {source}; drag a box on the image (Trackers panel: Draw box) to start a tracker"
+        );
+        if !self.state.trackers.is_empty() {
+            let tracker = self
+                .state
+                .selected_tracker
+                .min(self.state.trackers.len() - 1);
+            self.rt.ui.tool = Tool::DrawBox {
+                tracker,
+                start: None,
+            };
+        }
+        self.rt.worker.send(Job::Live {
+            generation: self.rt.run.generation,
+            source,
+            width,
+            height,
+        });
+    }
+
+    /// Whether a live source runs.
+    pub fn is_live(&self) -> bool {
+        self.rt.live.info.is_some()
+    }
+
     /// Re-initialises every enabled tracker on `frame` and shows it.
     fn restart(&mut self, frame: usize) {
-        let Some(seq) = self.rt.seq.sequence.clone() else {
+        let n = self.frame_count();
+        if n == 0 {
             return;
-        };
-        let frame = frame.min(seq.len().saturating_sub(1));
+        }
+        let frame = frame.min(n - 1);
         self.rt.run.generation += 1;
         self.rt.run.playing = false;
         self.rt.run.tracked_until = None;
@@ -149,9 +207,10 @@ impl InspectorApp {
     /// Re-runs tracker `i` alone, from its start frame up to the frame the others reached; the
     /// view stays on its frame.
     fn rerun_tracker(&mut self, i: usize) {
-        let Some(seq) = self.rt.seq.sequence.clone() else {
+        let n = self.frame_count();
+        if n == 0 {
             return;
-        };
+        }
         let Some(t) = self.state.trackers.get(i).cloned() else {
             return;
         };
@@ -166,7 +225,7 @@ impl InspectorApp {
         let results = self.rt.run.results.edit();
         results.resize(self.state.trackers.len(), Vec::new());
         results[i].clear();
-        let from = self.rt.run.starts[i].min(seq.len().saturating_sub(1));
+        let from = self.rt.run.starts[i].min(n - 1);
         let until = self.rt.run.tracked_until.unwrap_or(from).max(from);
         let tracker = if t.enabled {
             let quad = match &t.init {
@@ -289,6 +348,8 @@ impl InspectorApp {
                 Reply::Progress(what, d, t) => {
                     self.rt.msg.progress = (!what.is_empty()).then_some((what, d, t))
                 }
+                // A sequence opened before a live source replaced it (the worker closed it).
+                Reply::Opened(_) if self.is_live() => {}
                 Reply::Opened(seq) => {
                     self.rt.msg.progress = None;
                     self.rt.msg.status = format!("{}: {} frames", seq.name, seq.len());
@@ -384,6 +445,11 @@ impl InspectorApp {
                         continue;
                     }
                     self.rt.run.tracked_until = Some(frame);
+                    // Live, the image holds while a box or a quad is being drawn on it (the
+                    // tracker then starts on the frame it was drawn on).
+                    if self.is_live() && self.drawing() {
+                        continue;
+                    }
                     // Follow the trackers while they run.
                     self.state.frame = frame;
                     if std::mem::take(&mut self.rt.run.play_after_start) {
@@ -416,6 +482,32 @@ impl InspectorApp {
                     self.rt.seq.bad_frame = Some((index, message));
                 }
                 Reply::Proposal { label, result } => self.proposal_arrived(label, result),
+                Reply::Live(info) => {
+                    if self.rt.live.info.is_some() {
+                        self.rt.live.info = Some(info);
+                    }
+                }
+                Reply::LiveEnded { error } => {
+                    let source = self.rt.live.info.take().map(|i| i.source);
+                    match error {
+                        Some(e) => self.error(match &self.rt.live.last_recording {
+                            Some((p, n)) if source.is_some() => {
+                                format!("{e}; the recording of {n} frames is kept: {}", p.display())
+                            }
+                            _ => e,
+                        }),
+                        None => {
+                            if let Some(s) = source {
+                                self.rt.msg.status = format!("live source {s} closed");
+                            }
+                        }
+                    }
+                }
+                Reply::RecordingEnded { path, frames } => {
+                    self.rt.msg.status =
+                        format!("recorded {frames} frames as a sequence: {}", path.display());
+                    self.rt.live.last_recording = Some((path, frames));
+                }
                 Reply::Picked(path) => {
                     self.rt.ui.dialog = false;
                     match path {
@@ -553,7 +645,7 @@ impl InspectorApp {
             if shortcut(i, egui::Key::O).is_some() {
                 dialog = true;
             }
-            if i.modifiers.command || n == 0 {
+            if i.modifiers.command || n == 0 || self.is_live() {
                 return;
             }
             if i.key_pressed(egui::Key::Space) {

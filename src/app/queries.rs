@@ -14,7 +14,19 @@ use std::sync::Arc;
 impl InspectorApp {
     /// Frames in the open sequence.
     pub fn frame_count(&self) -> usize {
-        self.rt.seq.sequence.as_ref().map_or(0, |s| s.len())
+        match &self.rt.live.info {
+            Some(live) => live.frames,
+            None => self.rt.seq.sequence.as_ref().map_or(0, |s| s.len()),
+        }
+    }
+
+    /// Whether a box or a quad is being drawn (pointer pressed, or corners clicked).
+    pub fn drawing(&self) -> bool {
+        match &self.rt.ui.tool {
+            crate::app::Tool::DrawBox { start, .. } => start.is_some(),
+            crate::app::Tool::DrawQuad { corners, .. } => !corners.is_empty(),
+            _ => false,
+        }
     }
 
     /// Whether the trackers are playing.
@@ -30,6 +42,16 @@ impl InspectorApp {
     /// Where an image point was drawn on screen in the last frame view.
     pub fn screen_pos(&self, p: Point) -> Option<egui::Pos2> {
         self.rt.display.transform.map(|t| t.to_screen(p))
+    }
+
+    /// The running live source's progress (`None`: no live source runs).
+    pub fn live(&self) -> Option<&crate::app::worker::LiveInfo> {
+        self.rt.live.info.as_ref()
+    }
+
+    /// The last recording of a live source that ended: its ground-truth file and frames.
+    pub fn last_recording(&self) -> Option<&(std::path::PathBuf, usize)> {
+        self.rt.live.last_recording.as_ref()
     }
 
     /// The frame the view shows a "could not be read" placeholder for.

@@ -183,6 +183,28 @@ impl Default for UiRt {
     }
 }
 
+/// A live source (a camera or an FFmpeg test source): shown and tracked while it runs, and
+/// what it recorded.
+pub(super) struct LiveRt {
+    /// The running source's progress (`None`: no live source runs).
+    pub(super) info: Option<super::worker::LiveInfo>,
+    /// The folder recordings go to (each recording a sequence `live.txt` + `live/`, then
+    /// `live_2`...).
+    pub(super) record_folder: String,
+    /// The last recording that ended (its ground-truth file and frames), to open.
+    pub(super) last_recording: Option<(PathBuf, usize)>,
+}
+
+impl Default for LiveRt {
+    fn default() -> Self {
+        LiveRt {
+            info: None,
+            record_folder: "recordings".into(),
+            last_recording: None,
+        }
+    }
+}
+
 /// Runtime state, never saved, grouped by concern.
 pub struct Runtime {
     /// All background work: jobs out, replies in.
@@ -190,6 +212,7 @@ pub struct Runtime {
     /// Commands pushed this frame, applied after the panels are drawn.
     pub(super) commands: Vec<Command>,
     pub(super) seq: SequenceRt,
+    pub(super) live: LiveRt,
     pub(super) run: RunRt,
     pub(super) display: DisplayRt,
     pub(super) msg: MessagesRt,

@@ -205,6 +205,8 @@ pub struct RunOptions {
     pub session: Option<PathBuf>,
     pub sequence: Option<PathBuf>,
     pub screenshot: Option<(usize, PathBuf)>,
+    /// A live source to open at start, and its frame size.
+    pub camera: Option<(String, usize, usize)>,
 }
 
 /// Opens the inspector window (blocks until it closes).
@@ -224,6 +226,7 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
     };
     let shot = opts.screenshot.clone();
     let session = opts.session.clone();
+    let camera = opts.camera.clone();
     let result: ShotResult = Arc::new(Mutex::new(None));
     let result2 = result.clone();
     eframe::run_native(
@@ -237,6 +240,13 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
             }
             if let Some((frames, path)) = shot {
                 app.screenshot_after(frames, path, result2);
+            }
+            if let Some((source, width, height)) = camera {
+                app.apply(super::command::Command::OpenCamera {
+                    source,
+                    width,
+                    height,
+                });
             }
             Ok(Box::new(app))
         }),

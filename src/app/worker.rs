@@ -5,7 +5,7 @@
 //! tracking, propagating corrections, sweeping a landscape) never runs on the UI thread.
 //! Results of an older generation (before a re-initialisation) are dropped by the UI.
 
-use super::decoder::{AHEAD, Ahead, decode_frame};
+use super::decoder::{AHEAD, Ahead, decode_frame, gray_image};
 use super::state::SequenceSource;
 use crate::dataset::{Sequence, demo};
 use crate::error::{Error, Result};
@@ -89,6 +89,49 @@ pub enum Job {
         frames: Option<usize>,
         fps: f32,
     },
+    /// Open a live source (`/dev/videoN` or `lavfi:<graph>`) at `width x height`: its frames
+    /// are shown and tracked as they come, the newest each time (see [`crate::dataset::live`]),
+    /// until another source is opened, [`Job::StopLive`] or the source stops.
+    Live {
+        generation: u64,
+        source: String,
+        width: usize,
+        height: usize,
+    },
+    /// Start recording the live frames with tracker `index`'s corners as a sequence under
+    /// the folder (`None`: stop recording).
+    Record(Option<(PathBuf, usize)>),
+    /// Close the live source.
+    StopLive,
+}
+
+/// What a live run has done so far (sent with every live frame).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LiveInfo {
+    pub source: String,
+    /// Frames received and shown.
+    pub frames: usize,
+    /// Frames the source sent that came while the trackers were busy (never shown).
+    pub dropped: u64,
+    /// Frames per second shown, over the last second or so.
+    pub fps: f32,
+    /// The recording's ground-truth file and its frames, while recording.
+    pub recording: Option<(PathBuf, usize)>,
+}
+
+/// Live frames kept for initialising a tracker on the frame a box was drawn on (about 3 s at
+/// 30 fps).
+pub const LIVE_KEPT: usize = 90;
+
+/// A live source being shown and tracked.
+struct LiveRun {
+    live: crate::dataset::live::Live,
+    /// The newest frames, by index.
+    kept: std::collections::VecDeque<(usize, GrayU8)>,
+    recording: Option<(crate::dataset::live::Recording, usize)>,
+    info: LiveInfo,
+    /// When the frames of the last second were shown (for the rate).
+    shown: std::collections::VecDeque<Instant>,
 }
 
 /// A tracker's result on a tracked frame, with what the recorder saw of its iterations.
@@ -206,6 +249,19 @@ pub enum Reply {
     },
     /// The path a file dialog returned (`None`: it was closed without a choice).
     Picked(Option<PathBuf>),
+    /// A live source opened, or its progress (with each live frame).
+    Live(LiveInfo),
+    /// The live source was closed (`error: None`), could not open or stopped by itself (the
+    /// error names it and the frame).
+    LiveEnded {
+        error: Option<String>,
+    },
+    /// A recording ended (asked, or its source stopped): its ground-truth file and frames,
+    /// kept on disk.
+    RecordingEnded {
+        path: PathBuf,
+        frames: usize,
+    },
 }
 
 /// The handle the UI keeps.
@@ -247,7 +303,7 @@ impl Worker {
 
     /// Queues a job.
     pub fn send(&self, job: Job) {
-        if matches!(job, Job::Start { .. } | Job::Open(_)) {
+        if matches!(job, Job::Start { .. } | Job::Open(_) | Job::Live { .. }) {
             self.stop();
         }
         let _ = self.jobs.send((self.epoch.load(Ordering::SeqCst), job));
@@ -292,6 +348,7 @@ struct Thread<W: Fn() + Sync> {
     templates: Vec<Arc<Vec<f32>>>,
     generation: u64,
     frame: usize,
+    live: Option<LiveRun>,
 }
 
 impl<W: Fn() + Sync> Thread<W> {
@@ -306,6 +363,7 @@ impl<W: Fn() + Sync> Thread<W> {
             templates: Vec::new(),
             generation: 0,
             frame: 0,
+            live: None,
         }
     }
 
@@ -315,9 +373,37 @@ impl<W: Fn() + Sync> Thread<W> {
     }
 
     fn run(mut self, jobs: Receiver<Stamped>) {
-        while let Ok((epoch, job)) = jobs.recv() {
+        loop {
+            // While a live source runs, its frames are taken between jobs.
+            let next = if self.live.is_some() {
+                match jobs.try_recv() {
+                    Ok(j) => j,
+                    Err(std::sync::mpsc::TryRecvError::Empty) => {
+                        self.live_step();
+                        continue;
+                    }
+                    Err(std::sync::mpsc::TryRecvError::Disconnected) => break,
+                }
+            } else {
+                match jobs.recv() {
+                    Ok(j) => j,
+                    Err(_) => break,
+                }
+            };
+            let (epoch, job) = next;
             match job {
-                Job::Open(src) => self.open(src),
+                Job::Open(src) => {
+                    self.end_live(None);
+                    self.open(src)
+                }
+                Job::Live {
+                    generation,
+                    source,
+                    width,
+                    height,
+                } => self.open_live(generation, source, width, height),
+                Job::Record(what) => self.record(what),
+                Job::StopLive => self.end_live(None),
                 Job::Show(i) => match self.decode(i) {
                     Ok((_, img)) => self.reply(Reply::Image(img)),
                     Err(e) => self.reply(Reply::FrameError { index: i, error: e }),
@@ -411,6 +497,21 @@ impl<W: Fn() + Sync> Thread<W> {
     /// Frame `i`: from the frames decoded ahead, else decoded now; asks the decoder for the
     /// next few frames (tracking and replay go forward).
     fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage)> {
+        if let Some(run) = &self.live {
+            let gray = run
+                .kept
+                .iter()
+                .find(|(k, _)| *k == i)
+                .map(|(_, g)| g.clone())
+                .ok_or_else(|| {
+                    Error::InvalidParameter(format!(
+                        "live frame {} is no longer kept (the last {LIVE_KEPT} are)",
+                        i + 1
+                    ))
+                })?;
+            let image = gray_image(i, &gray);
+            return Ok((gray, image));
+        }
         let seq = self
             .sequence
             .as_ref()
@@ -527,10 +628,12 @@ impl<W: Fn() + Sync> Thread<W> {
             self.templates.remove(k);
         }
         let Some((spec, quad)) = tracker else { return };
-        let Some(seq) = self.sequence.clone() else {
-            return;
+        let len = match (&self.live, &self.sequence) {
+            (Some(run), _) => run.info.frames,
+            (None, Some(seq)) => seq.len(),
+            (None, None) => return,
         };
-        let until = until.min(seq.len().saturating_sub(1)).max(from);
+        let until = until.min(len.saturating_sub(1)).max(from);
         let gray = match self.decode(from) {
             Ok(v) => v.0,
             Err(e) => {
@@ -596,6 +699,182 @@ impl<W: Fn() + Sync> Thread<W> {
         self.reply(Reply::Progress(String::new(), 0, 0));
         self.trackers.push((index, t));
         self.templates.push(template);
+    }
+
+    /// Opens a live source; its frames then come between jobs ([`Thread::live_step`]).
+    fn open_live(&mut self, generation: u64, source: String, width: usize, height: usize) {
+        self.end_live(None);
+        match crate::dataset::live::Live::open(&source, width, height) {
+            Ok(live) => {
+                self.sequence = None;
+                self.trackers.clear();
+                self.templates.clear();
+                self.generation = generation;
+                self.frame = 0;
+                let info = LiveInfo {
+                    source,
+                    ..LiveInfo::default()
+                };
+                self.reply(Reply::Live(info.clone()));
+                self.live = Some(LiveRun {
+                    live,
+                    kept: Default::default(),
+                    recording: None,
+                    info,
+                    shown: Default::default(),
+                });
+            }
+            Err(e) => self.reply(Reply::LiveEnded {
+                error: Some(format!("cannot open the live source {source}: {e}")),
+            }),
+        }
+    }
+
+    /// Takes the newest live frame (waiting a little for one), tracks it with the trackers
+    /// initialised so far, records it when recording, and sends it.
+    fn live_step(&mut self) {
+        let Some(run) = self.live.as_mut() else {
+            return;
+        };
+        let frame = match run.live.newest_within(Duration::from_millis(50)) {
+            Ok(Some(f)) => f,
+            Ok(None) => return,
+            Err(e) => {
+                let at = run.info.frames + 1;
+                return self.end_live(Some(format!("{e} (at live frame {at})")));
+            }
+        };
+        let i = run.info.frames;
+        if i > 0 {
+            run.info.dropped += frame.dropped;
+        }
+        run.info.frames += 1;
+        let now = Instant::now();
+        run.shown.push_back(now);
+        while run
+            .shown
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
+        {
+            run.shown.pop_front();
+        }
+        run.info.fps = run.shown.len() as f32;
+        run.kept.push_back((i, frame.image));
+        if run.kept.len() > LIVE_KEPT {
+            run.kept.pop_front();
+        }
+        let gray = &run.kept.back().expect("just pushed").1;
+        let image = gray_image(i, gray);
+        // Trackers initialised on this frame or before (a box drawn on a kept frame starts
+        // its tracker there) follow it.
+        let mut results = Vec::with_capacity(self.trackers.len());
+        for k in 0..self.trackers.len() {
+            let mut rec = Recorder {
+                visuals: true,
+                patches: true,
+                ..Recorder::default()
+            };
+            let out = self.trackers[k].1.update(FrameInput::Gray8(gray), &mut rec);
+            results.push(tracked_frame(
+                self.trackers[k].0,
+                &self.trackers[k].1,
+                &mut rec,
+                &out,
+                self.templates[k].clone(),
+            ));
+        }
+        self.frame = i;
+        let mut failed = None;
+        if let Some((rec, index)) = run.recording.as_mut() {
+            let corners = results
+                .iter()
+                .find(|r| r.tracker == *index && r.status == TrackStatus::Tracking)
+                .map(|r| r.corners);
+            match rec.push(gray, corners.as_ref()) {
+                Ok(()) => run.info.recording = Some((rec.path().to_path_buf(), rec.frames())),
+                Err(e) => failed = Some(e),
+            }
+        }
+        if let Some(e) = failed {
+            // The recording stops (what it wrote is kept); the live view goes on.
+            let kept = run
+                .recording
+                .take()
+                .map(|(r, _)| (r.path().to_path_buf(), r.frames()));
+            run.info.recording = None;
+            let info = run.info.clone();
+            self.reply(Reply::Error {
+                context: "the recording stopped".into(),
+                error: e,
+            });
+            if let Some((path, frames)) = kept {
+                self.reply(Reply::RecordingEnded { path, frames });
+            }
+            self.reply(Reply::Live(info));
+        }
+        let info = self
+            .live
+            .as_ref()
+            .map(|r| r.info.clone())
+            .unwrap_or_default();
+        self.reply(Reply::Frame {
+            generation: self.generation,
+            frame: i,
+            results,
+            image: Some(image),
+            catch_up: false,
+        });
+        self.reply(Reply::Live(info));
+    }
+
+    /// Starts or stops recording the live frames.
+    fn record(&mut self, what: Option<(PathBuf, usize)>) {
+        let Some(run) = self.live.as_mut() else {
+            return self.reply(Reply::Error {
+                context: "cannot record".into(),
+                error: Error::InvalidParameter("no live source is open".into()),
+            });
+        };
+        let ended = run
+            .recording
+            .take()
+            .map(|(r, _)| (r.path().to_path_buf(), r.frames()));
+        run.info.recording = None;
+        let mut error = None;
+        if let Some((root, index)) = what {
+            match crate::dataset::live::Recording::create_fresh(&root) {
+                Ok(r) => {
+                    run.info.recording = Some((r.path().to_path_buf(), 0));
+                    run.recording = Some((r, index));
+                }
+                Err(e) => error = Some(e),
+            }
+        }
+        let info = run.info.clone();
+        if let Some(e) = error {
+            self.reply(Reply::Error {
+                context: "cannot record".into(),
+                error: e,
+            });
+        }
+        if let Some((path, frames)) = ended {
+            self.reply(Reply::RecordingEnded { path, frames });
+        }
+        self.reply(Reply::Live(info));
+    }
+
+    /// Closes the live source, if one runs (the recording it made stays on disk).
+    fn end_live(&mut self, error: Option<String>) {
+        let Some(run) = self.live.take() else {
+            return;
+        };
+        if let Some((r, _)) = run.recording {
+            self.reply(Reply::RecordingEnded {
+                path: r.path().to_path_buf(),
+                frames: r.frames(),
+            });
+        }
+        self.reply(Reply::LiveEnded { error });
     }
 
     fn advance(&mut self, frames: Option<usize>, fps: f32, epoch: u64) {

@@ -13,6 +13,13 @@ use std::io::Read;
 use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
 
+/// A frame size `WxH` (both sides 1..=16384), as the camera options take it.
+pub fn parse_size(s: &str) -> Option<(usize, usize)> {
+    let (w, h) = s.trim().split_once(['x', 'X'])?;
+    let (w, h) = (w.trim().parse().ok()?, h.trim().parse().ok()?);
+    ((1..=16384).contains(&w) && (1..=16384).contains(&h)).then_some((w, h))
+}
+
 /// A live source: `/dev/videoN` (V4L2) or `lavfi:<graph>` (an FFmpeg test source).
 pub struct Live {
     pub source: String,
@@ -99,7 +106,7 @@ impl Live {
                         let _ = err.read_to_string(&mut why);
                         let why = why.trim().replace('\n', "; ");
                         slot.ended = Some(format!(
-                            "the live source stopped after {} frame(s){}",
+                            "stopped after {} frame(s){}",
                             slot.received,
                             if why.is_empty() {
                                 String::new()
@@ -127,6 +134,17 @@ impl Live {
     /// The newest frame not handed out yet, waiting for one if needed; an error once the
     /// source has stopped (naming it and how many frames it gave).
     pub fn newest(&mut self) -> Result<LiveFrame> {
+        loop {
+            if let Some(f) = self.newest_within(std::time::Duration::from_secs(3600))? {
+                return Ok(f);
+            }
+        }
+    }
+
+    /// As [`Live::newest`], waiting at most `wait` (`None` when no frame came meanwhile), so
+    /// that a caller can do other work while a camera is slow.
+    pub fn newest_within(&mut self, wait: std::time::Duration) -> Result<Option<LiveFrame>> {
+        let deadline = std::time::Instant::now() + wait;
         let (lock, cv) = &*self.shared;
         let mut slot = lock.lock().unwrap_or_else(|e| e.into_inner());
         loop {
@@ -135,15 +153,21 @@ impl Live {
             {
                 let dropped = slot.received - self.taken - 1;
                 self.taken = slot.received;
-                return Ok(LiveFrame { image, dropped });
+                return Ok(Some(LiveFrame { image, dropped }));
             }
             if let Some(why) = &slot.ended {
-                return Err(Error::Sequence {
-                    path: self.source.clone().into(),
+                return Err(Error::Live {
+                    name: self.source.clone(),
                     message: why.clone(),
                 });
             }
-            slot = cv.wait(slot).unwrap_or_else(|e| e.into_inner());
+            let Some(left) = deadline.checked_duration_since(std::time::Instant::now()) else {
+                return Ok(None);
+            };
+            slot = cv
+                .wait_timeout(slot, left)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
         }
     }
 }
@@ -152,5 +176,113 @@ impl Drop for Live {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// A live run written as a sequence in the MTF layout as it happens: `ROOT/NAME/frame00001.jpg`...
+/// and `ROOT/NAME.txt`, one line per frame (the tracked corners, or `lost`), appended and flushed
+/// after its frame is on disk. A run that ends in any way (the camera unplugged, the program
+/// killed) leaves a sequence that opens, evaluates and replays up to its last complete frame.
+pub struct Recording {
+    gt_path: std::path::PathBuf,
+    frames_dir: std::path::PathBuf,
+    gt: std::fs::File,
+    frames: usize,
+}
+
+/// JPEG quality of recorded frames (high: a recording is evaluated and corrected later).
+const RECORD_QUALITY: u8 = 95;
+
+impl Recording {
+    /// Starts a recording `ROOT/NAME.txt` + `ROOT/NAME/`; refuses to overwrite one.
+    pub fn create(root: &std::path::Path, name: &str) -> Result<Recording> {
+        let gt_path = root.join(format!("{name}.txt"));
+        let frames_dir = root.join(name);
+        if gt_path.exists() || frames_dir.exists() {
+            return Err(Error::io(
+                &gt_path,
+                std::io::Error::new(
+                    std::io::ErrorKind::AlreadyExists,
+                    "a recording of that name exists (choose another name or folder)",
+                ),
+            ));
+        }
+        std::fs::create_dir_all(&frames_dir).map_err(|e| Error::io(&frames_dir, e))?;
+        let mut gt = std::fs::File::create(&gt_path).map_err(|e| Error::io(&gt_path, e))?;
+        use std::io::Write;
+        gt.write_all(b"frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n")
+            .and_then(|()| gt.flush())
+            .map_err(|e| Error::io(&gt_path, e))?;
+        Ok(Recording {
+            gt_path,
+            frames_dir,
+            gt,
+            frames: 0,
+        })
+    }
+
+    /// Starts a recording in `root` under the first free name of `live`, `live_2`, `live_3`...
+    pub fn create_fresh(root: &std::path::Path) -> Result<Recording> {
+        let free = (1..10_000)
+            .map(|k| match k {
+                1 => "live".to_string(),
+                k => format!("live_{k}"),
+            })
+            .find(|n| !root.join(format!("{n}.txt")).exists() && !root.join(n).exists())
+            .unwrap_or_else(|| "live".into());
+        Recording::create(root, &free)
+    }
+
+    /// Appends a frame and its corners (`None`: not tracked, written `lost`).
+    pub fn push(&mut self, image: &GrayU8, corners: Option<&crate::geometry::Quad>) -> Result<()> {
+        use std::io::Write;
+        let name = format!("frame{:05}.jpg", self.frames + 1);
+        let path = self.frames_dir.join(&name);
+        if image.data.len() != image.width * image.height {
+            return Err(Error::InvalidParameter(
+                "a frame's data does not match its size".into(),
+            ));
+        }
+        let file = std::fs::File::create(&path).map_err(|e| Error::io(&path, e))?;
+        let mut writer = std::io::BufWriter::new(file);
+        image::ImageEncoder::write_image(
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut writer, RECORD_QUALITY),
+            &image.data,
+            image.width as u32,
+            image.height as u32,
+            image::ExtendedColorType::L8,
+        )
+        .map_err(|e| Error::Image {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        writer.flush().map_err(|e| Error::io(&path, e))?;
+        drop(writer);
+        let mut line = name;
+        match corners {
+            Some(q) => {
+                for v in q.to_array() {
+                    line.push_str(&format!(" {v:.4}"));
+                }
+            }
+            None => line.push_str(" lost"),
+        }
+        line.push('\n');
+        self.gt
+            .write_all(line.as_bytes())
+            .and_then(|()| self.gt.flush())
+            .map_err(|e| Error::io(&self.gt_path, e))?;
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Frames recorded so far.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// The recording's ground-truth file (what opens it as a sequence).
+    pub fn path(&self) -> &std::path::Path {
+        &self.gt_path
     }
 }

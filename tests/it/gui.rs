@@ -946,3 +946,107 @@ fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
         );
     }
 }
+
+/// Live mode end to end on FFmpeg's test source (the same path as a camera): frames shown as
+/// they come, a box dragged on the live image starts a tracker on the frame it was drawn on
+/// (the image holds during the drag), Record writes frames and corners as a sequence, and the
+/// source stopping mid-run is an error that names it while the recording is kept and opens.
+#[test]
+fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_source_stops() {
+    if std::process::Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_err()
+    {
+        panic!("ffmpeg is needed for the live path (apt install ffmpeg)");
+    }
+    let d = TempDir::new("gui-live");
+    let seq = small_sequence(d.path(), 3);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    // 7 s of a 320x240 test pattern at 25 fps, then the source ends (as a camera unplugged).
+    h.state_mut().send(Command::OpenCamera {
+        source: "lavfi:testsrc=size=320x240:rate=25:duration=7".into(),
+        width: 320,
+        height: 240,
+    });
+    step_until(&mut h, "live frames", |a| {
+        a.live().is_some_and(|l| l.frames >= 5) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    assert_eq!(h.state().frame_count(), h.state().live().unwrap().frames);
+    // Opening a camera arms the box tool for the selected tracker: drag a box on the image.
+    let a = h.state().screen_pos(Point::new(60.0, 40.0)).unwrap();
+    let b = h.state().screen_pos(Point::new(200.0, 150.0)).unwrap();
+    h.hover_at(a);
+    h.step();
+    h.drag_at(a);
+    h.step();
+    let held = h.state().state.frame;
+    for k in 1..=4 {
+        h.hover_at(a + (b - a) * (k as f32 / 4.0));
+        h.step();
+        std::thread::sleep(Duration::from_millis(60));
+    }
+    // The image held while the box was drawn, though frames kept coming.
+    assert_eq!(h.state().state.frame, held);
+    assert!(h.state().live().unwrap().frames > held + 1);
+    h.drop_at(b);
+    h.step();
+    h.step();
+    step_until(&mut h, "the tracker on its start frame", |a| {
+        a.result(0, held).is_some()
+    });
+    let start = h.state().result(0, held).unwrap().corners;
+    assert!(start.0[0].dist(Point::new(60.0, 40.0)) < 1.0, "{start}");
+    assert!(start.0[2].dist(Point::new(200.0, 150.0)) < 1.0, "{start}");
+    // It follows the newest frames.
+    step_until(&mut h, "tracked live frames", |a| {
+        a.tracked_until()
+            .is_some_and(|f| f > held + 5 && a.result(0, f).is_some())
+    });
+    let f = h.state().tracked_until().unwrap();
+    let r = h.state().result(0, f).unwrap();
+    assert_eq!(
+        r.status,
+        regtrack::tracker::TrackStatus::Tracking,
+        "live frame {f}"
+    );
+    // Record into a folder of the test's own.
+    let rec = d.path().join("rec");
+    h.state_mut()
+        .send(Command::SetRecordFolder(rec.display().to_string()));
+    h.step();
+    h.get_by_label("Record").click();
+    h.step();
+    step_until(&mut h, "recorded frames", |a| {
+        a.live()
+            .and_then(|l| l.recording.as_ref())
+            .is_some_and(|r| r.1 >= 10)
+    });
+    // The source stops by itself: one error naming it; the recording is kept.
+    step_until(&mut h, "the source to stop", |a| a.live().is_none());
+    let errors = h.state().errors_shown().join(" | ");
+    assert!(
+        errors.contains("testsrc") && errors.contains("stopped after"),
+        "{errors}"
+    );
+    assert!(errors.contains("recording of"), "{errors}");
+    let (path, n) = h.state().last_recording().cloned().expect("a recording");
+    assert_eq!(path, rec.join("live.txt"));
+    let recorded = regtrack::dataset::Sequence::open(&path).unwrap();
+    assert_eq!(recorded.len(), n);
+    assert!(n >= 10);
+    let tracked = (0..n)
+        .filter(|&k| recorded.ground_truth(k).is_some())
+        .count();
+    assert!(
+        tracked * 10 >= n * 9,
+        "{tracked} of {n} frames have corners"
+    );
+    // Opened from the bar, it is a sequence to step through, evaluate and correct.
+    h.get_by_label(&format!("Open the recording ({n} frames)"))
+        .click();
+    step_until(&mut h, "the recording", |a| {
+        a.frame_count() == n && a.tracked_until() == Some(0)
+    });
+}

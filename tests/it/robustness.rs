@@ -843,3 +843,37 @@ fn the_line_search_settles_the_forward_methods_on_a_star_field() {
         assert!(on.1 < off.1 && on.2 < 2.0, "{off:?} {on:?}");
     }
 }
+
+/// A target of vertical stripes (nothing along them to register: a camera on a bar code, or
+/// FFmpeg's colour bars) on a static frame stays where it is, tracking: without the Newton
+/// system's ridge the pivot of the unconstrained direction is rounding, and the step along
+/// it sent every gradient method's quad out of the frame on the first update.
+#[test]
+fn stripes_on_a_static_frame_stay_put_and_tracking() {
+    let (w, h) = (320usize, 240usize);
+    let data = (0..w * h)
+        .map(|i| [20u8, 200, 90, 240, 140, 60, 180, 110][(i % w) / 40])
+        .collect();
+    let img = GrayU8 {
+        width: w,
+        height: h,
+        data,
+    };
+    let truth = Quad::from_rect(60.0, 40.0, 140.0, 110.0);
+    for (sm, am) in [
+        ("iclk", "zncc"),
+        ("fclk", "ssd"),
+        ("esm", "ssd"),
+        ("ialk", "zncc"),
+    ] {
+        let spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+        let mut t = Tracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
+        for k in 0..5 {
+            let out = t.update(FrameInput::Gray8(&img), &mut NoObserver);
+            assert_eq!(out.status, TrackStatus::Tracking, "{sm}-{am} frame {k}");
+            let e = alignment_error(&out.corners, &truth);
+            assert!(e < 0.05, "{sm}-{am} frame {k}: {e} px");
+        }
+    }
+}

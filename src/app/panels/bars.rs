@@ -59,6 +59,7 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             {
                 out.push(Command::OpenSequence(SequenceSource::Demo));
             }
+            camera_controls(ui, out);
             if !app.rt.ui.recent.is_empty() {
                 egui::ComboBox::from_label("recent")
                     .selected_text("Recent")
@@ -131,10 +132,139 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     });
 }
 
+/// A live source to open: a V4L2 device or an FFmpeg test source, and its frame size.
+fn camera_controls(ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    let id = ui.make_persistent_id("camera_input");
+    let mut source = super::remembered_text(ui, id);
+    let edit = ui.add(
+        egui::TextEdit::singleline(&mut source)
+            .hint_text("/dev/video0 or lavfi:testsrc")
+            .desired_width(150.0),
+    );
+    let size_id = ui.make_persistent_id("camera_size");
+    let mut size = super::remembered_text(ui, size_id);
+    ui.add(
+        egui::TextEdit::singleline(&mut size)
+            .hint_text("640x480")
+            .desired_width(70.0),
+    )
+    .on_hover_text("The camera's frame size, WxH");
+    let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+    if (ui
+        .button("Open camera")
+        .on_hover_text(
+            "A live source: frames shown as they come; drag a box on the image to start a \
+             tracker, Record to keep the frames and corners as a sequence",
+        )
+        .clicked()
+        || enter)
+        && !source.trim().is_empty()
+    {
+        let size = if size.trim().is_empty() {
+            "640x480"
+        } else {
+            size.trim()
+        };
+        match crate::dataset::live::parse_size(size) {
+            Some((width, height)) => out.push(Command::OpenCamera {
+                source: source.trim().to_string(),
+                width,
+                height,
+            }),
+            None => out.push(Command::ReportError(format!(
+                "camera size {size:?}: expected WxH, e.g. 640x480"
+            ))),
+        }
+    }
+    super::remember_text(ui, id, source);
+    super::remember_text(ui, size_id, size);
+}
+
+/// The live source's bar: what it has shown and dropped, recording, closing it.
+fn live_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    let Some(info) = &app.rt.live.info else {
+        return;
+    };
+    ui.horizontal(|ui| {
+        ui.label(
+            egui::RichText::new("LIVE")
+                .strong()
+                .color(egui::Color32::from_rgb(230, 60, 60)),
+        );
+        ui.label(format!(
+            "{}: {} frames, {} dropped, {:.0} fps",
+            info.source, info.frames, info.dropped, info.fps
+        ))
+        .on_hover_text(
+            "Dropped: frames the source sent while the trackers were busy (each frame shown is \
+             the newest)",
+        );
+        ui.separator();
+        match &info.recording {
+            Some((path, n)) => {
+                if ui
+                    .button("Stop recording")
+                    .on_hover_text("The recording stays on disk as a sequence")
+                    .clicked()
+                {
+                    out.push(Command::Record(false));
+                }
+                ui.label(format!("recording {n} frames to {}", path.display()));
+            }
+            None => {
+                let label = ui.label("record to");
+                let mut folder = app.rt.live.record_folder.clone();
+                if ui
+                    .add(egui::TextEdit::singleline(&mut folder).desired_width(140.0))
+                    .labelled_by(label.id)
+                    .changed()
+                {
+                    out.push(Command::SetRecordFolder(folder));
+                }
+                if ui
+                    .button("Record")
+                    .on_hover_text(
+                        "Write every frame shown and the selected tracker's corners as a \
+                         sequence (MTF layout: live.txt + live/), to evaluate, correct and \
+                         replay later",
+                    )
+                    .clicked()
+                {
+                    out.push(Command::Record(true));
+                }
+            }
+        }
+        ui.separator();
+        if ui.button("Stop camera").clicked() {
+            out.push(Command::StopCamera);
+        }
+        open_recording_button(app, ui, out);
+    });
+}
+
+/// Opens the last recording as a sequence (for stepping, evaluating and correcting it).
+fn open_recording_button(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    let open = app.sequence().and_then(|s| s.gt_path.as_deref());
+    let recording = app.rt.live.last_recording.as_ref();
+    if let Some((path, n)) = recording.filter(|(p, n)| *n > 0 && open != Some(p.as_path()))
+        && ui
+            .button(format!("Open the recording ({n} frames)"))
+            .on_hover_text(path.display().to_string())
+            .clicked()
+    {
+        out.push(Command::OpenSequence(SequenceSource::Path(path.clone())));
+    }
+}
+
 /// Play, pause, step, seek, speed, re-run.
 pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     egui::Panel::bottom("playback").show(ui, |ui| {
+        if app.is_live() {
+            live_bar(app, ui, out);
+            return;
+        }
         ui.horizontal(|ui| {
+            open_recording_button(app, ui, out);
             let n = app.frame_count();
             if ui
                 .button("|< Start")

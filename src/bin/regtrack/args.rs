@@ -27,6 +27,13 @@ pub enum Command {
         /// Track, save a screenshot of the whole window to this PNG, and exit.
         #[arg(long)]
         screenshot: Option<PathBuf>,
+        /// Open a live camera instead: `/dev/video0` (V4L2), or an FFmpeg test source
+        /// `lavfi:testsrc=size=640x480:rate=30`; drag a box on the image to start a tracker.
+        #[arg(long, conflicts_with = "seq")]
+        camera: Option<String>,
+        /// The camera's frame size, WxH.
+        #[arg(long, default_value = "640x480", requires = "camera")]
+        size: String,
     },
     /// Render the bundled demo sequence (once) and compare ICLK, FCLK and ESM with SSD and ZNCC.
     Demo {

@@ -48,6 +48,8 @@ fn run() -> Result<()> {
         seq: None,
         frames: 30,
         screenshot: None,
+        camera: None,
+        size: "640x480".into(),
     });
     match command {
         Command::Inspect {
@@ -55,7 +57,18 @@ fn run() -> Result<()> {
             seq,
             frames,
             screenshot,
-        } => run_inspector(session, seq, frames, screenshot),
+            camera,
+            size,
+        } => {
+            let camera = match camera {
+                Some(c) => {
+                    let (w, h) = parse_size(&size)?;
+                    Some((c, w, h))
+                }
+                None => None,
+            };
+            run_inspector(session, seq, frames, screenshot, camera)
+        }
         Command::Demo { cache } => run_demo(cache.as_deref()),
         Command::Track {
             seq,
@@ -164,12 +177,14 @@ fn run_inspector(
     seq: Option<PathBuf>,
     frames: usize,
     screenshot: Option<PathBuf>,
+    camera: Option<(String, usize, usize)>,
 ) -> Result<()> {
     let shot = screenshot.clone();
     let summary = regtrack::app::run(regtrack::app::RunOptions {
         session,
         sequence: seq,
         screenshot: screenshot.map(|p| (frames, p)),
+        camera,
     })
     .map_err(|e| anyhow::anyhow!("inspector: {e}"))?;
     if let (Some(p), Some(summary)) = (shot, summary) {
@@ -184,6 +199,7 @@ fn run_inspector(
     _: Option<PathBuf>,
     _: usize,
     _: Option<PathBuf>,
+    _: Option<(String, usize, usize)>,
 ) -> Result<()> {
     bail!("this regtrack was built without the inspector (feature `gui`); see `regtrack --help`")
 }
@@ -250,8 +266,7 @@ fn spec_of(t: &TrackerArgs) -> Result<TrackerSpec> {
 
 /// `WxH`, e.g. `640x480`.
 fn parse_size(s: &str) -> Result<(usize, usize)> {
-    s.split_once(['x', 'X'])
-        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+    dataset::live::parse_size(s)
         .with_context(|| format!("--size must be WxH, e.g. 640x480, got '{s}'"))
 }
 
@@ -335,11 +350,11 @@ fn run_live(
     let spec = spec_of(t)?;
     let mut tracker = tracker::Tracker::new(&spec)?;
     let mut live = dataset::live::Live::open(camera, w, h)?;
-    let frames_dir = record.map(|d| d.join("live"));
-    if let Some(d) = &frames_dir {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
-    let (mut corners, mut names) = (Vec::new(), Vec::new());
+    // Written as it happens: a run that ends in any way leaves a sequence up to its last frame.
+    let mut recording = record
+        .map(|d| dataset::live::Recording::create(d, "live"))
+        .transpose()?;
+    let mut corners = Vec::new();
     let (mut dropped, mut lost) = (0u64, 0usize);
     let started = std::time::Instant::now();
     let mut stopped = None;
@@ -361,13 +376,8 @@ fn run_live(
             (o.status == regtrack::tracker::TrackStatus::Tracking).then_some(o.corners)
         };
         lost += q.is_none() as usize;
-        if let Some(d) = &frames_dir {
-            let name = format!("frame{:05}.jpg", corners.len() + 1);
-            image::GrayImage::from_raw(w as u32, h as u32, f.image.data)
-                .context("frame size")?
-                .save(d.join(&name))
-                .with_context(|| format!("cannot record {}", d.join(&name).display()))?;
-            names.push(name);
+        if let Some(r) = &mut recording {
+            r.push(&f.image, q.as_ref())?;
         }
         corners.push(q);
     }
@@ -380,13 +390,11 @@ fn run_live(
         corners.len() as f64 / secs.max(1e-9),
         out.display()
     );
-    if let Some(root) = record {
-        let gt = root.join("live.txt");
-        dataset::write_corners_named(&gt, &corners, &names)?;
+    if let Some(r) = &recording {
         println!(
             "recorded {} frames as a sequence: {}",
-            names.len(),
-            gt.display()
+            r.frames(),
+            r.path().display()
         );
     }
     match stopped {

@@ -126,6 +126,7 @@ impl InspectorApp {
             ..Default::default()
         });
         self.rt.msg.errors.clear();
+        self.rt.msg.progress = None;
         self.rt.msg.status = format!(
             "live: {source}; drag a box on the image (Trackers panel: Draw box) to start a tracker"
         );
@@ -349,7 +350,7 @@ impl InspectorApp {
                     self.rt.msg.progress = (!what.is_empty()).then_some((what, d, t))
                 }
                 // A sequence opened before a live source replaced it (the worker closed it).
-                Reply::Opened(_) if self.is_live() => {}
+                Reply::Opened(_) if self.is_live() => self.rt.msg.progress = None,
                 Reply::Opened(seq) => {
                     self.rt.msg.progress = None;
                     self.rt.msg.status = format!("{}: {} frames", seq.name, seq.len());

@@ -190,10 +190,11 @@ fn live_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             egui::RichText::new("LIVE")
                 .strong()
                 .color(egui::Color32::from_rgb(230, 60, 60)),
-        );
+        )
+        .on_hover_text(info.source.as_str());
         ui.label(format!(
-            "{}: {} frames, {} dropped, {:.0} fps",
-            info.source, info.frames, info.dropped, info.fps
+            "{} frames, {} dropped, {:.0} fps",
+            info.frames, info.dropped, info.fps
         ))
         .on_hover_text(
             "Dropped: frames the source sent while the trackers were busy (each frame shown is \
@@ -209,10 +210,21 @@ fn live_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 {
                     out.push(Command::Record(false));
                 }
-                ui.label(format!("recording {n} frames to {}", path.display()));
+                ui.label(format!("recording: {n} frames to {}", path.display()));
             }
             None => {
-                let label = ui.label("record to");
+                if ui
+                    .button("Record")
+                    .on_hover_text(
+                        "Write every frame shown and the selected tracker's corners as a \
+                         sequence (MTF layout: live.txt + live/, then live_2...), to evaluate, \
+                         correct and replay later",
+                    )
+                    .clicked()
+                {
+                    out.push(Command::Record(true));
+                }
+                let label = ui.label("to folder");
                 let mut folder = app.rt.live.record_folder.clone();
                 if ui
                     .add(egui::TextEdit::singleline(&mut folder).desired_width(140.0))
@@ -221,17 +233,6 @@ fn live_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 {
                     out.push(Command::SetRecordFolder(folder));
                 }
-                if ui
-                    .button("Record")
-                    .on_hover_text(
-                        "Write every frame shown and the selected tracker's corners as a \
-                         sequence (MTF layout: live.txt + live/), to evaluate, correct and \
-                         replay later",
-                    )
-                    .clicked()
-                {
-                    out.push(Command::Record(true));
-                }
             }
         }
         ui.separator();
@@ -239,6 +240,8 @@ fn live_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             out.push(Command::StopCamera);
         }
         open_recording_button(app, ui, out);
+        // The source last: a lavfi graph can be long.
+        ui.add(egui::Label::new(egui::RichText::new(info.source.as_str()).weak()).truncate());
     });
 }
 

@@ -329,7 +329,22 @@ fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
 fn tracker_stats(app: &InspectorApp, i: usize) -> String {
     let errors = app.errors(i);
     if errors.is_empty() {
-        return "not tracked yet".into();
+        // Without ground truth (a live source, an unannotated sequence): what it did.
+        let confidences = app.confidences(i);
+        let (n, us, _, _) = app.speed(i);
+        if confidences.is_empty() {
+            return "not tracked yet".into();
+        }
+        let lost = confidences.iter().filter(|c| c.2).count();
+        return format!(
+            "{} frames · {lost} lost · {:.0} FPS · no ground truth",
+            confidences.len(),
+            if us > 0.0 {
+                n as f64 / (us * 1e-6)
+            } else {
+                0.0
+            }
+        );
     }
     let e: Vec<f64> = errors.iter().map(|(_, e)| *e).collect();
     let finite: Vec<f64> = e.iter().copied().filter(|v| v.is_finite()).collect();

@@ -490,6 +490,9 @@ impl InspectorApp {
                 }
                 Reply::LiveEnded { error } => {
                     let source = self.rt.live.info.take().map(|i| i.source);
+                    if error.is_some() {
+                        self.rt.msg.status = "the live source stopped".into();
+                    }
                     match error {
                         Some(e) => self.error(match &self.rt.live.last_recording {
                             Some((p, n)) if source.is_some() => {

@@ -45,7 +45,12 @@ pub struct Landscape {
     pub center: Params,
     pub center_value: f64,
     /// Per axis, `df/du` at the centre: from the AM's analytic gradient, and by central
-    /// differences of `f` (`u` in px).
+    /// differences of `f` over +-0.01 px (`u` in px). They differ by up to about a tenth of
+    /// the gradient's size on a lightly smoothed frame, without either being wrong: the
+    /// analytic slope is made of image gradients by central differences (what every gradient
+    /// search method uses, a smoothed derivative), the numeric one is the slope of the
+    /// bilinearly interpolated frame; the gap narrows as the frame is smoothed (the AM's own
+    /// derivatives pass finite-difference tests in `am/tests.rs`).
     pub analytic: Vec<f64>,
     pub numeric: Vec<f64>,
 }

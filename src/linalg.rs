@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, SMatrix};
 pub const MAX_DOF: usize = 8;
 
 /// The load added to the Newton system's diagonal, relative to its largest entry.
-pub const RIDGE: f64 = 1e-6;
+pub const RIDGE: f64 = 1e-9;
 
 /// Solves `H x = -g` for the Newton step of a maximisation, with `H` (row-major, `n x n`) the
 /// Hessian, normally negative definite. Tries a Cholesky factorisation of `-H`, then LU with
@@ -227,12 +227,12 @@ mod tests {
         g[0] = 1.0;
         g[1] = 2.0;
         let x = newton_step(&h, &g, 2).unwrap();
-        // The ridge (1e-6 of the largest curvature) moves the solution by about as much.
-        assert!((x[0] - 1.0 / 11.0).abs() < 1e-5 && (x[1] - 7.0 / 11.0).abs() < 1e-5);
+        // The ridge (1e-9 of the largest curvature) moves the solution by about as much.
+        assert!((x[0] - 1.0 / 11.0).abs() < 1e-8 && (x[1] - 7.0 / 11.0).abs() < 1e-8);
         // Indefinite: falls back to LU.
         h[..4].copy_from_slice(&[1.0, 0.0, 0.0, -1.0]);
         let x = newton_step(&h, &g, 2).unwrap();
-        assert!((x[0] + 1.0).abs() < 1e-5 && (x[1] - 2.0).abs() < 1e-5);
+        assert!((x[0] + 1.0).abs() < 1e-8 && (x[1] - 2.0).abs() < 1e-8);
         // Singular.
         h[..4].copy_from_slice(&[1.0, 1.0, 1.0, 1.0]);
         assert!(newton_step(&h, &g, 2).is_none());
@@ -241,7 +241,7 @@ mod tests {
         // rounding.
         h[..4].copy_from_slice(&[-1e4, 0.0, 0.0, -1e-12]);
         g[0] = 0.0;
-        g[1] = 1e-6;
+        g[1] = 1e-9;
         let x = newton_step(&h, &g, 2).unwrap();
         assert!(x[1].abs() < 1e-3, "{}", x[1]);
     }

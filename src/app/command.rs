@@ -131,12 +131,8 @@ impl InspectorApp {
         }
         match cmd {
             Command::OpenSequence(src) => {
-                // A new sequence: nothing of the old one's frames carries over.
-                self.state.start_frame = 0;
-                self.state.frame = 0;
-                for t in &mut self.state.trackers {
-                    t.init = InitSource::GroundTruth;
-                }
+                // The frames reset once it opened (a failed open changes nothing).
+                self.rt.seq.fresh = true;
                 self.open(src)
             }
             Command::AddTracker => {
@@ -149,6 +145,10 @@ impl InspectorApp {
                     .unwrap_or_else(|| State::default().trackers[0].clone());
                 entry.color = PALETTE[n % PALETTE.len()];
                 entry.init = InitSource::GroundTruth;
+                self.rt.msg.status = format!(
+                    "tracker {} added: a copy of tracker {n} (pick its methods in its panel)",
+                    n + 1
+                );
                 self.state.trackers.push(entry);
                 self.rt.run.results.edit().push(Vec::new());
                 self.rt.run.starts.push(self.state.start_frame);

@@ -83,7 +83,8 @@ impl InspectorApp {
     fn error(&mut self, e: String) {
         self.rt.msg.errors.retain(|x| *x != e);
         self.rt.msg.errors.push(e);
-        if self.rt.msg.errors.len() > 5 {
+        // At most three, the newest: more pushes the frame down and hides what matters now.
+        if self.rt.msg.errors.len() > 3 {
             self.rt.msg.errors.remove(0);
         }
     }
@@ -146,6 +147,19 @@ impl InspectorApp {
             width,
             height,
         });
+    }
+
+    /// Whether a result of the worker is awaited: a propagation, a landscape, a file dialog, a
+    /// live source's frames.
+    fn awaiting_worker(&self) -> bool {
+        let landscape = &self.rt.ui.landscape;
+        self.rt.gt.running
+            || self.rt.ui.dialog
+            || self.is_live()
+            || self.rt.seq.opening.is_some()
+            || (landscape.open
+                && landscape.requested.is_some()
+                && landscape.result.as_ref().map(|r| &r.0) != landscape.requested.as_ref())
     }
 
     /// Whether a live source runs.
@@ -353,6 +367,15 @@ impl InspectorApp {
                 Reply::Opened(_) if self.is_live() => self.rt.msg.progress = None,
                 Reply::Opened(seq) => {
                     self.rt.msg.progress = None;
+                    // A new sequence (not a session's): nothing of the old one's frames carries
+                    // over. (Reset only now: a failed open leaves the shown sequence as it was.)
+                    if std::mem::take(&mut self.rt.seq.fresh) {
+                        self.state.start_frame = 0;
+                        self.state.frame = 0;
+                        for t in &mut self.state.trackers {
+                            t.init = InitSource::GroundTruth;
+                        }
+                    }
                     self.rt.msg.status = format!("{}: {} frames", seq.name, seq.len());
                     let start = self.state.start_frame.min(seq.len() - 1);
                     if let Some(src) = self.rt.seq.opening.take() {
@@ -468,6 +491,7 @@ impl InspectorApp {
                 Reply::Error { context, error } => {
                     self.rt.msg.progress = None;
                     self.rt.seq.opening = None;
+                    self.rt.seq.fresh = false;
                     self.error(format!("{context}: {error}"));
                 }
                 Reply::Landscape { key, result } => {
@@ -592,7 +616,12 @@ impl InspectorApp {
         }
         self.rt.commands.extend(out);
         self.apply_pending();
-        if !self.rt.run.rerun_due.is_empty() && !ctx.input(|i| i.pointer.any_down()) {
+        // Once the pointer is released and no value is being typed (typing "50" re-runs at 50,
+        // not at 5 first).
+        if !self.rt.run.rerun_due.is_empty()
+            && !ctx.input(|i| i.pointer.any_down())
+            && !ctx.egui_wants_keyboard_input()
+        {
             for i in std::mem::take(&mut self.rt.run.rerun_due) {
                 self.rerun_tracker(i);
             }
@@ -607,6 +636,11 @@ impl InspectorApp {
         self.screenshot(&ctx);
         if self.rt.run.playing || self.rt.msg.progress.is_some() {
             ctx.request_repaint();
+        } else if self.awaiting_worker() {
+            // Every reply requests a repaint; this is the safety net should a request made
+            // while a frame is being built be folded into it (a result then waited for the
+            // next mouse move).
+            ctx.request_repaint_after(std::time::Duration::from_millis(100));
         }
         if self.rt.run.playing {
             let dt = ctx.input(|i| i.unstable_dt);
@@ -631,6 +665,9 @@ impl InspectorApp {
         ctx.input(|i| {
             if i.key_pressed(egui::Key::F1) || i.key_pressed(egui::Key::Questionmark) {
                 self.rt.ui.show_help = !self.rt.ui.show_help;
+            }
+            if i.key_pressed(egui::Key::Escape) {
+                self.rt.ui.show_help = false;
             }
             if i.key_pressed(egui::Key::F2) || i.key_pressed(egui::Key::F3) {
                 let mut view = self.state.view.clone();

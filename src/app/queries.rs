@@ -44,6 +44,11 @@ impl InspectorApp {
         self.rt.display.transform.map(|t| t.to_screen(p))
     }
 
+    /// Whether the keyboard help is open.
+    pub fn help_shown(&self) -> bool {
+        self.rt.ui.show_help
+    }
+
     /// The running live source's progress (`None`: no live source runs).
     pub fn live(&self) -> Option<&crate::app::worker::LiveInfo> {
         self.rt.live.info.as_ref()

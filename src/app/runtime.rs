@@ -111,6 +111,9 @@ pub(super) struct SequenceRt {
     pub(super) restore_frame: Option<usize>,
     /// A frame that could not be read, and why (the view shows a placeholder for it).
     pub(super) bad_frame: Option<(usize, String)>,
+    /// The sequence being opened is a new one (not a session's): once it opened, the shown
+    /// frame and the trackers' starts go back to its first frame.
+    pub(super) fresh: bool,
 }
 
 /// The trackers' results and the run that makes them.

@@ -13,11 +13,10 @@ use std::io::Read;
 use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
 
-/// A frame size `WxH` (both sides 1..=16384), as the camera options take it.
+/// A frame size `WxH` (what is read; the range is the user's of it to check).
 pub fn parse_size(s: &str) -> Option<(usize, usize)> {
     let (w, h) = s.trim().split_once(['x', 'X'])?;
-    let (w, h) = (w.trim().parse().ok()?, h.trim().parse().ok()?);
-    ((1..=16384).contains(&w) && (1..=16384).contains(&h)).then_some((w, h))
+    Some((w.trim().parse().ok()?, h.trim().parse().ok()?))
 }
 
 /// A live source: `/dev/videoN` (V4L2) or `lavfi:<graph>` (an FFmpeg test source).

@@ -445,12 +445,20 @@ pub fn ground_truth_in(
             },
         })
         .collect::<Vec<_>>();
-    // Residuals against the (corrected) 8-DOF ground truth.
+    // Residuals of the fit against the (corrected) 8-DOF ground truth. A frame corrected by
+    // hand in this SSM has none: the correction is the annotator's word, and where it fixed a
+    // wrong original it would point "jump to worst" and the residual file at the fixed frame.
     let residuals = frames
         .iter()
         .zip(&quads)
-        .map(|(g, full)| match (g.quad(), full) {
-            (Some(a), Some(b)) => Some(alignment_error(&a, b)),
+        .map(|(g, full)| match (g, full) {
+            (
+                GtFrame::Quad {
+                    corrected: true, ..
+                },
+                _,
+            ) => None,
+            (GtFrame::Quad { quad, .. }, Some(b)) => Some(alignment_error(quad, b)),
             _ => None,
         })
         .collect();
@@ -540,6 +548,10 @@ pub enum PropagateStop {
     Jump { frame: usize, from: f64, to: f64 },
     /// The tracker lost the target at this frame.
     Lost(usize),
+    /// From this frame on the old ground truth agrees with the tracker again (within
+    /// [`PropagateLimits::agree_px`] for [`PropagateLimits::agree_frames`] frames): the frames
+    /// from here are kept as they are.
+    Agrees(usize),
     /// The proposal reached its length limit or the end of the sequence.
     End,
     /// A frame could not be read (the message names it).
@@ -558,6 +570,11 @@ impl std::fmt::Display for PropagateStop {
                 frame + 1
             ),
             PropagateStop::Lost(k) => write!(f, "the tracker lost the target at frame {}", k + 1),
+            PropagateStop::Agrees(k) => write!(
+                f,
+                "stopped before frame {}: the old ground truth agrees with the tracker from there",
+                k + 1
+            ),
             PropagateStop::End => write!(f, "reached the end"),
             PropagateStop::Frame(m) => write!(f, "stopped: {m}"),
         }
@@ -579,6 +596,10 @@ pub struct PropagateLimits {
     pub jump_px: f64,
     /// At most this many frames are proposed.
     pub max_frames: usize,
+    /// The old ground truth is right again once it is within this (px) of the tracker ...
+    pub agree_px: f64,
+    /// ... on this many frames in a row (which are not proposed).
+    pub agree_frames: usize,
 }
 
 impl Default for PropagateLimits {
@@ -586,6 +607,8 @@ impl Default for PropagateLimits {
         PropagateLimits {
             jump_px: 5.0,
             max_frames: 500,
+            agree_px: 1.0,
+            agree_frames: 3,
         }
     }
 }
@@ -593,7 +616,8 @@ impl Default for PropagateLimits {
 /// Tracks forward from a corrected frame to propose corrections of the next ones: initialises
 /// `spec` on frame `from` at `start`, then proposes the tracked corners of each next frame until
 /// a frame for which `corrected` holds, a jump of the error against the `old` ground truth from
-/// one tracked frame to the next, the loss of the target, or the length limit.
+/// one tracked frame to the next, the old ground truth agreeing with the tracker again, the loss
+/// of the target, or the length limit.
 pub fn propagate(
     seq: &Sequence,
     spec: &crate::tracker::TrackerSpec,
@@ -605,7 +629,11 @@ pub fn propagate(
     let PropagateLimits {
         jump_px,
         max_frames,
+        agree_px,
+        agree_frames,
     } = limits;
+    // Frames in a row (the newest last) on which the old ground truth agrees with the tracker.
+    let mut agreeing = 0usize;
     use crate::tracker::{FrameInput, TrackStatus, Tracker};
     let mut tracker = Tracker::new(spec)?;
     let img = seq.load_gray(from)?;
@@ -658,7 +686,19 @@ pub fn propagate(
         if err.is_some() {
             prev_err = err;
         }
+        agreeing = match err {
+            Some(e) if e <= agree_px => agreeing + 1,
+            _ => 0,
+        };
         frames.push((f, out.corners));
+        if agree_frames > 0 && agreeing >= agree_frames {
+            // The old ground truth is right again: its frames stay as they are.
+            frames.truncate(frames.len() - agreeing);
+            return Ok(Proposal {
+                frames,
+                stop: PropagateStop::Agrees(f + 1 - agreeing),
+            });
+        }
     }
     Ok(Proposal {
         frames,

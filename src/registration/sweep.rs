@@ -100,6 +100,7 @@ pub fn sweep(
         .zip(&deltas)
         .map(|(&k, &d)| g[k] * d)
         .collect();
+    // Central differences of f over +-0.01 px: the slope of the interpolated frame.
     let h = 0.01;
     let mut numeric = Vec::new();
     for j in 0..spec.axes.len() {

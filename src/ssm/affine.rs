@@ -23,6 +23,9 @@ impl Ssm for Affine {
     fn dof(&self) -> usize {
         6
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["tx", "ty", "a11", "a12", "a21", "a22"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         Matrix3::new(
             1.0 + p[2],

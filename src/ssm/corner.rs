@@ -56,6 +56,9 @@ impl Ssm for CornerHomography {
     fn dof(&self) -> usize {
         8
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["dx0", "dy0", "dx1", "dy1", "dx2", "dy2", "dx3", "dy3"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         // A degenerate corner configuration has no homography: report it as non-finite so that
         // the search method sees the loss.

@@ -23,6 +23,9 @@ impl Ssm for Homography {
     fn dof(&self) -> usize {
         8
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["h11-1", "h12", "h13", "h21", "h22-1", "h23", "h31", "h32"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         Matrix3::new(
             1.0 + p[0],

@@ -22,6 +22,9 @@ impl Ssm for Isometry {
     fn dof(&self) -> usize {
         3
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["tx", "ty", "theta"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         let (s, c) = p[2].sin_cos();
         Matrix3::new(c, -s, p[0], s, c, p[1], 0.0, 0.0, 1.0)

@@ -35,6 +35,8 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     fn name(&self) -> &'static str;
     /// Degrees of freedom.
     fn dof(&self) -> usize;
+    /// The parameters' names, as the module's documentation writes them (`dof` of them).
+    fn param_names(&self) -> &'static [&'static str];
     /// The identity warp.
     fn identity(&self) -> Params {
         [0.0; MAX_DOF]

@@ -23,6 +23,9 @@ impl Ssm for Similitude {
     fn dof(&self) -> usize {
         4
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["tx", "ty", "a", "b"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         Matrix3::new(
             1.0 + p[2],

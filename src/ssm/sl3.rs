@@ -51,6 +51,11 @@ impl Ssm for Sl3 {
     fn dof(&self) -> usize {
         8
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &[
+            "E13 (tx)", "E23 (ty)", "E21", "E12", "E11-E22", "E22-E33", "E31", "E32",
+        ]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         expm(&algebra(p))
     }

@@ -128,3 +128,16 @@ fn registry_resolves_mtf_aliases() {
         "{err}"
     );
 }
+
+#[test]
+fn every_model_names_each_of_its_parameters_once() {
+    for e in REGISTRY {
+        let ssm = (e.build)();
+        let names = ssm.param_names();
+        assert_eq!(names.len(), ssm.dof(), "{}", ssm.name());
+        let mut sorted = names.to_vec();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), names.len(), "{}: {names:?}", ssm.name());
+    }
+}

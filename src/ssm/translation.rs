@@ -22,6 +22,9 @@ impl Ssm for Translation {
     fn dof(&self) -> usize {
         2
     }
+    fn param_names(&self) -> &'static [&'static str] {
+        &["tx", "ty"]
+    }
     fn matrix(&self, p: &Params) -> Matrix3<f64> {
         Matrix3::new(1.0, 0.0, p[0], 0.0, 1.0, p[1], 0.0, 0.0, 1.0)
     }

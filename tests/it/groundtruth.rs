@@ -464,3 +464,78 @@ fn the_journal_survives_200_kills_and_a_full_disk() {
         "{failed} failed edits"
     );
 }
+
+/// A frame corrected by hand has no fit residual: the correction is the annotator's word, and
+/// against a wrong original it would point "jump to worst" at the fixed frame.
+#[test]
+fn a_corrected_frame_has_no_residual_against_the_original_it_fixed() {
+    let d = TempDir::new("gt-residual");
+    let quads = known_similitude_dataset(d.path());
+    let seq = Sequence::open(&d.path().join("known.txt")).unwrap();
+    let (mut c, _) = Corrections::open(&d.path().join("known.journal"), "known", 8).unwrap();
+    let (_, before) = gt::ground_truth_in(&seq, &c, "similitude").unwrap();
+    assert!(before[4].unwrap() > 1.0, "frame 5 is off: {:?}", before[4]);
+    // Frame 5 corrected to where the similitude puts it (the original's pushed corner undone).
+    let mut fixed = quads[4];
+    fixed.0[2].x -= 6.0;
+    c.edit(
+        "fix frame 5",
+        &[("similitude".into(), 4, Some(Mark::Quad(fixed.to_array())))],
+    )
+    .unwrap();
+    let (frames, after) = gt::ground_truth_in(&seq, &c, "similitude").unwrap();
+    assert_eq!(after[4], None);
+    assert_eq!(frames[4].quad(), Some(fixed));
+    for (k, r) in after.iter().enumerate().filter(|(k, _)| *k != 4) {
+        assert!(r.unwrap() < 1e-3, "frame {}: {r:?}", k + 1);
+    }
+}
+
+/// Propagating a correction stops where the old ground truth is right again: frames 9-12 of
+/// a rendered sequence are 6 px off, frame 9 is corrected, and the proposal covers frames
+/// 10-12 only, not the good frames after them.
+#[test]
+fn propagation_stops_where_the_old_ground_truth_is_right_again() {
+    use regtrack::dataset::synth::{SynthConfig, render_sequence};
+    let d = TempDir::new("gt-propagate");
+    let a = crate::common::root().join("assets");
+    let cfg = SynthConfig {
+        texture: a.join("textures/skimage_coffee.png"),
+        background: Some(a.join("textures/skimage_grass.png")),
+        motion: a.join("motion/ucsb_bricks_rt.txt"),
+        max_frames: Some(24),
+        jpeg_quality: 0,
+        ..SynthConfig::default()
+    };
+    let seq = render_sequence(&cfg, d.path(), "rt", &|_, _| {}).unwrap();
+    let truth: Vec<Quad> = (0..seq.len())
+        .map(|f| seq.ground_truth(f).unwrap())
+        .collect();
+    let old: Vec<Option<Quad>> = truth
+        .iter()
+        .enumerate()
+        .map(|(f, q)| {
+            Some(if (8..12).contains(&f) {
+                q.map(|p| Point::new(p.x + 6.0, p.y))
+            } else {
+                *q
+            })
+        })
+        .collect();
+    let spec = regtrack::tracker::TrackerSpec::from_names("iclk", "zncc", "homography").unwrap();
+    let p = gt::propagate(
+        &seq,
+        &spec,
+        (8, truth[8]),
+        &old,
+        &|_| false,
+        gt::PropagateLimits::default(),
+    )
+    .unwrap();
+    let proposed: Vec<usize> = p.frames.iter().map(|(f, _)| *f).collect();
+    assert_eq!(proposed, vec![9, 10, 11], "{}", p.stop);
+    assert_eq!(p.stop, gt::PropagateStop::Agrees(12));
+    for (f, q) in &p.frames {
+        assert!(alignment_error(q, &truth[*f]) < 1.0, "frame {}", f + 1);
+    }
+}

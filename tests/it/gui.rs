@@ -981,11 +981,15 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
     h.step();
     h.drag_at(a);
     h.step();
+    // The drag starts once the pointer moves; from then on the image holds.
+    h.hover_at(a + (b - a) * 0.25);
+    h.step();
+    assert!(h.state().drawing());
     let held = h.state().state.frame;
-    for k in 1..=4 {
+    for k in 2..=4 {
         h.hover_at(a + (b - a) * (k as f32 / 4.0));
         h.step();
-        std::thread::sleep(Duration::from_millis(60));
+        std::thread::sleep(Duration::from_millis(80));
     }
     // The image held while the box was drawn, though frames kept coming.
     assert_eq!(h.state().state.frame, held);
@@ -1049,4 +1053,51 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
     step_until(&mut h, "the recording", |a| {
         a.frame_count() == n && a.tracked_until() == Some(0)
     });
+}
+
+/// What the second day of use found in the window's small things: a failed open keeps the
+/// shown frame, Esc closes the help, error banners stay at three (the newest), and a new
+/// tracker says what it is.
+#[test]
+fn a_failed_open_keeps_the_frame_esc_closes_the_help_and_errors_stay_few() {
+    let d = TempDir::new("gui-second-day");
+    let seq = small_sequence(d.path(), 6);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Step);
+    h.state_mut().send(Command::Step);
+    step_until(&mut h, "two frames", |a| a.tracked_until() == Some(2));
+    h.state_mut().send(Command::Seek(2));
+    h.step();
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(
+            d.path().join("no_such.txt"),
+        )));
+    step_until(&mut h, "the error", |a| !a.errors_shown().is_empty());
+    assert_eq!(
+        h.state().state.frame,
+        2,
+        "a failed open keeps the shown frame"
+    );
+    assert_eq!(h.state().tracked_until(), Some(2));
+    press(&mut h, egui::Key::F1, egui::Modifiers::NONE);
+    assert!(h.state().help_shown());
+    press(&mut h, egui::Key::Escape, egui::Modifiers::NONE);
+    assert!(!h.state().help_shown());
+    for k in 0..5 {
+        h.state_mut()
+            .send(Command::ReportError(format!("error {k}")));
+    }
+    h.step();
+    assert_eq!(
+        h.state().errors_shown(),
+        &["error 2".to_string(), "error 3".into(), "error 4".into()]
+    );
+    h.state_mut().send(Command::AddTracker);
+    h.step();
+    assert!(
+        h.state().status().contains("a copy of tracker 2"),
+        "{}",
+        h.state().status()
+    );
 }

@@ -59,7 +59,12 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             {
                 out.push(Command::OpenSequence(SequenceSource::Demo));
             }
-            camera_controls(ui, out);
+            // In a menu: the top bar stays one line at 1280 px.
+            ui.menu_button("Camera…", |ui| {
+                ui.horizontal(|ui| camera_controls(ui, out));
+            })
+            .response
+            .on_hover_text("Open a live camera or an FFmpeg test source");
             if !app.rt.ui.recent.is_empty() {
                 egui::ComboBox::from_label("recent")
                     .selected_text("Recent")

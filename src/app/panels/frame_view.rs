@@ -409,15 +409,35 @@ fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Colo
         painter.add(Shape::mesh(mesh));
     }
     let boxes = v.label == "detections";
-    for (q, &w) in v.quads.iter().zip(&v.weights) {
-        let w = w.clamp(0.0, 1.0);
-        let col = c.gamma_multiply(0.12 + 0.88 * w);
-        if boxes {
-            painter.add(Shape::closed_line(quad_points(t, q), Stroke::new(1.0, col)));
+    // Weights relative to the largest: a particle filter's sum to 1 over hundreds of particles,
+    // each too small to see on an absolute scale.
+    let top = v.weights.iter().copied().fold(0.0f32, f32::max);
+    let rel = |w: f32| {
+        if top > 0.0 {
+            (w / top).clamp(0.0, 1.0)
         } else {
-            for p in q.0 {
-                painter.circle_filled(t.to_screen(p), 0.8 + 1.4 * w, col);
-            }
+            0.0
+        }
+    };
+    // The best candidates' outlines (the rest would bury the frame).
+    let mut order: Vec<usize> = (0..v.quads.len().min(v.weights.len())).collect();
+    order.sort_by(|&a, &b| v.weights[b].total_cmp(&v.weights[a]));
+    for (rank, &k) in order.iter().enumerate() {
+        let (q, w) = (&v.quads[k], rel(v.weights[k]));
+        let col = c.gamma_multiply(0.15 + 0.85 * w);
+        if boxes || rank < 8 {
+            painter.add(Shape::closed_line(
+                quad_points(t, q),
+                Stroke::new(if boxes { 1.0 } else { 0.8 }, col),
+            ));
+        }
+        if !boxes {
+            // Each candidate as a dot at its centre, larger and brighter the likelier it is.
+            let centre = crate::geometry::Point::new(
+                q.0.iter().map(|p| p.x).sum::<f64>() / 4.0,
+                q.0.iter().map(|p| p.y).sum::<f64>() / 4.0,
+            );
+            painter.circle_filled(t.to_screen(centre), 1.5 + 3.0 * w, col);
         }
     }
     if let Some(q) = v.chosen.and_then(|k| v.quads.get(k)) {

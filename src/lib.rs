@@ -42,6 +42,7 @@ pub mod am;
 pub mod app;
 pub mod bench;
 pub mod catalogue;
+pub mod converge;
 pub mod dataset;
 pub mod error;
 pub mod eval;

@@ -541,24 +541,51 @@ type DrawResult<DB> =
 /// A figure to draw.
 enum Plot<'a> {
     Sr(&'a Figure),
+    /// Curves over other axes (the frequency of convergence).
+    Curves(&'a Figure, &'a Axes),
     Speed(&'a [(String, f64)]),
+}
+
+/// The axes of a curve figure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Axes {
+    pub x_desc: String,
+    pub y_desc: String,
+    /// The x range is `0..x_max`; y is `0..1`.
+    pub x_max: f64,
+    /// What the number after each legend entry is.
+    pub legend_header: String,
 }
 
 impl Plot<'_> {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
         match self {
-            Plot::Sr(f) => draw_sr(area, f),
+            Plot::Sr(f) => draw_sr(
+                area,
+                f,
+                &Axes {
+                    x_desc: "error threshold t (px)".into(),
+                    y_desc: "success rate".into(),
+                    x_max: SR_MAX,
+                    legend_header: "mean SR".into(),
+                },
+            ),
+            Plot::Curves(f, axes) => draw_sr(area, f, axes),
             Plot::Speed(rows) => draw_speed(area, rows),
         }
     }
 }
 
-fn draw_sr<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> DrawResult<DB> {
+fn draw_sr<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &Figure,
+    axes: &Axes,
+) -> DrawResult<DB> {
     root.fill(&WHITE)?;
     let root = root.titled(&fig.title, (FAMILY, 22).into_font().color(&BLACK))?;
     // The legend sits right of the plot, so that it hides no curve.
     let legend_font = (FAMILY, 15).into_font().color(&BLACK);
-    let header = "mean SR";
+    let header = axes.legend_header.as_str();
     let entries: Vec<String> = fig
         .curves
         .iter()
@@ -576,11 +603,11 @@ fn draw_sr<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> D
         .margin(12)
         .x_label_area_size(50)
         .y_label_area_size(62)
-        .build_cartesian_2d(0.0..SR_MAX, 0.0..1.02)?;
+        .build_cartesian_2d(0.0..axes.x_max, 0.0..1.02)?;
     chart
         .configure_mesh()
-        .x_desc("error threshold t (px)")
-        .y_desc("success rate")
+        .x_desc(axes.x_desc.as_str())
+        .y_desc(axes.y_desc.as_str())
         .axis_desc_style((FAMILY, 17))
         .label_style((FAMILY, 14))
         .x_labels(11)
@@ -777,6 +804,16 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
 /// Draws a success-rate figure to `path` (`.png` or `.svg`).
 pub fn draw_sr_figure(path: &Path, figure: &Figure, size: (u32, u32)) -> Result<()> {
     save(path, size, &Plot::Sr(figure))
+}
+
+/// Draws curves over other axes (as [`draw_sr_figure`] draws success rates) to `path`.
+pub fn draw_curve_figure(
+    path: &Path,
+    figure: &Figure,
+    axes: &Axes,
+    size: (u32, u32),
+) -> Result<()> {
+    save(path, size, &Plot::Curves(figure, axes))
 }
 
 /// Draws the horizontal bar chart of tracker-only FPS (log scale) to `path` (`.png` or `.svg`),

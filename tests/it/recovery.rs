@@ -462,3 +462,69 @@ fn an_illumination_model_recovers_a_known_warp_with_every_gradient_method() {
         "{err}"
     );
 }
+
+/// The frequency of convergence (Baker and Matthews' experiment) falls as the starts move
+/// further off, repeats itself from its seed, and shows the default pyramid's wider basin;
+/// `regtrack converge` writes its table and figure.
+#[test]
+fn the_frequency_of_convergence_falls_with_the_perturbation_and_the_pyramid_widens_it() {
+    use regtrack::converge::{ConvergeSpec, frequency_of_convergence};
+    let img = crate::common::texture("skimage_coffee.png");
+    let truth = regtrack::geometry::Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    let c = ConvergeSpec {
+        sigmas: vec![1.0, 20.0],
+        starts: 20,
+        ..ConvergeSpec::default()
+    };
+    let mut paper = TrackerSpec::from_names("iclk", "ssd", "homography").unwrap();
+    crate::common::paper_settings(&mut paper);
+    let defaults = TrackerSpec::from_names("iclk", "ssd", "homography").unwrap();
+    let p = frequency_of_convergence(&paper, &img, &truth, &c).unwrap();
+    assert_eq!(
+        p,
+        frequency_of_convergence(&paper, &img, &truth, &c).unwrap()
+    );
+    let d = frequency_of_convergence(&defaults, &img, &truth, &c).unwrap();
+    assert!(p.points[0].1 >= 0.95, "{p:?}");
+    assert!(p.points[1].1 < p.points[0].1, "{p:?}");
+    assert!(
+        d.points[1].1 > p.points[1].1,
+        "pyramid {d:?} vs paper {p:?}"
+    );
+    // The converged end close to the truth.
+    assert!(p.points[0].2 < 0.5, "{p:?}");
+    // The command: a table on stdout, the CSV and both figures on disk.
+    let dir = crate::common::TempDir::new("converge");
+    let seq = dir.path().join("data");
+    crate::cli::succeed(crate::cli::synth(
+        "ucsb_bricks_rt.txt",
+        &seq,
+        "rt",
+        &["--frames", "2"],
+    ));
+    let out = dir.path().join("out");
+    let o = crate::cli::regtrack(&[
+        "converge",
+        "--seq",
+        seq.join("rt.txt").to_str().unwrap(),
+        "--sm",
+        "iclk,esm",
+        "--am",
+        "ssd",
+        "--starts",
+        "4",
+        "--sigmas",
+        "1,6",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    crate::cli::succeed(o);
+    assert!(
+        text.contains("iclk_ssd_homography") && text.contains("esm_ssd_homography"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(out.join("convergence.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 2 * 2, "{csv}");
+    assert!(out.join("convergence.svg").is_file() && out.join("convergence.png").is_file());
+}

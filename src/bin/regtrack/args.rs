@@ -186,6 +186,36 @@ pub enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Frequency of convergence (Baker and Matthews' experiment): on one frame, each tracker
+    /// started again and again from the ground truth moved by Gaussian noise of sigma px; the
+    /// fraction that ends within --threshold px, per sigma. Writes convergence.csv, .svg, .png.
+    Converge {
+        /// Sequence (default: the demo).
+        #[arg(long)]
+        seq: Option<PathBuf>,
+        /// The frame (1-based) whose ground truth is the target.
+        #[arg(long, default_value_t = 1)]
+        frame: usize,
+        // The trackers (default: iclk,fclk,falk,esm x ssd x homography).
+        #[command(flatten)]
+        select: SelectArgs,
+        /// The noise levels (px).
+        #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6,7,8,9,10")]
+        sigmas: Vec<f64>,
+        /// Starts per noise level.
+        #[arg(long, default_value_t = 100)]
+        starts: usize,
+        /// A start converged when its search ends this close (px, alignment error).
+        #[arg(long, default_value_t = 1.0)]
+        threshold: f64,
+        /// Seed of the perturbations (the same starts for every tracker; `--seed` is the
+        /// trackers' own, for NN and PF).
+        #[arg(long, default_value_t = 0)]
+        start_seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Args)]

@@ -168,7 +168,72 @@ fn run() -> Result<()> {
             let specs = select.specs(["iclk,fclk,esm", "ssd,zncc", "homography"])?;
             run_bench(seq.as_deref(), &specs, repeats, frames, json.as_deref())
         }
+        Command::Converge {
+            seq,
+            frame,
+            select,
+            sigmas,
+            starts,
+            threshold,
+            start_seed,
+            out,
+        } => {
+            let specs = select.specs(["iclk,fclk,falk,esm", "ssd", "homography"])?;
+            let c = regtrack::converge::ConvergeSpec {
+                sigmas,
+                starts,
+                threshold,
+                seed: start_seed,
+            };
+            run_converge(seq.as_deref(), frame, &specs, &c, &out)
+        }
     }
+}
+
+/// `converge`: the trackers in parallel, a line each, then the files.
+fn run_converge(
+    seq: Option<&Path>,
+    frame: usize,
+    specs: &[TrackerSpec],
+    c: &regtrack::converge::ConvergeSpec,
+    out: &Path,
+) -> Result<()> {
+    use rayon::prelude::*;
+    let seq = match seq {
+        Some(p) => Sequence::open(p)?,
+        None => load_demo(None)?,
+    };
+    let k = frame
+        .checked_sub(1)
+        .filter(|&k| k < seq.len())
+        .with_context(|| format!("--frame must be 1..={}", seq.len()))?;
+    let truth = seq
+        .ground_truth(k)
+        .with_context(|| format!("frame {frame} of {} has no ground truth", seq.name))?;
+    let img = seq.load_gray(k)?;
+    let curves: Vec<regtrack::converge::ConvergeCurve> = specs
+        .par_iter()
+        .map(|s| regtrack::converge::frequency_of_convergence(s, &img, &truth, c))
+        .collect::<regtrack::Result<_>>()?;
+    println!(
+        "frequency of convergence on frame {frame} of {} ({} starts per sigma, within {} px)",
+        seq.name, c.starts, c.threshold
+    );
+    let sigmas: Vec<String> = c.sigmas.iter().map(|s| format!("{s:>5}")).collect();
+    println!("{:<28} {}   mean", "tracker \\ sigma", sigmas.join(" "));
+    for curve in &curves {
+        let f: Vec<String> = curve
+            .points
+            .iter()
+            .map(|p| format!("{:>5.2}", p.1))
+            .collect();
+        println!("{:<28} {}  {:.3}", curve.tracker, f.join(" "), curve.mean());
+    }
+    let title = format!("Frequency of convergence: {}, frame {frame}", seq.name);
+    for f in regtrack::converge::write_results(out, &curves, c, &title)? {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
 }
 
 #[cfg(feature = "gui")]

@@ -70,7 +70,7 @@ pub fn frequency_of_convergence(
     truth: &Quad,
     c: &ConvergeSpec,
 ) -> Result<ConvergeCurve> {
-    if c.starts == 0 || c.sigmas.is_empty() || c.sigmas.iter().any(|s| !(*s >= 0.0)) {
+    if c.starts == 0 || c.sigmas.is_empty() || c.sigmas.iter().any(|s| !s.is_finite() || *s < 0.0) {
         return Err(Error::InvalidParameter(
             "the convergence experiment needs starts >= 1 and noise levels >= 0".into(),
         ));

@@ -10,6 +10,12 @@ pub const SHORTCUTS: &[(&str, &str)] = &[
         "next frame (tracks it if needed) / previous frame",
     ),
     ("Home / End", "start frame / last tracked frame"),
+    (
+        "P",
+        "perturb: every tracker from the ground truth moved by the experiment's noise",
+    ),
+    (". / ,", "next / previous iteration (the convergence view)"),
+    ("Esc", "clear the experiment, close this help"),
     ("Ctrl+O", "open a sequence (file dialog)"),
     ("Ctrl+S", "save the session to the session field's path"),
     ("F1 or ?", "this help"),

@@ -63,6 +63,12 @@ pub enum Command {
     Record(bool),
     /// The folder recordings go to.
     SetRecordFolder(String),
+    /// The convergence experiment: start every enabled tracker on the shown frame from the
+    /// ground truth (else the inspected tracker's corners) moved by Gaussian noise of the
+    /// experiment's sigma (seeded: each press the next start).
+    Perturb,
+    SetPerturbSigma(f64),
+    ClearExperiment,
 }
 
 /// The actions of the ground-truth mode ([`Command::Gt`]).
@@ -308,6 +314,12 @@ impl InspectorApp {
                 self.rt.worker.send(Job::Record(what));
             }
             Command::SetRecordFolder(f) => self.rt.live.record_folder = f,
+            Command::Perturb => self.perturb(),
+            Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
+            Command::ClearExperiment => {
+                self.rt.ui.experiment = None;
+                self.rt.ui.selected_iteration = None;
+            }
             Command::DismissError(i) => {
                 if i < self.rt.msg.errors.len() {
                     self.rt.msg.errors.remove(i);

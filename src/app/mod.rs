@@ -19,7 +19,7 @@ mod window;
 pub mod worker;
 
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
-pub use runtime::{LandscapeSettings, LandscapeView, Runtime, Tool, Versioned};
+pub use runtime::{Experiment, LandscapeSettings, LandscapeView, Runtime, Tool, Versioned};
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
 use command::Command;
@@ -154,12 +154,86 @@ impl InspectorApp {
     fn awaiting_worker(&self) -> bool {
         let landscape = &self.rt.ui.landscape;
         self.rt.gt.running
+            || self
+                .rt
+                .ui
+                .experiment
+                .as_ref()
+                .is_some_and(|e| e.results.is_none())
             || self.rt.ui.dialog
             || self.is_live()
             || self.rt.seq.opening.is_some()
             || (landscape.open
                 && landscape.requested.is_some()
                 && landscape.result.as_ref().map(|r| &r.0) != landscape.requested.as_ref())
+    }
+
+    /// Starts the convergence experiment on the shown frame (see [`Command::Perturb`]).
+    fn perturb(&mut self) {
+        let frame = self.state.frame;
+        let i = self.state.selected_tracker;
+        let truth = self.ground_truth(frame);
+        let base = truth.or_else(|| {
+            self.rt
+                .run
+                .results
+                .get(i)
+                .and_then(|v| v.get(frame))
+                .and_then(|r| r.as_ref())
+                .map(|r| r.corners)
+        });
+        let Some(base) = base else {
+            self.error(format!(
+                "nothing to perturb on frame {}: give it ground truth or track it first",
+                frame + 1
+            ));
+            return;
+        };
+        let mut trackers = Vec::new();
+        for (k, t) in self
+            .state
+            .trackers
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.enabled)
+        {
+            let from = self.tracker_start(k);
+            let init = match &t.init {
+                InitSource::Quad(q) => Some(*q),
+                InitSource::GroundTruth => self.ground_truth(from),
+            };
+            if let Some(q) = init {
+                trackers.push((k, t.spec.clone(), from, q));
+            }
+        }
+        if trackers.is_empty() {
+            self.error("no tracker to run the experiment: initialise one first".into());
+            return;
+        }
+        let sigma = self.rt.ui.perturb_sigma;
+        let n = self.rt.ui.perturbations;
+        self.rt.ui.perturbations += 1;
+        let start = crate::converge::perturbed(&base, sigma, 0, n as usize);
+        let key = self.rt.ui.experiment.as_ref().map_or(0, |e| e.key) + 1;
+        self.rt.ui.experiment = Some(runtime::Experiment {
+            key,
+            frame,
+            start,
+            sigma,
+            from_truth: truth.is_some(),
+            number: n + 1,
+            results: None,
+        });
+        self.rt.ui.selected_iteration = None;
+        self.rt.msg.status = format!("experiment: start {} at σ {sigma} px…", n + 1);
+        self.rt
+            .worker
+            .send(Job::Experiment(Box::new(worker::ExperimentJob {
+                key,
+                frame,
+                start,
+                trackers,
+            })));
     }
 
     /// Whether a live source runs.
@@ -178,6 +252,7 @@ impl InspectorApp {
         self.rt.run.playing = false;
         self.rt.run.tracked_until = None;
         self.rt.ui.selected_iteration = None;
+        self.rt.ui.experiment = None;
         self.state.start_frame = frame;
         self.state.frame = frame;
         self.rt.run.replaying = None;
@@ -531,6 +606,30 @@ impl InspectorApp {
                         }
                     }
                 }
+                Reply::Experiment { key, results } => {
+                    if let Some(e) = self.rt.ui.experiment.as_mut()
+                        && e.key == key
+                    {
+                        let converged: Vec<String> = results
+                            .iter()
+                            .map(|r| {
+                                format!(
+                                    "tracker {}: {} iterations",
+                                    r.tracker + 1,
+                                    r.iterations.len()
+                                )
+                            })
+                            .collect();
+                        e.results = Some(results);
+                        self.rt.ui.selected_iteration = Some(0);
+                        self.rt.msg.status = format!(
+                            "experiment, start {} (σ {} px): {}; step with . and , (Esc clears)",
+                            e.number,
+                            e.sigma,
+                            converged.join(", ")
+                        );
+                    }
+                }
                 Reply::RecordingEnded { path, frames } => {
                     self.rt.msg.status =
                         format!("recorded {frames} frames as a sequence: {}", path.display());
@@ -697,6 +796,25 @@ impl InspectorApp {
                 });
             }
             if !gt_mode {
+                if i.key_pressed(egui::Key::P) {
+                    cmds.push(Command::Perturb);
+                }
+                let shown = self.result(self.state.selected_tracker, frame);
+                let n_it = shown.map_or(0, |r| r.iterations.len());
+                let sel = self.rt.ui.selected_iteration;
+                if i.key_pressed(egui::Key::Period) && n_it > 0 {
+                    cmds.push(Command::SelectIteration(Some(
+                        sel.map_or(0, |k| (k + 1).min(n_it - 1)),
+                    )));
+                }
+                if i.key_pressed(egui::Key::Comma) && n_it > 0 {
+                    cmds.push(Command::SelectIteration(Some(
+                        sel.map_or(0, |k| k.saturating_sub(1)),
+                    )));
+                }
+                if i.key_pressed(egui::Key::Escape) && self.rt.ui.experiment.is_some() {
+                    cmds.push(Command::ClearExperiment);
+                }
                 if i.key_pressed(egui::Key::ArrowRight) {
                     match self.rt.run.tracked_until {
                         Some(t) if frame < t => cmds.push(Command::Seek(frame + 1)),

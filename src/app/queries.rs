@@ -44,6 +44,11 @@ impl InspectorApp {
         self.rt.display.transform.map(|t| t.to_screen(p))
     }
 
+    /// The iteration the convergence view and the frame view show (0-based).
+    pub fn rt_selected_iteration(&self) -> Option<usize> {
+        self.rt.ui.selected_iteration
+    }
+
     /// Whether the keyboard help is open.
     pub fn help_shown(&self) -> bool {
         self.rt.ui.show_help
@@ -138,7 +143,20 @@ impl InspectorApp {
 
     /// The result of tracker `t` on `frame`.
     pub fn result(&self, t: usize, frame: usize) -> Option<&TrackerFrame> {
+        // On the experiment's frame, the experiment's run (from its perturbed start).
+        if let Some(r) = self
+            .experiment_on(frame)
+            .and_then(|e| e.results.as_ref())
+            .and_then(|rs| rs.iter().find(|r| r.tracker == t))
+        {
+            return Some(r);
+        }
         self.rt.run.results.get(t)?.get(frame)?.as_ref()
+    }
+
+    /// The convergence experiment, if it is on `frame`.
+    pub fn experiment_on(&self, frame: usize) -> Option<&crate::app::Experiment> {
+        self.rt.ui.experiment.as_ref().filter(|e| e.frame == frame)
     }
 
     /// Alignment errors of tracker `t` on the frames tracked after the start frame (lost frames

@@ -157,6 +157,23 @@ pub(super) struct MessagesRt {
     pub(super) progress: Option<(String, usize, usize)>,
 }
 
+/// The convergence experiment shown on a frame: every enabled tracker started from the same
+/// perturbed corners, its iterations to step through.
+pub struct Experiment {
+    /// Identifies the request in flight.
+    pub key: u64,
+    pub frame: usize,
+    /// The perturbed start, and what was perturbed (the ground truth, or the inspected
+    /// tracker's corners).
+    pub start: crate::geometry::Quad,
+    pub sigma: f64,
+    pub from_truth: bool,
+    /// Which start of the seeded sequence this is (1-based).
+    pub number: u64,
+    /// Per tracker, its run from the start (`None` until the worker answers).
+    pub results: Option<Vec<TrackerFrame>>,
+}
+
 /// The window's modes and fields that are not part of a session.
 pub(super) struct UiRt {
     pub(super) tool: Tool,
@@ -170,6 +187,10 @@ pub(super) struct UiRt {
     pub(super) recent: Vec<PathBuf>,
     /// A file dialog is open (its answer arrives as a reply).
     pub(super) dialog: bool,
+    /// The convergence experiment, its noise (px) and how many starts were drawn.
+    pub(super) experiment: Option<Experiment>,
+    pub(super) perturb_sigma: f64,
+    pub(super) perturbations: u64,
 }
 
 impl Default for UiRt {
@@ -182,6 +203,9 @@ impl Default for UiRt {
             session_path: String::from("sessions/my_session.toml"),
             recent: Vec::new(),
             dialog: false,
+            experiment: None,
+            perturb_sigma: 5.0,
+            perturbations: 0,
         }
     }
 }

@@ -103,6 +103,20 @@ pub enum Job {
     Record(Option<(PathBuf, usize)>),
     /// Close the live source.
     StopLive,
+    /// The convergence experiment: each tracker, initialised as its run was, started on
+    /// `frame` from the `start` corners (a perturbation); answered by [`Reply::Experiment`].
+    Experiment(Box<ExperimentJob>),
+}
+
+/// A convergence experiment to run (see [`Job::Experiment`]).
+#[derive(Debug)]
+pub struct ExperimentJob {
+    /// Identifies the request (the reply carries it back).
+    pub key: u64,
+    pub frame: usize,
+    pub start: Quad,
+    /// Per tracker: its index, spec, and the frame and corners it was initialised on.
+    pub trackers: Vec<(usize, TrackerSpec, usize, Quad)>,
 }
 
 /// What a live run has done so far (sent with every live frame).
@@ -261,6 +275,11 @@ pub enum Reply {
     RecordingEnded {
         path: PathBuf,
         frames: usize,
+    },
+    /// A convergence experiment's runs, per tracker (for the request `key`).
+    Experiment {
+        key: u64,
+        results: Vec<TrackerFrame>,
     },
 }
 
@@ -424,6 +443,13 @@ impl<W: Fn() + Sync> Thread<W> {
                         self.rerun(index, tracker.map(|b| *b), from, until);
                     }
                 }
+                Job::Experiment(job) => {
+                    let results = self.experiment(&job);
+                    self.reply(Reply::Experiment {
+                        key: job.key,
+                        results,
+                    });
+                }
                 Job::Landscape(job) => {
                     let result = self.landscape(&job);
                     self.reply(Reply::Landscape {
@@ -583,6 +609,41 @@ impl<W: Fn() + Sync> Thread<W> {
             image: Some(image),
             catch_up: false,
         });
+    }
+
+    /// Each tracker of the experiment from its start; a tracker that cannot run it is
+    /// reported and left out.
+    fn experiment(&self, job: &ExperimentJob) -> Vec<TrackerFrame> {
+        let mut out = Vec::new();
+        for (index, spec, from, init) in &job.trackers {
+            let run = || -> Result<TrackerFrame> {
+                let (first, _) = self.decode(*from)?;
+                let mut t = Tracker::new(spec)?;
+                t.initialize(FrameInput::Gray8(&first), init)?;
+                let template = Arc::new(
+                    t.inspection()
+                        .map(|i| i.template.to_vec())
+                        .unwrap_or_default(),
+                );
+                let (img, _) = self.decode(job.frame)?;
+                t.set_corners(&job.start)?;
+                let mut rec = Recorder {
+                    visuals: true,
+                    patches: true,
+                    ..Recorder::default()
+                };
+                let o = t.update(FrameInput::Gray8(&img), &mut rec);
+                Ok(tracked_frame(*index, &t, &mut rec, &o, template))
+            };
+            match run() {
+                Ok(r) => out.push(r),
+                Err(e) => self.reply(Reply::Error {
+                    context: format!("experiment, tracker {}", index + 1),
+                    error: e,
+                }),
+            }
+        }
+        out
     }
 
     fn landscape(&self, job: &LandscapeJob) -> Result<crate::landscape::Landscape> {

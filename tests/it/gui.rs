@@ -1101,3 +1101,74 @@ fn a_failed_open_keeps_the_frame_esc_closes_the_help_and_errors_stay_few() {
         h.state().status()
     );
 }
+
+/// The teacher's experiment: on a tracked frame, P starts every tracker from the ground truth
+/// moved by Gaussian noise (seeded), the views show each tracker's run from there, `.` and `,`
+/// step its iterations, the next P draws the next start, Esc goes back to the tracked result.
+#[test]
+fn perturb_and_step_runs_every_tracker_from_the_same_start() {
+    let d = TempDir::new("gui-experiment");
+    let seq = small_sequence(d.path(), 6);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Step);
+    h.state_mut().send(Command::Step);
+    step_until(&mut h, "two frames", |a| a.tracked_until() == Some(2));
+    h.state_mut().send(Command::Seek(2));
+    h.step();
+    let tracked = h.state().result(0, 2).unwrap().corners;
+    let truth = h.state().ground_truth(2).unwrap();
+    h.state_mut().send(Command::SetPerturbSigma(4.0));
+    press(&mut h, egui::Key::P, egui::Modifiers::NONE);
+    step_until(&mut h, "the experiment", |a| {
+        a.experiment_on(2).is_some_and(|e| e.results.is_some())
+    });
+    let e = h.state().experiment_on(2).unwrap();
+    let start = e.start;
+    let runs = e.results.clone().unwrap();
+    assert_eq!(runs.len(), 2, "both trackers ran");
+    let moved = regtrack::geometry::alignment_error(&start, &truth);
+    assert!(moved > 1.0 && moved < 20.0, "start {moved} px off");
+    for r in &runs {
+        assert!(
+            r.start.unwrap().change_norm(&start) < 1e-6,
+            "tracker {} from the same start",
+            r.tracker + 1
+        );
+        assert!(!r.iterations.is_empty());
+        let e = regtrack::geometry::alignment_error(&r.corners, &truth);
+        assert!(e < 1.0, "tracker {} converged to {e} px", r.tracker + 1);
+    }
+    // The views show the experiment's run, its first iteration selected.
+    assert!(
+        h.state()
+            .result(0, 2)
+            .unwrap()
+            .start
+            .unwrap()
+            .change_norm(&start)
+            < 1e-6
+    );
+    assert_eq!(h.state().rt_selected_iteration(), Some(0));
+    press(&mut h, egui::Key::Period, egui::Modifiers::NONE);
+    press(&mut h, egui::Key::Period, egui::Modifiers::NONE);
+    assert_eq!(
+        h.state().rt_selected_iteration(),
+        Some(2.min(runs[0].iterations.len() - 1))
+    );
+    press(&mut h, egui::Key::Comma, egui::Modifiers::NONE);
+    assert_eq!(
+        h.state().rt_selected_iteration(),
+        Some(1.min(runs[0].iterations.len() - 1))
+    );
+    // The next press draws the next start of the seeded sequence.
+    press(&mut h, egui::Key::P, egui::Modifiers::NONE);
+    step_until(&mut h, "the second start", |a| {
+        a.experiment_on(2)
+            .is_some_and(|e| e.number == 2 && e.results.is_some())
+    });
+    assert_ne!(h.state().experiment_on(2).unwrap().start, start);
+    press(&mut h, egui::Key::Escape, egui::Modifiers::NONE);
+    assert!(h.state().experiment_on(2).is_none());
+    assert_eq!(h.state().result(0, 2).unwrap().corners, tracked);
+}

@@ -359,6 +359,25 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             light,
         );
     }
+    // The convergence experiment's start, dashed white.
+    if let Some(e) = app.experiment_on(frame) {
+        let pts = quad_points(&t, &e.start);
+        let mut closed = pts.clone();
+        closed.push(pts[0]);
+        painter.add(Shape::dashed_line(
+            &closed,
+            Stroke::new(1.5, Color32::WHITE),
+            6.0,
+            4.0,
+        ));
+        painter.text(
+            t.to_screen(e.start.0[3]) + Vec2::new(0.0, 4.0),
+            egui::Align2::LEFT_TOP,
+            format!("start {} (σ {} px)", e.number, e.sigma),
+            egui::FontId::proportional(13.0),
+            Color32::WHITE,
+        );
+    }
     interact(app, ui, out, &response, &t, &painter);
     Some(t)
 }

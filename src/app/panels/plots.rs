@@ -212,6 +212,7 @@ fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         i + 1,
         frame + 1
     ));
+    experiment_controls(app, ui, out, frame);
     let Some(r) = app.result(i, frame).cloned() else {
         ui.label("not tracked on this frame");
         return;
@@ -295,6 +296,66 @@ fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         }
     }
     patches(app, ui, i, frame, &r);
+}
+
+/// The convergence experiment: perturb the start on this frame, run every enabled tracker
+/// from it, step through the iterations.
+fn experiment_controls(
+    app: &InspectorApp,
+    ui: &mut egui::Ui,
+    out: &mut Vec<Command>,
+    frame: usize,
+) {
+    ui.horizontal(|ui| {
+        let mut sigma = app.rt.ui.perturb_sigma;
+        ui.label("perturb σ");
+        if ui
+            .add(
+                egui::DragValue::new(&mut sigma)
+                    .range(0.0..=100.0)
+                    .speed(0.1)
+                    .suffix(" px"),
+            )
+            .on_hover_text("Gaussian noise added to each corner coordinate")
+            .changed()
+        {
+            out.push(Command::SetPerturbSigma(sigma));
+        }
+        if ui
+            .button("Perturb (P)")
+            .on_hover_text(
+                "Start every enabled tracker on this frame from the ground truth (else the \
+                 inspected tracker's corners) moved by this noise, seeded: each press the next \
+                 start. Step the iterations with . and , (the slider below).",
+            )
+            .clicked()
+        {
+            out.push(Command::Perturb);
+        }
+        if app.rt.ui.experiment.is_some() && ui.button("Clear (Esc)").clicked() {
+            out.push(Command::ClearExperiment);
+        }
+    });
+    if let Some(e) = app.experiment_on(frame) {
+        let what = if e.from_truth {
+            "the ground truth"
+        } else {
+            "the tracker's corners"
+        };
+        let text = match &e.results {
+            None => format!("experiment: start {} running…", e.number),
+            Some(_) => format!(
+                "experiment: start {}, {what} moved by σ {} px (dashed white); the views show \
+                 each tracker's run from it",
+                e.number, e.sigma
+            ),
+        };
+        ui.label(
+            egui::RichText::new(text)
+                .small()
+                .color(egui::Color32::from_rgb(255, 220, 120)),
+        );
+    }
 }
 
 fn patches(

@@ -147,7 +147,8 @@ pub fn write_results(
     let axes = Axes {
         x_desc: "initial perturbation sigma (px)".into(),
         y_desc: format!("fraction converged (within {} px)", c.threshold),
-        x_max: c.sigmas.iter().copied().fold(1.0, f64::max),
+        x_range: (0.0, c.sigmas.iter().copied().fold(1.0, f64::max)),
+        y_range: (0.0, 1.02),
         legend_header: "mean".into(),
     };
     let mut files = vec![csv_path];

@@ -551,8 +551,9 @@ enum Plot<'a> {
 pub struct Axes {
     pub x_desc: String,
     pub y_desc: String,
-    /// The x range is `0..x_max`; y is `0..1`.
-    pub x_max: f64,
+    /// The ranges drawn.
+    pub x_range: (f64, f64),
+    pub y_range: (f64, f64),
     /// What the number after each legend entry is.
     pub legend_header: String,
 }
@@ -566,7 +567,8 @@ impl Plot<'_> {
                 &Axes {
                     x_desc: "error threshold t (px)".into(),
                     y_desc: "success rate".into(),
-                    x_max: SR_MAX,
+                    x_range: (0.0, SR_MAX),
+                    y_range: (0.0, 1.02),
                     legend_header: "mean SR".into(),
                 },
             ),
@@ -603,7 +605,24 @@ fn draw_sr<DB: DrawingBackend>(
         .margin(12)
         .x_label_area_size(50)
         .y_label_area_size(62)
-        .build_cartesian_2d(0.0..axes.x_max, 0.0..1.02)?;
+        .build_cartesian_2d(
+            axes.x_range.0..axes.x_range.1,
+            axes.y_range.0..axes.y_range.1,
+        )?;
+    // As many decimals as the ranges need.
+    let decimals = |span: f64| -> usize {
+        if span >= 20.0 {
+            0
+        } else if span >= 0.5 {
+            1
+        } else {
+            2
+        }
+    };
+    let (dx, dy) = (
+        decimals(axes.x_range.1 - axes.x_range.0),
+        decimals(axes.y_range.1 - axes.y_range.0),
+    );
     chart
         .configure_mesh()
         .x_desc(axes.x_desc.as_str())
@@ -612,8 +631,8 @@ fn draw_sr<DB: DrawingBackend>(
         .label_style((FAMILY, 14))
         .x_labels(11)
         .y_labels(11)
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.1}"))
+        .x_label_formatter(&|v| format!("{v:.dx$}"))
+        .y_label_formatter(&|v| format!("{v:.dy$}"))
         .light_line_style(RGBColor(245, 245, 245))
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;

@@ -69,6 +69,9 @@ pub enum Command {
     Perturb,
     SetPerturbSigma(f64),
     ClearExperiment,
+    /// Write the plots shown (success rates, errors per frame, a landscape curve) as SVG and
+    /// PNG into the folder, with `report`'s figure code.
+    ExportPlots(PathBuf),
 }
 
 /// The actions of the ground-truth mode ([`Command::Gt`]).
@@ -316,6 +319,7 @@ impl InspectorApp {
             Command::SetRecordFolder(f) => self.rt.live.record_folder = f,
             Command::Perturb => self.perturb(),
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
+            Command::ExportPlots(dir) => self.export_plots(dir),
             Command::ClearExperiment => {
                 self.rt.ui.experiment = None;
                 self.rt.ui.selected_iteration = None;

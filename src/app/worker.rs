@@ -276,6 +276,8 @@ pub enum Reply {
         path: PathBuf,
         frames: usize,
     },
+    /// Plots written (the files), or why not.
+    Exported(std::result::Result<Vec<PathBuf>, String>),
     /// A convergence experiment's runs, per tracker (for the request `key`).
     Experiment {
         key: u64,

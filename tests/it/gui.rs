@@ -1172,3 +1172,31 @@ fn perturb_and_step_runs_every_tracker_from_the_same_start() {
     assert!(h.state().experiment_on(2).is_none());
     assert_eq!(h.state().result(0, 2).unwrap().corners, tracked);
 }
+
+/// A researcher's export: the plots shown written as SVG and PNG with the report's figure code.
+#[test]
+fn the_plots_export_as_svg_and_png() {
+    let d = TempDir::new("gui-export");
+    let seq = small_sequence(d.path(), 6);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    h.get_by_label("Play").click();
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(5) && !a.is_playing()
+    });
+    let out = d.path().join("plots");
+    h.state_mut().send(Command::ExportPlots(out.clone()));
+    step_until(&mut h, "the files", |a| a.status().starts_with("wrote"));
+    for f in ["sr.svg", "sr.png", "errors.svg", "errors.png"] {
+        let p = out.join(f);
+        assert!(
+            p.is_file() && std::fs::metadata(&p).unwrap().len() > 1000,
+            "{f}"
+        );
+    }
+    let svg = std::fs::read_to_string(out.join("sr.svg")).unwrap();
+    assert!(
+        svg.contains("success rate") && svg.contains("esm_ssd_homography"),
+        "sr.svg"
+    );
+}

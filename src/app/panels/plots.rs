@@ -45,7 +45,30 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
             egui::ScrollArea::both()
                 .auto_shrink([false, true])
                 .show(ui, |ui| {
-                    ui.heading("Success rate");
+                    ui.horizontal(|ui| {
+                        ui.heading("Success rate");
+                        let id = ui.make_persistent_id("export_folder");
+                        let mut folder = super::remembered_text(ui, id);
+                        if folder.is_empty() {
+                            folder = "plots".into();
+                        }
+                        if ui
+                            .small_button("Export plots")
+                            .on_hover_text(
+                                "Write the success rates, the errors per frame and a landscape \
+                                 curve as SVG and PNG into the folder at the right (the figures \
+                                 of regtrack report)",
+                            )
+                            .clicked()
+                        {
+                            out.push(Command::ExportPlots(std::path::PathBuf::from(
+                                folder.trim(),
+                            )));
+                        }
+                        ui.add(egui::TextEdit::singleline(&mut folder).desired_width(90.0))
+                            .on_hover_text("The folder the plots are written to");
+                        super::remember_text(ui, id, folder);
+                    });
                     axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
                         .height(190.0)
                         .legend(Legend::default())

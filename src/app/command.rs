@@ -113,6 +113,12 @@ pub enum GtCommand {
     Propagate,
     AcceptProposal,
     RejectProposal,
+    /// The timeline's selected frame range (inclusive), or none.
+    Select(Option<(usize, usize)>),
+    /// Accepts the proposal's frames inside the selection only (the rest stays proposed).
+    AcceptProposalInSelection,
+    /// Deletes the corrections of the selected frames (back to the original ground truth).
+    RevertSelection,
 }
 
 impl InspectorApp {

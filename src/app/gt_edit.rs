@@ -36,6 +36,8 @@ pub struct GtRuntime {
     pub(super) proposal: Option<(String, Proposal)>,
     /// A propagation is running on the worker.
     pub(super) running: bool,
+    /// The timeline's selected frames (inclusive range).
+    pub(super) selection: Option<(usize, usize)>,
     /// The first annotated frame's image (the template side of the patch view) and the shown
     /// frame's image.
     pub(super) template_image: Option<(usize, GrayF32)>,
@@ -52,6 +54,7 @@ impl Default for GtRuntime {
             drag: None,
             proposal: None,
             running: false,
+            selection: None,
             template_image: None,
             frame_image: None,
         }
@@ -114,6 +117,11 @@ impl InspectorApp {
         self.rt.gt.proposal.as_ref().map(|p| &p.1)
     }
 
+    /// The timeline's selected frames (inclusive).
+    pub fn gt_selection(&self) -> Option<(usize, usize)> {
+        self.rt.gt.selection
+    }
+
     /// Whether a propagation is running.
     pub fn gt_propagating(&self) -> bool {
         self.rt.gt.running
@@ -123,6 +131,7 @@ impl InspectorApp {
     pub(super) fn open_corrections(&mut self, seq: &Sequence) {
         let path = gt::journal_path(seq);
         self.rt.gt.proposal = None;
+        self.rt.gt.selection = None;
         self.rt.gt.drag = None;
         self.rt.gt.template_image = None;
         self.rt.gt.frame_image = None;
@@ -316,6 +325,49 @@ impl InspectorApp {
                         .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
                         .collect();
                     self.gt_edit(&label, changes);
+                }
+            }
+            GtCommand::Select(sel) => {
+                self.rt.gt.selection = sel.map(|(a, b)| (a.min(b), a.max(b)));
+            }
+            GtCommand::AcceptProposalInSelection => {
+                let Some((a, b)) = self.rt.gt.selection else {
+                    return;
+                };
+                if let Some((label, mut p)) = self.rt.gt.proposal.take() {
+                    let (inside, outside): (Vec<_>, Vec<_>) =
+                        p.frames.iter().partition(|(f, _)| (a..=b).contains(f));
+                    let changes: Vec<(usize, Option<Mark>)> = inside
+                        .iter()
+                        .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
+                        .collect();
+                    let n = changes.len();
+                    p.frames = outside;
+                    if !p.frames.is_empty() {
+                        self.rt.gt.proposal = Some((label.clone(), p));
+                    }
+                    self.gt_edit(
+                        &format!("{label}, frames {}-{} ({n})", a + 1, b + 1),
+                        changes,
+                    );
+                }
+            }
+            GtCommand::RevertSelection => {
+                let Some((a, b)) = self.rt.gt.selection else {
+                    return;
+                };
+                let key = self.gt_key();
+                let changes: Vec<(usize, Option<Mark>)> = (a..=b)
+                    .filter(|&f| self.rt.gt.corrections.mark(&key, f).is_some())
+                    .map(|f| (f, None))
+                    .collect();
+                if changes.is_empty() {
+                    self.rt.msg.status = "no correction in the selection".into();
+                } else {
+                    self.gt_edit(
+                        &format!("delete the corrections of frames {}-{}", a + 1, b + 1),
+                        changes,
+                    );
                 }
             }
             GtCommand::RejectProposal => {

@@ -871,7 +871,10 @@ impl InspectorApp {
         let transform = egui::CentralPanel::default()
             .show(ui, |ui| {
                 if self.rt.ui.tool == Tool::EditGroundTruth && self.rt.seq.sequence.is_some() {
-                    egui::Panel::bottom("gt_strip").show(ui, |ui| panels::gt_strip(self, ui));
+                    egui::Panel::bottom("gt_strip").show(ui, |ui| {
+                        panels::timeline(self, ui, &mut out);
+                        panels::gt_strip(self, ui)
+                    });
                 }
                 panels::frame_view(self, ui, &mut out)
             })

@@ -1200,3 +1200,76 @@ fn the_plots_export_as_svg_and_png() {
         "sr.svg"
     );
 }
+
+/// The annotator's timeline: a proposal accepted on a selected range only (the rest stays
+/// proposed), and the corrections of a range deleted in one undoable edit.
+#[test]
+fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
+    use regtrack::app::command::GtCommand;
+    use regtrack::gt::Mark;
+    let d = TempDir::new("gui-timeline");
+    let seq = small_sequence(d.path(), 8);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    // Frame 1 corrected 6 px to the right: the proposal carries the offset on.
+    let gt = h.state().ground_truth(0).unwrap();
+    let moved = gt.map(|p| Point::new(p.x + 6.0, p.y));
+    h.state_mut().send(Command::Gt(GtCommand::Commit {
+        frame: 0,
+        quad: moved,
+        label: "move".into(),
+    }));
+    h.step();
+    h.get_by_label("Propagate").click();
+    step_until(&mut h, "the proposal", |a| a.gt_proposal().is_some());
+    let proposed: Vec<usize> = h
+        .state()
+        .gt_proposal()
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| f.0)
+        .collect();
+    assert!(proposed.len() >= 4, "{proposed:?}");
+    h.state_mut()
+        .send(Command::Gt(GtCommand::Select(Some((3, 2)))));
+    h.step();
+    assert_eq!(h.state().gt_selection(), Some((2, 3)));
+    h.step();
+    h.get_by_label("Accept the proposal here").click();
+    h.step();
+    h.step();
+    let key = "homography";
+    let marked = |h: &Harness<'static, InspectorApp>, f: usize| {
+        matches!(h.state().corrections().mark(key, f), Some(Mark::Quad(_)))
+    };
+    assert!(marked(&h, 2) && marked(&h, 3));
+    assert!(
+        !marked(&h, 1) && !marked(&h, 4),
+        "outside the selection: still proposed"
+    );
+    let rest: Vec<usize> = h
+        .state()
+        .gt_proposal()
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| f.0)
+        .collect();
+    assert!(rest.contains(&1) && !rest.contains(&2), "{rest:?}");
+    // Delete the corrections of frames 1-3 (frame 1 is the first correction).
+    h.state_mut()
+        .send(Command::Gt(GtCommand::Select(Some((0, 2)))));
+    h.step();
+    h.get_by_label("Delete corrections here").click();
+    h.step();
+    h.step();
+    assert!(!marked(&h, 0) && !marked(&h, 2) && marked(&h, 3));
+    // One undo brings both back.
+    press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
+    assert!(marked(&h, 0) && marked(&h, 2));
+}

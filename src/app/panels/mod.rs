@@ -7,11 +7,13 @@ mod bars;
 mod frame_view;
 mod plots;
 mod sidebar;
+mod timeline;
 
 pub use bars::{playback_bar, top_bar};
 pub use frame_view::{Transform, frame_view, gt_strip};
 pub use plots::plots_panel;
 pub use sidebar::sidebar;
+pub use timeline::timeline;
 
 use crate::app::command::Command;
 use std::hash::{Hash, Hasher};

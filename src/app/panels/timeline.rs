@@ -1,0 +1,204 @@
+//! The annotator's timeline: one strip over every frame of the sequence, in the ground-truth
+//! mode. Per frame: the fit residual (or, where the ground truth is the 8-DOF one, the inspected
+//! tracker's error) as a heat colour, occluded frames grey, frames without ground truth black,
+//! corrected key frames as green ticks, a pending proposal's frames as an orange band, the
+//! selection in blue and the shown frame as a white line. Click to seek; Shift-drag selects a
+//! range, on which the buttons act.
+
+use super::Commands;
+use crate::app::InspectorApp;
+use crate::app::command::{Command, GtCommand};
+use crate::gt::GtFrame;
+use eframe::egui;
+use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
+
+/// Heat of an error (px): dark green at 0, yellow at 2.5, red from 5.
+fn heat(e: f64) -> Color32 {
+    let t = (e / 5.0).clamp(0.0, 1.0) as f32;
+    if t < 0.5 {
+        let u = t * 2.0;
+        Color32::from_rgb((40.0 + 200.0 * u) as u8, (110.0 + 110.0 * u) as u8, 40)
+    } else {
+        let u = (t - 0.5) * 2.0;
+        Color32::from_rgb(240, (220.0 * (1.0 - u)) as u8, 40)
+    }
+}
+
+pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
+    let n = app.frame_count();
+    if n == 0 {
+        return;
+    }
+    let (rect, response) = ui.allocate_exact_size(
+        Vec2::new(ui.available_width(), 30.0),
+        Sense::click_and_drag(),
+    );
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 0.0, Color32::from_gray(20));
+    let x_of = |f: usize| rect.left() + rect.width() * (f as f32 + 0.5) / n as f32;
+    let frame_at = |p: Pos2| {
+        (((p.x - rect.left()) / rect.width() * n as f32)
+            .floor()
+            .max(0.0) as usize)
+            .min(n - 1)
+    };
+    let cell = (rect.width() / n as f32).max(1.0);
+    let inspected = app.state.selected_tracker;
+    let errors: std::collections::BTreeMap<usize, f64> =
+        app.errors(inspected).into_iter().collect();
+    let key = crate::gt::ssm_key(&app.state.gt_ssm).unwrap_or_default();
+    let corrected = app.corrections().corrected_frames(&key);
+    // One column per pixel at most: the worst frame of each column is drawn.
+    let columns = (rect.width().floor() as usize).clamp(1, n);
+    for c in 0..columns {
+        let (a, b) = (
+            c * n / columns,
+            ((c + 1) * n / columns).max(c * n / columns + 1),
+        );
+        let mut colour = Color32::BLACK;
+        let mut worst = -1.0f64;
+        for f in a..b.min(n) {
+            let (col, e) = match app.gt_frame(f) {
+                Some(GtFrame::Occluded) => (Color32::from_gray(90), 0.0),
+                Some(GtFrame::Quad { .. }) => {
+                    let e = app
+                        .gt_residual(f)
+                        .filter(|r| *r > 1e-9)
+                        .or_else(|| errors.get(&f).copied())
+                        .unwrap_or(0.0);
+                    (heat(e), e)
+                }
+                _ => (Color32::BLACK, -0.5),
+            };
+            if e > worst {
+                worst = e;
+                colour = col;
+            }
+        }
+        let x0 = rect.left() + rect.width() * a as f32 / n as f32;
+        let x1 = rect.left() + rect.width() * b.min(n) as f32 / n as f32;
+        painter.rect_filled(
+            Rect::from_min_max(
+                Pos2::new(x0, rect.top() + 6.0),
+                Pos2::new(x1.max(x0 + 1.0), rect.bottom() - 6.0),
+            ),
+            0.0,
+            colour,
+        );
+    }
+    for f in corrected {
+        let x = x_of(f);
+        painter.line_segment(
+            [Pos2::new(x, rect.top()), Pos2::new(x, rect.top() + 6.0)],
+            Stroke::new(cell.clamp(1.5, 3.0), Color32::from_rgb(60, 230, 90)),
+        );
+    }
+    if let Some(p) = app.gt_proposal() {
+        for (f, _) in &p.frames {
+            let x = x_of(*f);
+            painter.line_segment(
+                [
+                    Pos2::new(x, rect.bottom() - 6.0),
+                    Pos2::new(x, rect.bottom()),
+                ],
+                Stroke::new(cell.max(1.5), Color32::from_rgb(255, 150, 30)),
+            );
+        }
+    }
+    if let Some((a, b)) = app.gt_selection() {
+        let r = Rect::from_min_max(
+            Pos2::new(x_of(a) - cell / 2.0, rect.top()),
+            Pos2::new(x_of(b) + cell / 2.0, rect.bottom()),
+        );
+        painter.rect_filled(r, 0.0, Color32::from_rgba_unmultiplied(80, 140, 255, 70));
+    }
+    let x = x_of(app.state.frame);
+    painter.line_segment(
+        [Pos2::new(x, rect.top()), Pos2::new(x, rect.bottom())],
+        Stroke::new(2.0, Color32::WHITE),
+    );
+    // Shift-drag selects; a click seeks.
+    let shift = ui.input(|i| i.modifiers.shift);
+    if shift
+        && response.dragged()
+        && let (Some(origin), Some(now)) = (
+            ui.input(|i| i.pointer.press_origin()),
+            response.interact_pointer_pos(),
+        )
+    {
+        out.push(Command::Gt(GtCommand::Select(Some((
+            frame_at(origin),
+            frame_at(now),
+        )))));
+    } else if response.clicked()
+        && let Some(p) = response.interact_pointer_pos()
+    {
+        if shift {
+            out.push(Command::Gt(GtCommand::Select(Some((
+                app.state.frame,
+                frame_at(p),
+            )))));
+        } else {
+            out.push(Command::Seek(frame_at(p)));
+        }
+    }
+    let hover = response.hover_pos().map(frame_at);
+    response.on_hover_text(match hover {
+        Some(f) => format!(
+            "frame {}: {} (click: show it; Shift-drag: select frames)",
+            f + 1,
+            match (app.gt_frame(f), app.gt_residual(f), errors.get(&f)) {
+                (Some(GtFrame::Occluded), _, _) => "occluded".to_string(),
+                (
+                    Some(GtFrame::Quad {
+                        corrected: true, ..
+                    }),
+                    _,
+                    _,
+                ) => "corrected".to_string(),
+                (Some(GtFrame::Quad { .. }), Some(r), _) if r > 1e-9 => {
+                    format!("fit residual {r:.2} px")
+                }
+                (Some(GtFrame::Quad { .. }), _, Some(e)) => format!("tracker error {e:.2} px"),
+                (Some(GtFrame::Quad { .. }), _, None) => "ground truth".to_string(),
+                _ => "no ground truth".to_string(),
+            }
+        ),
+        None => String::new(),
+    });
+    ui.horizontal(|ui| match app.gt_selection() {
+        Some((a, b)) => {
+            ui.label(format!("selected: frames {}-{}", a + 1, b + 1));
+            if app.gt_proposal().is_some()
+                && ui
+                    .button("Accept the proposal here")
+                    .on_hover_text("Accept the proposed frames inside the selection only")
+                    .clicked()
+            {
+                out.push(Command::Gt(GtCommand::AcceptProposalInSelection));
+            }
+            if ui
+                .button("Delete corrections here")
+                .on_hover_text(
+                    "The selected frames back to the original ground truth (one undoable edit)",
+                )
+                .clicked()
+            {
+                out.push(Command::Gt(GtCommand::RevertSelection));
+            }
+            if ui.button("Clear selection").clicked() {
+                out.push(Command::Gt(GtCommand::Select(None)));
+            }
+        }
+        None => {
+            ui.label(
+                egui::RichText::new(
+                    "timeline: heat = fit residual or tracker error, green ticks = corrected, \
+                         orange = proposal; click to show a frame, Shift-drag to select",
+                )
+                .small()
+                .weak(),
+            );
+        }
+    });
+}

@@ -33,6 +33,7 @@ const LAYERS: &[&str] = &[
     "eval",
     "bench",
     "report",
+    "converge",
     "session",
     "app",
     "python",

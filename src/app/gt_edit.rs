@@ -296,14 +296,7 @@ impl InspectorApp {
                 };
                 match gt::export(&seq, self.rt.gt.corrections.edit(), &self.state.gt_ssm) {
                     Ok(paths) => {
-                        self.rt.msg.status = format!(
-                            "exported: {}",
-                            paths
-                                .iter()
-                                .map(|p| p.display().to_string())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )
+                        self.rt.msg.status = format!("exported: {}", super::list_paths(&paths))
                     }
                     Err(e) => self.error(format!("cannot export the ground truth: {e}")),
                 }

@@ -198,11 +198,7 @@ impl InspectorApp {
             .filter(|(_, t)| t.enabled)
         {
             let from = self.tracker_start(k);
-            let init = match &t.init {
-                InitSource::Quad(q) => Some(*q),
-                InitSource::GroundTruth => self.ground_truth(from),
-            };
-            if let Some(q) = init {
+            if let Some(q) = self.init_quad(&t.init, from) {
                 trackers.push((k, t.spec.clone(), from, q));
             }
         }
@@ -394,6 +390,14 @@ impl InspectorApp {
         self.rt.live.info.is_some()
     }
 
+    /// The corners a tracker starts from on `frame`: its own quad, or the ground truth there.
+    fn init_quad(&self, init: &InitSource, frame: usize) -> Option<crate::geometry::Quad> {
+        match init {
+            InitSource::Quad(q) => Some(*q),
+            InitSource::GroundTruth => self.ground_truth(frame),
+        }
+    }
+
     /// Re-initialises every enabled tracker on `frame` and shows it.
     fn restart(&mut self, frame: usize) {
         let n = self.frame_count();
@@ -424,11 +428,7 @@ impl InspectorApp {
             .enumerate()
             .filter(|(_, t)| t.enabled)
         {
-            let quad = match &t.init {
-                InitSource::Quad(q) => Some(*q),
-                InitSource::GroundTruth => self.ground_truth(frame),
-            };
-            match quad {
+            match self.init_quad(&t.init, frame) {
                 Some(q) => specs.push((i, t.spec.clone(), q)),
                 None => missing.push(i + 1),
             }
@@ -471,11 +471,7 @@ impl InspectorApp {
         let from = self.rt.run.starts[i].min(n - 1);
         let until = self.rt.run.tracked_until.unwrap_or(from).max(from);
         let tracker = if t.enabled {
-            let quad = match &t.init {
-                InitSource::Quad(q) => Some(*q),
-                InitSource::GroundTruth => self.ground_truth(from),
-            };
-            match quad {
+            match self.init_quad(&t.init, from) {
                 Some(q) => Some(Box::new((t.spec.clone(), q))),
                 None => {
                     self.error(format!(
@@ -546,10 +542,7 @@ impl InspectorApp {
             return;
         };
         let estimate = r.corners;
-        let init = match &t.init {
-            state::InitSource::Quad(q) => Some(*q),
-            state::InitSource::GroundTruth => self.ground_truth(start),
-        };
+        let init = self.init_quad(&t.init, start);
         let at = if self.rt.ui.landscape.settings.around_truth {
             self.ground_truth(frame)
         } else {
@@ -784,16 +777,7 @@ impl InspectorApp {
                     }
                 }
                 Reply::Exported(result) => match result {
-                    Ok(files) => {
-                        self.rt.msg.status = format!(
-                            "wrote {}",
-                            files
-                                .iter()
-                                .map(|f| f.display().to_string())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )
-                    }
+                    Ok(files) => self.rt.msg.status = format!("wrote {}", list_paths(&files)),
                     Err(e) => self.error(format!("cannot export the plots: {e}")),
                 },
                 Reply::RecordingEnded { path, frames } => {
@@ -1051,6 +1035,15 @@ impl InspectorApp {
             self.send(Command::OpenSequence(SequenceSource::Path(p)));
         }
     }
+}
+
+/// Paths for a status line, comma-separated.
+fn list_paths(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// `Ctrl` (`Cmd` on macOS) + `key` pressed this frame, with the modifiers held *at that press*

@@ -148,6 +148,16 @@ struct LiveRun {
     shown: std::collections::VecDeque<Instant>,
 }
 
+impl LiveRun {
+    /// Ends the recording, if one runs: its ground-truth file and frames (kept on disk).
+    fn stop_recording(&mut self) -> Option<(PathBuf, usize)> {
+        self.info.recording = None;
+        self.recording
+            .take()
+            .map(|(r, _)| (r.path().to_path_buf(), r.frames()))
+    }
+}
+
 /// A tracker's result on a tracked frame, with what the recorder saw of its iterations.
 fn tracked_frame(
     index: usize,
@@ -860,12 +870,7 @@ impl<W: Fn() + Sync> Thread<W> {
         }
         if let Some(e) = failed {
             // The recording stops (what it wrote is kept); the live view goes on.
-            let kept = run
-                .recording
-                .take()
-                .map(|(r, _)| (r.path().to_path_buf(), r.frames()));
-            run.info.recording = None;
-            let info = run.info.clone();
+            let kept = run.stop_recording();
             self.reply(Reply::Error {
                 context: "the recording stopped".into(),
                 error: e,
@@ -873,7 +878,6 @@ impl<W: Fn() + Sync> Thread<W> {
             if let Some((path, frames)) = kept {
                 self.reply(Reply::RecordingEnded { path, frames });
             }
-            self.reply(Reply::Live(info));
         }
         let info = self
             .live
@@ -898,11 +902,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 error: Error::InvalidParameter("no live source is open".into()),
             });
         };
-        let ended = run
-            .recording
-            .take()
-            .map(|(r, _)| (r.path().to_path_buf(), r.frames()));
-        run.info.recording = None;
+        let ended = run.stop_recording();
         let mut error = None;
         if let Some((root, index)) = what {
             match crate::dataset::live::Recording::create_fresh(&root) {
@@ -928,14 +928,11 @@ impl<W: Fn() + Sync> Thread<W> {
 
     /// Closes the live source, if one runs (the recording it made stays on disk).
     fn end_live(&mut self, error: Option<String>) {
-        let Some(run) = self.live.take() else {
+        let Some(mut run) = self.live.take() else {
             return;
         };
-        if let Some((r, _)) = run.recording {
-            self.reply(Reply::RecordingEnded {
-                path: r.path().to_path_buf(),
-                frames: r.frames(),
-            });
+        if let Some((path, frames)) = run.stop_recording() {
+            self.reply(Reply::RecordingEnded { path, frames });
         }
         self.reply(Reply::LiveEnded { error });
     }

@@ -447,6 +447,37 @@ impl RegistrationTracker {
         result
     }
 
+    /// Tells the observer where an iteration (`frame`, `level`, `iteration`) ended: corners,
+    /// similarity, corner change, and, for observers that show it, the patch there (the next
+    /// iteration samples again, so the shared buffers may be used).
+    fn report_iteration(
+        ctx: &mut Context,
+        view: &ImageView,
+        observer: &mut dyn Observer,
+        (frame, level, iteration): (usize, usize, usize),
+        (corners, similarity, step): (Quad, f64, f64),
+        started: Instant,
+    ) {
+        let patch = if observer.wants_patches() {
+            let p = ctx.params;
+            ctx.sample_at(view, &p);
+            Some(&ctx.work.values[..])
+        } else {
+            None
+        };
+        observer.iteration(&Iteration {
+            frame,
+            level,
+            iteration,
+            params: &ctx.params[..ctx.dof],
+            corners,
+            similarity,
+            step,
+            elapsed: started.elapsed(),
+            patch,
+        });
+    }
+
     /// The confidence of the patch of `view` under `p` (one sampling of the grid).
     fn confidence_at(
         ctx: &mut Context,
@@ -561,24 +592,14 @@ impl RegistrationTracker {
             iterations = it + 1;
             let step = corners.change_norm(&prev);
             prev = corners;
-            let patch = if observer.wants_patches() {
-                let q = ctx.params;
-                ctx.sample_at(view, &q);
-                Some(&ctx.work.values[..])
-            } else {
-                None
-            };
-            observer.iteration(&Iteration {
-                frame,
-                level: 0,
-                iteration: first + it,
-                params: &ctx.params[..ctx.dof],
-                corners,
-                similarity: f,
-                step,
-                elapsed: started.elapsed(),
-                patch,
-            });
+            Self::report_iteration(
+                ctx,
+                view,
+                observer,
+                (frame, 0, first + it),
+                (corners, f, step),
+                started,
+            );
             if step < params.eps {
                 break;
             }
@@ -797,26 +818,14 @@ impl RegistrationTracker {
             prev = corners;
             iterations = it + 1;
             similarity = f;
-            // The patch where this iteration ended, for observers that show it (the next
-            // iteration samples again, so the shared buffers may be used).
-            let patch = if observer.wants_patches() {
-                let p = ctx.params;
-                ctx.sample_at(view, &p);
-                Some(&ctx.work.values[..])
-            } else {
-                None
-            };
-            observer.iteration(&Iteration {
-                frame,
-                level,
-                iteration: first + it,
-                params: &ctx.params[..ctx.dof],
-                corners,
-                similarity: f,
-                step,
-                elapsed: started.elapsed(),
-                patch,
-            });
+            Self::report_iteration(
+                ctx,
+                view,
+                observer,
+                (frame, level, first + it),
+                (corners, f, step),
+                started,
+            );
             if observer.wants_method_visuals()
                 && let Some(v) = sm.visual(ctx)
             {

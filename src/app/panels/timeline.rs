@@ -48,6 +48,12 @@ pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
         app.errors(inspected).into_iter().collect();
     let key = crate::gt::ssm_key(&app.state.gt_ssm).unwrap_or_default();
     let corrected = app.corrections().corrected_frames(&key);
+    // The table once (each lookup by frame would check its cache key).
+    let Some(table) = app.gt_table() else {
+        return;
+    };
+    let gt_frame = |f: usize| table.frames.get(f).copied();
+    let gt_residual = |f: usize| table.residuals.get(f).copied().flatten();
     // One column per pixel at most: the worst frame of each column is drawn.
     let columns = (rect.width().floor() as usize).clamp(1, n);
     for c in 0..columns {
@@ -58,11 +64,10 @@ pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
         let mut colour = Color32::BLACK;
         let mut worst = -1.0f64;
         for f in a..b.min(n) {
-            let (col, e) = match app.gt_frame(f) {
+            let (col, e) = match gt_frame(f) {
                 Some(GtFrame::Occluded) => (Color32::from_gray(90), 0.0),
                 Some(GtFrame::Quad { .. }) => {
-                    let e = app
-                        .gt_residual(f)
+                    let e = gt_residual(f)
                         .filter(|r| *r > 1e-9)
                         .or_else(|| errors.get(&f).copied())
                         .unwrap_or(0.0);
@@ -147,7 +152,7 @@ pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
         Some(f) => format!(
             "frame {}: {} (click: show it; Shift-drag: select frames)",
             f + 1,
-            match (app.gt_frame(f), app.gt_residual(f), errors.get(&f)) {
+            match (gt_frame(f), gt_residual(f), errors.get(&f)) {
                 (Some(GtFrame::Occluded), _, _) => "occluded".to_string(),
                 (
                     Some(GtFrame::Quad {

@@ -98,6 +98,7 @@ impl Ahead {
         let spawned = std::thread::Builder::new()
             .name("regtrack-decoder".into())
             .spawn(move || {
+                super::worker::yield_to_window();
                 let (lock, decoded) = &*state;
                 while let Ok((seq, i)) = rx.recv() {
                     let id = Arc::as_ptr(&seq) as usize;

@@ -45,7 +45,11 @@ pub enum Command {
     },
     /// The session file *Save session* writes and *Load session* reads.
     SetSessionPath(String),
+    /// Save the session; over an existing file other than the session's own, only after
+    /// [`Command::ConfirmOverwrite`].
     SaveSession(PathBuf),
+    /// The answer to "overwrite?": save (`true`) or keep the file (`false`).
+    ConfirmOverwrite(bool),
     LoadSession(PathBuf),
     DismissError(usize),
     /// Show an error message.
@@ -292,16 +296,19 @@ impl InspectorApp {
             Command::Gt(c) => self.apply_gt(c),
             Command::OpenDialog { folder } => self.open_dialog(folder),
             Command::SetSessionPath(p) => self.rt.ui.session_path = p,
-            Command::SaveSession(p) => match self.state.save(&p) {
-                Ok(()) => {
-                    self.rt.msg.status = format!("saved session {}", p.display());
-                    self.rt.ui.session_path = p.display().to_string();
+            Command::SaveSession(p) => self.save_session(p, false),
+            Command::ConfirmOverwrite(yes) => {
+                if let Some(p) = self.rt.ui.confirm_overwrite.take() {
+                    if yes {
+                        self.save_session(p, true);
+                    } else {
+                        self.rt.msg.status = format!("not saved: {} kept", p.display());
+                    }
                 }
-                Err(e) => self.error(format!("cannot save the session: {e}")),
-            },
+            }
             Command::LoadSession(p) => match State::load(&p) {
                 Ok(s) => {
-                    self.rt.ui.session_path = p.display().to_string();
+                    self.set_session_path(&p);
                     self.load_state(s);
                 }
                 Err(e) => self.error(format!("cannot load the session: {e}")),

@@ -12,6 +12,7 @@ pub mod command;
 mod decoder;
 mod gt_edit;
 mod panels;
+pub mod prefs;
 mod queries;
 mod runtime;
 pub use crate::session as state;
@@ -60,9 +61,64 @@ impl InspectorApp {
         app
     }
 
-    /// The session file the session field shows (and *Save session* writes).
+    /// The session file the session field shows (and *Save session* writes), as the file the
+    /// session came from (saving there again asks nothing).
     pub fn set_session_path(&mut self, p: &std::path::Path) {
         self.rt.ui.session_path = p.display().to_string();
+        self.rt.ui.session_file = Some(p.to_path_buf());
+    }
+
+    /// Keeps the preferences (the recent sequences) in `path` between runs: reads them now
+    /// (a file that cannot be read is one error, and the defaults), writes them on every change.
+    pub fn use_prefs(&mut self, path: PathBuf) {
+        match prefs::Prefs::load(&path) {
+            Ok(p) => self.rt.ui.prefs = p,
+            Err(e) => self.error(format!("cannot read the preferences (recent list): {e}")),
+        }
+        self.rt.ui.prefs_path = Some(path);
+    }
+
+    /// The recently opened sequences, newest first.
+    pub fn recent(&self) -> &[PathBuf] {
+        &self.rt.ui.prefs.recent
+    }
+
+    fn add_recent(&mut self, p: &std::path::Path) {
+        self.rt.ui.prefs.add_recent(p);
+        if let Some(path) = &self.rt.ui.prefs_path
+            && let Err(e) = self.rt.ui.prefs.save(path)
+        {
+            self.error(format!("cannot keep the recent list: {e}"));
+        }
+    }
+
+    /// Saves the session to `p`; over an existing file other than the session's own, only
+    /// after the user confirms (`confirmed`).
+    fn save_session(&mut self, p: PathBuf, confirmed: bool) {
+        let own = self.rt.ui.session_file.as_ref() == Some(&p);
+        if p.exists() && !own && !confirmed {
+            self.rt.msg.status = format!("{} exists: overwrite it?", p.display());
+            self.rt.ui.confirm_overwrite = Some(p);
+            return;
+        }
+        self.rt.ui.confirm_overwrite = None;
+        let replaced = p.exists();
+        match self.state.save(&p) {
+            Ok(()) => {
+                self.rt.msg.status = if replaced {
+                    format!("saved session {} (replaced the file)", p.display())
+                } else {
+                    format!("saved session {}", p.display())
+                };
+                self.set_session_path(&p);
+            }
+            Err(e) => self.error(format!("cannot save the session: {e}")),
+        }
+    }
+
+    /// The save that waits for the user's yes (see [`Command::ConfirmOverwrite`]).
+    pub fn overwrite_pending(&self) -> Option<&std::path::Path> {
+        self.rt.ui.confirm_overwrite.as_deref()
     }
 
     /// Replaces the session (the trackers then run up to its saved frame).
@@ -601,9 +657,7 @@ impl InspectorApp {
                     let start = self.state.start_frame.min(seq.len() - 1);
                     if let Some(src) = self.rt.seq.opening.take() {
                         if let SequenceSource::Path(p) = &src {
-                            self.rt.ui.recent.retain(|r| r != p);
-                            self.rt.ui.recent.insert(0, p.clone());
-                            self.rt.ui.recent.truncate(8);
+                            self.add_recent(&p.clone());
                         }
                         self.state.sequence = src;
                     }
@@ -885,6 +939,11 @@ impl InspectorApp {
         if self.rt.ui.show_help {
             window::help_window(&ctx, &mut self.rt.ui.show_help);
         }
+        if let Some(p) = self.rt.ui.confirm_overwrite.clone()
+            && let Some(yes) = window::overwrite_window(&ctx, &p)
+        {
+            self.apply(Command::ConfirmOverwrite(yes));
+        }
         self.screenshot(&ctx);
         if self.rt.run.playing || self.rt.msg.progress.is_some() {
             ctx.request_repaint();
@@ -920,6 +979,9 @@ impl InspectorApp {
             }
             if i.key_pressed(egui::Key::Escape) {
                 self.rt.ui.show_help = false;
+                if self.rt.ui.confirm_overwrite.is_some() {
+                    cmds.push(Command::ConfirmOverwrite(false));
+                }
             }
             if i.key_pressed(egui::Key::F2) || i.key_pressed(egui::Key::F3) {
                 let mut view = self.state.view.clone();

@@ -184,7 +184,15 @@ pub(super) struct UiRt {
     pub(super) landscape: LandscapeView,
     /// The session file *Save session* writes.
     pub(super) session_path: String,
-    pub(super) recent: Vec<PathBuf>,
+    /// The file this session was loaded from or last saved to: saving there again needs no
+    /// confirmation, saving over another existing file does.
+    pub(super) session_file: Option<PathBuf>,
+    /// A save over an existing file that waits for the user's yes.
+    pub(super) confirm_overwrite: Option<PathBuf>,
+    /// The preferences kept between runs (the recent sequences), and their file (`None`: not
+    /// kept, as in tests and screenshots).
+    pub(super) prefs: super::prefs::Prefs,
+    pub(super) prefs_path: Option<PathBuf>,
     /// A file dialog is open (its answer arrives as a reply).
     pub(super) dialog: bool,
     /// The convergence experiment, its noise (px) and how many starts were drawn.
@@ -200,8 +208,11 @@ impl Default for UiRt {
             selected_iteration: None,
             show_help: false,
             landscape: LandscapeView::default(),
-            session_path: String::from("sessions/my_session.toml"),
-            recent: Vec::new(),
+            session_path: super::prefs::default_session_path().display().to_string(),
+            session_file: None,
+            confirm_overwrite: None,
+            prefs: Default::default(),
+            prefs_path: None,
             dialog: false,
             experiment: None,
             perturb_sigma: 5.0,

@@ -158,6 +158,32 @@ pub(super) fn help_window(ctx: &egui::Context, open: &mut bool) {
         });
 }
 
+/// Asks whether to overwrite `path`: `Some(answer)` once given (Enter is yes; Esc, handled
+/// with the other keys, is no).
+pub(super) fn overwrite_window(ctx: &egui::Context, path: &std::path::Path) -> Option<bool> {
+    let mut answer = None;
+    egui::Window::new("Overwrite the session file?")
+        .collapsible(false)
+        .resizable(false)
+        .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO)
+        .show(ctx, |ui| {
+            ui.label(format!(
+                "{} exists and is not this session's file.",
+                path.display()
+            ));
+            ui.horizontal(|ui| {
+                if ui.button("Overwrite").clicked() || ui.input(|i| i.key_pressed(egui::Key::Enter))
+                {
+                    answer = Some(true);
+                }
+                if ui.button("Cancel").clicked() {
+                    answer = Some(false);
+                }
+            });
+        });
+    answer
+}
+
 /// The window's frame rate while the trackers ran, and the time the UI took to build a frame
 /// (what the app itself costs; the rest is rendering).
 fn frame_rate_summary(times: &[(f32, f32)]) -> String {
@@ -237,6 +263,12 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
             let mut app = InspectorApp::new(state, move || ctx.request_repaint());
             if let Some(p) = &session {
                 app.set_session_path(p);
+            }
+            // A screenshot is a batch run: it leaves the user's recent list alone.
+            if shot.is_none()
+                && let Some(p) = super::prefs::prefs_path()
+            {
+                app.use_prefs(p);
             }
             if let Some((frames, path)) = shot {
                 app.screenshot_after(frames, path, result2);

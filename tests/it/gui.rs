@@ -1273,3 +1273,94 @@ fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
     press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
     assert!(marked(&h, 0) && marked(&h, 2));
 }
+
+/// The recent list outlives the window (the preferences file), and a save over another existing
+/// session asks first; the session's own file is saved again without a question.
+#[test]
+fn the_recent_list_survives_a_restart_and_saving_over_another_file_asks() {
+    let d = TempDir::new("gui-prefs");
+    let seq = small_sequence(d.path(), 3);
+    let prefs = d.path().join("config/inspector.toml");
+    let mut h = harness(State::default());
+    h.state_mut().use_prefs(prefs.clone());
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(seq.clone())));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    assert_eq!(h.state().recent(), &[seq.clone()]);
+    drop(h);
+    // The next run starts with it, in the top bar.
+    let mut h = harness(State::default());
+    h.state_mut().use_prefs(prefs.clone());
+    assert_eq!(h.state().recent(), &[seq.clone()]);
+    h.run_steps(2);
+    assert!(h.query_by_label("recent").is_some(), "the recent menu");
+
+    // Saving over a file that is not this session's: a question; Esc keeps the file.
+    let own = d.path().join("own.toml");
+    let other = d.path().join("other.toml");
+    std::fs::write(&other, "# someone else's\n").unwrap();
+    h.state_mut().set_session_path(&own);
+    h.state_mut().send(Command::SaveSession(own.clone()));
+    h.step();
+    assert!(own.is_file() && h.state().overwrite_pending().is_none());
+    h.state_mut().send(Command::SaveSession(other.clone()));
+    h.run_steps(2);
+    assert_eq!(h.state().overwrite_pending(), Some(other.as_path()));
+    assert!(
+        h.query_by_label("Overwrite").is_some(),
+        "the question is shown"
+    );
+    press(&mut h, egui::Key::Escape, egui::Modifiers::NONE);
+    h.step();
+    assert!(h.state().overwrite_pending().is_none());
+    assert_eq!(
+        std::fs::read_to_string(&other).unwrap(),
+        "# someone else's\n"
+    );
+    // Ctrl+S asks again; Overwrite writes it, and it is the session's file from then on.
+    h.state_mut()
+        .send(Command::SetSessionPath(other.display().to_string()));
+    h.step();
+    press(&mut h, egui::Key::S, egui::Modifiers::COMMAND);
+    h.run_steps(2);
+    assert_eq!(h.state().overwrite_pending(), Some(other.as_path()));
+    h.get_by_label("Overwrite").click();
+    h.run_steps(2);
+    assert!(h.state().overwrite_pending().is_none());
+    assert!(State::load(&other).is_ok(), "a session now");
+    assert!(
+        h.state().status().contains("replaced"),
+        "{}",
+        h.state().status()
+    );
+    h.state_mut().send(Command::SaveSession(other.clone()));
+    h.step();
+    assert!(h.state().overwrite_pending().is_none(), "its own file now");
+}
+
+/// Panels keep their share of the window: squeezed by a small window, they grow back with it.
+#[test]
+fn side_panels_grow_back_when_the_window_does() {
+    let d = TempDir::new("gui-share");
+    let seq = small_sequence(d.path(), 3);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.run_steps(3);
+    let width = |h: &Harness<'static, InspectorApp>| {
+        let a = h.state().screen_pos(Point::new(0.0, 0.0)).unwrap();
+        let b = h.state().screen_pos(Point::new(639.0, 0.0)).unwrap();
+        b.x - a.x
+    };
+    let before = width(&h);
+    h.set_size(egui::Vec2::new(1000.0, 700.0));
+    h.run_steps(4);
+    h.set_size(egui::Vec2::new(1400.0, 900.0));
+    h.run_steps(4);
+    let after = width(&h);
+    assert!(
+        (after - before).abs() < 0.05 * before,
+        "the frame was {before} px wide, {after} px after the window shrank and grew"
+    );
+}

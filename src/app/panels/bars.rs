@@ -65,11 +65,11 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             })
             .response
             .on_hover_text("Open a live camera or an FFmpeg test source");
-            if !app.rt.ui.recent.is_empty() {
+            if !app.recent().is_empty() {
                 egui::ComboBox::from_label("recent")
                     .selected_text("Recent")
                     .show_ui(ui, |ui| {
-                        for p in app.rt.ui.recent.iter().cloned() {
+                        for p in app.recent().iter().cloned() {
                             if ui
                                 .selectable_label(false, p.display().to_string())
                                 .clicked()

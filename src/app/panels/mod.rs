@@ -50,6 +50,44 @@ pub fn cached_texture(
     }
 }
 
+/// A resizable side panel that keeps its share of the window: egui keeps a panel's width in
+/// pixels, so one squeezed by a small window stayed narrow after the window grew again. `size`
+/// is (default width in px, largest share of the window, smallest width in px). Pair with
+/// [`remember_share`] after the panel is shown.
+pub fn follow_window(
+    ctx: &egui::Context,
+    name: &str,
+    panel: egui::Panel,
+    (default, most, least): (f32, f32, f32),
+) -> egui::Panel {
+    let w = ctx.content_rect().width();
+    let max = (w * most).max(least);
+    let panel = panel
+        .resizable(true)
+        .default_size(default.min(max))
+        .max_size(max);
+    let stored: Option<(f32, f32)> = ctx.data(|d| d.get_temp(share_id(name)));
+    match stored {
+        // The window changed size: the panel takes the share it had.
+        Some((last, share)) if (last - w).abs() > 0.5 => {
+            panel.exact_size((share * w).clamp(least.min(max), max))
+        }
+        _ => panel,
+    }
+}
+
+/// Records the width a [`follow_window`] panel was given, as a share of the window.
+pub fn remember_share(ctx: &egui::Context, name: &str, width: f32) {
+    let w = ctx.content_rect().width();
+    if w > 0.0 {
+        ctx.data_mut(|d| d.insert_temp(share_id(name), (w, width / w)));
+    }
+}
+
+fn share_id(name: &str) -> egui::Id {
+    egui::Id::unique(("panel_share", name))
+}
+
 /// A text field's contents kept in egui's memory under `id` (for fields that are not part of
 /// the app's state, as a path being typed).
 pub fn remembered_text(ui: &egui::Ui, id: egui::Id) -> String {

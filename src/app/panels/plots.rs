@@ -7,8 +7,8 @@ use crate::app::InspectorApp;
 use crate::app::command::Command;
 use eframe::egui;
 use egui_plot::{
-    AxisHints, HPlacement, Legend, Line, LineStyle, MarkerShape, Plot, PlotImage, PlotPoint,
-    PlotPoints, Points, VLine,
+    AxisHints, Corner, HPlacement, Legend, Line, LineStyle, MarkerShape, Plot, PlotImage,
+    PlotPoint, PlotPoints, Points, VLine,
 };
 
 /// The error plot draws each tracker's confidence (0..1) on its right-hand axis, scaled to
@@ -35,179 +35,205 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
     if !app.state.view.show_plots_panel {
         return;
     }
-    let w = ui.ctx().content_rect().width();
+    let ctx = ui.ctx().clone();
+    let w = ctx.content_rect().width();
     let most = if w < 1200.0 { 0.28 } else { 0.38 };
-    egui::Panel::right("plots")
-        .resizable(true)
-        .default_size(430.0f32.min(w * 0.28))
-        .max_size((w * most).max(200.0))
-        .show(ui, |ui| {
-            egui::ScrollArea::both()
-                .auto_shrink([false, true])
-                .show(ui, |ui| {
-                    ui.horizontal(|ui| {
-                        ui.heading("Success rate");
-                        let id = ui.make_persistent_id("export_folder");
-                        let mut folder = super::remembered_text(ui, id);
-                        if folder.is_empty() {
-                            folder = "plots".into();
-                        }
-                        if ui
-                            .small_button("Export plots")
-                            .on_hover_text(
-                                "Write the success rates, the errors per frame and a landscape \
+    let panel = super::follow_window(
+        &ctx,
+        "plots",
+        egui::Panel::right("plots"),
+        (430.0f32.min(w * 0.28), most, 200.0),
+    );
+    let shown = panel.show(ui, |ui| {
+        egui::ScrollArea::both()
+            .auto_shrink([false, true])
+            .show(ui, |ui| {
+                ui.horizontal_wrapped(|ui| {
+                    ui.heading("Success rate");
+                    let id = ui.make_persistent_id("export_folder");
+                    let mut folder = super::remembered_text(ui, id);
+                    if folder.is_empty() {
+                        folder = "plots".into();
+                    }
+                    if ui
+                        .small_button("Export plots")
+                        .on_hover_text(
+                            "Write the success rates, the errors per frame and a landscape \
                                  curve as SVG and PNG into the folder at the right (the figures \
                                  of regtrack report)",
-                            )
-                            .clicked()
-                        {
-                            out.push(Command::ExportPlots(std::path::PathBuf::from(
-                                folder.trim(),
-                            )));
-                        }
-                        ui.add(egui::TextEdit::singleline(&mut folder).desired_width(90.0))
-                            .on_hover_text("The folder the plots are written to");
-                        super::remember_text(ui, id, folder);
-                    });
-                    axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
-                        .height(190.0)
-                        .legend(Legend::default())
-                        .include_x(0.0)
-                        .include_x(20.0)
-                        .include_y(0.0)
-                        .include_y(1.0)
-                        .allow_scroll(false)
-                        .show(ui, |p| {
-                            let ab = app.state.view.ab;
-                            for (i, t) in app.state.trackers.iter().enumerate() {
-                                // In A/B mode, only A and B.
-                                if ab.is_some_and(|(a, b)| i != a && i != b) {
-                                    continue;
-                                }
-                                let curve = app.success_curve(i);
-                                if !curve.is_empty() {
-                                    let pts: Vec<[f64; 2]> =
-                                        curve.iter().map(|(x, y)| [*x, *y]).collect();
-                                    p.line(
-                                        Line::new(
-                                            format!("{} {}", i + 1, t.spec.label()),
-                                            PlotPoints::from(pts),
-                                        )
-                                        .color(color(t.color)),
-                                    );
-                                }
-                            }
-                        });
-                    ui.heading("Alignment error and confidence per frame");
-                    let shown = app.state.frame;
-                    let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
-                        .custom_y_axes(vec![
-                            AxisHints::new_y()
-                                .label("E_AL (px)")
-                                .label_spacing(14.0..=22.0),
-                            AxisHints::new_y()
-                                .label("confidence (dashed)")
-                                .placement(HPlacement::Right)
-                                .label_spacing(14.0..=22.0)
-                                .formatter(|m, _| {
-                                    let c = m.value / CONFIDENCE_SCALE;
-                                    if (0.0..=1.0).contains(&c) {
-                                        format!("{c:.1}")
-                                    } else {
-                                        String::new()
-                                    }
-                                }),
-                        ])
-                        .height(170.0)
-                        .legend(Legend::default())
-                        .include_y(0.0)
-                        .allow_scroll(false)
-                        .allow_drag(false)
-                        .show(ui, |p| {
-                            let ab = app.state.view.ab;
-                            for (i, t) in app.state.trackers.iter().enumerate() {
-                                if ab.is_some_and(|(a, b)| i != a && i != b) {
-                                    continue;
-                                }
-                                let pts: Vec<[f64; 2]> = app
-                                    .errors(i)
-                                    .into_iter()
-                                    .filter(|(_, e)| e.is_finite())
-                                    .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
-                                    .collect();
-                                if !pts.is_empty() {
-                                    p.line(
-                                        Line::new(format!("{}", i + 1), PlotPoints::from(pts))
-                                            .color(color(t.color)),
-                                    );
-                                }
-                                // The confidence, dashed, and the frames reported lost (under the
-                                // tracker's legend entry, which shows and hides all three).
-                                let conf = app.confidences(i);
-                                let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
-                                let line: Vec<[f64; 2]> = conf
-                                    .iter()
-                                    .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
-                                    .collect();
-                                if !line.is_empty() {
-                                    p.line(
-                                        Line::new(format!("{}", i + 1), PlotPoints::from(line))
-                                            .color(color(t.color).gamma_multiply(0.7))
-                                            .style(LineStyle::dashed_loose()),
-                                    );
-                                }
-                                let lost: Vec<[f64; 2]> = conf
-                                    .iter()
-                                    .filter(|(_, _, lost)| *lost)
-                                    .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
-                                    .collect();
-                                if !lost.is_empty() {
-                                    p.points(
-                                        Points::new(format!("{}", i + 1), PlotPoints::from(lost))
-                                            .shape(MarkerShape::Cross)
-                                            .radius(3.0)
-                                            .color(egui::Color32::from_rgb(230, 60, 60)),
-                                    );
-                                }
-                            }
-                            // The shown frame; a click seeks.
-                            p.vline(
-                                VLine::new("shown frame", (shown + 1) as f64)
-                                    .color(egui::Color32::from_gray(160)),
-                            );
-                            p.set_auto_bounds(true);
-                            p.pointer_coordinate()
-                        });
-                    if r.response.clicked()
-                        && let Some(pt) = r.inner
-                        && app.frame_count() > 0
+                        )
+                        .clicked()
                     {
-                        let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
-                        out.push(Command::Seek(f));
+                        out.push(Command::ExportPlots(std::path::PathBuf::from(
+                            folder.trim(),
+                        )));
                     }
-                    if let Some((a, b)) = app.state.view.ab {
-                        disagreement(app, ui, out, a, b);
-                    }
-                    speed_table(app, ui);
-                    ui.separator();
-                    convergence(app, ui, out);
-                    ui.separator();
-                    landscape(app, ui, out);
+                    ui.add(egui::TextEdit::singleline(&mut folder).desired_width(90.0))
+                        .on_hover_text("The folder the plots are written to");
+                    super::remember_text(ui, id, folder);
                 });
-        });
+                axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
+                    .height(190.0)
+                    // Below the curves (they rise at the left and run along the top).
+                    .legend(Legend::default().position(Corner::RightBottom))
+                    .include_x(0.0)
+                    .include_x(20.0)
+                    .include_y(0.0)
+                    .include_y(1.0)
+                    .allow_scroll(false)
+                    .show(ui, |p| {
+                        let ab = app.state.view.ab;
+                        for (i, t) in app.state.trackers.iter().enumerate() {
+                            // In A/B mode, only A and B.
+                            if ab.is_some_and(|(a, b)| i != a && i != b) {
+                                continue;
+                            }
+                            let curve = app.success_curve(i);
+                            if !curve.is_empty() {
+                                let pts: Vec<[f64; 2]> =
+                                    curve.iter().map(|(x, y)| [*x, *y]).collect();
+                                p.line(
+                                    Line::new(
+                                        format!("{} {}", i + 1, t.spec.label()),
+                                        PlotPoints::from(pts),
+                                    )
+                                    .color(color(t.color)),
+                                );
+                            }
+                        }
+                    });
+                ui.heading("Alignment error and confidence per frame");
+                error_legend(app, ui);
+                let shown = app.state.frame;
+                let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
+                    .custom_y_axes(vec![
+                        AxisHints::new_y()
+                            .label("E_AL (px)")
+                            .label_spacing(14.0..=22.0),
+                        AxisHints::new_y()
+                            .label("confidence (dashed)")
+                            .placement(HPlacement::Right)
+                            .label_spacing(14.0..=22.0)
+                            .formatter(|m, _| {
+                                let c = m.value / CONFIDENCE_SCALE;
+                                if (0.0..=1.0).contains(&c) {
+                                    format!("{c:.1}")
+                                } else {
+                                    String::new()
+                                }
+                            }),
+                    ])
+                    .height(170.0)
+                    .include_y(0.0)
+                    .allow_scroll(false)
+                    .allow_drag(false)
+                    .show(ui, |p| {
+                        let ab = app.state.view.ab;
+                        for (i, t) in app.state.trackers.iter().enumerate() {
+                            if ab.is_some_and(|(a, b)| i != a && i != b) {
+                                continue;
+                            }
+                            let pts: Vec<[f64; 2]> = app
+                                .errors(i)
+                                .into_iter()
+                                .filter(|(_, e)| e.is_finite())
+                                .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
+                                .collect();
+                            if !pts.is_empty() {
+                                p.line(
+                                    Line::new(format!("{}", i + 1), PlotPoints::from(pts))
+                                        .color(color(t.color)),
+                                );
+                            }
+                            // The confidence, dashed, and the frames reported lost (under the
+                            // tracker's legend entry, which shows and hides all three).
+                            let conf = app.confidences(i);
+                            let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
+                            let line: Vec<[f64; 2]> = conf
+                                .iter()
+                                .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+                                .collect();
+                            if !line.is_empty() {
+                                p.line(
+                                    Line::new(format!("{}", i + 1), PlotPoints::from(line))
+                                        .color(color(t.color).gamma_multiply(0.7))
+                                        .style(LineStyle::dashed_loose()),
+                                );
+                            }
+                            let lost: Vec<[f64; 2]> = conf
+                                .iter()
+                                .filter(|(_, _, lost)| *lost)
+                                .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+                                .collect();
+                            if !lost.is_empty() {
+                                p.points(
+                                    Points::new(format!("{}", i + 1), PlotPoints::from(lost))
+                                        .shape(MarkerShape::Cross)
+                                        .radius(3.0)
+                                        .color(egui::Color32::from_rgb(230, 60, 60)),
+                                );
+                            }
+                        }
+                        // The shown frame; a click seeks.
+                        p.vline(
+                            VLine::new("shown frame", (shown + 1) as f64)
+                                .color(egui::Color32::from_gray(160)),
+                        );
+                        p.set_auto_bounds(true);
+                        p.pointer_coordinate()
+                    });
+                if r.response.clicked()
+                    && let Some(pt) = r.inner
+                    && app.frame_count() > 0
+                {
+                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
+                    out.push(Command::Seek(f));
+                }
+                if let Some((a, b)) = app.state.view.ab {
+                    disagreement(app, ui, out, a, b);
+                }
+                speed_table(app, ui);
+                ui.separator();
+                convergence(app, ui, out);
+                ui.separator();
+                landscape(app, ui, out);
+            });
+    });
+    super::remember_share(&ctx, "plots", shown.response.rect.width());
+}
+
+/// The error plot's legend, above it (inside, it covered the curves): each tracker's colour and
+/// what the line styles mean.
+fn error_legend(app: &InspectorApp, ui: &mut egui::Ui) {
+    let ab = app.state.view.ab;
+    ui.horizontal_wrapped(|ui| {
+        ui.spacing_mut().item_spacing.x = 10.0;
+        for (i, t) in app.state.trackers.iter().enumerate() {
+            if ab.is_some_and(|(a, b)| i != a && i != b) {
+                continue;
+            }
+            ui.colored_label(color(t.color), format!("— {}", i + 1))
+                .on_hover_text(t.spec.label());
+        }
+        ui.label(egui::RichText::new("solid: error · dashed: confidence · ×: lost").small());
+    });
 }
 
 fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
     ui.heading("Speed");
+    // The figures first: in a narrow panel the names are what is cut off.
     egui::Grid::new("speed").striped(true).show(ui, |ui| {
-        ui.label("tracker");
-        ui.label("tracker FPS");
-        ui.label("live FPS");
+        ui.label("");
+        ui.label("tracker FPS")
+            .on_hover_text("Frames per second of the tracker alone");
+        ui.label("live FPS")
+            .on_hover_text("Frames per second with the pre-processing of the frame");
         ui.label("it/frame");
+        ui.label("tracker");
         ui.end_row();
         for (i, t) in app.state.trackers.iter().enumerate() {
             let (n, s, u, it) = app.speed(i);
-            ui.colored_label(color(t.color), format!("{} {}", i + 1, t.spec.label()));
+            ui.colored_label(color(t.color), format!("{}", i + 1));
             let fps = |us: f64| {
                 if us > 0.0 {
                     format!("{:.0}", n as f64 / (us * 1e-6))
@@ -222,6 +248,7 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
             } else {
                 "-".into()
             });
+            ui.colored_label(color(t.color), t.spec.label());
             ui.end_row();
         }
     });

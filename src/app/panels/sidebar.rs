@@ -35,9 +35,16 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         return;
     }
     // A small part of a small window, so that the frame keeps most of it (F2 hides the panel).
-    let w = ui.ctx().content_rect().width();
+    let ctx = ui.ctx().clone();
+    let w = ctx.content_rect().width();
     let most = if w < 1200.0 { 0.22 } else { 0.3 };
-    egui::Panel::left("trackers").resizable(true).default_size(300.0f32.min(w * 0.22)).max_size((w * most).max(170.0)).show(ui, |ui| {
+    let panel = super::follow_window(
+        &ctx,
+        "trackers",
+        egui::Panel::left("trackers"),
+        (300.0f32.min(w * 0.22), most, 170.0),
+    );
+    let shown = panel.show(ui, |ui| {
         egui::ScrollArea::vertical().show(ui, |ui| {
             ui.heading("Trackers");
             let n = app.state.trackers.len();
@@ -46,7 +53,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 let mut next = entry.clone();
                 let stats = tracker_stats(app, i);
                 egui::Frame::group(ui.style()).show(ui, |ui| {
-                    ui.horizontal(|ui| {
+                    ui.horizontal_wrapped(|ui| {
                         ui.color_edit_button_srgb(&mut next.color);
                         ui.checkbox(&mut next.enabled, format!("Tracker {}", i + 1));
                         if ui.radio(app.state.selected_tracker == i, "inspect").on_hover_text("Show its iterations").clicked() {
@@ -120,6 +127,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             }
         });
     });
+    super::remember_share(&ctx, "trackers", shown.response.rect.width());
 }
 
 /// The kind of tracker, in the tracker's header: a registration tracker (AM x SSM x SM, chosen

@@ -65,7 +65,39 @@ pub struct View {
     /// most listed.
     #[serde(default)]
     pub ab: Option<(usize, usize)>,
+    /// The cost-landscape view is open, and what it sweeps.
+    #[serde(default)]
+    pub show_landscape: bool,
+    #[serde(default)]
+    pub landscape: LandscapeSettings,
 }
+
+/// What the cost-landscape view sweeps.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LandscapeSettings {
+    /// The swept parameters (0-based); the second is optional (a curve or a map).
+    pub x: usize,
+    pub y: Option<usize>,
+    /// Half-width of the sweep, px of corner motion (in [`LANDSCAPE_RADIUS`]).
+    pub radius: f64,
+    /// Around the ground truth instead of the tracker's estimate.
+    pub around_truth: bool,
+}
+
+impl Default for LandscapeSettings {
+    fn default() -> Self {
+        LandscapeSettings {
+            x: 0,
+            y: None,
+            radius: 5.0,
+            around_truth: false,
+        }
+    }
+}
+
+/// The half-widths of a landscape sweep the widget and a session allow, px.
+pub const LANDSCAPE_RADIUS: std::ops::RangeInclusive<f64> = 0.5..=100.0;
 
 fn yes() -> bool {
     true
@@ -82,6 +114,8 @@ impl Default for View {
             show_trackers_panel: true,
             show_plots_panel: true,
             ab: None,
+            show_landscape: false,
+            landscape: LandscapeSettings::default(),
         }
     }
 }
@@ -266,6 +300,26 @@ impl State {
                     "ab = [{a}, {b}] but the session has {} tracker(s)",
                     self.trackers.len()
                 ),
+            ));
+        }
+        let l = &self.view.landscape;
+        if !LANDSCAPE_RADIUS.contains(&l.radius) {
+            return Err((
+                "radius",
+                format!(
+                    "landscape radius = {} must be in {}..={} px",
+                    crate::error::short_number(l.radius, 2),
+                    LANDSCAPE_RADIUS.start(),
+                    LANDSCAPE_RADIUS.end()
+                ),
+            ));
+        }
+        // The largest warp has 8 parameters (the inspected tracker's may have fewer: the view
+        // clamps to it).
+        if let Some(k) = std::iter::once(l.x).chain(l.y).find(|&k| k >= 8) {
+            return Err((
+                if k == l.x { "x" } else { "y" },
+                format!("landscape parameter {k} does not exist (0..=7)"),
             ));
         }
         crate::gt::ssm_key(&self.gt_ssm).map_err(|e| ("gt_ssm", e.to_string()))?;

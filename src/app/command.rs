@@ -287,8 +287,8 @@ impl InspectorApp {
                 self.rt.ui.tool = t;
             }
             Command::SetView(v) => self.state.view = v,
-            Command::ShowLandscape(open) => self.rt.ui.landscape.open = open,
-            Command::SetLandscape(s) => self.rt.ui.landscape.settings = s,
+            Command::ShowLandscape(open) => self.state.view.show_landscape = open,
+            Command::SetLandscape(s) => self.state.view.landscape = s,
             Command::SetGtSsm(name) => match ssm::build(&name) {
                 Ok(m) => self.state.gt_ssm = m.name().to_string(),
                 Err(e) => self.error(e.to_string()),

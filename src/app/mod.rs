@@ -20,7 +20,8 @@ mod window;
 pub mod worker;
 
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
-pub use runtime::{Experiment, LandscapeSettings, LandscapeView, Runtime, Tool, Versioned};
+pub use runtime::{Experiment, LandscapeView, Runtime, Tool, Versioned};
+pub use state::LandscapeSettings;
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
 use command::Command;
@@ -219,7 +220,7 @@ impl InspectorApp {
             || self.rt.ui.dialog
             || self.is_live()
             || self.rt.seq.opening.is_some()
-            || (landscape.open
+            || (self.state.view.show_landscape
                 && landscape.requested.is_some()
                 && landscape.result.as_ref().map(|r| &r.0) != landscape.requested.as_ref())
     }
@@ -586,7 +587,7 @@ impl InspectorApp {
     /// Asks the worker for the cost landscape of the inspected tracker on the shown frame when
     /// the view is open and what it shows changed.
     fn request_landscape(&mut self) {
-        if !self.rt.ui.landscape.open {
+        if !self.state.view.show_landscape {
             return;
         }
         let (i, frame) = (self.state.selected_tracker, self.state.frame);
@@ -599,7 +600,7 @@ impl InspectorApp {
         };
         let estimate = r.corners;
         let init = self.init_quad(&t.init, start);
-        let at = if self.rt.ui.landscape.settings.around_truth {
+        let at = if self.state.view.landscape.around_truth {
             self.ground_truth(frame)
         } else {
             Some(estimate)
@@ -607,7 +608,7 @@ impl InspectorApp {
         let (Some(init), Some(at)) = (init, at) else {
             return;
         };
-        let v = &self.rt.ui.landscape.settings;
+        let v = &self.state.view.landscape;
         let mut axes = vec![v.x];
         axes.extend(v.y.filter(|&y| y != v.x));
         let sweep = crate::landscape::LandscapeSpec {

@@ -38,34 +38,10 @@ pub(super) type ErrorsKey = (u64, u64, u64, String, usize);
 /// Per tracker, its errors and what they were computed from.
 pub(super) type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec<(usize, f64)>)>>;
 
-/// What the cost-landscape view sweeps.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LandscapeSettings {
-    /// The swept parameters (0-based); the second is optional (a curve or a map).
-    pub x: usize,
-    pub y: Option<usize>,
-    /// Half-width of the sweep, px of corner motion.
-    pub radius: f64,
-    /// Around the ground truth instead of the tracker's estimate.
-    pub around_truth: bool,
-}
-
-impl Default for LandscapeSettings {
-    fn default() -> Self {
-        LandscapeSettings {
-            x: 0,
-            y: None,
-            radius: 5.0,
-            around_truth: false,
-        }
-    }
-}
-
-/// The cost-landscape view: open or not, its settings, the request in flight, the last result.
+/// The cost-landscape view's runtime part (what it shows and whether it is open are the
+/// session's [`super::state::View`]): the request in flight, the last result.
 #[derive(Default)]
 pub struct LandscapeView {
-    pub open: bool,
-    pub settings: LandscapeSettings,
     pub requested: Option<String>,
     pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
 }

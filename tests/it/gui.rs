@@ -883,6 +883,18 @@ fn several_presses_within_one_frame_of_the_window_all_count() {
 fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
     let d = TempDir::new("gui-badsession");
     let session = d.path().join("s.toml");
+    // The A/B pair and the landscape's settings are part of a session.
+    let mut state = State::default();
+    state.view.ab = Some((1, 0));
+    state.view.show_landscape = true;
+    state.view.landscape = regtrack::app::LandscapeSettings {
+        x: 2,
+        y: Some(3),
+        radius: 7.5,
+        around_truth: true,
+    };
+    state.save(&session).unwrap();
+    assert_eq!(State::load(&session).unwrap(), state);
     State::default().save(&session).unwrap();
     let good = std::fs::read_to_string(&session).unwrap();
     assert!(State::load(&session).is_ok());
@@ -918,6 +930,8 @@ fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
         ),
         ("selected_tracker", "7", "the session has 2 tracker(s)"),
         ("gt_ssm", "\"warp9\"", "warp9"),
+        ("radius", "1000.0", "landscape radius = 1000.00 must be in 0.5..=100"),
+        ("x", "9", "landscape parameter 9 does not exist"),
     ] {
         let text = set(key, value);
         assert_ne!(text, good, "{key} is in the saved session");

@@ -532,7 +532,7 @@ fn colormap(t: f64) -> egui::Color32 {
 fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let open = egui::CollapsingHeader::new("Cost landscape")
         .id_salt("landscape")
-        .open(Some(app.rt.ui.landscape.open))
+        .open(Some(app.state.view.show_landscape))
         .show(ui, |ui| {
             let i = app.state.selected_tracker;
             let names = app
@@ -548,7 +548,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 ui.label("the inspected tracker has no warp parameters");
                 return;
             }
-            let mut settings = app.rt.ui.landscape.settings;
+            let mut settings = app.state.view.landscape;
             let v = &mut settings;
             ui.horizontal(|ui| {
                 ui.label("x");
@@ -574,7 +574,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 }
                 ui.add(
                     egui::DragValue::new(&mut v.radius)
-                        .range(0.5..=100.0)
+                        .range(crate::app::state::LANDSCAPE_RADIUS)
                         .speed(0.1)
                         .prefix("± ")
                         .suffix(" px"),
@@ -585,7 +585,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 ui.radio_value(&mut v.around_truth, false, "around the estimate");
                 ui.radio_value(&mut v.around_truth, true, "around the ground truth");
             });
-            if settings != app.rt.ui.landscape.settings {
+            if settings != app.state.view.landscape {
                 out.push(Command::SetLandscape(settings));
             }
             let iterations: Vec<Vec<f64>> = app
@@ -640,7 +640,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             }
         });
     if open.header_response.clicked() {
-        out.push(Command::ShowLandscape(!app.rt.ui.landscape.open));
+        out.push(Command::ShowLandscape(!app.state.view.show_landscape));
     }
 }
 

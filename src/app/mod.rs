@@ -21,6 +21,7 @@ pub mod worker;
 
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
 pub use runtime::{Experiment, LandscapeView, Runtime, Tool, Versioned};
+pub use queries::{Disagreement, rank_disagreements};
 pub use state::LandscapeSettings;
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 

@@ -6,7 +6,7 @@ use super::runtime::ErrorsKey;
 use super::worker::TrackerFrame;
 use crate::dataset::Sequence;
 use crate::eval;
-use crate::geometry::{Point, alignment_error};
+use crate::geometry::{Point, Quad, alignment_error};
 use crate::tracker::TrackStatus;
 use eframe::egui;
 use std::sync::Arc;
@@ -108,32 +108,17 @@ impl InspectorApp {
             self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()),
         ))
     }
-
-    /// The frames where trackers `a` and `b` disagree most: the alignment error between their
-    /// corners (infinite where exactly one of them is lost), largest first.
-    pub fn disagreements(&self, a: usize, b: usize) -> Vec<(usize, f64)> {
+    /// The frames both trackers of an A/B pair have a result on, ranked by how far apart their
+    /// corners are, largest first (see [`rank_disagreements`]).
+    pub fn disagreements(&self, a: usize, b: usize) -> Vec<Disagreement> {
         let (Some(ra), Some(rb)) = (self.rt.run.results.get(a), self.rt.run.results.get(b)) else {
             return Vec::new();
         };
-        let mut v: Vec<(usize, f64)> = ra
-            .iter()
-            .zip(rb)
-            .enumerate()
-            .filter_map(|(f, (x, y))| {
-                let (x, y) = (x.as_ref()?, y.as_ref()?);
-                let (lx, ly) = (
-                    x.status != TrackStatus::Tracking,
-                    y.status != TrackStatus::Tracking,
-                );
-                match (lx, ly) {
-                    (false, false) => Some((f, alignment_error(&x.corners, &y.corners))),
-                    (true, true) => None,
-                    _ => Some((f, f64::INFINITY)),
-                }
-            })
-            .collect();
-        v.sort_by(|p, q| q.1.total_cmp(&p.1).then(p.0.cmp(&q.0)));
-        v
+        let lost = |r: &TrackerFrame| r.status != TrackStatus::Tracking;
+        rank_disagreements(ra.iter().zip(rb).enumerate().filter_map(|(f, (x, y))| {
+            let (x, y) = (x.as_ref()?, y.as_ref()?);
+            Some((f, (lost(x), x.corners), (lost(y), y.corners)))
+        }))
     }
 
     /// Whether stored results are being played back.
@@ -252,5 +237,66 @@ impl InspectorApp {
             return Vec::new();
         }
         eval::success_curve(&e)
+    }
+}
+
+/// How far apart an A/B pair is on a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Disagreement {
+    pub frame: usize,
+    /// Alignment error of one's corners against the other's (px).
+    pub px: f64,
+    /// Which of the two (A, B) reported the frame lost.
+    pub lost: [bool; 2],
+}
+
+/// Ranks frames by the distance between the two trackers' corners, largest first (ties: the
+/// earlier frame). A tracker that reports a loss still has corners (where it last was or
+/// searched), so a frame where one is lost ranks by how far it is from the other: the onset of
+/// a loss, where the two part, comes before frames where the lost one happens to lie close.
+/// Frames where both are lost say nothing about which is right and are left out, as are
+/// corners that are not finite.
+pub fn rank_disagreements(
+    frames: impl Iterator<Item = (usize, (bool, Quad), (bool, Quad))>,
+) -> Vec<Disagreement> {
+    let mut v: Vec<Disagreement> = frames
+        .filter(|(_, a, b)| !(a.0 && b.0))
+        .map(|(frame, a, b)| Disagreement {
+            frame,
+            px: alignment_error(&a.1, &b.1),
+            lost: [a.0, b.0],
+        })
+        .filter(|d| d.px.is_finite())
+        .collect();
+    v.sort_by(|p, q| q.px.total_cmp(&p.px).then(p.frame.cmp(&q.frame)));
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(x: f64) -> Quad {
+        Quad::from_rect(x, 0.0, 10.0, 10.0)
+    }
+
+    #[test]
+    fn a_loss_ranks_by_the_distance_not_first_or_in_frame_order() {
+        let frames = vec![
+            (0, (false, square(0.0)), (false, square(1.0))),
+            // B lost and far: the top.
+            (1, (false, square(0.0)), (true, square(30.0))),
+            // B lost but close: below a frame where both track 4 px apart.
+            (2, (false, square(0.0)), (true, square(2.0))),
+            (3, (false, square(0.0)), (false, square(4.0))),
+            // Both lost: left out.
+            (4, (true, square(0.0)), (true, square(50.0))),
+            (5, (false, square(0.0)), (false, Quad([Point::new(f64::NAN, 0.0); 4]))),
+        ];
+        let r = rank_disagreements(frames.into_iter());
+        let order: Vec<usize> = r.iter().map(|d| d.frame).collect();
+        assert_eq!(order, vec![1, 3, 2, 0]);
+        assert_eq!(r[0].lost, [false, true]);
+        assert!((r[0].px - 30.0).abs() < 1e-9);
     }
 }

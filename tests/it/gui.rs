@@ -755,10 +755,10 @@ fn ab_mode_lists_the_frames_where_two_trackers_disagree() {
     let worst = h.state().disagreements(0, 1);
     assert_eq!(worst.len(), 10);
     assert!(
-        worst.windows(2).all(|w| w[0].1 >= w[1].1),
+        worst.windows(2).all(|w| w[0].px >= w[1].px),
         "sorted, largest first"
     );
-    let (f, dist) = worst[0];
+    let (f, dist) = (worst[0].frame, worst[0].px);
     let expect = regtrack::geometry::alignment_error(
         &h.state().result(0, f).unwrap().corners,
         &h.state().result(1, f).unwrap().corners,

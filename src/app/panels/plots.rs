@@ -799,18 +799,19 @@ fn disagreement(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, a
         return;
     }
     ui.horizontal_wrapped(|ui| {
-        for (f, d) in worst.iter().take(12) {
-            let text = if d.is_finite() {
-                format!("frame {}: {d:.1} px", f + 1)
-            } else {
-                format!("frame {}: one lost", f + 1)
+        for d in worst.iter().take(12) {
+            let who = match d.lost {
+                [true, _] => format!(" ({} lost)", a + 1),
+                [_, true] => format!(" ({} lost)", b + 1),
+                _ => String::new(),
             };
+            let text = format!("frame {}: {:.1} px{who}", d.frame + 1, d.px);
             if ui
-                .selectable_label(app.state.frame == *f, text)
-                .on_hover_text("Show this frame")
+                .selectable_label(app.state.frame == d.frame, text)
+                .on_hover_text("Show this frame (ranked by the distance between the two)")
                 .clicked()
             {
-                out.push(Command::Seek(*f));
+                out.push(Command::Seek(d.frame));
             }
         }
     });

@@ -183,6 +183,9 @@ impl InspectorApp {
                     if i < self.rt.run.starts.len() {
                         self.rt.run.starts.remove(i);
                     }
+                    if i < self.rt.run.reinits.len() {
+                        self.rt.run.reinits.remove(i);
+                    }
                     self.rt.worker.send(Job::Remove { index: i });
                     self.state.selected_tracker = self
                         .state
@@ -263,8 +266,8 @@ impl InspectorApp {
                 }
             }
             Command::RerunFrom(f) => {
-                // Re-tracking from here, and playing on.
-                self.restart(f);
+                // Re-tracking from here, and playing on; the results before stay.
+                self.restart_from(f, true);
                 self.rt.run.play_after_start = true;
             }
             Command::InitTracker(i, init) => {

@@ -19,9 +19,9 @@ pub use crate::session as state;
 mod window;
 pub mod worker;
 
+pub use queries::{Disagreement, rank_disagreements};
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
 pub use runtime::{Experiment, LandscapeView, Runtime, Tool, Versioned};
-pub use queries::{Disagreement, rank_disagreements};
 pub use state::LandscapeSettings;
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
@@ -179,6 +179,7 @@ impl InspectorApp {
             t.init = InitSource::GroundTruth;
         }
         self.rt.run.starts = vec![0; self.state.trackers.len()];
+        self.rt.run.reinits = Vec::new();
         *self.rt.run.results.edit() = vec![Vec::new(); self.state.trackers.len()];
         self.rt.live.info = Some(worker::LiveInfo {
             source: source.clone(),
@@ -458,24 +459,48 @@ impl InspectorApp {
 
     /// Re-initialises every enabled tracker on `frame` and shows it.
     fn restart(&mut self, frame: usize) {
+        self.restart_from(frame, false);
+    }
+
+    /// Re-initialises every enabled tracker on `frame` and shows it; with `keep_before`, the
+    /// results on the frames before it stay (the plots keep them; `frame` is then a
+    /// re-initialisation, left out of the errors as the start frame is).
+    fn restart_from(&mut self, frame: usize, keep_before: bool) {
         let n = self.frame_count();
         if n == 0 {
             return;
         }
         let frame = frame.min(n - 1);
+        let keep = keep_before && frame > self.state.start_frame;
         self.rt.run.generation += 1;
         self.rt.run.playing = false;
         self.rt.run.tracked_until = None;
         self.rt.ui.selected_iteration = None;
         self.rt.ui.experiment = None;
-        self.state.start_frame = frame;
         self.state.frame = frame;
         self.rt.run.replaying = None;
-        self.rt.run.starts = vec![frame; self.state.trackers.len()];
+        let count = self.state.trackers.len();
+        if keep {
+            self.rt.run.starts.resize(count, self.state.start_frame);
+            self.rt.run.reinits.resize(count, Vec::new());
+            for (i, r) in self.rt.run.reinits.iter_mut().enumerate() {
+                if self.rt.run.starts[i] < frame {
+                    r.retain(|&f| f < frame);
+                    r.push(frame);
+                } else {
+                    self.rt.run.starts[i] = frame;
+                    r.clear();
+                }
+            }
+        } else {
+            self.state.start_frame = frame;
+            self.rt.run.starts = vec![frame; count];
+            self.rt.run.reinits = vec![Vec::new(); count];
+        }
         let results = self.rt.run.results.edit();
-        results.resize(self.state.trackers.len(), Vec::new());
+        results.resize(count, Vec::new());
         for r in results {
-            r.clear();
+            r.truncate(if keep { frame } else { 0 });
         }
         let mut specs = Vec::new();
         let mut missing = Vec::new();
@@ -526,6 +551,10 @@ impl InspectorApp {
         let results = self.rt.run.results.edit();
         results.resize(self.state.trackers.len(), Vec::new());
         results[i].clear();
+        // It runs straight through from its start: no re-initialisation on the way.
+        if let Some(r) = self.rt.run.reinits.get_mut(i) {
+            r.clear();
+        }
         let from = self.rt.run.starts[i].min(n - 1);
         let until = self.rt.run.tracked_until.unwrap_or(from).max(from);
         let tracker = if t.enabled {

@@ -91,6 +91,15 @@ impl InspectorApp {
     }
 
     /// The frame tracker `t` was initialised on.
+    /// Whether tracker `t` was initialised again on `frame` (see [`InspectorApp::restart_from`]).
+    pub(super) fn reinit_on(&self, t: usize, frame: usize) -> bool {
+        self.rt
+            .run
+            .reinits
+            .get(t)
+            .is_some_and(|r| r.contains(&frame))
+    }
+
     pub(super) fn tracker_start(&self, t: usize) -> usize {
         self.rt
             .run
@@ -179,7 +188,7 @@ impl InspectorApp {
         };
         v.iter()
             .enumerate()
-            .filter(|(f, r)| *f > self.tracker_start(t) && r.is_some())
+            .filter(|(f, r)| *f > self.tracker_start(t) && r.is_some() && !self.reinit_on(t, *f))
             .filter_map(|(f, r)| {
                 let r = r.as_ref()?;
                 let gt = self.ground_truth(f)?;
@@ -291,7 +300,11 @@ mod tests {
             (3, (false, square(0.0)), (false, square(4.0))),
             // Both lost: left out.
             (4, (true, square(0.0)), (true, square(50.0))),
-            (5, (false, square(0.0)), (false, Quad([Point::new(f64::NAN, 0.0); 4]))),
+            (
+                5,
+                (false, square(0.0)),
+                (false, Quad([Point::new(f64::NAN, 0.0); 4])),
+            ),
         ];
         let r = rank_disagreements(frames.into_iter());
         let order: Vec<usize> = r.iter().map(|d| d.frame).collect();

@@ -101,6 +101,9 @@ pub(super) struct RunRt {
     pub(super) results: Versioned<Vec<Vec<Option<TrackerFrame>>>>,
     /// Per tracker, the frame it was initialised on.
     pub(super) starts: Vec<usize>,
+    /// Per tracker, later frames it was initialised on again (*Re-run from here*, which keeps
+    /// the results before): their error is zero by construction and is not counted.
+    pub(super) reinits: Vec<Vec<usize>>,
     /// The last frame the trackers reached.
     pub(super) tracked_until: Option<usize>,
     pub(super) playing: bool,

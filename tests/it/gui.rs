@@ -630,11 +630,36 @@ fn only_the_changed_tracker_reruns_and_play_replays() {
         "{}",
         h.state().status()
     );
-    // Re-run from here re-tracks and plays.
+    // Re-run from here re-tracks and plays, keeping the results before it in the plots; the
+    // frame it re-initialised on (error 0 by construction) is not counted.
+    let before: Vec<_> = (1..4)
+        .map(|f| h.state().result(0, f).unwrap().corners)
+        .collect();
+    let errors_before = h.state().errors(0);
+    assert_eq!(errors_before.len(), 9);
     h.state_mut().send(Command::RerunFrom(4));
+    h.step();
+    assert_eq!(h.state().tracked_until(), None, "re-initialising");
     step_until(&mut h, "the re-run to the end", |a| {
         a.tracked_until() == Some(9) && !a.is_playing()
     });
+    for (k, c) in before.iter().enumerate() {
+        assert_eq!(
+            h.state().result(0, k + 1).unwrap().corners,
+            *c,
+            "frame {}",
+            k + 1
+        );
+    }
+    let errors = h.state().errors(0);
+    let frames: Vec<usize> = errors.iter().map(|e| e.0).collect();
+    assert_eq!(frames, vec![1, 2, 3, 5, 6, 7, 8, 9]);
+    assert_eq!(&errors[..3], &errors_before[..3]);
+    assert_eq!(
+        h.state().state.start_frame,
+        0,
+        "the run still starts on frame 1"
+    );
 }
 
 #[test]
@@ -930,7 +955,11 @@ fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
         ),
         ("selected_tracker", "7", "the session has 2 tracker(s)"),
         ("gt_ssm", "\"warp9\"", "warp9"),
-        ("radius", "1000.0", "landscape radius = 1000.00 must be in 0.5..=100"),
+        (
+            "radius",
+            "1000.0",
+            "landscape radius = 1000.00 must be in 0.5..=100",
+        ),
         ("x", "9", "landscape parameter 9 does not exist"),
     ] {
         let text = set(key, value);

@@ -309,7 +309,10 @@ pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
             }
             if ui
                 .add_enabled(n > 0, egui::Button::new("Re-run from here"))
-                .on_hover_text("Re-initialise every tracker on this frame and play")
+                .on_hover_text(
+                    "Re-initialise every tracker on this frame and play; the results before \
+                     it stay in the plots",
+                )
                 .clicked()
             {
                 out.push(Command::RerunFrom(app.state.frame));

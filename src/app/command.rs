@@ -33,6 +33,8 @@ pub enum Command {
     SetView(super::state::View),
     /// Opens or closes the cost-landscape view.
     ShowLandscape(bool),
+    /// Show the cost landscape in a window of its own (`true`) or back in the panel.
+    EnlargeLandscape(bool),
     /// What the cost-landscape view sweeps.
     SetLandscape(super::LandscapeSettings),
     /// Show (and correct) the ground truth projected on this SSM.
@@ -291,6 +293,7 @@ impl InspectorApp {
             }
             Command::SetView(v) => self.state.view = v,
             Command::ShowLandscape(open) => self.state.view.show_landscape = open,
+            Command::EnlargeLandscape(big) => self.rt.ui.landscape.enlarged = big,
             Command::SetLandscape(s) => self.state.view.landscape = s,
             Command::SetGtSsm(name) => match ssm::build(&name) {
                 Ok(m) => self.state.gt_ssm = m.name().to_string(),

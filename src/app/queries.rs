@@ -109,6 +109,11 @@ impl InspectorApp {
             .unwrap_or(self.state.start_frame)
     }
 
+    /// Whether the cost landscape is shown in a window of its own.
+    pub fn landscape_enlarged(&self) -> bool {
+        self.rt.ui.landscape.enlarged
+    }
+
     /// The cost landscape shown (the last one computed) and whether it is current.
     pub fn landscape_shown(&self) -> Option<(&Result<crate::landscape::Landscape, String>, bool)> {
         let (key, r) = self.rt.ui.landscape.result.as_ref()?;

@@ -42,6 +42,8 @@ pub(super) type ErrorsCache = std::cell::RefCell<BTreeMap<usize, (ErrorsKey, Vec
 /// session's [`super::state::View`]): the request in flight, the last result.
 #[derive(Default)]
 pub struct LandscapeView {
+    /// Shown in a window of its own.
+    pub enlarged: bool,
     pub requested: Option<String>,
     pub result: Option<(String, Result<crate::landscape::Landscape, String>)>,
 }

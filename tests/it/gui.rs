@@ -759,6 +759,41 @@ fn the_cost_landscape_view_sweeps_the_inspected_tracker() {
     // The tracker converged: the best sample is within a step of the estimate.
     assert!(l.best()[0].abs() <= 0.25 + 1e-9, "{:?}", l.best());
     assert!(h.query_by_label("Cost landscape").is_some());
+    // A map (two parameters) with its colour bar; enlarged into a window of its own, and back.
+    let mut settings = h.state().state.view.landscape;
+    settings.y = Some(1);
+    h.state_mut().send(Command::SetLandscape(settings));
+    h.step();
+    step_until(
+        &mut h,
+        "the map",
+        |a| matches!(a.landscape_shown(), Some((Ok(l), true)) if l.axes.len() == 2),
+    );
+    h.run_steps(2);
+    assert!(
+        h.query_by_label_contains("the best sample").is_some(),
+        "the map's caption"
+    );
+    h.get_by_label("Enlarge").scroll_to_me();
+    h.run_steps(3);
+    h.get_by_label("Enlarge").click();
+    h.run_steps(3);
+    assert!(h.state().landscape_enlarged());
+    assert!(
+        h.query_by_label_contains("Cost landscape: tracker 1, frame 5")
+            .is_some(),
+        "its window"
+    );
+    assert!(h.query_by_label("shown in its own window").is_some());
+    // (At the bottom of the scrolled panel, under its scroll bar: through accesskit, as a
+    // screen reader would; the real window was clicked by hand.)
+    h.get_by_label("Back into the panel").click_accesskit();
+    h.run_steps(3);
+    assert!(!h.state().landscape_enlarged());
+    assert!(
+        h.query_by_label_contains("Cost landscape: tracker")
+            .is_none()
+    );
 }
 
 #[test]

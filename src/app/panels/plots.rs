@@ -588,6 +588,63 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             if settings != app.state.view.landscape {
                 out.push(Command::SetLandscape(settings));
             }
+            if app.landscape_enlarged() {
+                ui.label("shown in its own window");
+                if ui.button("Back into the panel").clicked() {
+                    out.push(Command::EnlargeLandscape(false));
+                }
+                return;
+            }
+            if ui
+                .small_button("Enlarge")
+                .on_hover_text("Show the landscape in a window of its own, resizable")
+                .clicked()
+            {
+                out.push(Command::EnlargeLandscape(true));
+            }
+            landscape_plot(app, ui, names, None);
+        });
+    if open.header_response.clicked() {
+        out.push(Command::ShowLandscape(!app.state.view.show_landscape));
+    }
+    if app.state.view.show_landscape && app.landscape_enlarged() {
+        let i = app.state.selected_tracker;
+        let names = app
+            .state
+            .trackers
+            .get(i)
+            .and_then(|t| t.spec.registration())
+            .and_then(|r| crate::ssm::build(&r.ssm).ok())
+            .map_or(&[][..], |m| m.param_names());
+        let mut keep = true;
+        egui::Window::new(format!(
+            "Cost landscape: tracker {}, frame {}",
+            i + 1,
+            app.state.frame + 1
+        ))
+        .id(egui::Id::unique("landscape_window"))
+        .open(&mut keep)
+        .resizable(true)
+        .default_size([620.0, 600.0])
+        // Over the frame, not over the panel that shows its settings.
+        .default_pos(ui.ctx().content_rect().left_top() + egui::vec2(240.0, 60.0))
+        .show(ui.ctx(), |ui| {
+            // The plot takes what the window leaves after the caption and the colour bar.
+            let h = (ui.available_height() - 70.0).max(160.0);
+            landscape_plot(app, ui, names, Some(h));
+        });
+        if !keep {
+            out.push(Command::EnlargeLandscape(false));
+        }
+    }
+}
+
+/// The landscape's plot (a curve or a map) and its caption; `height` `None` is the panel's size.
+fn landscape_plot(app: &InspectorApp, ui: &mut egui::Ui, names: &[&str], height: Option<f32>) {
+    let i = app.state.selected_tracker;
+    let name = |k: usize| names.get(k).copied().unwrap_or("?");
+    {
+        {
             let iterations: Vec<Vec<f64>> = app
                 .result(i, app.state.frame)
                 .map(|r| r.iterations.iter().map(|it| it.params.clone()).collect())
@@ -634,13 +691,11 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             );
             let path: Vec<Vec<f64>> = iterations.iter().map(|p| l.offsets_of(p)).collect();
             if l.axes.len() == 1 {
-                landscape_curve(ui, &l, &path, c, names);
+                landscape_curve(ui, &l, &path, c, names, height.unwrap_or(170.0));
             } else {
-                landscape_map(ui, &l, &path, names);
+                landscape_map(ui, &l, &path, names, height.unwrap_or(230.0));
             }
-        });
-    if open.header_response.clicked() {
-        out.push(Command::ShowLandscape(!app.state.view.show_landscape));
+        }
     }
 }
 
@@ -650,6 +705,7 @@ fn landscape_curve(
     path: &[Vec<f64>],
     c: egui::Color32,
     names: &[&str],
+    height: f32,
 ) {
     let pts: Vec<[f64; 2]> = l
         .offsets
@@ -687,7 +743,7 @@ fn landscape_curve(
         ),
         "similarity f",
     )
-    .height(170.0)
+    .height(height)
     .allow_scroll(false)
     .show(ui, |p| {
         p.line(Line::new("f", PlotPoints::from(pts)).color(c));
@@ -720,6 +776,7 @@ fn landscape_map(
     l: &crate::landscape::Landscape,
     path: &[Vec<f64>],
     names: &[&str],
+    height: f32,
 ) {
     let name = |k: usize| names.get(k).copied().unwrap_or("?");
     let n = l.offsets.len();
@@ -756,7 +813,7 @@ fn landscape_map(
         &format!("{} offset (px)", name(l.axes[0])),
         &format!("{} offset (px)", name(l.axes[1])),
     )
-    .height(230.0)
+    .height(height)
     .data_aspect(1.0)
     .allow_scroll(false)
     .show(ui, |p| {
@@ -782,12 +839,37 @@ fn landscape_map(
                 .color(egui::Color32::from_rgb(255, 80, 80)),
         );
     });
-    ui.label(
-        egui::RichText::new(format!(
-            "f from {lo:.4} (dark) to {hi:.4} (yellow); red: the best sample; white: the iterations"
-        ))
-        .small(),
-    );
+    colour_bar(ui, lo, hi);
+    ui.label(egui::RichText::new("red: the best sample; white: the iterations").small());
+}
+
+/// The map's colour scale: the colour of each value of f from `lo` to `hi`, with both ends
+/// and the middle labelled.
+fn colour_bar(ui: &mut egui::Ui, lo: f64, hi: f64) {
+    let w = ui.available_width().clamp(60.0, 600.0);
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(w, 12.0), egui::Sense::hover());
+    let steps = 64;
+    for k in 0..steps {
+        let (a, b) = (k as f32 / steps as f32, (k + 1) as f32 / steps as f32);
+        let r = egui::Rect::from_min_max(
+            egui::pos2(rect.left() + a * w, rect.top()),
+            egui::pos2(rect.left() + b * w + 0.5, rect.bottom()),
+        );
+        ui.painter()
+            .rect_filled(r, 0.0, colormap((k as f64 + 0.5) / steps as f64));
+    }
+    ui.horizontal(|ui| {
+        ui.set_width(w);
+        let small = |v: f64| egui::RichText::new(format!("{v:.4}")).small();
+        ui.label(small(lo)).on_hover_text("f at the darkest colour");
+        let mid = ui.available_width() / 2.0 - 40.0;
+        ui.add_space(mid.max(0.0));
+        ui.label(small(0.5 * (lo + hi)));
+        ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+            ui.label(small(hi))
+                .on_hover_text("f at the brightest colour");
+        });
+    });
 }
 
 /// A/B mode: the frames where the two trackers disagree most, for a jump.

@@ -72,6 +72,34 @@ impl Landscape {
             .collect()
     }
 
+    /// Per axis, the mean slope of `f` between the centre and the samples nearest ±1 px
+    /// (`|f(±1) - f(0)|`, per px): the scale the slopes at the centre compare with. At an
+    /// optimum the slopes at the centre are near zero next to it, and what is left of them
+    /// (the analytic and the numeric may then differ even in sign) is noise.
+    pub fn slope_scale(&self) -> Vec<f64> {
+        let n = self.offsets.len();
+        if n < 3 {
+            return vec![f64::NAN; self.axes.len()];
+        }
+        let mid = n / 2;
+        let step = self.offsets[1] - self.offsets[0];
+        let k = ((1.0 / step).round() as usize).clamp(1, mid);
+        let at = |col: usize, row: usize| match self.axes.len() {
+            1 => self.values[col],
+            _ => self.values[row * n + col],
+        };
+        let slope = |a: f64, b: f64| {
+            ((a - self.center_value).abs() + (b - self.center_value).abs())
+                / (2.0 * k as f64 * step)
+        };
+        (0..self.axes.len())
+            .map(|axis| match axis {
+                0 => slope(at(mid - k, mid), at(mid + k, mid)),
+                _ => slope(at(mid, mid - k), at(mid, mid + k)),
+            })
+            .collect()
+    }
+
     /// The sample with the highest similarity: its offsets (px).
     pub fn best(&self) -> Vec<f64> {
         let Some((i, _)) = self

@@ -668,11 +668,22 @@ fn landscape_plot(app: &InspectorApp, ui: &mut egui::Ui, names: &[&str], height:
             if !current {
                 ui.label(egui::RichText::new("updating…").small().weak());
             }
+            let scale = l.slope_scale();
             let grads: Vec<String> = l
                 .axes
                 .iter()
                 .zip(l.analytic.iter().zip(&l.numeric))
-                .map(|(k, (a, n))| format!("{}: analytic {a:.4}, numeric {n:.4}", name(*k)))
+                .zip(&scale)
+                .map(|((k, (a, n)), s)| {
+                    // At an optimum both are noise next to the slope a pixel away: say so
+                    // rather than let a gap of "-0.04 against -185" look like a wrong derivative.
+                    let flat = if a.abs().max(n.abs()) < 0.02 * s {
+                        format!(" (both ≈ 0 next to {s:.4} a px away: an optimum)")
+                    } else {
+                        String::new()
+                    };
+                    format!("{}: analytic {a:.4}, numeric {n:.4}{flat}", name(*k))
+                })
                 .collect();
             ui.label(
                 egui::RichText::new(format!(
@@ -808,7 +819,7 @@ fn landscape_map(
         .map(|o| [o[0], o[1]])
         .collect();
     let best = l.best();
-    axes(
+    let shown = axes(
         Plot::new("landscape_map"),
         &format!("{} offset (px)", name(l.axes[0])),
         &format!("{} offset (px)", name(l.axes[1])),
@@ -839,14 +850,14 @@ fn landscape_map(
                 .color(egui::Color32::from_rgb(255, 80, 80)),
         );
     });
-    colour_bar(ui, lo, hi);
+    colour_bar(ui, lo, hi, shown.response.rect.width());
     ui.label(egui::RichText::new("red: the best sample; white: the iterations").small());
 }
 
 /// The map's colour scale: the colour of each value of f from `lo` to `hi`, with both ends
 /// and the middle labelled.
-fn colour_bar(ui: &mut egui::Ui, lo: f64, hi: f64) {
-    let w = ui.available_width().clamp(60.0, 600.0);
+fn colour_bar(ui: &mut egui::Ui, lo: f64, hi: f64, width: f32) {
+    let w = width.min(ui.available_width()).max(60.0);
     let (rect, _) = ui.allocate_exact_size(egui::vec2(w, 12.0), egui::Sense::hover());
     let steps = 64;
     for k in 0..steps {
@@ -860,7 +871,14 @@ fn colour_bar(ui: &mut egui::Ui, lo: f64, hi: f64) {
     }
     ui.horizontal(|ui| {
         ui.set_width(w);
-        let small = |v: f64| egui::RichText::new(format!("{v:.4}")).small();
+        let small = |v: f64| {
+            let text = if v.abs() >= 100.0 {
+                format!("{v:.0}")
+            } else {
+                format!("{v:.4}")
+            };
+            egui::RichText::new(text).small()
+        };
         ui.label(small(lo)).on_hover_text("f at the darkest colour");
         let mid = ui.available_width() / 2.0 - 40.0;
         ui.add_space(mid.max(0.0));

@@ -125,6 +125,12 @@ pub enum GtCommand {
     AcceptProposalInSelection,
     /// Deletes the corrections of the selected frames (back to the original ground truth).
     RevertSelection,
+    /// Interpolates the frames inside the selection between its first and last frame's ground
+    /// truth (corrected or not), in the shown SSM's parameters.
+    InterpolateSelection,
+    /// Propagates from the selection's first frame to its last (and no further), the old
+    /// ground truth agreeing on the way not stopping it.
+    PropagateSelection,
 }
 
 impl InspectorApp {

@@ -309,7 +309,43 @@ impl InspectorApp {
                 }
             }
             GtCommand::Interpolate => self.interpolate(),
-            GtCommand::Propagate => self.propagate(),
+            GtCommand::Propagate => {
+                self.propagate(self.state.frame, crate::gt::PropagateLimits::default())
+            }
+            GtCommand::InterpolateSelection => {
+                let Some((a, b)) = self.rt.gt.selection else {
+                    return;
+                };
+                match (self.ground_truth(a), self.ground_truth(b)) {
+                    (Some(qa), Some(qb)) if b > a + 1 => self.interpolate_between((a, qa), (b, qb)),
+                    (Some(_), Some(_)) => {
+                        self.rt.msg.status =
+                            "select at least three frames: the ends are the key frames".into()
+                    }
+                    _ => self.error(format!(
+                        "interpolation over frames {}-{} needs corners on both ends",
+                        a + 1,
+                        b + 1
+                    )),
+                }
+            }
+            GtCommand::PropagateSelection => {
+                let Some((a, b)) = self.rt.gt.selection else {
+                    return;
+                };
+                if b == a {
+                    self.rt.msg.status = "select more than one frame to propagate over".into();
+                    return;
+                }
+                let limits = crate::gt::PropagateLimits {
+                    max_frames: b - a,
+                    // The user chose the range: frames where the old ground truth agrees are
+                    // proposed too (the jump and loss stops stay).
+                    agree_frames: 0,
+                    ..Default::default()
+                };
+                self.propagate(a, limits);
+            }
             GtCommand::AcceptProposal => {
                 if let Some((label, p)) = self.rt.gt.proposal.take() {
                     let changes = p
@@ -442,6 +478,12 @@ impl InspectorApp {
             self.error("the key frames are marked occluded: nothing to interpolate".into());
             return;
         };
+        self.interpolate_between((a, qa), (b, qb));
+    }
+
+    /// Replaces the frames strictly between two key frames by the interpolation of their
+    /// corners in the shown SSM's parameters (one undoable edit).
+    fn interpolate_between(&mut self, (a, qa): (usize, Quad), (b, qb): (usize, Quad)) {
         match gt::interpolate(&self.state.gt_ssm, (a, qa), (b, qb)) {
             Ok(Some(v)) if !v.is_empty() => {
                 let changes = v
@@ -457,13 +499,12 @@ impl InspectorApp {
         }
     }
 
-    /// Starts a propagation from the shown frame with the inspected tracker's methods on the
-    /// shown SSM, on the worker.
-    fn propagate(&mut self) {
+    /// Starts a propagation from `frame` with the inspected tracker's methods on the shown
+    /// SSM, on the worker, stopping where `limits` say.
+    fn propagate(&mut self, frame: usize, limits: gt::PropagateLimits) {
         let Some(seq) = self.rt.seq.sequence.clone() else {
             return;
         };
-        let frame = self.state.frame;
         let Some(start) = self.ground_truth(frame) else {
             self.error("propagation starts from a frame with corners".into());
             return;
@@ -493,6 +534,7 @@ impl InspectorApp {
             from: (frame, start),
             old,
             corrected,
+            limits,
         })));
         self.rt.gt.running = true;
         self.rt.gt.proposal = None;

@@ -225,6 +225,8 @@ pub struct PropagateJob {
     pub old: Vec<Option<Quad>>,
     /// Frames corrected by hand (the propagation stops before them).
     pub corrected: BTreeSet<usize>,
+    /// Where else it stops.
+    pub limits: gt::PropagateLimits,
 }
 
 /// A job with the cancellation epoch it was sent in: an advance runs only while no stop,
@@ -702,7 +704,7 @@ impl<W: Fn() + Sync> Thread<W> {
             job.from,
             &job.old,
             &|f| job.corrected.contains(&f),
-            gt::PropagateLimits::default(),
+            job.limits,
         )
     }
 

@@ -1317,7 +1317,7 @@ fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
         .send(Command::Gt(GtCommand::Select(Some((3, 2)))));
     h.step();
     assert_eq!(h.state().gt_selection(), Some((2, 3)));
-    h.step();
+    h.run_steps(3);
     h.get_by_label("Accept the proposal here").click();
     h.step();
     h.step();
@@ -1350,6 +1350,54 @@ fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
     // One undo brings both back.
     press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
     assert!(marked(&h, 0) && marked(&h, 2));
+
+    // Interpolate over frames 4-8: the ends are the keys (frame 4 corrected, frame 8 the
+    // original), frames 5-7 lie between them, one undoable edit.
+    h.state_mut().send(Command::Gt(GtCommand::RejectProposal));
+    h.state_mut()
+        .send(Command::Gt(GtCommand::Select(Some((3, 7)))));
+    h.run_steps(4);
+    let (q3, q7) = (
+        h.state().ground_truth(3).unwrap(),
+        h.state().ground_truth(7).unwrap(),
+    );
+    h.get_by_label("Interpolate here").click();
+    h.run_steps(2);
+    for f in 4..7 {
+        assert!(marked(&h, f), "frame {} interpolated", f + 1);
+        let c = h.state().ground_truth(f).unwrap().centroid();
+        let (a, b) = (q3.centroid(), q7.centroid());
+        let t = (f - 3) as f64 / 4.0;
+        let expect = Point::new(a.x + t * (b.x - a.x), a.y + t * (b.y - a.y));
+        assert!(
+            (c.x - expect.x).hypot(c.y - expect.y) < 1.0,
+            "frame {}: centre {c:?}, between the keys {expect:?}",
+            f + 1
+        );
+    }
+    assert!(!marked(&h, 7), "the end key stays as it was");
+    press(&mut h, egui::Key::Z, egui::Modifiers::COMMAND);
+    assert!(!marked(&h, 4) && !marked(&h, 6));
+
+    // Propagate over frames 4-6: a proposal for frames 5 and 6 and no further, although the old
+    // ground truth agrees with the tracker there (which stops a propagation on its own).
+    h.state_mut()
+        .send(Command::Gt(GtCommand::Select(Some((3, 5)))));
+    h.run_steps(4);
+    h.get_by_label("Propagate here").click();
+    h.step();
+    step_until(&mut h, "the proposal over the selection", |a| {
+        a.gt_proposal().is_some()
+    });
+    let proposed: Vec<usize> = h
+        .state()
+        .gt_proposal()
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| f.0)
+        .collect();
+    assert_eq!(proposed, vec![4, 5]);
 }
 
 /// The recent list outlives the window (the preferences file), and a save over another existing

@@ -171,7 +171,7 @@ pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
         ),
         None => String::new(),
     });
-    ui.horizontal(|ui| match app.gt_selection() {
+    ui.horizontal_wrapped(|ui| match app.gt_selection() {
         Some((a, b)) => {
             ui.label(format!("selected: frames {}-{}", a + 1, b + 1));
             if app.gt_proposal().is_some()
@@ -181,6 +181,26 @@ pub fn timeline(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) {
                     .clicked()
             {
                 out.push(Command::Gt(GtCommand::AcceptProposalInSelection));
+            }
+            if ui
+                .button("Interpolate here")
+                .on_hover_text(
+                    "The frames inside the selection from its first and last frames' ground \
+                     truth, in the SSM's parameters (one undoable edit)",
+                )
+                .clicked()
+            {
+                out.push(Command::Gt(GtCommand::InterpolateSelection));
+            }
+            if ui
+                .add_enabled(!app.gt_propagating(), egui::Button::new("Propagate here"))
+                .on_hover_text(
+                    "Track from the selection's first frame to its last with the inspected \
+                     tracker; then accept or reject the proposal",
+                )
+                .clicked()
+            {
+                out.push(Command::Gt(GtCommand::PropagateSelection));
             }
             if ui
                 .button("Delete corrections here")

@@ -74,6 +74,10 @@ pub enum Command {
     /// experiment's sigma (seeded: each press the next start).
     Perturb,
     SetPerturbSigma(f64),
+    /// The frequency of convergence on the shown frame: every enabled tracker started this
+    /// many times at each noise level 1..10 px around the ground truth (see
+    /// [`crate::converge`]); the plot shows the fraction that converges.
+    ConvergenceFrequency(usize),
     ClearExperiment,
     /// Write the plots shown (success rates, errors per frame, a landscape curve) as SVG and
     /// PNG into the folder, with `report`'s figure code.
@@ -345,6 +349,7 @@ impl InspectorApp {
             Command::Perturb => self.perturb(),
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
             Command::ExportPlots(dir) => self.export_plots(dir),
+            Command::ConvergenceFrequency(starts) => self.convergence_frequency(starts),
             Command::ClearExperiment => {
                 self.rt.ui.experiment = None;
                 self.rt.ui.selected_iteration = None;

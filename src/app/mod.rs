@@ -21,7 +21,7 @@ pub mod worker;
 
 pub use queries::{Disagreement, rank_disagreements};
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
-pub use runtime::{Experiment, LandscapeView, Runtime, Tool, Versioned};
+pub use runtime::{Experiment, Frequency, LandscapeView, Runtime, Tool, Versioned};
 pub use state::LandscapeSettings;
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
@@ -216,6 +216,12 @@ impl InspectorApp {
             || self
                 .rt
                 .ui
+                .frequency
+                .as_ref()
+                .is_some_and(|f| f.result.is_none())
+            || self
+                .rt
+                .ui
                 .experiment
                 .as_ref()
                 .is_some_and(|e| e.results.is_none())
@@ -289,6 +295,85 @@ impl InspectorApp {
                 start,
                 trackers,
             })));
+    }
+
+    /// Runs the frequency of convergence of every enabled registration tracker on the shown
+    /// frame, around its ground truth, on a thread of its own (see [`Command::ConvergenceFrequency`]).
+    fn convergence_frequency(&mut self, starts: usize) {
+        let frame = self.state.frame;
+        let starts = starts.clamp(1, 1000);
+        self.rt.ui.frequency_starts = starts;
+        let Some(seq) = self.rt.seq.sequence.clone() else {
+            return;
+        };
+        let Some(truth) = self.ground_truth(frame) else {
+            self.error(format!(
+                "the frequency of convergence needs ground truth on frame {}",
+                frame + 1
+            ));
+            return;
+        };
+        let trackers: Vec<(usize, crate::tracker::TrackerSpec)> = self
+            .state
+            .trackers
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.enabled && t.spec.registration().is_some())
+            .map(|(i, t)| (i, t.spec.clone()))
+            .collect();
+        if trackers.is_empty() {
+            self.error("no enabled registration tracker to run".into());
+            return;
+        }
+        if self
+            .rt
+            .ui
+            .frequency
+            .as_ref()
+            .is_some_and(|f| f.result.is_none())
+        {
+            self.rt.msg.status = "the frequency of convergence is running".into();
+            return;
+        }
+        self.rt.ui.frequency = Some(runtime::Frequency {
+            frame,
+            starts,
+            result: None,
+        });
+        self.rt.msg.status = format!(
+            "frequency of convergence on frame {}: {} tracker(s) x 10 noise levels x {starts} starts…",
+            frame + 1,
+            trackers.len()
+        );
+        let spawned = self.rt.worker.spawn_task("convergence", move || {
+            let run = || -> crate::Result<Vec<(usize, crate::converge::ConvergeCurve)>> {
+                let img = seq.load_gray(frame)?;
+                let spec = crate::converge::ConvergeSpec {
+                    starts,
+                    ..Default::default()
+                };
+                trackers
+                    .iter()
+                    .map(|(i, t)| {
+                        crate::converge::frequency_of_convergence(t, &img, &truth, &spec)
+                            .map(|c| (*i, c))
+                    })
+                    .collect()
+            };
+            Reply::Frequency {
+                frame,
+                result: run().map_err(|e| e.to_string()),
+            }
+        });
+        if let Err(e) = spawned {
+            self.rt.ui.frequency = None;
+            self.error(format!("cannot run the frequency of convergence: {e}"));
+        }
+    }
+
+    /// The frequency of convergence run last (or running).
+    pub fn frequency(&self) -> Option<&runtime::Frequency> {
+        self.rt.ui.frequency.as_ref()
     }
 
     /// Writes the plots shown as figures (on a thread of its own; the files come back as a
@@ -421,6 +506,40 @@ impl InspectorApp {
                     },
                 ));
             }
+        }
+        if let Some(runtime::Frequency {
+            frame,
+            starts,
+            result: Some(Ok(curves)),
+        }) = &self.rt.ui.frequency
+        {
+            figures.push((
+                "convergence",
+                Figure {
+                    kind: FigureKind::Others,
+                    stem: "convergence".into(),
+                    title: format!(
+                        "Frequency of convergence: {name}, frame {}, {starts} starts per σ",
+                        frame + 1
+                    ),
+                    curves: curves
+                        .iter()
+                        .map(|(i, c)| Curve {
+                            name: format!("{} {}", i + 1, c.tracker),
+                            tracker: c.tracker.clone(),
+                            mean_sr: c.mean(),
+                            points: c.points.iter().map(|p| (p.0, p.1)).collect(),
+                        })
+                        .collect(),
+                },
+                Axes {
+                    x_desc: "σ of the corner noise (px)".into(),
+                    y_desc: "fraction converged (within 1 px)".into(),
+                    x_range: (0.0, 10.5),
+                    y_range: (0.0, 1.02),
+                    legend_header: "mean".into(),
+                },
+            ));
         }
         if figures.is_empty() {
             self.error("nothing to export: track some frames first".into());
@@ -859,6 +978,28 @@ impl InspectorApp {
                             e.sigma,
                             converged.join(", ")
                         );
+                    }
+                }
+                Reply::Frequency { frame, result } => {
+                    if let Some(f) = self.rt.ui.frequency.as_mut().filter(|f| f.frame == frame) {
+                        match &result {
+                            Ok(curves) => {
+                                let means: Vec<String> = curves
+                                    .iter()
+                                    .map(|(i, c)| format!("{} {:.2}", i + 1, c.mean()))
+                                    .collect();
+                                self.rt.msg.status = format!(
+                                    "frequency of convergence on frame {}: mean fraction {}",
+                                    frame + 1,
+                                    means.join(", ")
+                                );
+                            }
+                            Err(e) => {
+                                self.rt.msg.status =
+                                    format!("the frequency of convergence failed: {e}")
+                            }
+                        }
+                        f.result = Some(result);
                     }
                 }
                 Reply::Exported(result) => match result {

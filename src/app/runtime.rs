@@ -138,6 +138,16 @@ pub(super) struct MessagesRt {
     pub(super) progress: Option<(String, usize, usize)>,
 }
 
+/// The frequency of convergence (Baker and Matthews' experiment, see [`crate::converge`]) of
+/// the enabled trackers on one frame: per tracker (its index) the fraction of starts that
+/// converge per noise level.
+#[derive(Clone, Debug)]
+pub struct Frequency {
+    pub frame: usize,
+    pub starts: usize,
+    pub result: Option<Result<Vec<(usize, crate::converge::ConvergeCurve)>, String>>,
+}
+
 /// The convergence experiment shown on a frame: every enabled tracker started from the same
 /// perturbed corners, its iterations to step through.
 pub struct Experiment {
@@ -178,6 +188,10 @@ pub(super) struct UiRt {
     pub(super) dialog: bool,
     /// The convergence experiment, its noise (px) and how many starts were drawn.
     pub(super) experiment: Option<Experiment>,
+    /// The frequency of convergence on a frame (running while its result is `None`), and the
+    /// starts per noise level it runs.
+    pub(super) frequency: Option<Frequency>,
+    pub(super) frequency_starts: usize,
     pub(super) perturb_sigma: f64,
     pub(super) perturbations: u64,
 }
@@ -196,6 +210,8 @@ impl Default for UiRt {
             prefs_path: None,
             dialog: false,
             experiment: None,
+            frequency: None,
+            frequency_starts: 50,
             perturb_sigma: 5.0,
             perturbations: 0,
         }

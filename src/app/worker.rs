@@ -290,6 +290,11 @@ pub enum Reply {
     },
     /// Plots written (the files), or why not.
     Exported(std::result::Result<Vec<PathBuf>, String>),
+    /// The frequency of convergence on `frame` (see [`super::Frequency`]).
+    Frequency {
+        frame: usize,
+        result: std::result::Result<Vec<(usize, crate::converge::ConvergeCurve)>, String>,
+    },
     /// A convergence experiment's runs, per tracker (for the request `key`).
     Experiment {
         key: u64,

@@ -1262,10 +1262,46 @@ fn the_plots_export_as_svg_and_png() {
     step_until(&mut h, "the end", |a| {
         a.tracked_until() == Some(5) && !a.is_playing()
     });
+    // The frequency of convergence on the shown frame, in the window: every enabled tracker,
+    // ten noise levels, the fraction converging falls as the noise grows.
+    h.state_mut().send(Command::Seek(3));
+    h.run_steps(2);
+    h.get_by_label("Frequency of convergence").click_accesskit();
+    h.run_steps(3);
+    h.state_mut().send(Command::ConvergenceFrequency(8));
+    h.step();
+    step_until(&mut h, "the curves", |a| {
+        a.frequency().is_some_and(|f| f.result.is_some())
+    });
+    let f = h.state().frequency().unwrap();
+    assert_eq!((f.frame, f.starts), (3, 8));
+    let curves = f.result.as_ref().unwrap().as_ref().unwrap();
+    assert_eq!(curves.len(), h.state().state.trackers.len());
+    for (_, c) in curves {
+        assert_eq!(c.points.len(), 10);
+        assert!(c.points.iter().all(|p| (0.0..=1.0).contains(&p.1)));
+        assert!(
+            c.points[0].1 >= c.points[9].1 && c.points[0].1 >= 0.5,
+            "{}: {:?}",
+            c.tracker,
+            c.points
+        );
+    }
+    assert!(
+        h.query_by_label_contains("starts per σ").is_some(),
+        "the plot's caption"
+    );
     let out = d.path().join("plots");
     h.state_mut().send(Command::ExportPlots(out.clone()));
     step_until(&mut h, "the files", |a| a.status().starts_with("wrote"));
-    for f in ["sr.svg", "sr.png", "errors.svg", "errors.png"] {
+    for f in [
+        "sr.svg",
+        "sr.png",
+        "errors.svg",
+        "errors.png",
+        "convergence.svg",
+        "convergence.png",
+    ] {
         let p = out.join(f);
         assert!(
             p.is_file() && std::fs::metadata(&p).unwrap().len() > 1000,

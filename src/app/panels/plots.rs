@@ -58,9 +58,9 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                     if ui
                         .small_button("Export plots")
                         .on_hover_text(
-                            "Write the success rates, the errors per frame and a landscape \
-                                 curve as SVG and PNG into the folder at the right (the figures \
-                                 of regtrack report)",
+                            "Write the success rates, the errors per frame, a landscape \
+                             curve and the frequency of convergence as SVG and PNG into the \
+                             folder at the right (the figures of regtrack report)",
                         )
                         .clicked()
                     {
@@ -195,6 +195,8 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                 speed_table(app, ui);
                 ui.separator();
                 convergence(app, ui, out);
+                ui.separator();
+                frequency(app, ui, out);
                 ui.separator();
                 landscape(app, ui, out);
             });
@@ -348,6 +350,94 @@ fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     patches(app, ui, i, frame, &r);
 }
 
+/// The frequency of convergence on the shown frame: run it, and the fraction of starts that
+/// converge per noise level, per tracker.
+fn frequency(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    egui::CollapsingHeader::new("Frequency of convergence")
+        .id_salt("frequency")
+        .show(ui, |ui| {
+            let running = app.frequency().is_some_and(|f| f.result.is_none());
+            ui.horizontal_wrapped(|ui| {
+                let id = ui.make_persistent_id("frequency_starts");
+                let mut starts: usize = ui
+                    .data(|d| d.get_temp(id))
+                    .unwrap_or(app.rt.ui.frequency_starts);
+                ui.add(
+                    egui::DragValue::new(&mut starts)
+                        .range(1..=1000)
+                        .suffix(" starts"),
+                )
+                .on_hover_text("Starts per noise level (each a fresh tracker)");
+                ui.data_mut(|d| d.insert_temp(id, starts));
+                if ui
+                    .add_enabled(
+                        !running,
+                        egui::Button::new(if running {
+                            "Running…"
+                        } else {
+                            "Run on this frame"
+                        }),
+                    )
+                    .on_hover_text(
+                        "Every enabled tracker initialised at the ground truth of this frame, \
+                         then started on the same frame from the corners moved by Gaussian \
+                         noise of σ = 1..10 px; a start converges when it ends within 1 px \
+                         (Baker and Matthews' experiment; regtrack converge on the command line)",
+                    )
+                    .clicked()
+                {
+                    out.push(Command::ConvergenceFrequency(starts));
+                }
+            });
+            let Some(f) = app.frequency() else {
+                ui.label(egui::RichText::new("not run yet").small().weak());
+                return;
+            };
+            let curves = match &f.result {
+                None => {
+                    ui.label(format!("running on frame {}…", f.frame + 1));
+                    return;
+                }
+                Some(Err(e)) => {
+                    ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e);
+                    return;
+                }
+                Some(Ok(c)) => c,
+            };
+            ui.label(
+                egui::RichText::new(format!(
+                    "frame {}, {} starts per σ; converged: within 1 px",
+                    f.frame + 1,
+                    f.starts
+                ))
+                .small(),
+            );
+            axes(Plot::new("frequency_plot"), "σ (px)", "fraction converged")
+                .height(170.0)
+                .legend(Legend::default().position(Corner::LeftBottom))
+                .include_x(0.0)
+                .include_x(10.0)
+                .include_y(0.0)
+                .include_y(1.0)
+                .allow_scroll(false)
+                .show(ui, |p| {
+                    for (i, c) in curves {
+                        let colour = app
+                            .state
+                            .trackers
+                            .get(*i)
+                            .map_or(egui::Color32::WHITE, |t| color(t.color));
+                        let pts: Vec<[f64; 2]> = c.points.iter().map(|q| [q.0, q.1]).collect();
+                        let name = format!("{} {}", i + 1, c.tracker);
+                        p.line(
+                            Line::new(name.clone(), PlotPoints::from(pts.clone())).color(colour),
+                        );
+                        p.points(Points::new(name, pts).radius(2.5).color(colour));
+                    }
+                });
+        });
+}
+
 /// The convergence experiment: perturb the start on this frame, run every enabled tracker
 /// from it, step through the iterations.
 fn experiment_controls(
@@ -435,12 +525,18 @@ fn patches(
         return;
     }
     let size = [side, side];
-    // Made again only when the shown result changes (the run, its results, the iteration).
+    // Made again only when the shown result changes (the run, its results, the iteration,
+    // an experiment's run on this frame, the template itself: another sequence's template is
+    // another allocation).
     let key = (
-        frame,
-        app.rt.run.generation,
-        selected,
+        (frame, app.rt.run.generation, selected),
         app.rt.run.results.version(),
+        app.experiment_on(frame)
+            .map(|e| (e.key, e.results.is_some())),
+        (
+            std::sync::Arc::as_ptr(&r.template) as usize,
+            r.template.len(),
+        ),
     );
     let image = |kind: usize| {
         let (lo, hi) = r

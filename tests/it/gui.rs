@@ -1455,7 +1455,14 @@ fn the_recent_list_survives_a_restart_and_saving_over_another_file_asks() {
     h.state_mut().use_prefs(prefs.clone());
     assert_eq!(h.state().recent(), &[seq.clone()]);
     h.run_steps(2);
-    assert!(h.query_by_label("recent").is_some(), "the recent menu");
+    assert!(h.query_by_label("Recent").is_some(), "the recent menu");
+    h.get_by_label("Recent").click();
+    h.run_steps(2);
+    h.get_by_label(&seq.display().to_string()).click();
+    h.step();
+    step_until(&mut h, "the recent sequence", |a| {
+        a.state.sequence == SequenceSource::Path(seq.clone()) && a.tracked_until() == Some(0)
+    });
 
     // Saving over a file that is not this session's: a question; Esc keeps the file.
     let own = d.path().join("own.toml");

@@ -66,18 +66,16 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             .response
             .on_hover_text("Open a live camera or an FFmpeg test source");
             if !app.recent().is_empty() {
-                egui::ComboBox::from_label("recent")
-                    .selected_text("Recent")
-                    .show_ui(ui, |ui| {
-                        for p in app.recent().iter().cloned() {
-                            if ui
-                                .selectable_label(false, p.display().to_string())
-                                .clicked()
-                            {
-                                out.push(Command::OpenSequence(SequenceSource::Path(p)));
-                            }
+                ui.menu_button("Recent", |ui| {
+                    for p in app.recent().iter().cloned() {
+                        if ui.button(p.display().to_string()).clicked() {
+                            out.push(Command::OpenSequence(SequenceSource::Path(p)));
+                            ui.close();
                         }
-                    });
+                    }
+                })
+                .response
+                .on_hover_text("Sequences opened lately (kept between runs)");
             }
             ui.separator();
             let label = ui.label("Session:");

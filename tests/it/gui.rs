@@ -1448,12 +1448,12 @@ fn the_recent_list_survives_a_restart_and_saving_over_another_file_asks() {
     h.state_mut()
         .send(Command::OpenSequence(SequenceSource::Path(seq.clone())));
     step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
-    assert_eq!(h.state().recent(), &[seq.clone()]);
+    assert_eq!(h.state().recent(), std::slice::from_ref(&seq));
     drop(h);
     // The next run starts with it, in the top bar.
     let mut h = harness(State::default());
     h.state_mut().use_prefs(prefs.clone());
-    assert_eq!(h.state().recent(), &[seq.clone()]);
+    assert_eq!(h.state().recent(), std::slice::from_ref(&seq));
     h.run_steps(2);
     assert!(h.query_by_label("Recent").is_some(), "the recent menu");
     h.get_by_label("Recent").click();

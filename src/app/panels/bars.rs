@@ -44,7 +44,7 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             let edit = ui.add(
                 egui::TextEdit::singleline(&mut path)
                     .hint_text("or type a path and press Enter")
-                    .desired_width(170.0),
+                    .desired_width(130.0),
             );
             let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
             if (ui.button("Open path").clicked() || enter) && !path.trim().is_empty() {
@@ -81,7 +81,7 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             let label = ui.label("Session:");
             let mut session = app.rt.ui.session_path.clone();
             if ui
-                .add(egui::TextEdit::singleline(&mut session).desired_width(150.0))
+                .add(egui::TextEdit::singleline(&mut session).desired_width(130.0))
                 .labelled_by(label.id)
                 .changed()
             {

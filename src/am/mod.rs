@@ -316,6 +316,11 @@ pub struct BlockCorrelation {
     samples: Vec<(u8, f32, f32)>,
     template: Vec<f32>,
     blocks: Vec<Block>,
+    /// What depends on the grid only, kept while `res` and `cells` stay: `(res, cells)` and per
+    /// block the sums of 1, x, y, xx, xy, yy (a new template per frame then only sums t, tx,
+    /// ty, tt).
+    geometry: Option<(usize, usize)>,
+    geometry_sums: Vec<[f64; 6]>,
 }
 
 /// One block of [`BlockCorrelation`]: `(M, u_t, v_t, n)` with `M` the plane fit's normal matrix
@@ -336,31 +341,51 @@ impl BlockCorrelation {
     /// not allocate (the tracker makes one of every frame's patch).
     pub fn set_template(&mut self, template: &[f32], res: usize, cells: usize) {
         let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
-        self.samples.clear();
         self.template.clear();
         self.blocks.clear();
         if res == 0 || template.len() < res * res {
+            self.samples.clear();
+            self.geometry = None;
             return;
         }
-        // Per block, sums of: 1, x, y, xx, xy, yy, t, tx, ty, tt.
-        let mut acc = [[0.0f64; 10]; MAX_BLOCKS * MAX_BLOCKS];
-        for r in 0..res {
-            let br = r * cells / res;
-            // Block-local coordinates keep the sums small.
-            let y = (r - br * res / cells) as f64;
-            for c in 0..res {
-                let bc = c * cells / res;
-                let x = (c - bc * res / cells) as f64;
-                let b = br * cells + bc;
-                self.samples.push((b as u8, x as f32, y as f32));
-                let t = template[r * res + c] as f64;
-                let terms = [1.0, x, y, x * x, x * y, y * y, t, t * x, t * y, t * t];
-                for (a, v) in acc[b].iter_mut().zip(terms) {
-                    *a += v;
+        // The grid's part, once per (res, cells): each sample's block and block-local
+        // coordinates (small sums), and per block the sums of 1, x, y, xx, xy, yy.
+        if self.geometry != Some((res, cells)) {
+            self.samples.clear();
+            self.geometry_sums.clear();
+            self.geometry_sums.resize(cells * cells, [0.0; 6]);
+            for r in 0..res {
+                let br = r * cells / res;
+                let y = (r - br * res / cells) as f64;
+                for c in 0..res {
+                    let bc = c * cells / res;
+                    let x = (c - bc * res / cells) as f64;
+                    let b = br * cells + bc;
+                    self.samples.push((b as u8, x as f32, y as f32));
+                    let terms = [1.0, x, y, x * x, x * y, y * y];
+                    for (a, v) in self.geometry_sums[b].iter_mut().zip(terms) {
+                        *a += v;
+                    }
                 }
             }
+            self.geometry = Some((res, cells));
         }
-        self.blocks.extend(acc[..cells * cells].iter().map(|b| {
+        // The template's part: per block, sums of t, tx, ty, tt.
+        let mut sums = [[0.0f64; 4]; MAX_BLOCKS * MAX_BLOCKS];
+        for (&(b, x, y), &t) in self.samples.iter().zip(&template[..res * res]) {
+            let (x, y, t) = (x as f64, y as f64, t as f64);
+            let a = &mut sums[b as usize];
+            a[0] += t;
+            a[1] += t * x;
+            a[2] += t * y;
+            a[3] += t * t;
+        }
+        let acc = self
+            .geometry_sums
+            .iter()
+            .zip(&sums)
+            .map(|(g, t)| [g[0], g[1], g[2], g[3], g[4], g[5], t[0], t[1], t[2], t[3]]);
+        self.blocks.extend(acc.map(|b| {
             let n = b[0];
             if n < 4.0 {
                 return None;

@@ -331,3 +331,31 @@ fn the_block_correlation_ignores_light_that_varies_smoothly_and_sees_anything_el
     assert!(block_correlation(&t[..16], &t[..16], 4, 8).is_finite());
     assert_eq!(block_correlation(&t[..10], &t[..10], 50, 4), 0.0);
 }
+
+/// A [`super::BlockCorrelation`] set again to other templates (as the tracker does every frame,
+/// keeping the grid's sums) gives exactly what a fresh one gives, also when the grid changes.
+#[test]
+fn block_correlation_reused_equals_fresh() {
+    let mut rng = crate::rng::Rng::new(7);
+    let patch = |n: usize, rng: &mut crate::rng::Rng| -> Vec<f32> {
+        (0..n * n)
+            .map(|i| ((i % n) as f32 * 0.3).sin() * 40.0 + rng.normal() as f32 * 5.0 + 100.0)
+            .collect()
+    };
+    let mut reused = super::BlockCorrelation::default();
+    for (res, cells) in [(50, 4), (50, 4), (21, 3), (50, 4), (9, 8)] {
+        let (t, c) = (patch(res, &mut rng), patch(res, &mut rng));
+        reused.set_template(&t, res, cells);
+        let fresh = super::BlockCorrelation::new(&t, res, cells);
+        assert_eq!(
+            reused.of(&c).to_bits(),
+            fresh.of(&c).to_bits(),
+            "{res} {cells}"
+        );
+        assert_eq!(
+            reused.of(&t).to_bits(),
+            fresh.of(&t).to_bits(),
+            "{res} {cells}"
+        );
+    }
+}

@@ -103,20 +103,6 @@ impl Capabilities {
     }
 }
 
-/// A boxed copy of a model, its template and internal model included: what lets a search
-/// method score many patches on several threads, each thread with its own copy (the models keep
-/// per-patch statistics in themselves between [`Am::gradient`] and [`Am::hessian`]). Every
-/// `Clone` model has it.
-pub trait AmClone {
-    fn clone_box(&self) -> Box<dyn Am>;
-}
-
-impl<T: Am + Clone + 'static> AmClone for T {
-    fn clone_box(&self) -> Box<dyn Am> {
-        Box::new(self.clone())
-    }
-}
-
 /// An appearance model.
 ///
 /// Per iteration a search method calls [`Am::gradient`] (or [`Am::similarity`]) once, then
@@ -125,7 +111,7 @@ impl<T: Am + Clone + 'static> AmClone for T {
 /// twice. For the models that say so in [`Am::updates_model`], each time the search settles on a
 /// frame the driver calls [`Am::update_model`] with the patch sampled there and lets the search go
 /// on (up to three times a frame), so that the model follows the light of the frame being tracked.
-pub trait Am: AmClone + Send + Sync + std::fmt::Debug {
+pub trait Am: Send + Sync + std::fmt::Debug {
     /// The registry name.
     fn name(&self) -> &'static str;
     /// What the model can do.

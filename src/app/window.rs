@@ -244,11 +244,6 @@ pub fn run(opts: RunOptions) -> Result<Option<String>, AppError> {
     if let Some(p) = &opts.sequence {
         state.sequence = SequenceSource::Path(p.clone());
     }
-    // The sampling search methods spread their work over rayon's threads: those yield to the
-    // window too (an error means the pool already runs, as it may in a host program).
-    let _ = rayon::ThreadPoolBuilder::new()
-        .start_handler(|_| super::worker::yield_to_window())
-        .build_global();
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("regtrack inspector")

@@ -141,48 +141,16 @@ impl Context {
 
     /// Warps the grid by `p` into frame pixels (`px`, `py`).
     pub fn warp_grid(&mut self, p: &Params) {
-        let m = self.pixel_matrix(p);
-        warp_points(
-            &m,
-            &self.grid_x,
-            &self.grid_y,
-            &mut self.work.px,
-            &mut self.work.py,
-        );
-    }
-
-    /// The similarity at each of `params`, into `out` (same length), over the cores: each
-    /// thread warps the grid, samples `img` and scores the patch with its own copy of the AM
-    /// ([`Am::clone_box`](crate::am::AmClone::clone_box)). The values are those of
-    /// [`Context::similarity_at`] called on each in turn, bit for bit; the context's own
-    /// buffers and model are left as they were. For the sampling search methods, which score
-    /// hundreds to thousands of warps a frame.
-    pub fn similarities_at(&self, img: &ImageView, params: &[Params], out: &mut [f64]) {
-        use rayon::prelude::*;
-        // Enough warps per task that a task's setup (a copy of the AM) is amortised.
-        const CHUNK: usize = 64;
-        let n = self.grid_x.len();
-        params
-            .par_chunks(CHUNK)
-            .zip(out.par_chunks_mut(CHUNK))
-            .for_each_init(
-                || {
-                    (
-                        self.am.clone_box(),
-                        vec![0f32; n],
-                        vec![0f32; n],
-                        vec![0f32; n],
-                    )
-                },
-                |(am, px, py, values), (ps, os)| {
-                    for (p, o) in ps.iter().zip(os) {
-                        let m = self.pixel_matrix(p);
-                        warp_points(&m, &self.grid_x, &self.grid_y, px, py);
-                        sample_values(img, px, py, values);
-                        *o = am.similarity(values);
-                    }
-                },
-            );
+        let m = self.pixel_matrix(p).cast::<f32>();
+        let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+        let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+        let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+        for i in 0..self.grid_x.len() {
+            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+            let w = 1.0 / (m20 * x + m21 * y + m22);
+            self.work.px[i] = (m00 * x + m01 * y + m02) * w;
+            self.work.py[i] = (m10 * x + m11 * y + m12) * w;
+        }
     }
 
     /// The objective of `p_t = argmax_p f(I*, I_t(w(x, p)))` at `p`: the grid warped by `p`,
@@ -402,62 +370,9 @@ impl Context {
     }
 }
 
-/// The points `(gx, gy)` mapped by the homography `m` (in f32, as the sampling reads them)
-/// into `(px, py)`.
-fn warp_points(m: &Matrix3<f64>, gx: &[f32], gy: &[f32], px: &mut [f32], py: &mut [f32]) {
-    let m = m.cast::<f32>();
-    let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
-    let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
-    let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
-    for i in 0..gx.len() {
-        let (x, y) = (gx[i], gy[i]);
-        let w = 1.0 / (m20 * x + m21 * y + m22);
-        px[i] = (m00 * x + m01 * y + m02) * w;
-        py[i] = (m10 * x + m11 * y + m12) * w;
-    }
-}
-
 #[cfg(test)]
 mod grid_tests {
     use super::*;
-
-    /// Every model scores warps over the cores exactly as one at a time.
-    #[test]
-    fn similarities_over_the_cores_equal_one_at_a_time() {
-        let (w, h) = (160usize, 120usize);
-        let data: Vec<f32> = (0..w * h)
-            .map(|i| {
-                let (x, y) = ((i % w) as f32, (i / w) as f32);
-                100.0 + 60.0 * (0.21 * x).sin() * (0.13 * y + 0.4).cos() + 0.3 * x
-            })
-            .collect();
-        let img = ImageView::new(&data, w, h, 0, 0);
-        let q = Quad::from_rect(40.0, 30.0, 70.0, 50.0);
-        for entry in crate::am::REGISTRY {
-            let mut ctx = Context::new(
-                crate::ssm::build("homography").unwrap(),
-                crate::am::build(entry.name).unwrap(),
-                HessianKind::Default,
-                20,
-            );
-            ctx.set_region(&q, 20, GridLayout::Centres).unwrap();
-            ctx.sample_template(&img);
-            let mut rng = crate::rng::Rng::new(5);
-            let base = ctx.template_corners;
-            let params: Vec<Params> = (0..300)
-                .map(|_| {
-                    crate::ssm::random_warp(&*ctx.ssm, &base, 0.05, &mut rng)
-                        .unwrap_or(ctx.ssm.identity())
-                })
-                .collect();
-            let mut par = vec![0.0; params.len()];
-            ctx.similarities_at(&img, &params, &mut par);
-            for (p, f) in params.iter().zip(&par) {
-                let one = ctx.similarity_at(&img, p);
-                assert_eq!(one.to_bits(), f.to_bits(), "{}: {one} vs {f}", entry.name);
-            }
-        }
-    }
 
     #[test]
     fn the_grid_lies_inside_or_spans_the_target() {

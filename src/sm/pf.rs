@@ -147,22 +147,18 @@ impl SearchMethod for Pf {
         let base = ctx.template_corners;
         let sigma = self.sigma * self.anneal.powi(self.round as i32);
         self.round += 1;
-        // Motion model (the generator in particle order, as one thread would draw it), then
-        // the measurement over the cores.
+        // Motion model and measurement.
+        let mut best = f64::NEG_INFINITY;
         for i in 0..self.states.len() {
             let moved = random_warp(&*ctx.ssm, &base, sigma, &mut self.rng)
                 .and_then(|q| ctx.ssm.compose(&self.states[i], &q));
             if let Some(s) = moved.filter(|s| s.iter().all(|v| v.is_finite())) {
                 self.states[i] = s;
             }
-        }
-        ctx.similarities_at(img, &self.states, &mut self.sims);
-        let mut best = f64::NEG_INFINITY;
-        for f in &mut self.sims {
-            if !f.is_finite() {
-                *f = f64::NEG_INFINITY;
-            }
-            best = best.max(*f);
+            let s = self.states[i];
+            let f = ctx.similarity_at(img, &s);
+            self.sims[i] = if f.is_finite() { f } else { f64::NEG_INFINITY };
+            best = best.max(self.sims[i]);
         }
         if !best.is_finite() {
             return Err(LossReason::NonFinite);

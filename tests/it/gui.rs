@@ -1451,7 +1451,10 @@ fn the_recent_list_survives_a_restart_and_saving_over_another_file_asks() {
     h.state_mut().use_prefs(prefs.clone());
     h.state_mut()
         .send(Command::OpenSequence(SequenceSource::Path(seq.clone())));
-    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    // (The default session's demo opens first: wait for this sequence, not any.)
+    step_until(&mut h, "the sequence", |a| {
+        a.state.sequence == SequenceSource::Path(seq.clone()) && a.tracked_until() == Some(0)
+    });
     assert_eq!(h.state().recent(), std::slice::from_ref(&seq));
     drop(h);
     // The next run starts with it, in the top bar.

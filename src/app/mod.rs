@@ -459,13 +459,7 @@ impl InspectorApp {
         if let Some((_, Ok(l))) = &self.rt.ui.landscape.result
             && l.axes.len() == 1
         {
-            let names = self
-                .state
-                .trackers
-                .get(self.state.selected_tracker)
-                .and_then(|t| t.spec.registration())
-                .and_then(|r| crate::ssm::build(&r.ssm).ok())
-                .map_or(&[][..], |m| m.param_names());
+            let names = self.inspected_param_names();
             let axis = names.get(l.axes[0]).copied().unwrap_or("?");
             let points: Vec<(f64, f64)> = l
                 .offsets

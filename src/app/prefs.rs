@@ -70,14 +70,7 @@ pub fn config_dir() -> Option<PathBuf> {
     if let Some(d) = env_dir("REGTRACK_CONFIG_DIR") {
         return Some(d);
     }
-    let base = if cfg!(windows) {
-        env_dir("APPDATA")
-    } else if cfg!(target_os = "macos") {
-        home().map(|h| h.join("Library/Application Support"))
-    } else {
-        env_dir("XDG_CONFIG_HOME").or_else(|| home().map(|h| h.join(".config")))
-    };
-    base.map(|b| b.join("regtrack"))
+    platform_dir("XDG_CONFIG_HOME", ".config")
 }
 
 /// The folder sessions are saved to by default (see the module's table).
@@ -85,14 +78,20 @@ pub fn sessions_dir() -> Option<PathBuf> {
     if let Some(d) = env_dir("REGTRACK_CONFIG_DIR") {
         return Some(d.join("sessions"));
     }
+    platform_dir("XDG_DATA_HOME", ".local/share").map(|d| d.join("sessions"))
+}
+
+/// `regtrack` in the platform's folder for applications: `%APPDATA%` on Windows, `Application
+/// Support` on macOS, elsewhere the XDG variable `xdg_var` or `xdg_fallback` in the home folder.
+fn platform_dir(xdg_var: &str, xdg_fallback: &str) -> Option<PathBuf> {
     let base = if cfg!(windows) {
         env_dir("APPDATA")
     } else if cfg!(target_os = "macos") {
         home().map(|h| h.join("Library/Application Support"))
     } else {
-        env_dir("XDG_DATA_HOME").or_else(|| home().map(|h| h.join(".local/share")))
+        env_dir(xdg_var).or_else(|| home().map(|h| h.join(xdg_fallback)))
     };
-    base.map(|b| b.join("regtrack").join("sessions"))
+    base.map(|b| b.join("regtrack"))
 }
 
 /// The preferences file, `inspector.toml` in [`config_dir`].

@@ -20,6 +20,16 @@ impl InspectorApp {
         }
     }
 
+    /// The names of the inspected tracker's warp parameters (none for a whole tracker).
+    pub fn inspected_param_names(&self) -> &'static [&'static str] {
+        self.state
+            .trackers
+            .get(self.state.selected_tracker)
+            .and_then(|t| t.spec.registration())
+            .and_then(|r| crate::ssm::build(&r.ssm).ok())
+            .map_or(&[][..], |m| m.param_names())
+    }
+
     /// Whether a box or a quad is being drawn (pointer pressed, or corners clicked).
     pub fn drawing(&self) -> bool {
         match &self.rt.ui.tool {

@@ -35,6 +35,13 @@ fn harness(state: State) -> Harness<'static, InspectorApp> {
         .build_ui_state(|ui, app: &mut InspectorApp| app.ui(ui), app)
 }
 
+/// How wide the small sequence's frame (640 px) is on screen.
+fn frame_width(h: &Harness<'static, InspectorApp>) -> f32 {
+    let a = h.state().screen_pos(Point::new(0.0, 0.0)).unwrap();
+    let b = h.state().screen_pos(Point::new(639.0, 0.0)).unwrap();
+    b.x - a.x
+}
+
 /// Steps the UI until `done` holds (the worker runs on its own thread).
 fn step_until(
     h: &mut Harness<'static, InspectorApp>,
@@ -724,18 +731,13 @@ fn at_1000x700_the_frame_keeps_most_of_the_window() {
         a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
     });
     h.run_steps(3);
-    let width = |h: &Harness<'static, InspectorApp>| {
-        let a = h.state().screen_pos(Point::new(0.0, 0.0)).unwrap();
-        let b = h.state().screen_pos(Point::new(639.0, 0.0)).unwrap();
-        b.x - a.x
-    };
-    let with_panels = width(&h);
+    let with_panels = frame_width(&h);
     assert!(with_panels > 440.0, "the frame is {with_panels} px wide");
     // F2 and F3 hide the panels: the frame gets nearly the whole width.
     press(&mut h, egui::Key::F2, egui::Modifiers::NONE);
     press(&mut h, egui::Key::F3, egui::Modifiers::NONE);
     h.run_steps(3);
-    let alone = width(&h);
+    let alone = frame_width(&h);
     assert!(alone > 900.0 || alone > 1.4 * with_panels, "{alone} px");
     assert!(!h.state().state.view.show_trackers_panel && !h.state().state.view.show_plots_panel);
 }
@@ -1524,17 +1526,12 @@ fn side_panels_grow_back_when_the_window_does() {
         a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
     });
     h.run_steps(3);
-    let width = |h: &Harness<'static, InspectorApp>| {
-        let a = h.state().screen_pos(Point::new(0.0, 0.0)).unwrap();
-        let b = h.state().screen_pos(Point::new(639.0, 0.0)).unwrap();
-        b.x - a.x
-    };
-    let before = width(&h);
+    let before = frame_width(&h);
     h.set_size(egui::Vec2::new(1000.0, 700.0));
     h.run_steps(4);
     h.set_size(egui::Vec2::new(1400.0, 900.0));
     h.run_steps(4);
-    let after = width(&h);
+    let after = frame_width(&h);
     assert!(
         (after - before).abs() < 0.05 * before,
         "the frame was {before} px wide, {after} px after the window shrank and grew"

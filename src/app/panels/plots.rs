@@ -630,14 +630,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         .id_salt("landscape")
         .open(Some(app.state.view.show_landscape))
         .show(ui, |ui| {
-            let i = app.state.selected_tracker;
-            let names = app
-                .state
-                .trackers
-                .get(i)
-                .and_then(|t| t.spec.registration())
-                .and_then(|r| crate::ssm::build(&r.ssm).ok())
-                .map_or(&[][..], |m| m.param_names());
+            let names = app.inspected_param_names();
             let dof = names.len();
             let name = |k: usize| names.get(k).copied().unwrap_or("?");
             if dof == 0 {
@@ -705,13 +698,7 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     }
     if app.state.view.show_landscape && app.landscape_enlarged() {
         let i = app.state.selected_tracker;
-        let names = app
-            .state
-            .trackers
-            .get(i)
-            .and_then(|t| t.spec.registration())
-            .and_then(|r| crate::ssm::build(&r.ssm).ok())
-            .map_or(&[][..], |m| m.param_names());
+        let names = app.inspected_param_names();
         let mut keep = true;
         egui::Window::new(format!(
             "Cost landscape: tracker {}, frame {}",
@@ -739,70 +726,66 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
 fn landscape_plot(app: &InspectorApp, ui: &mut egui::Ui, names: &[&str], height: Option<f32>) {
     let i = app.state.selected_tracker;
     let name = |k: usize| names.get(k).copied().unwrap_or("?");
-    {
-        {
-            let iterations: Vec<Vec<f64>> = app
-                .result(i, app.state.frame)
-                .map(|r| r.iterations.iter().map(|it| it.params.clone()).collect())
-                .unwrap_or_default();
-            let c = app
-                .state
-                .trackers
-                .get(i)
-                .map_or(egui::Color32::WHITE, |t| color(t.color));
-            let Some((result, current)) = app.landscape_shown() else {
-                ui.label("computing…");
-                return;
-            };
-            let l = match result {
-                Ok(l) => l.clone(),
-                Err(e) => {
-                    ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e);
-                    return;
-                }
-            };
-            if !current {
-                ui.label(egui::RichText::new("updating…").small().weak());
-            }
-            let scale = l.slope_scale();
-            let grads: Vec<String> = l
-                .axes
-                .iter()
-                .zip(l.analytic.iter().zip(&l.numeric))
-                .zip(&scale)
-                .map(|((k, (a, n)), s)| {
-                    // At an optimum both are noise next to the slope a pixel away: say so
-                    // rather than let a gap of "-0.04 against -185" look like a wrong derivative.
-                    let flat = if a.abs().max(n.abs()) < 0.02 * s {
-                        format!(" (both ≈ 0 next to {s:.4} a px away: an optimum)")
-                    } else {
-                        String::new()
-                    };
-                    format!("{}: analytic {a:.4}, numeric {n:.4}{flat}", name(*k))
-                })
-                .collect();
-            ui.label(
-                egui::RichText::new(format!(
-                    "df/du at the centre (per px): {}",
-                    grads.join("; ")
-                ))
-                .small(),
-            )
-            .on_hover_text(
-                "The analytic slope is made of image gradients by central differences (what \
-                 every gradient search method uses: a smoothed derivative); the numeric one is \
-                 the slope of the interpolated frame over ±0.01 px. On a lightly smoothed frame \
-                 they differ by up to about a tenth of the gradient without either being wrong \
-                 (e.g. ZNCC-similitude on the coffee: 38.1 against 42.0 at σ 0.7, 27.5 against \
-                 28.9 at σ 3); the AM's derivatives themselves pass finite-difference tests.",
-            );
-            let path: Vec<Vec<f64>> = iterations.iter().map(|p| l.offsets_of(p)).collect();
-            if l.axes.len() == 1 {
-                landscape_curve(ui, &l, &path, c, names, height.unwrap_or(170.0));
-            } else {
-                landscape_map(ui, &l, &path, names, height.unwrap_or(230.0));
-            }
+    let iterations: Vec<Vec<f64>> = app
+        .result(i, app.state.frame)
+        .map(|r| r.iterations.iter().map(|it| it.params.clone()).collect())
+        .unwrap_or_default();
+    let c = app
+        .state
+        .trackers
+        .get(i)
+        .map_or(egui::Color32::WHITE, |t| color(t.color));
+    let Some((result, current)) = app.landscape_shown() else {
+        ui.label("computing…");
+        return;
+    };
+    let l = match result {
+        Ok(l) => l.clone(),
+        Err(e) => {
+            ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e);
+            return;
         }
+    };
+    if !current {
+        ui.label(egui::RichText::new("updating…").small().weak());
+    }
+    let scale = l.slope_scale();
+    let grads: Vec<String> = l
+        .axes
+        .iter()
+        .zip(l.analytic.iter().zip(&l.numeric))
+        .zip(&scale)
+        .map(|((k, (a, n)), s)| {
+            // At an optimum both are noise next to the slope a pixel away: say so
+            // rather than let a gap of "-0.04 against -185" look like a wrong derivative.
+            let flat = if a.abs().max(n.abs()) < 0.02 * s {
+                format!(" (both ≈ 0 next to {s:.4} a px away: an optimum)")
+            } else {
+                String::new()
+            };
+            format!("{}: analytic {a:.4}, numeric {n:.4}{flat}", name(*k))
+        })
+        .collect();
+    ui.label(
+        egui::RichText::new(format!(
+            "df/du at the centre (per px): {}",
+            grads.join("; ")
+        ))
+        .small(),
+    )
+    .on_hover_text(
+        "The analytic slope is made of image gradients by central differences (what \
+         every gradient search method uses: a smoothed derivative); the numeric one is \
+         the slope of the interpolated frame over ±0.01 px. On a lightly smoothed frame \
+         they differ by up to about a tenth of the gradient without either being wrong \
+         (e.g. ZNCC-similitude on the coffee: 38.1 against 42.0 at σ 0.7, 27.5 against \
+         28.9 at σ 3); the AM's derivatives themselves pass finite-difference tests.",
+    );
+    let path: Vec<Vec<f64>> = iterations.iter().map(|p| l.offsets_of(p)).collect();
+    if l.axes.len() == 1 {
+        landscape_curve(ui, &l, &path, c, names, height.unwrap_or(170.0));
+    } else {
+        landscape_map(ui, &l, &path, names, height.unwrap_or(230.0));
     }
 }
 

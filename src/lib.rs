@@ -54,6 +54,7 @@ pub mod landscape;
 pub mod linalg;
 pub mod observe;
 pub mod params;
+pub mod patches;
 #[cfg(feature = "python")]
 pub mod python;
 pub mod registration;

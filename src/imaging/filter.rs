@@ -178,6 +178,27 @@ pub fn gaussian_blur<T: Pixel>(src: &Image<T>, kernel: &GaussianKernel) -> GrayF
     }
 }
 
+/// Smooths a whole image into `out` with a separable Gaussian kernel (border replicated);
+/// `tmp` and `line` are scratch. Every buffer keeps its allocation from frame to frame.
+pub fn gaussian_blur_into<'a, T: Pixel>(
+    src: impl Into<ImageRef<'a, T>>,
+    kernel: &GaussianKernel,
+    out: &mut GrayF32,
+    tmp: &mut Vec<f32>,
+    line: &mut Vec<f32>,
+) {
+    let src = src.into();
+    let (w, h) = (src.width, src.height);
+    out.width = w;
+    out.height = h;
+    blur_region(src, kernel, (0, 0, w, h), &mut out.data, tmp, line);
+}
+
+/// [`downsample_half`] into `out`, keeping the allocations of `out` and `scratch`.
+pub fn downsample_half_into(src: &GrayF32, out: &mut GrayF32, scratch: &mut Vec<f32>) {
+    half_into(&src.data, src.width, src.height, out, scratch);
+}
+
 /// Halves `src` (`w x h`) into `out`: binomial (1 4 6 4 1)/16 smoothing, then every other
 /// pixel (pixel `i` of the result is pixel `2 i` of the source), the border replicated.
 /// `scratch` keeps its allocation.

@@ -1,6 +1,7 @@
-//! Keypoints for the keypoint-based trackers (CMT): the FAST-9 corner detector of Rosten and
-//! Drummond with non-maximum suppression, the intensity-centroid orientation, and oriented
-//! binary (BRIEF-style) descriptors compared by Hamming distance.
+//! Keypoints for the keypoint-based trackers (CMT) and the many-patch tracker: the FAST-9 corner
+//! detector of Rosten and Drummond with non-maximum suppression, the minimum-eigenvalue corners
+//! of Shi and Tomasi ("Good features to track"), the intensity-centroid orientation, and
+//! oriented binary (BRIEF-style) descriptors compared by Hamming distance.
 
 use super::GrayF32;
 use crate::geometry::Point;
@@ -156,6 +157,145 @@ pub fn fast_in(
     out
 }
 
+/// Shi-Tomasi corners of `img` within the pixels `x0..x1, y0..y1` of `region` and at least
+/// `border` pixels from the image's edges: pixels where the smaller eigenvalue of the structure
+/// tensor (central-difference gradients, summed over the `(2 radius + 1)`-pixel window, divided
+/// by its pixel count) is the largest of its 3 x 3 neighbourhood and at least `quality` times
+/// the best; then, strongest first, those at least `min_distance` from every corner kept, at
+/// most `max`. The score is the eigenvalue. Ties keep the raster order, so the result depends
+/// only on the image.
+pub fn shi_tomasi(
+    img: &GrayF32,
+    radius: usize,
+    max: usize,
+    min_distance: f64,
+    quality: f32,
+    border: usize,
+    region: (usize, usize, usize, usize),
+) -> Vec<Keypoint> {
+    let (w, h) = (img.width, img.height);
+    let b = border.max(radius + 2);
+    if w <= 2 * b || h <= 2 * b || max == 0 {
+        return Vec::new();
+    }
+    let (x0, y0) = (region.0.max(b), region.1.max(b));
+    let (x1, y1) = (region.2.min(w - b), region.3.min(h - b));
+    if x0 >= x1 || y0 >= y1 {
+        return Vec::new();
+    }
+    // The tensor's entries over the region grown by the window (central differences need one
+    // more pixel, which `b` leaves), then box sums along rows and columns.
+    let r = radius;
+    let (gx0, gy0, gx1, gy1) = (x0 - r - 1, y0 - r - 1, x1 + r + 1, y1 + r + 1);
+    let gw = gx1 - gx0;
+    let gh = gy1 - gy0;
+    let d = &img.data;
+    let mut prod = vec![[0f32; 3]; gw * gh];
+    for y in gy0 + 1..gy1 - 1 {
+        for x in gx0 + 1..gx1 - 1 {
+            let i = y * w + x;
+            let dx = 0.5 * (d[i + 1] - d[i - 1]);
+            let dy = 0.5 * (d[i + w] - d[i - w]);
+            prod[(y - gy0) * gw + (x - gx0)] = [dx * dx, dx * dy, dy * dy];
+        }
+    }
+    // Box sums of the window: along the rows, then down the columns.
+    let (rw, rh) = (x1 - x0 + 2, y1 - y0 + 2); // one more pixel around for the 3 x 3 maximum
+    let mut rows = vec![[0f32; 3]; rw * gh];
+    for y in 0..gh {
+        for x in 0..rw {
+            let cx = x + r; // column in `prod` of the window's centre (x0 - 1 + x)
+            let mut acc = [0f32; 3];
+            for t in &prod[y * gw + cx - r..=y * gw + cx + r] {
+                acc[0] += t[0];
+                acc[1] += t[1];
+                acc[2] += t[2];
+            }
+            rows[y * rw + x] = acc;
+        }
+    }
+    let n = ((2 * r + 1) * (2 * r + 1)) as f32;
+    let mut eig = vec![0f32; rw * rh];
+    for y in 0..rh {
+        for x in 0..rw {
+            let mut acc = [0f32; 3];
+            for k in y..=y + 2 * r {
+                let t = rows[k * rw + x];
+                acc[0] += t[0];
+                acc[1] += t[1];
+                acc[2] += t[2];
+            }
+            let (a, bb, c) = (acc[0] / n, acc[1] / n, acc[2] / n);
+            let half_tr = 0.5 * (a + c);
+            let disc = (0.25 * (a - c) * (a - c) + bb * bb).sqrt();
+            eig[y * rw + x] = (half_tr - disc).max(0.0);
+        }
+    }
+    let best = eig.iter().copied().fold(0f32, f32::max);
+    if best <= 0.0 {
+        return Vec::new();
+    }
+    let floor = quality.max(0.0) * best;
+    let mut found = Vec::new();
+    for y in 1..rh - 1 {
+        for x in 1..rw - 1 {
+            let v = eig[y * rw + x];
+            if v <= 0.0 || v < floor {
+                continue;
+            }
+            let mut peak = true;
+            'n: for dy in 0..3 {
+                for dx in 0..3 {
+                    if eig[(y + dy - 1) * rw + x + dx - 1] > v {
+                        peak = false;
+                        break 'n;
+                    }
+                }
+            }
+            if peak {
+                found.push(Keypoint {
+                    x: (x0 + x - 1) as f64,
+                    y: (y0 + y - 1) as f64,
+                    score: v,
+                });
+            }
+        }
+    }
+    // Strongest first (a stable sort keeps the raster order among equals).
+    found.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let md = min_distance.max(0.0);
+    if md <= 0.0 {
+        found.truncate(max);
+        return found;
+    }
+    // Greedy spacing with a grid of cells `md` wide: only the 3 x 3 cells around can be close.
+    let cell = md;
+    let (cw, ch) = (
+        (w as f64 / cell).ceil() as usize + 1,
+        (h as f64 / cell).ceil() as usize + 1,
+    );
+    let mut grid: Vec<Vec<(f64, f64)>> = vec![Vec::new(); cw * ch];
+    let mut kept = Vec::new();
+    for k in found {
+        let (cx, cy) = ((k.x / cell) as usize, (k.y / cell) as usize);
+        let near = (cy.saturating_sub(1)..=(cy + 1).min(ch - 1)).any(|gy| {
+            (cx.saturating_sub(1)..=(cx + 1).min(cw - 1)).any(|gx| {
+                grid[gy * cw + gx]
+                    .iter()
+                    .any(|&(px, py)| (px - k.x).powi(2) + (py - k.y).powi(2) < md * md)
+            })
+        });
+        if !near {
+            grid[cy * cw + cx].push((k.x, k.y));
+            kept.push(k);
+            if kept.len() == max {
+                break;
+            }
+        }
+    }
+    kept
+}
+
 /// The orientation of the patch of `radius` around `(x, y)` by its intensity centroid (radians).
 pub fn orientation(img: &GrayF32, x: usize, y: usize, radius: i32) -> f64 {
     let (mut m10, mut m01) = (0f64, 0f64);
@@ -288,6 +428,33 @@ mod tests {
                 .any(|&(cx, cy): &(f64, f64)| (k.x - cx).abs() <= 1.0 && (k.y - cy).abs() <= 1.0);
             assert!(near, "{k:?}");
         }
+    }
+
+    #[test]
+    fn shi_tomasi_finds_the_corners_of_a_square_spaced_and_strongest_first() {
+        let mut img = GrayF32::new(80, 80);
+        for y in 0..80 {
+            for x in 0..80 {
+                let inside = (20..50).contains(&x) && (25..55).contains(&y);
+                img.set(x, y, if inside { 200.0 } else { 40.0 });
+            }
+        }
+        let img = gaussian_blur(&img, &gaussian_kernel(5, 1.0));
+        let kps = shi_tomasi(&img, 3, 100, 5.0, 0.1, 4, (0, 0, 80, 80));
+        assert_eq!(kps.len(), 4, "{kps:?}");
+        for k in &kps {
+            let near = [(19.5, 24.5), (49.5, 24.5), (19.5, 54.5), (49.5, 54.5)]
+                .iter()
+                .any(|&(cx, cy): &(f64, f64)| (k.x - cx).abs() <= 3.0 && (k.y - cy).abs() <= 3.0);
+            assert!(near, "{k:?}");
+        }
+        assert!(kps.windows(2).all(|p| p[0].score >= p[1].score));
+        // A region around one corner finds that one; `max` is kept.
+        let one = shi_tomasi(&img, 3, 100, 5.0, 0.1, 4, (10, 15, 30, 35));
+        assert_eq!(one.len(), 1, "{one:?}");
+        assert_eq!(shi_tomasi(&img, 3, 2, 5.0, 0.1, 4, (0, 0, 80, 80)).len(), 2);
+        // A flat image has none.
+        assert!(shi_tomasi(&GrayF32::new(80, 80), 3, 10, 5.0, 0.1, 4, (0, 0, 80, 80)).is_empty());
     }
 
     /// An oriented descriptor of a rotated image matches the original's (few differing bits),

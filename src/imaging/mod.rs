@@ -14,11 +14,14 @@ mod resample;
 mod sample;
 
 pub use filter::{
-    GaussianKernel, Preprocessor, downsample_half, gaussian_blur, gaussian_kernel, pyramid,
+    GaussianKernel, Preprocessor, downsample_half, downsample_half_into, gaussian_blur,
+    gaussian_blur_into, gaussian_kernel, pyramid,
 };
 pub use integral::Integral;
 pub use resample::resample_window;
-pub use sample::{Border, ImageView, sample_value, sample_values, sample_values_gradients};
+pub use sample::{
+    Border, ImageView, sample_grid_shifted, sample_value, sample_values, sample_values_gradients,
+};
 
 use crate::error::{Error, Result};
 use std::path::Path;

@@ -241,6 +241,74 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     }
 }
 
+/// Rows this long or longer that cross the border are sampled pixel by pixel.
+const PADDED: usize = 64;
+
+/// Samples the `cols x rows` grid of points `(x0 + i, y0 + j)` of `img` into `out` (row by
+/// row), the border replicated as [`sample_values`] does. Every point shares the fractional
+/// part of `(x0, y0)`, so the bilinear weights are the same for all and each row is a weighted
+/// sum of two image rows (vectorised where the row is inside the image). Returns `false`,
+/// writing nothing, when a coordinate is not finite or the image is smaller than 2 x 2.
+pub fn sample_grid_shifted(
+    img: &super::GrayF32,
+    x0: f32,
+    y0: f32,
+    cols: usize,
+    rows: usize,
+    out: &mut [f32],
+) -> bool {
+    let (w, h) = (img.width, img.height);
+    if !(x0.is_finite() && y0.is_finite()) || out.len() < cols * rows || w < 2 || h < 2 {
+        return false;
+    }
+    // Far outside, every read is the border's: keep the integers exact.
+    let x0 = x0.clamp(-(cols as f32) - 2.0, w as f32 + 2.0);
+    let y0 = y0.clamp(-(rows as f32) - 2.0, h as f32 + 2.0);
+    let (fx, fy) = (x0.floor(), y0.floor());
+    let (ix, iy) = (fx as i64, fy as i64);
+    let (ax, ay) = (x0 - fx, y0 - fy);
+    let (w00, w10, w01, w11) = (
+        (1.0 - ax) * (1.0 - ay),
+        ax * (1.0 - ay),
+        (1.0 - ax) * ay,
+        ax * ay,
+    );
+    let row_of = |y: i64| y.clamp(0, h as i64 - 1) as usize * w;
+    let inside_x = ix >= 0 && ix + (cols as i64) < w as i64;
+    let col = |x: i64| x.clamp(0, w as i64 - 1) as usize;
+    for (j, o) in out[..cols * rows].chunks_exact_mut(cols).enumerate() {
+        let (r0, r1) = (row_of(iy + j as i64), row_of(iy + j as i64 + 1));
+        if inside_x {
+            let ix = ix as usize;
+            let top = &img.data[r0 + ix..][..cols + 1];
+            let bot = &img.data[r1 + ix..][..cols + 1];
+            let (t0, t1, b0, b1) = (&top[..cols], &top[1..], &bot[..cols], &bot[1..]);
+            for i in 0..cols {
+                o[i] = w00 * t0[i] + w10 * t1[i] + w01 * b0[i] + w11 * b1[i];
+            }
+        } else if cols < PADDED {
+            // The two rows' pixels, border replicated, copied out; then the same weighted sum.
+            let (mut top, mut bot) = ([0f32; PADDED], [0f32; PADDED]);
+            for i in 0..=cols {
+                let c = col(ix + i as i64);
+                top[i] = img.data[r0 + c];
+                bot[i] = img.data[r1 + c];
+            }
+            let (t0, t1, b0, b1) = (&top[..cols], &top[1..=cols], &bot[..cols], &bot[1..=cols]);
+            for i in 0..cols {
+                o[i] = w00 * t0[i] + w10 * t1[i] + w01 * b0[i] + w11 * b1[i];
+            }
+        } else {
+            for (i, v) in o.iter_mut().enumerate() {
+                let (c0, c1) = (col(ix + i as i64), col(ix + i as i64 + 1));
+                let d = &img.data;
+                *v = w00 * d[r0 + c0] + w10 * d[r0 + c1] + w01 * d[r1 + c0] + w11 * d[r1 + c1];
+            }
+        }
+    }
+    true
+}
+
 /// Samples values and gradients (in frame pixels) at frame points `(xs[i], ys[i])`.
 pub fn sample_values_gradients(
     img: &ImageView,
@@ -484,6 +552,42 @@ mod avx2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The shifted grid reads what point-by-point sampling reads, inside the image and across
+    /// its borders.
+    #[test]
+    fn a_shifted_grid_samples_as_points_do() {
+        let mut img = crate::imaging::GrayF32::new(23, 17);
+        for (k, v) in img.data.iter_mut().enumerate() {
+            *v = ((k * 37) % 101) as f32 + 0.25 * (k % 7) as f32;
+        }
+        for &(x0, y0) in &[
+            (3.3f32, 4.6f32),
+            (-2.7, 5.2),
+            (15.4, 11.9),
+            (-30.0, -30.0),
+            (0.0, 0.0),
+        ] {
+            let (c, r) = (9, 7);
+            let mut fast = vec![0f32; c * r];
+            assert!(sample_grid_shifted(&img, x0, y0, c, r, &mut fast));
+            let xs: Vec<f32> = (0..c * r).map(|k| x0 + (k % c) as f32).collect();
+            let ys: Vec<f32> = (0..c * r).map(|k| y0 + (k / c) as f32).collect();
+            let mut slow = vec![0f32; c * r];
+            sample_values(&img.view(), &xs, &ys, &mut slow);
+            for (a, b) in fast.iter().zip(&slow) {
+                assert!((a - b).abs() < 1e-3, "at ({x0}, {y0}): {a} vs {b}");
+            }
+        }
+        assert!(!sample_grid_shifted(
+            &img,
+            f32::NAN,
+            0.0,
+            3,
+            3,
+            &mut [0.0; 9]
+        ));
+    }
     use crate::rng::Rng;
 
     /// The reference: bilinear interpolation and central differences written the plain way.

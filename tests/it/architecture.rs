@@ -19,6 +19,7 @@ const LAYERS: &[&str] = &[
     "imaging",
     "ssm",
     "dataset",
+    "patches",
     "landscape",
     "observe",
     "am",

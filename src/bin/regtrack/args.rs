@@ -72,6 +72,18 @@ pub enum Command {
             allow_hyphen_values = true
         )]
         init: Option<Corners>,
+        /// Track this many patches instead of one target (the many-patch mode): the strongest
+        /// Shi-Tomasi corners of the first frame, inside its ground-truth quad when the sequence
+        /// has one. --out is then a CSV of per-patch tracks.
+        #[arg(long, conflicts_with_all = ["camera", "init", "render"])]
+        patches: Option<usize>,
+        /// The many-patch mode from these points of the first frame (a file of `x,y` lines).
+        #[arg(long, conflicts_with_all = ["camera", "init", "render", "patches"])]
+        points: Option<PathBuf>,
+        /// A many-patch parameter, repeatable (e.g. --patch warp=affine --patch size=21);
+        /// `regtrack list` lists them.
+        #[arg(long = "patch", value_name = "NAME=VALUE")]
+        patch_params: Vec<String>,
         /// Output corners file.
         #[arg(long)]
         out: PathBuf,
@@ -79,6 +91,16 @@ pub enum Command {
         /// tracked quad (red) and the ground truth (green), encoded by FFmpeg.
         #[arg(long)]
         render: Option<PathBuf>,
+    },
+    /// Score a many-patch tracks file (`track --patches`, or another tracker's in its layout)
+    /// against a sequence's ground truth.
+    ScorePatches {
+        /// The sequence (its ground truth carries each patch's first position).
+        #[arg(long)]
+        seq: PathBuf,
+        /// The tracks: CSV `frame,patch,status,x,y,a00,a01,a10,a11,ncc`.
+        #[arg(long)]
+        tracks: PathBuf,
     },
     /// Evaluate every (sequence, SM, AM, SSM) of a dataset in the MTF layout.
     Eval {

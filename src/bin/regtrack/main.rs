@@ -78,9 +78,15 @@ fn run() -> Result<()> {
             record,
             tracker,
             init,
+            patches,
+            points,
+            patch_params,
             out,
             render,
         } => match (seq, camera) {
+            (Some(seq), _) if patches.is_some() || points.is_some() || !patch_params.is_empty() => {
+                run_patches(&seq, patches, points.as_deref(), &patch_params, &out)
+            }
             (Some(seq), _) => run_track(&seq, &tracker, init.map(|c| c.0), &out, render.as_deref()),
             (None, Some(camera)) => run_live(
                 &camera,
@@ -93,6 +99,17 @@ fn run() -> Result<()> {
             ),
             (None, None) => bail!("give --seq or --camera"),
         },
+        Command::ScorePatches { seq, tracks } => {
+            let seq = Sequence::open(&seq)?;
+            let run = regtrack::patches::read_tracks(&tracks)?;
+            match regtrack::patches::accuracy(&run, &seq) {
+                Some(a) => {
+                    print_patch_accuracy(&a);
+                    Ok(())
+                }
+                None => bail!("{} has no ground truth on its first frame", seq.name),
+            }
+        }
         Command::Eval {
             dataset,
             seqs,
@@ -398,6 +415,73 @@ fn run_track(
         );
     }
     Ok(())
+}
+
+/// `track --patches N` / `--points FILE`: the many-patch mode over a sequence.
+fn run_patches(
+    seq: &Path,
+    n: Option<usize>,
+    points: Option<&Path>,
+    assignments: &[String],
+    out: &Path,
+) -> Result<()> {
+    use regtrack::patches::{self, PatchParams, PatchSeeds};
+    let seq = Sequence::open(seq)?;
+    warn_about(std::slice::from_ref(&seq));
+    let pairs = assignments
+        .iter()
+        .map(|a| regtrack::params::split_assignment(a).map(|(k, v)| (k.to_string(), v.to_string())))
+        .collect::<regtrack::error::Result<Vec<_>>>()?;
+    let params = PatchParams::parse(&pairs)?;
+    let seeds = match points {
+        Some(p) => PatchSeeds::Points(patches::read_points(p)?),
+        None => PatchSeeds::Corners(n.unwrap_or(1000)),
+    };
+    let pb = bar(seq.len(), "frames");
+    let run = patches::track_sequence(&seq, &params, &seeds, &mut |_| pb.inc(1))?;
+    pb.finish_and_clear();
+    patches::write_tracks(out, &run)?;
+    let last = run
+        .frames
+        .last()
+        .map_or(0, |f| f.iter().filter(|s| s.tracking()).count());
+    println!(
+        "wrote {} ({} patches x {} frames; {} tracked at the last frame)",
+        out.display(),
+        run.patches(),
+        run.frames.len(),
+        last
+    );
+    println!(
+        "speed: {:.0} patch updates/s, {:.1} frames/s (median; tracking only, {} thread{}); \
+         {:.1} iterations per update",
+        run.updates_per_second(),
+        run.frames_per_second(),
+        if params.threads == 0 {
+            "all".to_string()
+        } else {
+            params.threads.to_string()
+        },
+        if params.threads == 1 { "" } else { "s" },
+        run.iterations_per_update()
+    );
+    if let Some(a) = patches::accuracy(&run, &seq) {
+        print_patch_accuracy(&a);
+    }
+    Ok(())
+}
+
+fn print_patch_accuracy(a: &regtrack::patches::PatchAccuracy) {
+    println!(
+        "accuracy: {} patches on the target; error to the ground truth mean {:.3} px, median \
+         {:.3} px; {:.1} % of patch-frames tracked; at the last frame {} tracked, {} within 2 px",
+        a.patches,
+        a.mean_error,
+        a.median_error,
+        100.0 * a.tracked_fraction,
+        a.tracked_at_end,
+        a.within_2px_at_end
+    );
 }
 
 /// `track --camera`: frames as they come, the newest each time (those that came meanwhile are

@@ -1,0 +1,1395 @@
+//! Many patches per frame: the paper's case for registration trackers in robotics ("tracking
+//! based SLAM systems like SVO ... track hundreds to thousands of patches per frame").
+//!
+//! A [`PatchTracker`] follows N small patches (a square grid of `size` x `size` samples each),
+//! every one with its own warp, translation or affine ([`PatchWarp`]), by inverse-compositional
+//! Lucas-Kanade (Baker and Matthews) over one pre-processed frame shared by all: one smoothing,
+//! one Gaussian pyramid and its gradient images, built once per frame. Patches are independent,
+//! so they are tracked in parallel over the cores (rayon) and give the same result, bit for bit,
+//! on any number of threads.
+//!
+//! The template of a patch is the previous frame's patch (`template=previous`, as KLT does:
+//! no appearance drift, a slow positional one) or the first frame's (`template=first`: no
+//! positional drift; with an affine warp it follows rotation, scale and shear). Each frame a
+//! patch reports a [`TrackStatus`]: it is lost when it leaves the frame, when its window is flat
+//! (`min_eigen`), when its values stop being finite, when its affine shape degenerates, when
+//! the tracked patch no longer looks like its template (`min_ncc`), or, with `fb_max`, when
+//! tracking it back to the previous frame misses its start by more than `fb_max` pixels (the
+//! forward-backward error of Kalal et al.). A lost patch keeps its last good position and is
+//! not searched again.
+//!
+//! One frame, per patch and pyramid level (coarse to fine): the template's values `T(u)` and
+//! their gradients in patch coordinates give the steepest-descent images `SD = grad T * dW/dp`
+//! and the Hessian `H = SD^T SD` (once per template); each iteration samples the frame at the
+//! warped grid `I(W(u))`, solves `dp = H^-1 SD^T (I(W(u)) - T(u))` and composes the inverse of
+//! the increment, `W <- W o W(dp)^-1`, until the patch's corners move less than `eps` pixels
+//! (of that level). A translation warp samples a grid that only shifts, whose bilinear weights
+//! are the same for every sample ([`imaging::sample_grid_shifted`]).
+
+use crate::dataset::Sequence;
+use crate::error::{Error, Result};
+use crate::geometry::{Point, Quad, apply_homography, homography_between};
+use crate::imaging::{self, GaussianKernel, GrayF32, ImageRef, ImageView, keypoints};
+use crate::params::{MethodParams, ParamDef};
+use crate::status::{LossReason, TrackStatus};
+use nalgebra::{Matrix2, SMatrix};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The warps a patch can have.
+pub const WARPS: &[&str] = &["translation", "affine"];
+/// Where a patch's template comes from.
+pub const TEMPLATES: &[&str] = &["previous", "first"];
+
+/// The many-patch tracker's parameters: their one definition (the command line's `--patch
+/// name=value`, the Python binding's keywords and `regtrack list` read it).
+pub const PATCH_PARAMS: &[ParamDef] = &[
+    ParamDef::choice(
+        "warp",
+        "The warp of each patch: translation (2 parameters) or affine (6)",
+        WARPS,
+    ),
+    ParamDef::int(
+        "size",
+        "Side of a patch's sampling grid, in pixels of each pyramid level",
+        5.0,
+        51.0,
+        15.0,
+    ),
+    ParamDef::int(
+        "levels",
+        "Pyramid levels (1 = full resolution only)",
+        1.0,
+        6.0,
+        3.0,
+    ),
+    ParamDef::int(
+        "iterations",
+        "Iterations per pyramid level at most",
+        1.0,
+        100.0,
+        30.0,
+    ),
+    ParamDef::float(
+        "eps",
+        "Stop a level's iterations when the patch's corners move less than this (pixels of the level)",
+        1e-4,
+        1.0,
+        0.01,
+    ),
+    ParamDef::choice(
+        "template",
+        "The template: the previous frame's patch (KLT) or the first frame's",
+        TEMPLATES,
+    ),
+    ParamDef::float(
+        "min_ncc",
+        "A patch whose normalised cross-correlation with its template falls below this is lost",
+        -1.0,
+        1.0,
+        0.7,
+    ),
+    ParamDef::float(
+        "min_eigen",
+        "A window whose structure tensor's smaller eigenvalue (per pixel, gray levels squared) is below this is flat: lost",
+        0.0,
+        1e5,
+        1.0,
+    ),
+    ParamDef::float(
+        "fb_max",
+        "Also track each patch back to the previous frame; lost when it misses its start by more than this (pixels; 0 = no check)",
+        0.0,
+        1000.0,
+        0.0,
+    ),
+    ParamDef::float(
+        "smoothing",
+        "Gaussian pre-smoothing of the frame, standard deviation in pixels (0 = none)",
+        0.0,
+        10.0,
+        1.0,
+    ),
+    ParamDef::float(
+        "min_distance",
+        "Detected corners are at least this far apart (pixels)",
+        0.0,
+        1000.0,
+        8.0,
+    ),
+    ParamDef::int(
+        "threads",
+        "Threads tracking the patches (0 = all cores)",
+        0.0,
+        1024.0,
+        0.0,
+    ),
+];
+
+/// The warp of a patch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PatchWarp {
+    /// A shift: 2 parameters.
+    Translation,
+    /// A linear map and a shift: 6 parameters.
+    Affine,
+}
+
+impl PatchWarp {
+    fn dof(self) -> usize {
+        match self {
+            PatchWarp::Translation => 2,
+            PatchWarp::Affine => 6,
+        }
+    }
+}
+
+/// Where a patch's template comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TemplateSource {
+    /// The patch in the previous frame, where it was tracked (KLT).
+    Previous,
+    /// The patch in the frame it was initialised on.
+    First,
+}
+
+/// The many-patch tracker's settings (see [`PATCH_PARAMS`] for each).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PatchParams {
+    pub warp: PatchWarp,
+    pub size: usize,
+    pub levels: usize,
+    pub iterations: usize,
+    pub eps: f64,
+    pub template: TemplateSource,
+    pub min_ncc: f64,
+    pub min_eigen: f64,
+    pub fb_max: f64,
+    pub smoothing: f64,
+    pub min_distance: f64,
+    pub threads: usize,
+}
+
+impl Default for PatchParams {
+    fn default() -> Self {
+        Self::from_values(&MethodParams::default()).unwrap_or_else(|_| unreachable!())
+    }
+}
+
+impl PatchParams {
+    /// The settings from values by name ([`PATCH_PARAMS`]'s defaults for the others); an unknown
+    /// name or a value out of range is an error naming it.
+    pub fn from_values(v: &MethodParams) -> Result<Self> {
+        let defs: Vec<&ParamDef> = PATCH_PARAMS.iter().collect();
+        v.validate("patches", &defs)?;
+        let get = |name: &str| {
+            PATCH_PARAMS
+                .iter()
+                .find(|d| d.name == name)
+                .map_or(0.0, |d| v.get(d))
+        };
+        Ok(PatchParams {
+            warp: if get("warp") == 1.0 {
+                PatchWarp::Affine
+            } else {
+                PatchWarp::Translation
+            },
+            size: get("size") as usize,
+            levels: get("levels") as usize,
+            iterations: get("iterations") as usize,
+            eps: get("eps"),
+            template: if get("template") == 1.0 {
+                TemplateSource::First
+            } else {
+                TemplateSource::Previous
+            },
+            min_ncc: get("min_ncc"),
+            min_eigen: get("min_eigen"),
+            fb_max: get("fb_max"),
+            smoothing: get("smoothing"),
+            min_distance: get("min_distance"),
+            threads: get("threads") as usize,
+        })
+    }
+
+    /// The settings from `name=value` assignments (choices by name).
+    pub fn parse(assignments: &[(String, String)]) -> Result<Self> {
+        let mut v = MethodParams::default();
+        for (name, value) in assignments {
+            let def = PATCH_PARAMS
+                .iter()
+                .find(|d| d.name == name.as_str())
+                .ok_or_else(|| {
+                    Error::InvalidParameter(format!(
+                        "patches have no parameter '{name}'; their parameters: {}",
+                        PATCH_PARAMS
+                            .iter()
+                            .map(|d| d.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+            v.set(name, def.parse("patches", value)?);
+        }
+        Self::from_values(&v)
+    }
+}
+
+/// What a patch is doing, after a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchState {
+    /// The patch's centre in the frame (the last good one when lost).
+    pub centre: Point,
+    /// The linear part of its warp, `[a00, a01, a10, a11]` (the identity for translation): a
+    /// patch offset `(u, v)` sits at `centre + (a00 u + a01 v, a10 u + a11 v)`.
+    pub linear: [f64; 4],
+    pub status: TrackStatus,
+    /// The normalised cross-correlation of the tracked patch with its template (-1..1).
+    pub ncc: f64,
+    /// The forward-backward error (pixels), when `fb_max` asks for it and the frame was tracked.
+    pub fb_error: Option<f64>,
+    /// Iterations run on this frame, all levels together.
+    pub iterations: usize,
+}
+
+impl PatchState {
+    /// Whether the patch is followed.
+    pub fn tracking(&self) -> bool {
+        self.status == TrackStatus::Tracking
+    }
+
+    /// The corners of the patch's window (`half` pixels from the centre along each side, before
+    /// the linear map): upper left, upper right, lower right, lower left.
+    pub fn corners(&self, half: f64) -> Quad {
+        let [a, b, c, d] = self.linear;
+        let at = |u: f64, v: f64| Point {
+            x: self.centre.x + a * u + b * v,
+            y: self.centre.y + c * u + d * v,
+        };
+        Quad([
+            at(-half, -half),
+            at(half, -half),
+            at(half, half),
+            at(-half, half),
+        ])
+    }
+}
+
+/// A patch's warp: frame point of patch offset `u` at level `l` is `A u + c / 2^l`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Warp {
+    a: [f64; 4],
+    c: Point,
+}
+
+impl Warp {
+    fn at(c: Point) -> Self {
+        Warp {
+            a: [1.0, 0.0, 0.0, 1.0],
+            c,
+        }
+    }
+
+    fn is_shift(&self) -> bool {
+        self.a == [1.0, 0.0, 0.0, 1.0]
+    }
+}
+
+/// The sampling grid's offsets from a patch's centre, shared by all patches.
+#[derive(Clone, Debug)]
+struct Grid {
+    side: usize,
+    half: f64,
+    ux: Vec<f32>,
+    uy: Vec<f32>,
+    /// The grid grown by one sample on every side (for the template's central differences).
+    ex: Vec<f32>,
+    ey: Vec<f32>,
+}
+
+impl Grid {
+    fn new(side: usize) -> Self {
+        let half = (side as f64 - 1.0) / 2.0;
+        let offsets = |from: f64, n: usize| {
+            let (mut xs, mut ys) = (Vec::new(), Vec::new());
+            for j in 0..n {
+                for i in 0..n {
+                    xs.push((i as f64 - from) as f32);
+                    ys.push((j as f64 - from) as f32);
+                }
+            }
+            (xs, ys)
+        };
+        let (ux, uy) = offsets(half, side);
+        let (ex, ey) = offsets(half + 1.0, side + 2);
+        Grid {
+            side,
+            half,
+            ux,
+            uy,
+            ex,
+            ey,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.side * self.side
+    }
+}
+
+/// One frame, pre-processed once for every patch: the smoothed frame's pyramid.
+#[derive(Clone, Debug, Default)]
+struct Frame {
+    levels: Vec<GrayF32>,
+}
+
+/// Buffers the pre-processing reuses from frame to frame.
+#[derive(Clone, Debug)]
+struct Prep {
+    kernel: GaussianKernel,
+    tmp: Vec<f32>,
+    line: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl Frame {
+    fn build(&mut self, src: ImageRef<'_, u8>, levels: usize, prep: &mut Prep) {
+        self.levels.resize_with(levels.max(1), GrayF32::default);
+        imaging::gaussian_blur_into(
+            src,
+            &prep.kernel,
+            &mut self.levels[0],
+            &mut prep.tmp,
+            &mut prep.line,
+        );
+        let mut kept = 1;
+        while kept < levels {
+            let (done, todo) = self.levels.split_at_mut(kept);
+            let below = &done[kept - 1];
+            if below.width < 32 || below.height < 32 {
+                break;
+            }
+            imaging::downsample_half_into(below, &mut todo[0], &mut prep.scratch);
+            kept += 1;
+        }
+        self.levels.truncate(kept);
+    }
+}
+
+/// A template at every level: values, steepest-descent images and the inverse Hessian.
+#[derive(Clone, Debug, Default)]
+struct Template {
+    t: Vec<f32>,
+    sd: Vec<f32>,
+    hinv: Vec<[f64; 36]>,
+    usable: Vec<bool>,
+}
+
+/// One patch: its state, warp, templates and scratch.
+#[derive(Clone, Debug)]
+struct Patch {
+    state: PatchState,
+    warp: Warp,
+    fwd: Template,
+    back: Template,
+    vals: Vec<f32>,
+    err: Vec<f32>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    /// The template's values on the grown grid.
+    ext: Vec<f32>,
+}
+
+/// Why a search failed.
+type Search = std::result::Result<(Warp, usize, f64), LossReason>;
+
+/// `sum a[i] * b[i]` over eight lanes (vectorised; the order of the sums is fixed).
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+impl Patch {
+    fn new(centre: Point, grid: &Grid, levels: usize, dof: usize) -> Self {
+        let n = grid.len();
+        let template = || Template {
+            t: vec![0.0; levels * n],
+            sd: vec![0.0; levels * dof * n],
+            hinv: vec![[0.0; 36]; levels],
+            usable: vec![false; levels],
+        };
+        Patch {
+            state: PatchState {
+                centre,
+                linear: [1.0, 0.0, 0.0, 1.0],
+                status: TrackStatus::Tracking,
+                ncc: 1.0,
+                fb_error: None,
+                iterations: 0,
+            },
+            warp: Warp::at(centre),
+            fwd: template(),
+            back: template(),
+            vals: vec![0.0; n],
+            err: vec![0.0; n],
+            xs: vec![0.0; grid.ex.len()],
+            ys: vec![0.0; grid.ex.len()],
+            ext: vec![0.0; grid.ex.len()],
+        }
+    }
+}
+
+/// Samples `img` at the grid warped by `w` at level `l` into `out` (`xs`, `ys` are scratch).
+#[allow(clippy::too_many_arguments)]
+fn sample(
+    img: &GrayF32,
+    w: &Warp,
+    l: usize,
+    (side, half, ux, uy): (usize, f64, &[f32], &[f32]),
+    out: &mut [f32],
+    xs: &mut [f32],
+    ys: &mut [f32],
+) {
+    let s = (1u32 << l) as f64;
+    let (cx, cy) = (w.c.x / s, w.c.y / s);
+    if w.is_shift()
+        && imaging::sample_grid_shifted(
+            img,
+            (cx - half) as f32,
+            (cy - half) as f32,
+            side,
+            side,
+            out,
+        )
+    {
+        return;
+    }
+    let [a, b, c, d] = w.a.map(|v| v as f32);
+    let (cx, cy) = (cx as f32, cy as f32);
+    let n = side * side;
+    let (xs, ys, out) = (&mut xs[..n], &mut ys[..n], &mut out[..n]);
+    for i in 0..n {
+        let (u, v) = (ux[i], uy[i]);
+        xs[i] = a * u + b * v + cx;
+        ys[i] = c * u + d * v + cy;
+    }
+    let view = ImageView::new(&img.data, img.width, img.height, 0, 0);
+    imaging::sample_values(&view, xs, ys, out);
+}
+
+impl Grid {
+    /// The grid, for [`sample`].
+    fn plain(&self) -> (usize, f64, &[f32], &[f32]) {
+        (self.side, self.half, &self.ux, &self.uy)
+    }
+
+    /// The grid grown by one sample on every side, for [`sample`].
+    fn grown(&self) -> (usize, f64, &[f32], &[f32]) {
+        (self.side + 2, self.half + 1.0, &self.ex, &self.ey)
+    }
+}
+
+/// The template of the patch warped by `w` in `frame`, at every level, into `tp`. Flat levels
+/// are marked unusable; `false` when the finest is flat.
+fn make_template(
+    p: &mut Patch,
+    which_back: bool,
+    frame: &Frame,
+    w: &Warp,
+    grid: &Grid,
+    warp: PatchWarp,
+    min_eigen: f64,
+) -> bool {
+    let n = grid.len();
+    let dof = warp.dof();
+    let tp = if which_back { &mut p.back } else { &mut p.fwd };
+    for l in 0..frame.levels.len() {
+        // The values on the grown grid; the template is its inside and the gradients in patch
+        // coordinates its central differences (for a shift, exactly the bilinear samples of the
+        // frame's central-difference gradients).
+        sample(
+            &frame.levels[l],
+            w,
+            l,
+            grid.grown(),
+            &mut p.ext,
+            &mut p.xs,
+            &mut p.ys,
+        );
+        let (side, e) = (grid.side, grid.side + 2);
+        let t = &mut tp.t[l * n..(l + 1) * n];
+        let sd = &mut tp.sd[l * dof * n..(l + 1) * dof * n];
+        let (tx, rest) = sd.split_at_mut(n);
+        let (ty, rest) = rest.split_at_mut(n);
+        for j in 0..side {
+            let (up, row, down) = (
+                &p.ext[j * e..(j + 1) * e],
+                &p.ext[(j + 1) * e..(j + 2) * e],
+                &p.ext[(j + 2) * e..(j + 3) * e],
+            );
+            let (t, tx, ty) = (
+                &mut t[j * side..(j + 1) * side],
+                &mut tx[j * side..(j + 1) * side],
+                &mut ty[j * side..(j + 1) * side],
+            );
+            for i in 0..side {
+                t[i] = row[i + 1];
+                tx[i] = 0.5 * (row[i + 2] - row[i]);
+                ty[i] = 0.5 * (down[i + 1] - up[i + 1]);
+            }
+        }
+        if dof == 6 {
+            // Columns: tx ux, tx uy, ty ux, ty uy, tx, ty (the shift last).
+            let (c0, rest) = rest.split_at_mut(n);
+            let (c1, rest) = rest.split_at_mut(n);
+            let (c2, c3) = rest.split_at_mut(n);
+            for i in 0..n {
+                let (u, v) = (grid.ux[i], grid.uy[i]);
+                c0[i] = tx[i] * u;
+                c1[i] = tx[i] * v;
+                c2[i] = ty[i] * u;
+                c3[i] = ty[i] * v;
+            }
+            // Reorder so the shift's columns come last: [c0 c1 c2 c3 tx ty].
+            sd.rotate_left(2 * n);
+        }
+        let sd = &tp.sd[l * dof * n..(l + 1) * dof * n];
+        let col = |k: usize| &sd[k * n..(k + 1) * n];
+        let (ix, iy) = (dof - 2, dof - 1);
+        let (hxx, hxy, hyy) = (
+            dot(col(ix), col(ix)) as f64,
+            dot(col(ix), col(iy)) as f64,
+            dot(col(iy), col(iy)) as f64,
+        );
+        let tr = hxx + hyy;
+        let det = hxx * hyy - hxy * hxy;
+        let min_eig = 0.5 * (tr - (tr * tr - 4.0 * det).max(0.0).sqrt()) / n as f64;
+        let mut usable = min_eig >= min_eigen && min_eig > 0.0;
+        if usable {
+            match dof {
+                2 => {
+                    let h = Matrix2::new(hxx, hxy, hxy, hyy);
+                    match h.try_inverse() {
+                        Some(inv) => {
+                            tp.hinv[l][..4].copy_from_slice(inv.as_slice());
+                        }
+                        None => usable = false,
+                    }
+                }
+                _ => {
+                    let mut h = SMatrix::<f64, 6, 6>::zeros();
+                    for r in 0..6 {
+                        for c in r..6 {
+                            let v = dot(col(r), col(c)) as f64;
+                            h[(r, c)] = v;
+                            h[(c, r)] = v;
+                        }
+                    }
+                    match h.try_inverse() {
+                        Some(inv) if inv.iter().all(|v| v.is_finite()) => {
+                            tp.hinv[l].copy_from_slice(inv.as_slice());
+                        }
+                        _ => usable = false,
+                    }
+                }
+            }
+        }
+        tp.usable[l] = usable;
+    }
+    tp.usable.first().copied().unwrap_or(false)
+}
+
+/// Searches `frame` for the patch's template (`back`: the backward one) from `start`, coarse to
+/// fine. Returns the warp, the iterations and the template's NCC with the last samples.
+#[allow(clippy::too_many_arguments)]
+fn search(
+    p: &mut Patch,
+    which_back: bool,
+    frame: &Frame,
+    start: Warp,
+    grid: &Grid,
+    prm: &PatchParams,
+) -> Search {
+    let n = grid.len();
+    let dof = prm.warp.dof();
+    let mut w = start;
+    let mut iterations = 0;
+    let levels = frame.levels.len();
+    let mut last_level_sampled = false;
+    for l in (0..levels).rev() {
+        let tp = if which_back { &p.back } else { &p.fwd };
+        if !tp.usable[l] {
+            continue;
+        }
+        let s = (1u32 << l) as f64;
+        let img = &frame.levels[l];
+        for _ in 0..prm.iterations {
+            sample(img, &w, l, grid.plain(), &mut p.vals, &mut p.xs, &mut p.ys);
+            iterations += 1;
+            let tp = if which_back { &p.back } else { &p.fwd };
+            let t = &tp.t[l * n..(l + 1) * n];
+            for ((e, v), t) in p.err.iter_mut().zip(&p.vals).zip(t) {
+                *e = v - t;
+            }
+            let sd = &tp.sd[l * dof * n..(l + 1) * dof * n];
+            let mut g = [0f64; 6];
+            for k in 0..dof {
+                g[k] = dot(&sd[k * n..(k + 1) * n], &p.err) as f64;
+            }
+            let hinv = &tp.hinv[l];
+            let mut dp = [0f64; 6];
+            for r in 0..dof {
+                // Column-major inverse (nalgebra's layout); it is symmetric anyway.
+                dp[r] = (0..dof).map(|c| hinv[c * dof + r] * g[c]).sum();
+            }
+            // W <- W o W(dp)^-1: with W(dp) = M u + t, A' = A M^-1 and c' = c - A' t.
+            let (m, t) = match prm.warp {
+                PatchWarp::Translation => ([1.0, 0.0, 0.0, 1.0], (dp[0], dp[1])),
+                PatchWarp::Affine => ([1.0 + dp[0], dp[1], dp[2], 1.0 + dp[3]], (dp[4], dp[5])),
+            };
+            let det = m[0] * m[3] - m[1] * m[2];
+            if !(det.is_finite() && det.abs() > 1e-6) {
+                return Err(LossReason::Singular);
+            }
+            let mi = [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det];
+            let a = w.a;
+            let na = [
+                a[0] * mi[0] + a[1] * mi[2],
+                a[0] * mi[1] + a[1] * mi[3],
+                a[2] * mi[0] + a[3] * mi[2],
+                a[2] * mi[1] + a[3] * mi[3],
+            ];
+            // The centre at this level, moved; back in frame pixels.
+            let (cx, cy) = (
+                w.c.x / s - (na[0] * t.0 + na[1] * t.1),
+                w.c.y / s - (na[2] * t.0 + na[3] * t.1),
+            );
+            let next = Warp {
+                a: if prm.warp == PatchWarp::Translation {
+                    w.a
+                } else {
+                    na
+                },
+                c: Point {
+                    x: cx * s,
+                    y: cy * s,
+                },
+            };
+            if !(next.c.is_finite() && next.a.iter().all(|v| v.is_finite())) {
+                return Err(LossReason::NonFinite);
+            }
+            // How far the window's corners moved (pixels of this level).
+            let h = grid.half;
+            let mut step = 0f64;
+            for (u, v) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+                let dx =
+                    (next.a[0] - w.a[0]) * u + (next.a[1] - w.a[1]) * v + (next.c.x - w.c.x) / s;
+                let dy =
+                    (next.a[2] - w.a[2]) * u + (next.a[3] - w.a[3]) * v + (next.c.y - w.c.y) / s;
+                step = step.max(dx * dx + dy * dy);
+            }
+            w = next;
+            last_level_sampled = l == 0;
+            if step < prm.eps * prm.eps {
+                break;
+            }
+        }
+    }
+    let ad = w.a[0] * w.a[3] - w.a[1] * w.a[2];
+    if !(0.2..=5.0).contains(&ad) {
+        return Err(LossReason::Degenerate);
+    }
+    // The NCC of the finest level's last samples with the template.
+    let tp = if which_back { &p.back } else { &p.fwd };
+    if !last_level_sampled {
+        return Err(LossReason::Singular);
+    }
+    Ok((w, iterations, ncc(&p.vals, &tp.t[..n])))
+}
+
+/// The zero-mean normalised cross-correlation of two equally long vectors (0 when either is
+/// flat).
+fn ncc(a: &[f32], b: &[f32]) -> f64 {
+    let n = a.len().max(1) as f64;
+    let (sa, sb) = (
+        a.iter().map(|&v| v as f64).sum::<f64>() / n,
+        b.iter().map(|&v| v as f64).sum::<f64>() / n,
+    );
+    let (mut ab, mut aa, mut bb) = (0f64, 0f64, 0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        let (x, y) = (x as f64 - sa, y as f64 - sb);
+        ab += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    if aa <= 1e-9 || bb <= 1e-9 {
+        0.0
+    } else {
+        ab / (aa * bb).sqrt()
+    }
+}
+
+/// Tracks N patches per frame (see the module's documentation).
+pub struct PatchTracker {
+    params: PatchParams,
+    grid: Grid,
+    prep: Prep,
+    cur: Frame,
+    prev: Frame,
+    patches: Vec<Patch>,
+    pool: Option<rayon::ThreadPool>,
+    size: (usize, usize),
+    frames: usize,
+}
+
+impl PatchTracker {
+    /// A tracker with these settings and no patches.
+    pub fn new(params: PatchParams) -> Result<Self> {
+        let sigma = params.smoothing as f32;
+        let kernel = if sigma > 0.0 {
+            imaging::gaussian_kernel(2 * (2.0 * sigma).ceil() as usize + 1, sigma)
+        } else {
+            imaging::gaussian_kernel(1, 0.0)
+        };
+        let pool = match params.threads {
+            0 => None,
+            t => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(t)
+                    .build()
+                    .map_err(|e| Error::InvalidParameter(format!("patches: threads: {e}")))?,
+            ),
+        };
+        Ok(PatchTracker {
+            grid: Grid::new(params.size),
+            prep: Prep {
+                kernel,
+                tmp: Vec::new(),
+                line: Vec::new(),
+                scratch: Vec::new(),
+            },
+            cur: Frame::default(),
+            prev: Frame::default(),
+            patches: Vec::new(),
+            pool,
+            size: (0, 0),
+            frames: 0,
+            params,
+        })
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &PatchParams {
+        &self.params
+    }
+
+    /// Shi-Tomasi corners of `frame` (smoothed as the tracker smooths), at most `max`, at
+    /// least `min_distance` apart, strongest first, where a whole patch fits in the frame and,
+    /// with `region`, in that quad.
+    pub fn detect<'a>(
+        &mut self,
+        frame: impl Into<ImageRef<'a, u8>>,
+        max: usize,
+        region: Option<&Quad>,
+    ) -> Vec<Point> {
+        let frame = frame.into();
+        let mut f = Frame::default();
+        f.build(frame, 1, &mut self.prep);
+        let img = &f.levels[0];
+        let half = self.grid.half;
+        let border = half.ceil() as usize + 2;
+        let bounds = match region {
+            Some(q) => {
+                let (x0, y0, x1, y1) = q.bbox();
+                (
+                    x0.max(0.0) as usize,
+                    y0.max(0.0) as usize,
+                    (x1.max(0.0) as usize + 1).min(img.width),
+                    (y1.max(0.0) as usize + 1).min(img.height),
+                )
+            }
+            None => (0, 0, img.width, img.height),
+        };
+        // Every candidate (the spacing is applied after the region's test).
+        let found = keypoints::shi_tomasi(img, 3, usize::MAX, 0.0, 0.01, border, bounds);
+        let md2 = self.params.min_distance * self.params.min_distance;
+        let mut kept: Vec<Point> = Vec::new();
+        for k in found {
+            let p = k.point();
+            if let Some(q) = region {
+                let window = Quad::from_rect(p.x - half, p.y - half, 2.0 * half, 2.0 * half);
+                if !window.0.iter().all(|&c| inside(q, c)) {
+                    continue;
+                }
+            }
+            if kept
+                .iter()
+                .any(|o| (o.x - p.x).powi(2) + (o.y - p.y).powi(2) < md2)
+            {
+                continue;
+            }
+            kept.push(p);
+            if kept.len() == max {
+                break;
+            }
+        }
+        kept
+    }
+
+    /// Starts tracking a patch centred on each of `points` in `frame`. A point whose window is
+    /// flat or outside the frame starts lost (its status says why).
+    pub fn initialize<'a>(
+        &mut self,
+        frame: impl Into<ImageRef<'a, u8>>,
+        points: &[Point],
+    ) -> Result<()> {
+        let frame = frame.into();
+        if frame.width < 8 || frame.height < 8 {
+            return Err(Error::InvalidParameter(format!(
+                "patches: a {}x{} frame is too small",
+                frame.width, frame.height
+            )));
+        }
+        self.size = (frame.width, frame.height);
+        self.cur.build(frame, self.params.levels, &mut self.prep);
+        let levels = self.params.levels;
+        let dof = self.params.warp.dof();
+        let grid = &self.grid;
+        let (w, h) = self.size;
+        self.patches = points
+            .iter()
+            .map(|&c| {
+                let mut p = Patch::new(c, grid, levels, dof);
+                if !(c.is_finite()
+                    && c.x >= 0.0
+                    && c.y >= 0.0
+                    && c.x <= (w - 1) as f64
+                    && c.y <= (h - 1) as f64)
+                {
+                    p.state.status = TrackStatus::Lost(LossReason::OutOfFrame);
+                    if !c.is_finite() {
+                        p.state.centre = Point::default();
+                        p.warp = Warp::at(Point::default());
+                    }
+                } else if !make_template(
+                    &mut p,
+                    false,
+                    &self.cur,
+                    &Warp::at(c),
+                    grid,
+                    self.params.warp,
+                    self.params.min_eigen,
+                ) {
+                    p.state.status = TrackStatus::Lost(LossReason::Singular);
+                }
+                p
+            })
+            .collect();
+        self.frames = 1;
+        Ok(())
+    }
+
+    /// Tracks every patch that is not lost into `frame`.
+    pub fn update<'a>(&mut self, frame: impl Into<ImageRef<'a, u8>>) -> Result<()> {
+        let frame = frame.into();
+        if self.frames == 0 {
+            return Err(Error::InvalidParameter(
+                "patches: update before initialize".into(),
+            ));
+        }
+        if (frame.width, frame.height) != self.size {
+            return Err(Error::InvalidParameter(format!(
+                "patches: a {}x{} frame after {}x{} ones",
+                frame.width, frame.height, self.size.0, self.size.1
+            )));
+        }
+        std::mem::swap(&mut self.cur, &mut self.prev);
+        self.cur.build(frame, self.params.levels, &mut self.prep);
+        let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
+        let size = self.size;
+        let work = |p: &mut Patch| track_patch(p, prev, cur, grid, prm, size);
+        match &self.pool {
+            _ if prm.threads == 1 => self.patches.iter_mut().for_each(work),
+            Some(pool) => pool.install(|| self.patches.par_iter_mut().for_each(work)),
+            None => self.patches.par_iter_mut().for_each(work),
+        }
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Every patch's state, in the order of the initial points.
+    pub fn states(&self) -> impl ExactSizeIterator<Item = &PatchState> {
+        self.patches.iter().map(|p| &p.state)
+    }
+
+    /// Patches followed now.
+    pub fn tracking(&self) -> usize {
+        self.states().filter(|s| s.tracking()).count()
+    }
+
+    /// Half the side of a patch's window (pixels at the finest level).
+    pub fn half_size(&self) -> f64 {
+        self.grid.half
+    }
+}
+
+/// One patch, one frame.
+fn track_patch(
+    p: &mut Patch,
+    prev: &Frame,
+    cur: &Frame,
+    grid: &Grid,
+    prm: &PatchParams,
+    (w, h): (usize, usize),
+) {
+    if !p.state.tracking() {
+        p.state.iterations = 0;
+        p.state.fb_error = None;
+        return;
+    }
+    let start = p.warp;
+    if prm.template == TemplateSource::Previous
+        && !make_template(p, false, prev, &start, grid, prm.warp, prm.min_eigen)
+    {
+        p.state.status = TrackStatus::Lost(LossReason::Singular);
+        return;
+    }
+    let lose = |p: &mut Patch, r: LossReason| {
+        p.state.status = TrackStatus::Lost(r);
+    };
+    match search(p, false, cur, start, grid, prm) {
+        Err(r) => lose(p, r),
+        Ok((found, iterations, similarity)) => {
+            p.state.iterations = iterations;
+            p.state.ncc = similarity;
+            let c = found.c;
+            if !(c.x >= 0.0 && c.y >= 0.0 && c.x <= (w - 1) as f64 && c.y <= (h - 1) as f64) {
+                return lose(p, LossReason::OutOfFrame);
+            }
+            if similarity < prm.min_ncc {
+                return lose(p, LossReason::LowConfidence);
+            }
+            if prm.fb_max > 0.0 {
+                if !make_template(p, true, cur, &found, grid, prm.warp, prm.min_eigen) {
+                    return lose(p, LossReason::Singular);
+                }
+                match search(p, true, prev, found, grid, prm) {
+                    Err(r) => return lose(p, r),
+                    Ok((back, _, _)) => {
+                        let e = back.c.dist(start.c);
+                        p.state.fb_error = Some(e);
+                        if e > prm.fb_max {
+                            return lose(p, LossReason::LowConfidence);
+                        }
+                    }
+                }
+            }
+            p.warp = found;
+            p.state.centre = found.c;
+            p.state.linear = found.a;
+        }
+    }
+}
+
+/// Whether `p` is inside the convex quad `q` (either orientation).
+fn inside(q: &Quad, p: Point) -> bool {
+    let mut sign = 0.0;
+    for k in 0..4 {
+        let (a, b) = (q.0[k], q.0[(k + 1) % 4]);
+        let cross = (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+        if cross != 0.0 {
+            if sign == 0.0 {
+                sign = cross.signum();
+            } else if cross.signum() != sign {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// A run of the many-patch tracker over a sequence.
+#[derive(Clone, Debug, Default)]
+pub struct PatchRun {
+    /// Per frame, every patch's state.
+    pub frames: Vec<Vec<PatchState>>,
+    /// Time spent tracking (pre-processing and searching; not reading frames), per frame
+    /// after the first.
+    pub times: Vec<Duration>,
+}
+
+impl PatchRun {
+    /// Patches (those of the first frame).
+    pub fn patches(&self) -> usize {
+        self.frames.first().map_or(0, |f| f.len())
+    }
+
+    /// Patch updates per second of tracking: patches searched, over the tracking time.
+    pub fn updates_per_second(&self) -> f64 {
+        let searched: usize = self
+            .frames
+            .iter()
+            .skip(1)
+            .zip(self.frames.iter())
+            .map(|(_, before)| before.iter().filter(|s| s.tracking()).count())
+            .sum();
+        let t: f64 = self.times.iter().map(|d| d.as_secs_f64()).sum();
+        if t > 0.0 { searched as f64 / t } else { 0.0 }
+    }
+
+    /// Mean iterations per patch update (all levels together).
+    pub fn iterations_per_update(&self) -> f64 {
+        let (mut it, mut n) = (0usize, 0usize);
+        for f in self.frames.iter().skip(1) {
+            for s in f.iter().filter(|s| s.iterations > 0) {
+                it += s.iterations;
+                n += 1;
+            }
+        }
+        if n == 0 { 0.0 } else { it as f64 / n as f64 }
+    }
+
+    /// Frames per second of tracking (median frame time).
+    pub fn frames_per_second(&self) -> f64 {
+        let mut t: Vec<f64> = self.times.iter().map(|d| d.as_secs_f64()).collect();
+        if t.is_empty() {
+            return 0.0;
+        }
+        t.sort_by(f64::total_cmp);
+        let m = t[t.len() / 2];
+        if m > 0.0 { 1.0 / m } else { 0.0 }
+    }
+}
+
+/// Where the patches start.
+#[derive(Clone, Debug)]
+pub enum PatchSeeds {
+    /// These points of the first frame.
+    Points(Vec<Point>),
+    /// The strongest Shi-Tomasi corners of the first frame, at most this many: inside the
+    /// first ground-truth quad when the sequence has one, else anywhere.
+    Corners(usize),
+}
+
+/// Reads points, one `x,y` (or `x y`) per line; `#` starts a comment. A malformed line is an
+/// error naming the file and the line.
+pub fn read_points(path: &Path) -> Result<Vec<Point>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut points = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let v: Vec<f64> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|t| !t.is_empty())
+            .map(|t| t.parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .filter(|v: &Vec<f64>| v.len() == 2)
+            .ok_or_else(|| Error::Parse {
+                path: path.to_path_buf(),
+                line: n + 1,
+                message: format!("expected two finite numbers x,y, got '{line}'"),
+            })?;
+        points.push(Point { x: v[0], y: v[1] });
+    }
+    Ok(points)
+}
+
+/// Tracks patches over `seq` from its first frame; `progress` sees each frame's index.
+pub fn track_sequence(
+    seq: &Sequence,
+    params: &PatchParams,
+    seeds: &PatchSeeds,
+    progress: &mut dyn FnMut(usize),
+) -> Result<PatchRun> {
+    let mut t = PatchTracker::new(params.clone())?;
+    let first = seq.load_gray(0)?;
+    let points = match seeds {
+        PatchSeeds::Points(p) => p.clone(),
+        PatchSeeds::Corners(n) => {
+            let region = seq.ground_truth(0);
+            t.detect(&first, *n, region.as_ref())
+        }
+    };
+    t.initialize(&first, &points)?;
+    let mut run = PatchRun::default();
+    run.frames.push(t.states().copied().collect());
+    progress(0);
+    for i in 1..seq.len() {
+        let frame = seq.load_gray(i)?;
+        let start = Instant::now();
+        t.update(&frame)?;
+        run.times.push(start.elapsed());
+        run.frames.push(t.states().copied().collect());
+        progress(i);
+    }
+    Ok(run)
+}
+
+/// How well patch tracks follow a sequence's ground truth: each patch's true position in a
+/// frame is its first-frame centre carried by the homography between the two frames'
+/// ground-truth quads (right for points on the planar target).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PatchAccuracy {
+    /// Patches scored (those whose start is inside the first ground-truth quad).
+    pub patches: usize,
+    /// Mean and median distance to the truth over every tracked patch and frame (pixels).
+    pub mean_error: f64,
+    pub median_error: f64,
+    /// Patches still tracked at the last frame, and how many of those are within 2 px of
+    /// the truth there.
+    pub tracked_at_end: usize,
+    pub within_2px_at_end: usize,
+    /// The fraction of patch-frames tracked.
+    pub tracked_fraction: f64,
+}
+
+/// Scores `run` against `seq`'s ground truth (`None` without one on the first frame).
+pub fn accuracy(run: &PatchRun, seq: &Sequence) -> Option<PatchAccuracy> {
+    let q0 = seq.ground_truth(0)?;
+    let starts: Vec<(usize, Point)> = run
+        .frames
+        .first()?
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.tracking() && inside(&q0, s.centre))
+        .map(|(k, s)| (k, s.centre))
+        .collect();
+    let mut errors = Vec::new();
+    let (mut tracked, mut total) = (0usize, 0usize);
+    let (mut at_end, mut near_end) = (0, 0);
+    let last = run.frames.len().saturating_sub(1);
+    for (i, states) in run.frames.iter().enumerate().skip(1) {
+        let Some(h) = seq
+            .ground_truth(i)
+            .and_then(|q| homography_between(&q0, &q))
+        else {
+            continue;
+        };
+        for &(k, p0) in &starts {
+            total += 1;
+            let Some(s) = states.get(k) else { continue };
+            if !s.tracking() {
+                continue;
+            }
+            tracked += 1;
+            let e = s.centre.dist(apply_homography(&h, p0));
+            if e.is_finite() {
+                errors.push(e);
+            }
+            if i == last {
+                at_end += 1;
+                if e <= 2.0 {
+                    near_end += 1;
+                }
+            }
+        }
+    }
+    let mean = if errors.is_empty() {
+        0.0
+    } else {
+        errors.iter().sum::<f64>() / errors.len() as f64
+    };
+    Some(PatchAccuracy {
+        patches: starts.len(),
+        mean_error: mean,
+        median_error: if errors.is_empty() {
+            0.0
+        } else {
+            crate::linalg::median(errors)
+        },
+        tracked_at_end: at_end,
+        within_2px_at_end: near_end,
+        tracked_fraction: if total == 0 {
+            0.0
+        } else {
+            tracked as f64 / total as f64
+        },
+    })
+}
+
+/// The header of a patch tracks file.
+pub const TRACKS_HEADER: &str = "frame,patch,status,x,y,a00,a01,a10,a11,ncc";
+
+/// Writes `run` as CSV: one line per frame and patch, [`TRACKS_HEADER`]'s columns; the status
+/// is `tracking` or `lost:<reason>`.
+pub fn write_tracks(path: &Path, run: &PatchRun) -> Result<()> {
+    let io = |e: std::io::Error| Error::Io {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let file = std::fs::File::create(path).map_err(io)?;
+    let mut out = std::io::BufWriter::new(file);
+    writeln!(out, "{TRACKS_HEADER}").map_err(io)?;
+    for (i, states) in run.frames.iter().enumerate() {
+        for (k, s) in states.iter().enumerate() {
+            let status = match s.status {
+                TrackStatus::Lost(r) => format!("lost:{}", reason_key(r)),
+                _ => "tracking".to_string(),
+            };
+            let [a, b, c, d] = s.linear;
+            writeln!(
+                out,
+                "{i},{k},{status},{:.4},{:.4},{a:.6},{b:.6},{c:.6},{d:.6},{:.4}",
+                s.centre.x, s.centre.y, s.ncc
+            )
+            .map_err(io)?;
+        }
+    }
+    out.flush().map_err(io)
+}
+
+fn reason_key(r: LossReason) -> &'static str {
+    match r {
+        LossReason::NonFinite => "non_finite",
+        LossReason::Singular => "singular",
+        LossReason::Degenerate => "degenerate",
+        LossReason::OutOfFrame => "out_of_frame",
+        LossReason::NotFound => "not_found",
+        LossReason::LowConfidence => "low_confidence",
+    }
+}
+
+/// Reads a tracks file written by [`write_tracks`] (or by another tracker in its layout: the
+/// benchmark scores OpenCV's tracks this way). A malformed line is an error naming the file
+/// and the line.
+pub fn read_tracks(path: &Path) -> Result<PatchRun> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    let bad = |line: usize, what: String| Error::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: what,
+    };
+    let mut run = PatchRun::default();
+    for (n, line) in text.lines().enumerate() {
+        let line_no = n + 1;
+        let line = line.trim();
+        if line.is_empty() || (n == 0 && line.starts_with("frame")) {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        if f.len() != 10 {
+            return Err(bad(
+                line_no,
+                format!("expected 10 fields ({TRACKS_HEADER}), got {}", f.len()),
+            ));
+        }
+        let int = |k: usize| {
+            f[k].parse::<usize>().map_err(|_| {
+                bad(
+                    line_no,
+                    format!("field {} is not a whole number: '{}'", k + 1, f[k]),
+                )
+            })
+        };
+        let num = |k: usize| {
+            f[k].parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    bad(
+                        line_no,
+                        format!("field {} is not a finite number: '{}'", k + 1, f[k]),
+                    )
+                })
+        };
+        let (frame, patch) = (int(0)?, int(1)?);
+        let status = match f[2] {
+            "tracking" => TrackStatus::Tracking,
+            s => match s.strip_prefix("lost:").map(|r| {
+                [
+                    LossReason::NonFinite,
+                    LossReason::Singular,
+                    LossReason::Degenerate,
+                    LossReason::OutOfFrame,
+                    LossReason::NotFound,
+                    LossReason::LowConfidence,
+                ]
+                .into_iter()
+                .find(|x| reason_key(*x) == r)
+            }) {
+                Some(Some(r)) => TrackStatus::Lost(r),
+                _ => {
+                    return Err(bad(
+                        line_no,
+                        format!("status '{s}' is neither 'tracking' nor 'lost:<reason>'"),
+                    ));
+                }
+            },
+        };
+        if frame > run.frames.len() || (frame + 1 < run.frames.len()) {
+            return Err(bad(line_no, format!("frame {frame} out of order")));
+        }
+        if frame == run.frames.len() {
+            run.frames.push(Vec::new());
+        }
+        let states = &mut run.frames[frame];
+        if patch != states.len() {
+            return Err(bad(
+                line_no,
+                format!("patch {patch} out of order (expected {})", states.len()),
+            ));
+        }
+        states.push(PatchState {
+            centre: Point {
+                x: num(3)?,
+                y: num(4)?,
+            },
+            linear: [num(5)?, num(6)?, num(7)?, num(8)?],
+            status,
+            ncc: num(9)?,
+            fb_error: None,
+            iterations: 0,
+        });
+    }
+    Ok(run)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dot_equals_the_plain_sum() {
+        let a: Vec<f32> = (0..37).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..37).map(|i| (i as f32 * 0.11).cos()).collect();
+        let plain: f64 = a.iter().zip(&b).map(|(x, y)| (x * y) as f64).sum();
+        assert!((dot(&a, &b) as f64 - plain).abs() < 1e-5);
+    }
+
+    #[test]
+    fn unknown_and_out_of_range_parameters_are_named() {
+        let e = PatchParams::parse(&[("sise".into(), "9".into())]).unwrap_err();
+        assert!(e.to_string().contains("sise"), "{e}");
+        let e = PatchParams::parse(&[("size".into(), "3".into())]).unwrap_err();
+        assert!(e.to_string().contains("size"), "{e}");
+        let p = PatchParams::parse(&[
+            ("warp".into(), "affine".into()),
+            ("template".into(), "first".into()),
+        ])
+        .unwrap();
+        assert_eq!(
+            (p.warp, p.template),
+            (PatchWarp::Affine, TemplateSource::First)
+        );
+    }
+}

@@ -343,6 +343,17 @@ impl Grid {
 #[derive(Clone, Debug, Default)]
 struct Frame {
     levels: Vec<GrayF32>,
+    /// The levels with a replicated border of [`Frame::border`] pixels: a patch whose centre is
+    /// in the frame reads only inside these.
+    padded: Vec<GrayF32>,
+    border: usize,
+}
+
+impl Frame {
+    /// Level `l`, padded, and its border.
+    fn level(&self, l: usize) -> (&GrayF32, usize) {
+        (&self.padded[l], self.border)
+    }
 }
 
 /// Buffers the pre-processing reuses from frame to frame.
@@ -355,7 +366,7 @@ struct Prep {
 }
 
 impl Frame {
-    fn build(&mut self, src: ImageRef<'_, u8>, levels: usize, prep: &mut Prep) {
+    fn build(&mut self, src: ImageRef<'_, u8>, levels: usize, border: usize, prep: &mut Prep) {
         self.levels.resize_with(levels.max(1), GrayF32::default);
         imaging::gaussian_blur_into(
             src,
@@ -375,6 +386,11 @@ impl Frame {
             kept += 1;
         }
         self.levels.truncate(kept);
+        self.border = border;
+        self.padded.resize_with(kept, GrayF32::default);
+        for (l, p) in self.levels.iter().zip(self.padded.iter_mut()) {
+            imaging::pad_replicate_into(l, border, p);
+        }
     }
 }
 
@@ -401,6 +417,9 @@ struct Patch {
     /// The template's values on the grown grid.
     ext: Vec<f32>,
 }
+
+/// The stop threshold of the coarse pyramid levels at least (pixels of the level).
+const COARSE_EPS: f64 = 0.05;
 
 /// Why a search failed.
 type Search = std::result::Result<(Warp, usize, f64), LossReason>;
@@ -456,7 +475,7 @@ impl Patch {
 /// Samples `img` at the grid warped by `w` at level `l` into `out` (`xs`, `ys` are scratch).
 #[allow(clippy::too_many_arguments)]
 fn sample(
-    img: &GrayF32,
+    (img, border): (&GrayF32, usize),
     w: &Warp,
     l: usize,
     (side, half, ux, uy): (usize, f64, &[f32], &[f32]),
@@ -465,7 +484,8 @@ fn sample(
     ys: &mut [f32],
 ) {
     let s = (1u32 << l) as f64;
-    let (cx, cy) = (w.c.x / s, w.c.y / s);
+    let b = border as f64;
+    let (cx, cy) = (w.c.x / s + b, w.c.y / s + b);
     if w.is_shift()
         && imaging::sample_grid_shifted(
             img,
@@ -522,7 +542,7 @@ fn make_template(
         // coordinates its central differences (for a shift, exactly the bilinear samples of the
         // frame's central-difference gradients).
         sample(
-            &frame.levels[l],
+            frame.level(l),
             w,
             l,
             grid.grown(),
@@ -546,10 +566,14 @@ fn make_template(
                 &mut tx[j * side..(j + 1) * side],
                 &mut ty[j * side..(j + 1) * side],
             );
-            for i in 0..side {
-                t[i] = row[i + 1];
-                tx[i] = 0.5 * (row[i + 2] - row[i]);
-                ty[i] = 0.5 * (down[i + 1] - up[i + 1]);
+            let (left, mid, right) = (&row[..side], &row[1..side + 1], &row[2..side + 2]);
+            let (up, down) = (&up[1..side + 1], &down[1..side + 1]);
+            t.copy_from_slice(mid);
+            for ((o, a), b) in tx.iter_mut().zip(left).zip(right) {
+                *o = 0.5 * (b - a);
+            }
+            for ((o, a), b) in ty.iter_mut().zip(up).zip(down) {
+                *o = 0.5 * (b - a);
             }
         }
         if dof == 6 {
@@ -636,7 +660,9 @@ fn search(
             continue;
         }
         let s = (1u32 << l) as f64;
-        let img = &frame.levels[l];
+        let img = frame.level(l);
+        // A coarse level only has to bring the patch within the finer level's basin.
+        let eps = if l == 0 { prm.eps } else { prm.eps.max(COARSE_EPS) };
         for _ in 0..prm.iterations {
             sample(img, &w, l, grid.plain(), &mut p.vals, &mut p.xs, &mut p.ys);
             iterations += 1;
@@ -704,7 +730,7 @@ fn search(
             }
             w = next;
             last_level_sampled = l == 0;
-            if step < prm.eps * prm.eps {
+            if step < eps * eps {
                 break;
             }
         }
@@ -722,24 +748,43 @@ fn search(
 }
 
 /// The zero-mean normalised cross-correlation of two equally long vectors (0 when either is
-/// flat).
+/// flat). One pass over eight lanes, on values shifted by the first of `b` (gray levels are
+/// small enough that the single-precision sums keep the correlation to about 1e-4).
 fn ncc(a: &[f32], b: &[f32]) -> f64 {
-    let n = a.len().max(1) as f64;
-    let (sa, sb) = (
-        a.iter().map(|&v| v as f64).sum::<f64>() / n,
-        b.iter().map(|&v| v as f64).sum::<f64>() / n,
-    );
-    let (mut ab, mut aa, mut bb) = (0f64, 0f64, 0f64);
-    for (&x, &y) in a.iter().zip(b) {
-        let (x, y) = (x as f64 - sa, y as f64 - sb);
-        ab += x * y;
-        aa += x * x;
-        bb += y * y;
+    let n = a.len().min(b.len());
+    let Some(&k) = b.first() else {
+        return 0.0;
+    };
+    let mut acc = [[0f32; 8]; 5];
+    let (ca, cb) = (a[..n].chunks_exact(8), b[..n].chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            let (x, y) = (x[l] - k, y[l] - k);
+            acc[0][l] += x;
+            acc[1][l] += y;
+            acc[2][l] += x * x;
+            acc[3][l] += y * y;
+            acc[4][l] += x * y;
+        }
     }
-    if aa <= 1e-9 || bb <= 1e-9 {
+    let mut s = acc.map(|a| a.iter().map(|&v| v as f64).sum::<f64>());
+    for (&x, &y) in ra.iter().zip(rb) {
+        let (x, y) = ((x - k) as f64, (y - k) as f64);
+        s[0] += x;
+        s[1] += y;
+        s[2] += x * x;
+        s[3] += y * y;
+        s[4] += x * y;
+    }
+    let nf = n.max(1) as f64;
+    let aa = s[2] - s[0] * s[0] / nf;
+    let bb = s[3] - s[1] * s[1] / nf;
+    let ab = s[4] - s[0] * s[1] / nf;
+    if aa <= 1e-6 * nf || bb <= 1e-6 * nf {
         0.0
     } else {
-        ab / (aa * bb).sqrt()
+        (ab / (aa * bb).sqrt()).clamp(-1.0, 1.0)
     }
 }
 
@@ -750,7 +795,11 @@ pub struct PatchTracker {
     prep: Prep,
     cur: Frame,
     prev: Frame,
+    /// The patches in raster order of their first positions (neighbours read the same rows
+    /// of the frame one after the other, from the cache).
     patches: Vec<Patch>,
+    /// Where each patch, in the order it was given, is in `patches`.
+    order: Vec<usize>,
     pool: Option<rayon::ThreadPool>,
     size: (usize, usize),
     frames: usize,
@@ -785,6 +834,7 @@ impl PatchTracker {
             cur: Frame::default(),
             prev: Frame::default(),
             patches: Vec::new(),
+            order: Vec::new(),
             pool,
             size: (0, 0),
             frames: 0,
@@ -808,7 +858,7 @@ impl PatchTracker {
     ) -> Vec<Point> {
         let frame = frame.into();
         let mut f = Frame::default();
-        f.build(frame, 1, &mut self.prep);
+        f.build(frame, 1, 0, &mut self.prep);
         let img = &f.levels[0];
         let half = self.grid.half;
         let border = half.ceil() as usize + 2;
@@ -865,14 +915,32 @@ impl PatchTracker {
             )));
         }
         self.size = (frame.width, frame.height);
-        self.cur.build(frame, self.params.levels, &mut self.prep);
+        self.cur.build(frame, self.params.levels, self.border(), &mut self.prep);
         let levels = self.params.levels;
         let dof = self.params.warp.dof();
         let grid = &self.grid;
         let (w, h) = self.size;
-        self.patches = points
+        // Raster order of the points, by rows of 16 pixels (ties keep the given order).
+        let mut by_place: Vec<usize> = (0..points.len()).collect();
+        let key = |p: Point| {
+            if p.is_finite() {
+                ((p.y / 16.0).floor() as i64, p.x)
+            } else {
+                (i64::MAX, 0.0)
+            }
+        };
+        by_place.sort_by(|&a, &b| {
+            let (ka, kb) = (key(points[a]), key(points[b]));
+            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+        });
+        self.order = vec![0; points.len()];
+        for (place, &k) in by_place.iter().enumerate() {
+            self.order[k] = place;
+        }
+        self.patches = by_place
             .iter()
-            .map(|&c| {
+            .map(|&k| points[k])
+            .map(|c| {
                 let mut p = Patch::new(c, grid, levels, dof);
                 if !(c.is_finite()
                     && c.x >= 0.0
@@ -918,7 +986,7 @@ impl PatchTracker {
             )));
         }
         std::mem::swap(&mut self.cur, &mut self.prev);
-        self.cur.build(frame, self.params.levels, &mut self.prep);
+        self.cur.build(frame, self.params.levels, self.border(), &mut self.prep);
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
         let work = |p: &mut Patch| track_patch(p, prev, cur, grid, prm, size);
@@ -933,12 +1001,17 @@ impl PatchTracker {
 
     /// Every patch's state, in the order of the initial points.
     pub fn states(&self) -> impl ExactSizeIterator<Item = &PatchState> {
-        self.patches.iter().map(|p| &p.state)
+        self.order.iter().map(|&k| &self.patches[k].state)
     }
 
     /// Patches followed now.
     pub fn tracking(&self) -> usize {
         self.states().filter(|s| s.tracking()).count()
+    }
+
+    /// The border the frame's levels get: a patch whose centre is inside reads inside it.
+    fn border(&self) -> usize {
+        self.grid.half.ceil() as usize + 3
     }
 
     /// Half the side of a patch's window (pixels at the finest level).
@@ -1374,6 +1447,16 @@ mod tests {
         let b: Vec<f32> = (0..37).map(|i| (i as f32 * 0.11).cos()).collect();
         let plain: f64 = a.iter().zip(&b).map(|(x, y)| (x * y) as f64).sum();
         assert!((dot(&a, &b) as f64 - plain).abs() < 1e-5);
+    }
+
+    #[test]
+    fn ncc_is_one_up_to_gain_and_bias_and_zero_for_a_flat_patch() {
+        let a: Vec<f32> = (0..441).map(|i| 100.0 + 60.0 * (i as f32 * 0.3).sin()).collect();
+        let b: Vec<f32> = a.iter().map(|v| 0.5 * v + 40.0).collect();
+        assert!((ncc(&a, &b) - 1.0).abs() < 1e-4, "{}", ncc(&a, &b));
+        let c: Vec<f32> = a.iter().map(|v| 255.0 - v).collect();
+        assert!((ncc(&a, &c) + 1.0).abs() < 1e-4);
+        assert_eq!(ncc(&a, &vec![7.0; 441]), 0.0);
     }
 
     #[test]

@@ -194,6 +194,26 @@ pub fn gaussian_blur_into<'a, T: Pixel>(
     blur_region(src, kernel, (0, 0, w, h), &mut out.data, tmp, line);
 }
 
+/// `src` with a border of `b` pixels on every side, replicating its edges, into `out` (which
+/// keeps its allocation): pixel `(x, y)` of `src` is pixel `(x + b, y + b)` of `out`.
+pub fn pad_replicate_into(src: &GrayF32, b: usize, out: &mut GrayF32) {
+    let (w, h) = (src.width, src.height);
+    let pw = w + 2 * b;
+    out.resize(pw, h + 2 * b);
+    if w == 0 || h == 0 {
+        out.data.fill(0.0);
+        return;
+    }
+    for y in 0..h + 2 * b {
+        let sy = y.saturating_sub(b).min(h - 1);
+        let row = &src.data[sy * w..(sy + 1) * w];
+        let dst = &mut out.data[y * pw..(y + 1) * pw];
+        dst[..b].fill(row[0]);
+        dst[b..b + w].copy_from_slice(row);
+        dst[b + w..].fill(row[w - 1]);
+    }
+}
+
 /// [`downsample_half`] into `out`, keeping the allocations of `out` and `scratch`.
 pub fn downsample_half_into(src: &GrayF32, out: &mut GrayF32, scratch: &mut Vec<f32>) {
     half_into(&src.data, src.width, src.height, out, scratch);
@@ -374,6 +394,17 @@ impl Preprocessor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn padding_replicates_the_edges() {
+        let src = GrayF32::from_vec(3, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        let mut out = GrayF32::default();
+        pad_replicate_into(&src, 2, &mut out);
+        assert_eq!((out.width, out.height), (7, 6));
+        assert_eq!(out.row(0), &[1.0, 1.0, 1.0, 2.0, 3.0, 3.0, 3.0]);
+        assert_eq!(out.row(3), &[4.0, 4.0, 4.0, 5.0, 6.0, 6.0, 6.0]);
+        assert_eq!(out.row(5), out.row(3));
+    }
     use crate::rng::Rng;
 
     fn naive(src: &GrayF32, k: &[f32]) -> GrayF32 {

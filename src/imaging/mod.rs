@@ -15,7 +15,7 @@ mod sample;
 
 pub use filter::{
     GaussianKernel, Preprocessor, downsample_half, downsample_half_into, gaussian_blur,
-    gaussian_blur_into, gaussian_kernel, pyramid,
+    gaussian_blur_into, gaussian_kernel, pad_replicate_into, pyramid,
 };
 pub use integral::Integral;
 pub use resample::resample_window;

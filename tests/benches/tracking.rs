@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the hot paths: one iteration of ICLK, FCLK and ESM (SSD, homography,
-//! 50x50) on a real texture, and the pre-processing of a tracker's region. The whole-tracker
-//! figures are in `regtrack bench`.
+//! 50x50) on a real texture, the pre-processing of a tracker's region, and the many-patch
+//! tracker's frame (its time divided by the patches is the cost of one patch update). The
+//! whole-tracker figures are in `regtrack bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use regtrack::geometry::Quad;
@@ -114,5 +115,48 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// The many-patch tracker: a frame of 500 patches (21 x 21, 3 levels, one thread) moving by
+/// about a pixel and a half, back and forth between two frames of a real texture.
+fn patches(c: &mut Criterion) {
+    use regtrack::imaging::{GrayU8, sample_value};
+    use regtrack::patches::{PatchParams, PatchTracker};
+    let img = load_gray(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/textures/skimage_coffee.png"),
+    )
+    .expect("bundled texture");
+    let f = img.to_f32();
+    let view = f.view();
+    let mut moved = GrayU8::new(img.width, img.height);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let v = sample_value(&view, x as f32 + 1.3, y as f32 - 0.7);
+            moved.set(x, y, v.round().clamp(0.0, 255.0) as u8);
+        }
+    }
+    let mut g = c.benchmark_group("patches");
+    for warp in ["translation", "affine"] {
+        let params = PatchParams::parse(&[
+            ("warp".into(), warp.into()),
+            ("size".into(), "21".into()),
+            ("levels".into(), "3".into()),
+            ("threads".into(), "1".into()),
+            ("min_distance".into(), "4".into()),
+        ])
+        .expect("params");
+        let mut t = PatchTracker::new(params).expect("tracker");
+        let points = t.detect(&img, 500, None);
+        t.initialize(&img, &points).expect("init");
+        let frames = [&moved, &img];
+        let mut k = 0;
+        g.bench_function(format!("{warp} frame, {} patches", points.len()), |b| {
+            b.iter(|| {
+                t.update(frames[k % 2]).expect("update");
+                k += 1;
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, patches);
 criterion_main!(benches);

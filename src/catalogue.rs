@@ -75,6 +75,10 @@ pub fn listing() -> String {
         };
         let _ = writeln!(out, "  {}{short}", d.describe());
     }
+    out.push_str("many-patch parameters (track --patches N --patch NAME=VALUE):\n");
+    for d in crate::patches::PATCH_PARAMS {
+        let _ = writeln!(out, "  {}", d.describe());
+    }
     out
 }
 

@@ -662,7 +662,11 @@ fn search(
         let s = (1u32 << l) as f64;
         let img = frame.level(l);
         // A coarse level only has to bring the patch within the finer level's basin.
-        let eps = if l == 0 { prm.eps } else { prm.eps.max(COARSE_EPS) };
+        let eps = if l == 0 {
+            prm.eps
+        } else {
+            prm.eps.max(COARSE_EPS)
+        };
         for _ in 0..prm.iterations {
             sample(img, &w, l, grid.plain(), &mut p.vals, &mut p.xs, &mut p.ys);
             iterations += 1;
@@ -915,7 +919,8 @@ impl PatchTracker {
             )));
         }
         self.size = (frame.width, frame.height);
-        self.cur.build(frame, self.params.levels, self.border(), &mut self.prep);
+        self.cur
+            .build(frame, self.params.levels, self.border(), &mut self.prep);
         let levels = self.params.levels;
         let dof = self.params.warp.dof();
         let grid = &self.grid;
@@ -986,7 +991,8 @@ impl PatchTracker {
             )));
         }
         std::mem::swap(&mut self.cur, &mut self.prev);
-        self.cur.build(frame, self.params.levels, self.border(), &mut self.prep);
+        self.cur
+            .build(frame, self.params.levels, self.border(), &mut self.prep);
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
         let work = |p: &mut Patch| track_patch(p, prev, cur, grid, prm, size);
@@ -1451,12 +1457,46 @@ mod tests {
 
     #[test]
     fn ncc_is_one_up_to_gain_and_bias_and_zero_for_a_flat_patch() {
-        let a: Vec<f32> = (0..441).map(|i| 100.0 + 60.0 * (i as f32 * 0.3).sin()).collect();
+        let a: Vec<f32> = (0..441)
+            .map(|i| 100.0 + 60.0 * (i as f32 * 0.3).sin())
+            .collect();
         let b: Vec<f32> = a.iter().map(|v| 0.5 * v + 40.0).collect();
         assert!((ncc(&a, &b) - 1.0).abs() < 1e-4, "{}", ncc(&a, &b));
         let c: Vec<f32> = a.iter().map(|v| 255.0 - v).collect();
         assert!((ncc(&a, &c) + 1.0).abs() < 1e-4);
         assert_eq!(ncc(&a, &vec![7.0; 441]), 0.0);
+    }
+
+    #[test]
+    fn points_and_tracks_files_are_read_and_a_bad_line_is_named() {
+        let d = std::env::temp_dir().join(format!("regtrack-points-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let p = d.join("points.txt");
+        std::fs::write(&p, "# corners\n10,20\n 30.5 40 \n").unwrap();
+        assert_eq!(
+            read_points(&p).unwrap(),
+            vec![Point { x: 10.0, y: 20.0 }, Point { x: 30.5, y: 40.0 }]
+        );
+        std::fs::write(&p, "10,20\n1,2,3\n").unwrap();
+        let e = read_points(&p).unwrap_err().to_string();
+        assert!(e.contains("points.txt:2"), "{e}");
+        // A run written and read back.
+        let state = PatchState {
+            centre: Point { x: 1.5, y: 2.25 },
+            linear: [1.0, 0.0, 0.0, 1.0],
+            status: TrackStatus::Lost(LossReason::OutOfFrame),
+            ncc: 0.5,
+            fb_error: None,
+            iterations: 0,
+        };
+        let run = PatchRun {
+            frames: vec![vec![state; 2]; 3],
+            times: Vec::new(),
+        };
+        let t = d.join("tracks.csv");
+        write_tracks(&t, &run).unwrap();
+        assert_eq!(read_tracks(&t).unwrap().frames, run.frames);
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]

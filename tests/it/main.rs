@@ -10,6 +10,7 @@ mod groundtruth;
 #[cfg(feature = "gui")]
 mod gui;
 mod landscape;
+mod patches;
 mod recovery;
 mod report;
 mod robustness;

@@ -120,3 +120,35 @@ class Camera:
     def close(self) -> None: ...
     def __iter__(self) -> Iterator[npt.NDArray[np.uint8]]: ...
     def __next__(self) -> npt.NDArray[np.uint8]: ...
+
+class PatchTracker:
+    """Many patches per frame (translation or affine inverse-compositional LK over one shared
+    pyramid, in parallel over the cores). Keyword arguments are the many-patch parameters
+    (``warp``, ``size``, ``levels``, ``template``, ``min_ncc``, ``fb_max``, ``threads``...;
+    ``list_text()`` lists them)."""
+
+    def __init__(self, **params: Any) -> None: ...
+    def detect(
+        self, frame: Frame, max: int = 1000, region: Optional[Corners] = None
+    ) -> npt.NDArray[np.float64]:
+        """Shi-Tomasi corners (N, 2) where a whole patch fits (inside ``region`` if given)."""
+    def initialize(self, frame: Frame, points: npt.ArrayLike) -> None:
+        """Starts a patch centred on each point (N, 2)."""
+    def update(
+        self, frame: Frame
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        """Tracks one frame: centres (N, 2) (a lost patch keeps its last good one) and which
+        patches are tracking (N,), in the order of the initial points."""
+    @property
+    def status(self) -> list[str]:
+        """``"tracking"`` or ``"lost: <reason>"`` per patch."""
+    @property
+    def linear(self) -> npt.NDArray[np.float64]:
+        """Each patch's linear map (N, 2, 2) (the identity for translation)."""
+    @property
+    def ncc(self) -> npt.NDArray[np.float64]:
+        """Each patch's correlation with its template on the last frame (N,)."""
+    @property
+    def last_update_us(self) -> float:
+        """The library's own time in the last call that took a frame (µs)."""
+    def __len__(self) -> int: ...

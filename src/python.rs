@@ -746,12 +746,219 @@ fn synth(
     Ok(PySequence { seq })
 }
 
+/// Many patches per frame: N small patches (translation or affine), each tracked by
+/// inverse-compositional Lucas-Kanade over one shared pyramid, in parallel over the cores.
+/// Keyword arguments are the many-patch parameters (`regtrack.list_text()` lists them).
+///
+/// >>> pt = regtrack.PatchTracker(warp="affine", size=15)
+/// >>> pts = pt.detect(frame, 500)            # (N, 2) Shi-Tomasi corners
+/// >>> pt.initialize(frame, pts)
+/// >>> centres, tracking = pt.update(next_frame)   # (N, 2) float64, (N,) bool
+#[pyclass(name = "PatchTracker", module = "regtrack")]
+pub struct PyPatchTracker {
+    inner: crate::patches::PatchTracker,
+    frames: FrameBuffers,
+    last_us: f64,
+}
+
+impl PyPatchTracker {
+    /// Runs `f` on the tracker and `frame` (grey 8-bit; any other frame is converted first)
+    /// with the GIL released.
+    fn with_frame<R: Send>(
+        &mut self,
+        py: Python<'_>,
+        frame: &Bound<'_, PyAny>,
+        f: impl FnOnce(&mut crate::patches::PatchTracker, crate::imaging::ImageRef<'_, u8>) -> R + Send,
+    ) -> PyResult<R> {
+        let t = &mut self.inner;
+        if let Ok(a) = frame.extract::<numpy::PyReadonlyArray2<'_, u8>>()
+            && a.is_c_contiguous()
+            && let Ok(data) = a.as_slice()
+        {
+            let [h, w] = [a.shape()[0], a.shape()[1]];
+            if let Some(view) = crate::imaging::ImageRef::new(w, h, data).filter(|_| w > 0 && h > 0)
+            {
+                let (r, us) = py.detach(|| timed(|| f(t, view)));
+                self.last_us = us;
+                return Ok(r);
+            }
+        }
+        self.frames.load(frame)?;
+        if self.frames.is_float {
+            let fl = &self.frames.float;
+            fill(&mut self.frames.gray, fl.width, fl.height);
+            for (g, v) in self.frames.gray.data.iter_mut().zip(&fl.data) {
+                *g = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        let gray = &self.frames.gray;
+        let (r, us) = py.detach(|| timed(|| f(t, gray.into())));
+        self.last_us = us;
+        Ok(r)
+    }
+
+    fn states(&self) -> Vec<crate::patches::PatchState> {
+        self.inner.states().copied().collect()
+    }
+}
+
+/// What `PatchTracker.update` returns.
+type CentresAndTracking<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<bool>>);
+
+/// Points from numpy: an `(N, 2)` array of x, y.
+fn points_from(points: &Bound<'_, PyAny>) -> PyResult<Vec<Point>> {
+    let a: PyArrayLike2<'_, f64, AllowTypeChange> = points
+        .extract()
+        .map_err(|_| PyValueError::new_err("points must be an (N, 2) array of x, y"))?;
+    let v = a.as_array();
+    if v.ncols() != 2 {
+        return Err(PyValueError::new_err(format!(
+            "points must be an (N, 2) array of x, y, got shape {:?}",
+            v.shape()
+        )));
+    }
+    Ok(v.rows()
+        .into_iter()
+        .map(|r| Point { x: r[0], y: r[1] })
+        .collect())
+}
+
+fn points_to<'py>(py: Python<'py>, pts: impl Iterator<Item = Point>) -> Bound<'py, PyArray2<f64>> {
+    let rows: Vec<Vec<f64>> = pts.map(|p| vec![p.x, p.y]).collect();
+    if rows.is_empty() {
+        return numpy::PyArray2::zeros(py, [0, 2], false);
+    }
+    PyArray2::from_vec2(py, &rows).unwrap_or_else(|_| numpy::PyArray2::zeros(py, [0, 2], false))
+}
+
+#[pymethods]
+impl PyPatchTracker {
+    #[new]
+    #[pyo3(signature = (**params))]
+    fn new(params: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut pairs = Vec::new();
+        if let Some(params) = params {
+            for (k, v) in params.iter() {
+                pairs.push((k.extract::<String>()?, param_text(&v)?));
+            }
+        }
+        let prm = crate::patches::PatchParams::parse(&pairs).map_err(library_error)?;
+        Ok(PyPatchTracker {
+            inner: crate::patches::PatchTracker::new(prm).map_err(library_error)?,
+            frames: FrameBuffers::default(),
+            last_us: 0.0,
+        })
+    }
+
+    /// The strongest Shi-Tomasi corners of `frame` where a whole patch fits, at most `max`,
+    /// `min_distance` apart; with `region` (corners, 4 x 2), inside it. An `(N, 2)` array.
+    #[pyo3(signature = (frame, max=1000, region=None))]
+    fn detect<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+        max: usize,
+        region: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let region = region.map(quad_from).transpose()?;
+        let pts = self.with_frame(py, frame, |t, f| t.detect(f, max, region.as_ref()))?;
+        Ok(points_to(py, pts.into_iter()))
+    }
+
+    /// Starts a patch centred on each of `points` (N x 2) in `frame`.
+    fn initialize(
+        &mut self,
+        py: Python<'_>,
+        frame: &Bound<'_, PyAny>,
+        points: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let pts = points_from(points)?;
+        self.with_frame(py, frame, |t, f| t.initialize(f, &pts))?
+            .map_err(library_error)
+    }
+
+    /// Tracks one frame; returns `(centres, tracking)`: `(N, 2)` centres (a lost patch keeps
+    /// its last good one) and an `(N,)` boolean array, in the order of the initial points.
+    fn update<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+    ) -> PyResult<CentresAndTracking<'py>> {
+        self.with_frame(py, frame, |t, f| t.update(f))?
+            .map_err(library_error)?;
+        let st = self.states();
+        let tracking: Vec<bool> = st.iter().map(|s| s.tracking()).collect();
+        Ok((
+            points_to(py, st.iter().map(|s| s.centre)),
+            PyArray1::from_vec(py, tracking),
+        ))
+    }
+
+    /// Each patch's status: `"tracking"` or `"lost: <reason>"`.
+    #[getter]
+    fn status(&self) -> Vec<String> {
+        self.states()
+            .iter()
+            .map(|s| status_text(&s.status))
+            .collect()
+    }
+
+    /// Each patch's linear map `[[a00, a01], [a10, a11]]` (the identity for translation), an
+    /// `(N, 2, 2)` array.
+    #[getter]
+    fn linear<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let rows: Vec<Vec<Vec<f64>>> = self
+            .states()
+            .iter()
+            .map(|s| {
+                vec![
+                    vec![s.linear[0], s.linear[1]],
+                    vec![s.linear[2], s.linear[3]],
+                ]
+            })
+            .collect();
+        if rows.is_empty() {
+            return Ok(PyArray3::zeros(py, [0, 2, 2], false));
+        }
+        PyArray3::from_vec3(py, &rows).map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// Each patch's normalised cross-correlation with its template on the last frame.
+    #[getter]
+    fn ncc<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.states().iter().map(|s| s.ncc).collect())
+    }
+
+    /// The library's own time in the last call that took a frame (µs).
+    #[getter]
+    fn last_update_us(&self) -> f64 {
+        self.last_us
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.states().len()
+    }
+
+    fn __repr__(&self) -> String {
+        let p = self.inner.params();
+        format!(
+            "PatchTracker({:?}, size={}, levels={}, {} patches, {} tracking)",
+            p.warp,
+            p.size,
+            p.levels,
+            self.inner.states().len(),
+            self.inner.tracking()
+        )
+    }
+}
+
 /// The Python module.
 #[pymodule]
 fn regtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyTracker>()?;
     m.add_class::<PySequence>()?;
     m.add_class::<PyCamera>()?;
+    m.add_class::<PyPatchTracker>()?;
     m.add("Error", m.py().get_type::<Error>())?;
     m.add_function(wrap_pyfunction!(list_methods, m)?)?;
     m.add_function(wrap_pyfunction!(list_text, m)?)?;

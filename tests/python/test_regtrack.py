@@ -1,5 +1,5 @@
 """The Python package: tracking a rendered sequence to the command line's corners, the error
-paths, threads, a whole tracker, the per-iteration record and the sequence reader.
+paths, threads, a whole tracker, the per-iteration record, the sequence reader and many patches.
 
 Run after `pip install .` (or `maturin develop`): `pytest tests/python`. The command line's
 binary is found in target/{debug,release}/ (or `REGTRACK_BIN`).
@@ -290,3 +290,42 @@ def test_a_live_source_from_python():
     assert c.shape == (4, 2)
     with pytest.raises(regtrack.Error, match="cannot|not"):
         list(regtrack.Camera("/dev/nosuchcamera", size=(320, 240)))
+
+
+def test_many_patches_from_python_match_the_command_line(rendered, tmp_path):
+    seq = regtrack.Sequence(rendered)
+    frames = [f for f, _ in seq]
+    gt = seq.ground_truth
+    pt = regtrack.PatchTracker(size=11, threads=1)
+    pts = pt.detect(frames[0], 40, region=gt[0])
+    assert pts.shape[1] == 2 and 10 <= len(pts) <= 40
+    pt.initialize(frames[0], pts)
+    assert len(pt) == len(pts)
+    ours = [pts]
+    for f in frames[1:]:
+        centres, tracking = pt.update(f)
+        assert centres.shape == (len(pts), 2) and tracking.dtype == bool
+        ours.append(centres)
+    assert tracking.mean() > 0.8
+    assert all(s == "tracking" or s.startswith("lost: ") for s in pt.status)
+    assert pt.linear.shape == (len(pts), 2, 2) and pt.ncc.shape == (len(pts),)
+    out = tmp_path / "tracks.csv"
+    subprocess.run(
+        [cli(), "track", "--seq", str(rendered), "--patches", "40", "--patch", "size=11",
+         "--patch", "threads=1", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
+    theirs = np.array([[float(r[3]), float(r[4])] for r in rows]).reshape(len(frames), -1, 2)
+    # The same points, the same tracks (the file holds 4 decimals).
+    assert np.abs(np.array(ours) - theirs).max() < 1e-3
+    # A float frame is the same frame; errors name what was wrong.
+    again = regtrack.PatchTracker(size=11, threads=1)
+    again.initialize(frames[0].astype(np.float32), pts)
+    c, _ = again.update(frames[1].astype(np.float32))
+    assert np.abs(c - ours[1]).max() < 1e-9
+    with pytest.raises(regtrack.Error, match="sise"):
+        regtrack.PatchTracker(sise=11)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        pt.initialize(frames[0], np.zeros((3, 3)))

@@ -1104,6 +1104,8 @@ fn inside(q: &Quad, p: Point) -> bool {
 /// A run of the many-patch tracker over a sequence.
 #[derive(Clone, Debug, Default)]
 pub struct PatchRun {
+    /// The sequence's frame the run started on (`frames[0]`).
+    pub first: usize,
     /// Per frame, every patch's state.
     pub frames: Vec<Vec<PatchState>>,
     /// Time spent tracking (pre-processing and searching; not reading frames), per frame
@@ -1197,20 +1199,35 @@ pub fn track_sequence(
     seeds: &PatchSeeds,
     progress: &mut dyn FnMut(usize),
 ) -> Result<PatchRun> {
+    track_sequence_from(seq, 0, params, seeds, progress)
+}
+
+/// [`track_sequence`] from frame `start` (corners are then detected in that frame's ground
+/// truth, when it has one).
+pub fn track_sequence_from(
+    seq: &Sequence,
+    start: usize,
+    params: &PatchParams,
+    seeds: &PatchSeeds,
+    progress: &mut dyn FnMut(usize),
+) -> Result<PatchRun> {
     let mut t = PatchTracker::new(params.clone())?;
-    let first = seq.load_gray(0)?;
+    let first = seq.load_gray(start)?;
     let points = match seeds {
         PatchSeeds::Points(p) => p.clone(),
         PatchSeeds::Corners(n) => {
-            let region = seq.ground_truth(0);
+            let region = seq.ground_truth(start);
             t.detect(&first, *n, region.as_ref())
         }
     };
     t.initialize(&first, &points)?;
-    let mut run = PatchRun::default();
+    let mut run = PatchRun {
+        first: start,
+        ..PatchRun::default()
+    };
     run.frames.push(t.states().copied().collect());
-    progress(0);
-    for i in 1..seq.len() {
+    progress(start);
+    for i in start + 1..seq.len() {
         let frame = seq.load_gray(i)?;
         let start = Instant::now();
         t.update(&frame)?;
@@ -1241,7 +1258,7 @@ pub struct PatchAccuracy {
 
 /// Scores `run` against `seq`'s ground truth (`None` without one on the first frame).
 pub fn accuracy(run: &PatchRun, seq: &Sequence) -> Option<PatchAccuracy> {
-    let q0 = seq.ground_truth(0)?;
+    let q0 = seq.ground_truth(run.first)?;
     let starts: Vec<(usize, Point)> = run
         .frames
         .first()?
@@ -1256,7 +1273,7 @@ pub fn accuracy(run: &PatchRun, seq: &Sequence) -> Option<PatchAccuracy> {
     let last = run.frames.len().saturating_sub(1);
     for (i, states) in run.frames.iter().enumerate().skip(1) {
         let Some(h) = seq
-            .ground_truth(i)
+            .ground_truth(run.first + i)
             .and_then(|q| homography_between(&q0, &q))
         else {
             continue;
@@ -1490,6 +1507,7 @@ mod tests {
             iterations: 0,
         };
         let run = PatchRun {
+            first: 0,
             frames: vec![vec![state; 2]; 3],
             times: Vec::new(),
         };

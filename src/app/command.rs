@@ -78,6 +78,14 @@ pub enum Command {
     /// many times at each noise level 1..10 px around the ground truth (see
     /// [`crate::converge`]); the plot shows the fraction that converges.
     ConvergenceFrequency(usize),
+    /// Track this many patches (Shi-Tomasi corners, inside the ground truth when the frame has
+    /// one) from the shown frame to the end of the sequence, translation or affine, on a task
+    /// thread; the frame view draws them.
+    TrackPatches {
+        count: usize,
+        affine: bool,
+    },
+    ClearPatches,
     ClearExperiment,
     /// Write the plots shown (success rates, errors per frame, a landscape curve) as SVG and
     /// PNG into the folder, with `report`'s figure code.
@@ -350,6 +358,8 @@ impl InspectorApp {
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
             Command::ExportPlots(dir) => self.export_plots(dir),
             Command::ConvergenceFrequency(starts) => self.convergence_frequency(starts),
+            Command::TrackPatches { count, affine } => self.track_patches(count, affine),
+            Command::ClearPatches => self.rt.ui.patches = None,
             Command::ClearExperiment => {
                 self.rt.ui.experiment = None;
                 self.rt.ui.selected_iteration = None;

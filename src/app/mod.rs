@@ -21,7 +21,7 @@ pub mod worker;
 
 pub use queries::{Disagreement, rank_disagreements};
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
-pub use runtime::{Experiment, Frequency, LandscapeView, Runtime, Tool, Versioned};
+pub use runtime::{Experiment, Frequency, LandscapeView, Patches, Runtime, Tool, Versioned};
 pub use state::LandscapeSettings;
 pub use window::{AppError, RunOptions, ScreenshotPlan, ShotResult, run};
 
@@ -369,6 +369,72 @@ impl InspectorApp {
             self.rt.ui.frequency = None;
             self.error(format!("cannot run the frequency of convergence: {e}"));
         }
+    }
+
+    /// Tracks `count` patches from the shown frame to the end on a thread of its own (see
+    /// [`Command::TrackPatches`]).
+    fn track_patches(&mut self, count: usize, affine: bool) {
+        let from = self.state.frame;
+        let Some(seq) = self.rt.seq.sequence.clone() else {
+            return;
+        };
+        if self
+            .rt
+            .ui
+            .patches
+            .as_ref()
+            .is_some_and(|p| p.result.is_none())
+        {
+            self.rt.msg.status = "patches are being tracked".into();
+            return;
+        }
+        let count = count.clamp(1, 10_000);
+        let params = match crate::patches::PatchParams::parse(&[(
+            "warp".to_string(),
+            if affine { "affine" } else { "translation" }.to_string(),
+        )]) {
+            Ok(p) => p,
+            Err(e) => return self.error(e.to_string()),
+        };
+        self.rt.ui.patches = Some(runtime::Patches {
+            from,
+            count,
+            affine,
+            half: (params.size as f64 - 1.0) / 2.0,
+            result: None,
+        });
+        self.rt.msg.status = format!("tracking {count} patches from frame {}…", from + 1);
+        let spawned = self.rt.worker.spawn_task("patches", move || {
+            let seeds = crate::patches::PatchSeeds::Corners(count);
+            Reply::Patches {
+                from,
+                result: crate::patches::track_sequence_from(
+                    &seq,
+                    from,
+                    &params,
+                    &seeds,
+                    &mut |_| {},
+                )
+                .map_err(|e| e.to_string()),
+            }
+        });
+        if let Err(e) = spawned {
+            self.rt.ui.patches = None;
+            self.error(format!("cannot track patches: {e}"));
+        }
+    }
+
+    /// The patches tracked last (or being tracked).
+    pub fn patches(&self) -> Option<&runtime::Patches> {
+        self.rt.ui.patches.as_ref()
+    }
+
+    /// The patches' states on `frame`, with half a patch's side, when a run reached it.
+    pub fn patches_on(&self, frame: usize) -> Option<(&[crate::patches::PatchState], f64)> {
+        let p = self.rt.ui.patches.as_ref()?;
+        let run = p.result.as_ref()?.as_ref().ok()?;
+        let k = frame.checked_sub(run.first)?;
+        run.frames.get(k).map(|f| (f.as_slice(), p.half))
     }
 
     /// The frequency of convergence run last (or running).
@@ -972,6 +1038,31 @@ impl InspectorApp {
                             e.sigma,
                             converged.join(", ")
                         );
+                    }
+                }
+                Reply::Patches { from, result } => {
+                    if let Some(p) = self.rt.ui.patches.as_mut().filter(|p| p.from == from) {
+                        match result {
+                            Ok(run) => {
+                                let last = run
+                                    .frames
+                                    .last()
+                                    .map_or(0, |f| f.iter().filter(|s| s.tracking()).count());
+                                self.rt.msg.status = format!(
+                                    "{} patches tracked from frame {} over {} frames ({:.0} frames/s); {} still tracking at the end",
+                                    run.patches(),
+                                    from + 1,
+                                    run.frames.len(),
+                                    run.frames_per_second(),
+                                    last
+                                );
+                                p.result = Some(Ok(std::sync::Arc::new(run)));
+                            }
+                            Err(e) => {
+                                p.result = Some(Err(e.clone()));
+                                self.error(format!("tracking patches: {e}"));
+                            }
+                        }
                     }
                 }
                 Reply::Frequency { frame, result } => {

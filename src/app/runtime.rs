@@ -148,6 +148,19 @@ pub struct Frequency {
     pub result: Option<Result<Vec<(usize, crate::converge::ConvergeCurve)>, String>>,
 }
 
+/// Many patches tracked over the open sequence from one frame (`regtrack track --patches`'s
+/// run), drawn on the frames it reached.
+#[derive(Clone, Debug)]
+pub struct Patches {
+    /// The frame they start on, how many were asked for, and their warp.
+    pub from: usize,
+    pub count: usize,
+    pub affine: bool,
+    /// Half the side of a patch (pixels).
+    pub half: f64,
+    pub result: Option<Result<std::sync::Arc<crate::patches::PatchRun>, String>>,
+}
+
 /// The convergence experiment shown on a frame: every enabled tracker started from the same
 /// perturbed corners, its iterations to step through.
 pub struct Experiment {
@@ -192,6 +205,8 @@ pub(super) struct UiRt {
     /// starts per noise level it runs.
     pub(super) frequency: Option<Frequency>,
     pub(super) frequency_starts: usize,
+    /// Patches tracked over the sequence (running while its result is `None`).
+    pub(super) patches: Option<Patches>,
     pub(super) perturb_sigma: f64,
     pub(super) perturbations: u64,
 }
@@ -212,6 +227,7 @@ impl Default for UiRt {
             experiment: None,
             frequency: None,
             frequency_starts: 50,
+            patches: None,
             perturb_sigma: 5.0,
             perturbations: 0,
         }

@@ -290,6 +290,11 @@ pub enum Reply {
     },
     /// Plots written (the files), or why not.
     Exported(std::result::Result<Vec<PathBuf>, String>),
+    /// Patches tracked from `from` (see [`super::Patches`]).
+    Patches {
+        from: usize,
+        result: std::result::Result<crate::patches::PatchRun, String>,
+    },
     /// The frequency of convergence on `frame` (see [`super::Frequency`]).
     Frequency {
         frame: usize,

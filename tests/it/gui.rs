@@ -1537,3 +1537,41 @@ fn side_panels_grow_back_when_the_window_does() {
         "the frame was {before} px wide, {after} px after the window shrank and grew"
     );
 }
+
+/// Patches tracked from the shown frame are drawn on every frame they reached, with the count
+/// of those still tracking in the sidebar; Clear removes them.
+#[test]
+fn patches_are_tracked_from_the_shown_frame_and_drawn() {
+    let d = TempDir::new("gui-patches");
+    let seq = small_sequence(d.path(), 6);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the first frame", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Seek(1));
+    h.step();
+    step_until(&mut h, "frame 2", |a| a.state.frame == 1);
+    h.state_mut().send(Command::TrackPatches {
+        count: 40,
+        affine: true,
+    });
+    h.step();
+    step_until(&mut h, "the patches", |a| {
+        a.patches().is_some_and(|p| p.result.is_some())
+    });
+    let app = h.state();
+    assert!(app.patches_on(0).is_none(), "they start on the shown frame");
+    let n = app.patches_on(1).expect("patches on frame 2").0.len();
+    assert!(n >= 20, "{n}");
+    let (last, half) = app.patches_on(5).expect("patches on the last frame");
+    assert_eq!(half, 7.0);
+    let on = last.iter().filter(|s| s.tracking()).count();
+    assert!(on as f64 > 0.8 * n as f64, "{on} of {n}");
+    h.state_mut().send(Command::Seek(5));
+    h.run_steps(3);
+    h.get_by_label("Patches").click_accesskit();
+    h.run_steps(3);
+    let label = format!("{on} of {n} tracking on this frame");
+    assert!(h.query_by_label(&label).is_some(), "{label}");
+    h.state_mut().send(Command::ClearPatches);
+    h.step();
+    assert!(h.state().patches().is_none());
+}

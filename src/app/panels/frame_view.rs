@@ -309,6 +309,9 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             PROPOSAL_COLOR,
         );
     }
+    if let Some((states, half)) = app.patches_on(frame) {
+        draw_patches(&painter, &t, states, half);
+    }
     if app.state.view.show_samples {
         for (i, entry) in app.state.trackers.iter().enumerate() {
             if let Some(v) = app.result(i, frame).and_then(|r| r.visual.as_ref()) {
@@ -386,6 +389,28 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
 /// sampling method's candidates as the corners of the target under each (faint when unlike the
 /// template, bright when like it) or a detector's boxes, the chosen one outlined, and points
 /// (keypoints; bright when they count).
+/// Many patches: each tracked one's window (its affine shape) in green, each lost one as a red
+/// cross where it was last.
+fn draw_patches(
+    painter: &egui::Painter,
+    t: &Transform,
+    states: &[crate::patches::PatchState],
+    half: f64,
+) {
+    let green = Stroke::new(1.0, Color32::from_rgb(80, 230, 120));
+    let red = Stroke::new(1.0, Color32::from_rgb(255, 90, 90));
+    for s in states {
+        if s.tracking() {
+            painter.add(Shape::closed_line(quad_points(t, &s.corners(half)), green));
+        } else {
+            let c = t.to_screen(s.centre);
+            let d = 3.0;
+            painter.line_segment([c + Vec2::new(-d, -d), c + Vec2::new(d, d)], red);
+            painter.line_segment([c + Vec2::new(-d, d), c + Vec2::new(d, -d)], red);
+        }
+    }
+}
+
 fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
     if let Some(m) = &v.map
         && m.width > 0

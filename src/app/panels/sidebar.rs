@@ -104,6 +104,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 out.push(Command::AddTracker);
             }
             ab_controls(app, ui, out);
+            patch_controls(app, ui, out);
             ui.separator();
             ui.heading("Ground truth");
             let mut view = app.state.view.clone();
@@ -128,6 +129,70 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         });
     });
     super::remember_share(&ctx, "trackers", shown.response.rect.width());
+}
+
+/// Many patches: how many, their warp, and a run from the shown frame (drawn on the frames).
+fn patch_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    egui::CollapsingHeader::new("Patches")
+        .id_salt("patches")
+        .show(ui, |ui| {
+            let running = app.patches().is_some_and(|p| p.result.is_none());
+            let id = ui.make_persistent_id("patch_settings");
+            let (mut count, mut affine): (usize, bool) = ui
+                .data(|d| d.get_temp(id))
+                .or(app.patches().map(|p| (p.count, p.affine)))
+                .unwrap_or((300, false));
+            ui.horizontal_wrapped(|ui| {
+                ui.add(
+                    egui::DragValue::new(&mut count)
+                        .range(1..=10_000)
+                        .suffix(" patches"),
+                );
+                ui.checkbox(&mut affine, "affine")
+                    .on_hover_text("Affine patches (6 parameters) instead of translation (2)");
+            });
+            ui.data_mut(|d| d.insert_temp(id, (count, affine)));
+            ui.horizontal_wrapped(|ui| {
+                if ui
+                    .add_enabled(
+                        !running,
+                        egui::Button::new(if running {
+                            "Tracking…"
+                        } else {
+                            "Track from this frame"
+                        }),
+                    )
+                    .on_hover_text(
+                        "The strongest Shi-Tomasi corners of this frame (inside its ground truth \
+                         when it has one), each a 15x15 patch tracked to the end of the sequence \
+                         by inverse-compositional LK over one shared pyramid (regtrack track \
+                         --patches on the command line). Green: tracking; red: lost.",
+                    )
+                    .clicked()
+                {
+                    out.push(Command::TrackPatches { count, affine });
+                }
+                if app.patches().is_some() && ui.button("Clear").clicked() {
+                    out.push(Command::ClearPatches);
+                }
+            });
+            match app.patches_on(app.state.frame) {
+                Some((states, _)) => {
+                    let on = states.iter().filter(|s| s.tracking()).count();
+                    ui.label(format!("{on} of {} tracking on this frame", states.len()));
+                }
+                None => {
+                    if let Some(p) = app.patches() {
+                        let text = match &p.result {
+                            None => format!("tracking from frame {}…", p.from + 1),
+                            Some(Err(e)) => e.clone(),
+                            Some(Ok(_)) => format!("tracked from frame {}", p.from + 1),
+                        };
+                        ui.label(egui::RichText::new(text).small().weak());
+                    }
+                }
+            }
+        });
 }
 
 /// The kind of tracker, in the tracker's header: a registration tracker (AM x SSM x SM, chosen

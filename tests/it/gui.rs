@@ -264,7 +264,7 @@ fn the_ground_truth_correction_flow() {
     let proposal = h.state().gt_proposal().unwrap().clone();
     assert_eq!(proposal.frames.first().unwrap().0, 1);
     assert!(proposal.frames.len() >= 5, "{:?}", proposal.stop);
-    h.get_by_label("Accept").click();
+    h.get_by_label("Accept").click_accesskit();
     h.step();
     h.step();
     let key = "similitude";

@@ -523,21 +523,45 @@ impl Grid {
     }
 }
 
+/// The warp searched at level `l`: affine patches that follow the previous frame's patch search
+/// only a shift, on an image-aligned window, at the coarse levels (between two frames the
+/// shape barely changes; the shift is what the coarse levels are for), then the whole affine
+/// warp at the finest level. Their coarse levels then cost what a translation patch's do.
+fn level_warp(prm: &PatchParams, l: usize) -> PatchWarp {
+    if l > 0 && prm.warp == PatchWarp::Affine && prm.template == TemplateSource::Previous {
+        PatchWarp::Translation
+    } else {
+        prm.warp
+    }
+}
+
+/// The window sampled at level `l` for the warp `w`: image-aligned where [`level_warp`] is a
+/// shift of an affine patch.
+fn level_window(prm: &PatchParams, l: usize, w: &Warp) -> Warp {
+    if level_warp(prm, l) != prm.warp {
+        Warp::at(w.c)
+    } else {
+        *w
+    }
+}
+
 /// The template of the patch warped by `w` in `frame`, at every level, into `tp`. Flat levels
 /// are marked unusable; `false` when the finest is flat.
 fn make_template(
     p: &mut Patch,
     which_back: bool,
     frame: &Frame,
-    w: &Warp,
+    start: &Warp,
     grid: &Grid,
-    warp: PatchWarp,
-    min_eigen: f64,
+    prm: &PatchParams,
 ) -> bool {
     let n = grid.len();
-    let dof = warp.dof();
+    let full = prm.warp.dof();
+    let min_eigen = prm.min_eigen;
     let tp = if which_back { &mut p.back } else { &mut p.fwd };
     for l in 0..frame.levels.len() {
+        let dof = level_warp(prm, l).dof();
+        let w = &level_window(prm, l, start);
         // The values on the grown grid; the template is its inside and the gradients in patch
         // coordinates its central differences (for a shift, exactly the bilinear samples of the
         // frame's central-difference gradients).
@@ -552,7 +576,7 @@ fn make_template(
         );
         let (side, e) = (grid.side, grid.side + 2);
         let t = &mut tp.t[l * n..(l + 1) * n];
-        let sd = &mut tp.sd[l * dof * n..(l + 1) * dof * n];
+        let sd = &mut tp.sd[l * full * n..(l * full + dof) * n];
         let (tx, rest) = sd.split_at_mut(n);
         let (ty, rest) = rest.split_at_mut(n);
         for j in 0..side {
@@ -591,7 +615,7 @@ fn make_template(
             // Reorder so the shift's columns come last: [c0 c1 c2 c3 tx ty].
             sd.rotate_left(2 * n);
         }
-        let sd = &tp.sd[l * dof * n..(l + 1) * dof * n];
+        let sd = &tp.sd[l * full * n..(l * full + dof) * n];
         let col = |k: usize| &sd[k * n..(k + 1) * n];
         let (ix, iy) = (dof - 2, dof - 1);
         let (hxx, hxy, hyy) = (
@@ -649,7 +673,7 @@ fn search(
     prm: &PatchParams,
 ) -> Search {
     let n = grid.len();
-    let dof = prm.warp.dof();
+    let full = prm.warp.dof();
     let mut w = start;
     let mut iterations = 0;
     let levels = frame.levels.len();
@@ -667,15 +691,27 @@ fn search(
         } else {
             prm.eps.max(COARSE_EPS)
         };
+        let model = level_warp(prm, l);
+        let dof = model.dof();
         for _ in 0..prm.iterations {
-            sample(img, &w, l, grid.plain(), &mut p.vals, &mut p.xs, &mut p.ys);
+            // The window searched (image-aligned for the shift of an affine patch).
+            let win = level_window(prm, l, &w);
+            sample(
+                img,
+                &win,
+                l,
+                grid.plain(),
+                &mut p.vals,
+                &mut p.xs,
+                &mut p.ys,
+            );
             iterations += 1;
             let tp = if which_back { &p.back } else { &p.fwd };
             let t = &tp.t[l * n..(l + 1) * n];
             for ((e, v), t) in p.err.iter_mut().zip(&p.vals).zip(t) {
                 *e = v - t;
             }
-            let sd = &tp.sd[l * dof * n..(l + 1) * dof * n];
+            let sd = &tp.sd[l * full * n..(l * full + dof) * n];
             let mut g = [0f64; 6];
             for k in 0..dof {
                 g[k] = dot(&sd[k * n..(k + 1) * n], &p.err) as f64;
@@ -687,7 +723,7 @@ fn search(
                 dp[r] = (0..dof).map(|c| hinv[c * dof + r] * g[c]).sum();
             }
             // W <- W o W(dp)^-1: with W(dp) = M u + t, A' = A M^-1 and c' = c - A' t.
-            let (m, t) = match prm.warp {
+            let (m, t) = match model {
                 PatchWarp::Translation => ([1.0, 0.0, 0.0, 1.0], (dp[0], dp[1])),
                 PatchWarp::Affine => ([1.0 + dp[0], dp[1], dp[2], 1.0 + dp[3]], (dp[4], dp[5])),
             };
@@ -696,7 +732,7 @@ fn search(
                 return Err(LossReason::Singular);
             }
             let mi = [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det];
-            let a = w.a;
+            let a = win.a;
             let na = [
                 a[0] * mi[0] + a[1] * mi[2],
                 a[0] * mi[1] + a[1] * mi[3],
@@ -709,7 +745,7 @@ fn search(
                 w.c.y / s - (na[2] * t.0 + na[3] * t.1),
             );
             let next = Warp {
-                a: if prm.warp == PatchWarp::Translation {
+                a: if model == PatchWarp::Translation {
                     w.a
                 } else {
                     na
@@ -958,15 +994,8 @@ impl PatchTracker {
                         p.state.centre = Point::default();
                         p.warp = Warp::at(Point::default());
                     }
-                } else if !make_template(
-                    &mut p,
-                    false,
-                    &self.cur,
-                    &Warp::at(c),
-                    grid,
-                    self.params.warp,
-                    self.params.min_eigen,
-                ) {
+                } else if !make_template(&mut p, false, &self.cur, &Warp::at(c), grid, &self.params)
+                {
                     p.state.status = TrackStatus::Lost(LossReason::Singular);
                 }
                 p
@@ -1040,9 +1069,13 @@ fn track_patch(
         p.state.fb_error = None;
         return;
     }
-    let start = p.warp;
-    if prm.template == TemplateSource::Previous
-        && !make_template(p, false, prev, &start, grid, prm.warp, prm.min_eigen)
+    // Following the previous frame's patch, an affine patch is searched as the change between
+    // the two frames, on a window aligned with the image (the local motion of the frame is the
+    // same affine map whatever the window's shape): its template is a shifted grid, sampled
+    // without gathers, and its shape is that change composed with its shape so far.
+    let relative = prm.warp == PatchWarp::Affine && prm.template == TemplateSource::Previous;
+    let start = if relative { Warp::at(p.warp.c) } else { p.warp };
+    if prm.template == TemplateSource::Previous && !make_template(p, false, prev, &start, grid, prm)
     {
         p.state.status = TrackStatus::Lost(LossReason::Singular);
         return;
@@ -1062,11 +1095,26 @@ fn track_patch(
             if similarity < prm.min_ncc {
                 return lose(p, LossReason::LowConfidence);
             }
+            let shape = if relative {
+                let (d, a) = (found.a, p.warp.a);
+                [
+                    d[0] * a[0] + d[1] * a[2],
+                    d[0] * a[1] + d[1] * a[3],
+                    d[2] * a[0] + d[3] * a[2],
+                    d[2] * a[1] + d[3] * a[3],
+                ]
+            } else {
+                found.a
+            };
+            if !(0.2..=5.0).contains(&(shape[0] * shape[3] - shape[1] * shape[2])) {
+                return lose(p, LossReason::Degenerate);
+            }
             if prm.fb_max > 0.0 {
-                if !make_template(p, true, cur, &found, grid, prm.warp, prm.min_eigen) {
+                let back_start = if relative { Warp::at(c) } else { found };
+                if !make_template(p, true, cur, &back_start, grid, prm) {
                     return lose(p, LossReason::Singular);
                 }
-                match search(p, true, prev, found, grid, prm) {
+                match search(p, true, prev, back_start, grid, prm) {
                     Err(r) => return lose(p, r),
                     Ok((back, _, _)) => {
                         let e = back.c.dist(start.c);
@@ -1077,9 +1125,9 @@ fn track_patch(
                     }
                 }
             }
-            p.warp = found;
-            p.state.centre = found.c;
-            p.state.linear = found.a;
+            p.warp = Warp { a: shape, c };
+            p.state.centre = c;
+            p.state.linear = shape;
         }
     }
 }

@@ -75,8 +75,9 @@ fn patches_follow_the_points_of_a_rendered_target() {
             assert!(a.median_error < 0.8 && a.mean_error < 2.5, "{what}");
         }
         // Affine patches take the target's local shape: their linear part is the Jacobian of
-        // the ground-truth homography at their start (the rotation is about 50 degrees).
-        if warp == "affine" && prm.template == TemplateSource::First {
+        // the ground-truth homography at their start (the rotation is about 50 degrees), both
+        // against the first frame and as the composition of the changes between frames.
+        if warp == "affine" {
             use regtrack::geometry::{apply_homography, homography_between};
             let last = run.frames.len() - 1;
             let (q0, q1) = (
@@ -112,12 +113,18 @@ fn patches_follow_the_points_of_a_rendered_target() {
                     .zip(j)
                     .map(|(a, b)| (a - b).abs())
                     .fold(0.0, f64::max);
-                assert!(off < 0.25, "{:?} vs {j:?}", s1.linear);
                 devs.push(off);
             }
             assert!(devs.len() >= 30, "{}", devs.len());
             devs.sort_by(f64::total_cmp);
-            assert!(devs[devs.len() / 2] < 0.06, "{devs:?}");
+            let (median, worst) = (devs[devs.len() / 2], devs[devs.len() - 1]);
+            if prm.template == TemplateSource::First {
+                assert!(median < 0.06 && worst < 0.25, "{devs:?}");
+            } else {
+                // Composed frame after frame, an 11x11 window's shape wanders (its position
+                // does not: see the errors above); the median still follows the target.
+                assert!(median < 0.15, "{devs:?}");
+            }
         }
     }
 }

@@ -855,7 +855,7 @@ impl PatchTracker {
             imaging::gaussian_kernel(1, 0.0)
         };
         let pool = match params.threads {
-            0 => None,
+            0 | 1 => None,
             t => Some(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(t)

@@ -102,3 +102,34 @@ fn update_does_not_allocate() {
         }
     });
 }
+
+/// The many-patch tracker's update (one thread) does not allocate once its buffers have the
+/// frame's size: not for the frame's levels, not per patch.
+#[test]
+fn a_patch_update_does_not_allocate() {
+    use regtrack::patches::{PatchParams, PatchTracker};
+    let img = crate::common::texture("skimage_coffee.png");
+    let mut moved = img.clone();
+    for y in 0..img.height {
+        for x in 0..img.width {
+            moved.set(x, y, img.get((x + 1).min(img.width - 1), y));
+        }
+    }
+    for warp in ["translation", "affine"] {
+        let prm = PatchParams::parse(&[
+            ("warp".into(), warp.into()),
+            ("threads".into(), "1".into()),
+            ("fb_max".into(), "1".into()),
+        ])
+        .unwrap();
+        let mut t = PatchTracker::new(prm).unwrap();
+        let pts = t.detect(&img, 100, None);
+        t.initialize(&img, &pts).unwrap();
+        t.update(&moved).unwrap();
+        let before = allocations();
+        t.update(&img).unwrap();
+        t.update(&moved).unwrap();
+        assert_eq!(allocations() - before, 0, "{warp}");
+        assert!(t.tracking() > 50, "{warp}: {}", t.tracking());
+    }
+}

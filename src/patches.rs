@@ -399,6 +399,8 @@ impl Frame {
 struct Template {
     t: Vec<f32>,
     sd: Vec<f32>,
+    /// `SD^T T` per level: the residual's projection is `SD^T I(W(u))` minus this.
+    sdt: Vec<[f64; 6]>,
     hinv: Vec<[f64; 36]>,
     usable: Vec<bool>,
 }
@@ -411,7 +413,6 @@ struct Patch {
     fwd: Template,
     back: Template,
     vals: Vec<f32>,
-    err: Vec<f32>,
     xs: Vec<f32>,
     ys: Vec<f32>,
     /// The template's values on the grown grid.
@@ -449,6 +450,7 @@ impl Patch {
             t: vec![0.0; levels * n],
             sd: vec![0.0; levels * dof * n],
             hinv: vec![[0.0; 36]; levels],
+            sdt: vec![[0.0; 6]; levels],
             usable: vec![false; levels],
         };
         Patch {
@@ -464,7 +466,6 @@ impl Patch {
             fwd: template(),
             back: template(),
             vals: vec![0.0; n],
-            err: vec![0.0; n],
             xs: vec![0.0; grid.ex.len()],
             ys: vec![0.0; grid.ex.len()],
             ext: vec![0.0; grid.ex.len()],
@@ -617,6 +618,10 @@ fn make_template(
         }
         let sd = &tp.sd[l * full * n..(l * full + dof) * n];
         let col = |k: usize| &sd[k * n..(k + 1) * n];
+        let t = &tp.t[l * n..(l + 1) * n];
+        for k in 0..dof {
+            tp.sdt[l][k] = dot(col(k), t) as f64;
+        }
         let (ix, iy) = (dof - 2, dof - 1);
         let (hxx, hxy, hyy) = (
             dot(col(ix), col(ix)) as f64,
@@ -707,14 +712,11 @@ fn search(
             );
             iterations += 1;
             let tp = if which_back { &p.back } else { &p.fwd };
-            let t = &tp.t[l * n..(l + 1) * n];
-            for ((e, v), t) in p.err.iter_mut().zip(&p.vals).zip(t) {
-                *e = v - t;
-            }
+            // SD^T (I(W(u)) - T), with SD^T T made once per template.
             let sd = &tp.sd[l * full * n..(l * full + dof) * n];
             let mut g = [0f64; 6];
             for k in 0..dof {
-                g[k] = dot(&sd[k * n..(k + 1) * n], &p.err) as f64;
+                g[k] = dot(&sd[k * n..(k + 1) * n], &p.vals) as f64 - tp.sdt[l][k];
             }
             let hinv = &tp.hinv[l];
             let mut dp = [0f64; 6];

@@ -1077,6 +1077,7 @@ fn track_patch(
     // without gathers, and its shape is that change composed with its shape so far.
     let relative = prm.warp == PatchWarp::Affine && prm.template == TemplateSource::Previous;
     let start = if relative { Warp::at(p.warp.c) } else { p.warp };
+    p.state.fb_error = None;
     if prm.template == TemplateSource::Previous && !make_template(p, false, prev, &start, grid, prm)
     {
         p.state.status = TrackStatus::Lost(LossReason::Singular);
@@ -1180,6 +1181,22 @@ impl PatchRun {
             .sum();
         let t: f64 = self.times.iter().map(|d| d.as_secs_f64()).sum();
         if t > 0.0 { searched as f64 / t } else { 0.0 }
+    }
+
+    /// The mean and median forward-backward error (pixels) over every patch update that
+    /// measured one (`fb_max` > 0); `None` when none did.
+    pub fn forward_backward_errors(&self) -> Option<(f64, f64)> {
+        let e: Vec<f64> = self
+            .frames
+            .iter()
+            .flatten()
+            .filter_map(|s| s.fb_error)
+            .collect();
+        if e.is_empty() {
+            return None;
+        }
+        let mean = e.iter().sum::<f64>() / e.len() as f64;
+        Some((mean, crate::linalg::median(e)))
     }
 
     /// Mean iterations per patch update (all levels together).

@@ -75,7 +75,34 @@ def run_opencv(frames, pts, size, levels, iterations, eps, out_csv):
             f.write(f"{i},{k},{s},{x:.4f},{y:.4f},1,0,0,1,1\n")
     total = sum(times)
     times.sort()
-    return updates / total, 1.0 / times[len(times) // 2]
+    return updates / total, 1.0 / times[len(times) // 2], rows
+
+
+def opencv_forward_backward(frames, rows, n, size, levels, iterations, eps):
+    """The forward-backward error of OpenCV's tracks (untimed): each point tracked at frame i
+    tracked back to frame i - 1, against where it was there."""
+    import cv2
+    import numpy as np
+
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)
+    per_frame = [rows[i * n:(i + 1) * n] for i in range(len(frames))]
+    errors = []
+    for i in range(1, len(frames)):
+        both = [k for k in range(n)
+                if per_frame[i][k][2] == "tracking" and per_frame[i - 1][k][2] == "tracking"]
+        if not both:
+            continue
+        q = np.array([per_frame[i][k][3:5] for k in both], dtype=np.float32).reshape(-1, 1, 2)
+        back, st, _ = cv2.calcOpticalFlowPyrLK(
+            frames[i], frames[i - 1], q, None,
+            winSize=(size, size), maxLevel=levels - 1, criteria=crit,
+        )
+        for j, k in enumerate(both):
+            if st[j, 0] == 1:
+                x, y = per_frame[i - 1][k][3:5]
+                errors.append(float(np.hypot(back[j, 0, 0] - x, back[j, 0, 1] - y)))
+    errors.sort()
+    return sum(errors) / len(errors), errors[len(errors) // 2]
 
 
 def main():
@@ -107,24 +134,36 @@ def main():
             speeds.append((float(m.group(1)), float(m.group(2))))
             acc = re.search(r"accuracy: (.*)", text).group(1)
         speeds.sort()
-        results.append((f"regtrack {warp}", speeds[len(speeds) // 2], acc))
+        # The forward-backward error, from one more (untimed) run that measures it.
+        text = subprocess.run(
+            [args.regtrack, "track", "--seq", args.seq, "--patches", str(args.patches),
+             "--patch", f"warp={warp}", "--patch", "fb_max=1000", *common,
+             "--out", os.path.join(tmp, "fb.csv")],
+            check=True, capture_output=True, text=True,
+        ).stdout
+        m = re.search(r"forward-backward error: mean ([\d.]+) px, median ([\d.]+) px", text)
+        fb = (float(m.group(1)), float(m.group(2)))
+        results.append((f"regtrack {warp}", speeds[len(speeds) // 2], fb, acc))
     pts = first_points(os.path.join(tmp, "regtrack_translation.csv"))
     frames = read_frames(args.seq)
     cv_speeds = []
     for r in range(args.repeats):
         cv_csv = os.path.join(tmp, "opencv.csv")
-        cv_speeds.append(run_opencv(frames, pts, args.size, args.levels, 30, 0.01, cv_csv))
+        ups, fps, rows = run_opencv(frames, pts, args.size, args.levels, 30, 0.01, cv_csv)
+        cv_speeds.append((ups, fps))
     cv_speeds.sort()
+    fb = opencv_forward_backward(frames, rows, len(pts), args.size, args.levels, 30, 0.01)
     text = subprocess.run(
         [args.regtrack, "score-patches", "--seq", args.seq, "--tracks", cv_csv],
         check=True, capture_output=True, text=True,
     ).stdout
     acc = re.search(r"accuracy: (.*)", text).group(1)
-    results.append(("OpenCV calcOpticalFlowPyrLK", cv_speeds[len(cv_speeds) // 2], acc))
+    results.append(("OpenCV calcOpticalFlowPyrLK", cv_speeds[len(cv_speeds) // 2], fb, acc))
     print(f"{len(pts)} patches, {len(frames)} frames, window {args.size}x{args.size}, "
           f"{args.levels} levels, one thread, medians of {args.repeats} runs")
-    for name, (ups, fps), acc in results:
-        print(f"| {name} | {ups:,.0f} patch updates/s | {fps:,.1f} frames/s | {acc} |")
+    for name, (ups, fps), (fb_mean, fb_median), acc in results:
+        print(f"| {name} | {ups:,.0f} patch updates/s | {fps:,.1f} frames/s | "
+              f"forward-backward error mean {fb_mean:.3f} px, median {fb_median:.3f} px | {acc} |")
     return 0
 
 

@@ -465,6 +465,9 @@ fn run_patches(
         if params.threads == 1 { "" } else { "s" },
         run.iterations_per_update()
     );
+    if let Some((mean, median)) = run.forward_backward_errors() {
+        println!("forward-backward error: mean {mean:.3} px, median {median:.3} px");
+    }
     if let Some(a) = patches::accuracy(&run, &seq) {
         print_patch_accuracy(&a);
     }

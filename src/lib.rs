@@ -19,7 +19,8 @@
 //! names through the registries ([`tracker::TrackerSpec`]). Every iteration is reported to an
 //! [`observe::Observer`]. The [`imaging`] layer pre-processes only the region a tracker reads; the
 //! [`dataset`] module reads sequences and ground truth and renders synthetic sequences; [`eval`]
-//! measures alignment error, success rates and speed.
+//! measures alignment error, success rates and speed. (This example runs, on a rendered sequence,
+//! in `tests/it/patches.rs`.)
 //!
 //! ```no_run
 //! use regtrack::{dataset, tracker::{FrameInput, Tracker, TrackerSpec}, observe::NoObserver};

@@ -16,7 +16,7 @@ use std::sync::OnceLock;
 
 /// A rendered sequence (coffee on grass, the rotation profile, 30 frames, PNG), shared by the
 /// tests of this file; its folder lives as long as the test binary.
-fn sequence() -> &'static Sequence {
+pub(crate) fn sequence() -> &'static Sequence {
     static SEQ: OnceLock<(TempDir, Sequence)> = OnceLock::new();
     &SEQ.get_or_init(|| {
         let d = TempDir::new("patches");
@@ -310,4 +310,28 @@ fn the_patch_commands_write_score_and_refuse_bad_input() {
     ]);
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     assert!(!o.status.success() && err.contains("sise"), "{err}");
+}
+
+/// The crate documentation's example (src/lib.rs), run on the rendered sequence: every frame is
+/// tracked and reported.
+#[test]
+fn the_crate_documentation_example_runs() -> Result<(), Box<dyn std::error::Error>> {
+    use regtrack::observe::NoObserver;
+    use regtrack::tracker::{FrameInput, Tracker, TrackerSpec};
+    let seq = sequence();
+    let spec = TrackerSpec::from_names("esm", "ssd", "homography")?;
+    let mut tracker = Tracker::new(&spec)?;
+    let first = seq.load_gray(0)?;
+    tracker.initialize(
+        FrameInput::Gray8(&first),
+        &seq.ground_truth(0).ok_or("no ground truth")?,
+    )?;
+    for i in 1..seq.len() {
+        let frame = seq.load_gray(i)?;
+        let outcome = tracker.update(FrameInput::Gray8(&frame), &mut NoObserver);
+        assert_eq!(outcome.status, TrackStatus::Tracking, "frame {i}");
+        let truth = seq.ground_truth(i).ok_or("no ground truth")?;
+        assert!(regtrack::geometry::alignment_error(&outcome.corners, &truth) < 2.0);
+    }
+    Ok(())
 }

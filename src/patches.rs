@@ -1172,12 +1172,11 @@ impl PatchRun {
 
     /// Patch updates per second of tracking: patches searched, over the tracking time.
     pub fn updates_per_second(&self) -> f64 {
-        let searched: usize = self
-            .frames
+        // Every frame but the last is searched from in the next one.
+        let before_last = &self.frames[..self.frames.len().saturating_sub(1)];
+        let searched: usize = before_last
             .iter()
-            .skip(1)
-            .zip(self.frames.iter())
-            .map(|(_, before)| before.iter().filter(|s| s.tracking()).count())
+            .map(|f| f.iter().filter(|s| s.tracking()).count())
             .sum();
         let t: f64 = self.times.iter().map(|d| d.as_secs_f64()).sum();
         if t > 0.0 { searched as f64 / t } else { 0.0 }

@@ -1,5 +1,6 @@
 //! The speed benchmark behind `regtrack bench`: per tracker, iterations per frame, microseconds
-//! per iteration, tracker-only FPS (the search on pre-smoothed frames) and live-path FPS (from
+//! per iteration (the iterations' own time, [`crate::observe::Iteration::duration`]), the rest of
+//! a frame's time (pyramid, loss checks), tracker-only FPS (the search on pre-smoothed frames) and live-path FPS (from
 //! 8-bit frames in memory, pre-processing of the region included). Frames are decoded before
 //! timing starts; every figure is the median over repeats.
 
@@ -19,7 +20,10 @@ pub struct BenchRow {
     /// Frames tracked per repeat (the target may be lost before the end).
     pub frames: usize,
     pub iterations_per_frame: f64,
+    /// The time of one iteration: the search method's step and the driver's bookkeeping of it.
     pub us_per_iteration: f64,
+    /// A frame's time outside its iterations: the pyramid levels, the loss-of-track checks.
+    pub us_per_frame_other: f64,
     pub tracker_fps: f64,
     pub live_fps: f64,
     /// Initialisation time (template, NN index, ...), ms.
@@ -30,17 +34,17 @@ pub struct BenchRow {
 
 impl BenchRow {
     /// The column names of [`BenchRow::line`].
-    pub const HEADER: &'static str =
-        "tracker                     frames it/frame  us/iter  tracker FPS   live FPS   init ms";
+    pub const HEADER: &'static str = "tracker                     frames it/frame  us/iter  other us/frame  tracker FPS   live FPS   init ms";
 
     /// The row as `regtrack bench` prints it, under [`BenchRow::HEADER`].
     pub fn line(&self) -> String {
         format!(
-            "{:<26} {:>7} {:>8.2} {:>8.1} {:>12.0} {:>10.0} {:>9.1}{}",
+            "{:<26} {:>7} {:>8.2} {:>8.2} {:>15.1} {:>12.0} {:>10.0} {:>9.1}{}",
             self.tracker,
             self.frames,
             self.iterations_per_frame,
             self.us_per_iteration,
+            self.us_per_frame_other,
             self.tracker_fps,
             self.live_fps,
             self.init_ms,
@@ -101,6 +105,7 @@ pub fn bench_tracker(
             .collect(),
     };
     let (mut fps_t, mut fps_l, mut ipf, mut upi) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut other = Vec::new();
     let mut init_ms = Vec::new();
     let mut tracked = 0;
     let mut lost_at = None;
@@ -124,7 +129,9 @@ pub fn bench_tracker(
         if n > 0 && secs > 0.0 {
             fps_t.push(n as f64 / secs);
             ipf.push(counter.iterations as f64 / counter.frames.max(1) as f64);
-            upi.push(secs * 1e6 / counter.iterations.max(1) as f64);
+            let busy = counter.busy.as_secs_f64();
+            upi.push(busy * 1e6 / counter.iterations.max(1) as f64);
+            other.push((secs - busy).max(0.0) * 1e6 / n as f64);
         }
         tracked = n;
         // Live path: 8-bit frames, the tracker smooths the region it reads.
@@ -152,6 +159,7 @@ pub fn bench_tracker(
         frames: tracked,
         iterations_per_frame: median(ipf),
         us_per_iteration: median(upi),
+        us_per_frame_other: median(other),
         tracker_fps: median(fps_t),
         live_fps: median(fps_l),
         init_ms: median(init_ms),

@@ -75,6 +75,9 @@ pub struct Iteration<'a> {
     pub step: f64,
     /// Time since the frame's update started.
     pub elapsed: Duration,
+    /// The time this iteration took: the search method's step and the driver's bookkeeping of
+    /// it (the line search, the stop test), not the observer's own work.
+    pub duration: Duration,
     /// The patch sampled at the parameters after the iteration (pre-processed frame, `res x res`),
     /// when the observer asked for it ([`Observer::wants_patches`]).
     pub patch: Option<&'a [f32]>,
@@ -221,6 +224,8 @@ impl Observer for Recorder {
 pub struct IterationCounter {
     pub iterations: u64,
     pub frames: u64,
+    /// The iterations' summed [`Iteration::duration`].
+    pub busy: Duration,
 }
 
 impl Observer for IterationCounter {
@@ -228,7 +233,8 @@ impl Observer for IterationCounter {
         self.frames += 1;
     }
     #[inline]
-    fn iteration(&mut self, _it: &Iteration<'_>) {
+    fn iteration(&mut self, it: &Iteration<'_>) {
         self.iterations += 1;
+        self.busy += it.duration;
     }
 }

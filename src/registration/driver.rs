@@ -226,6 +226,13 @@ impl RegistrationTracker {
         self.ctx
     }
 
+    /// The finest level's context and search method, for driving single iterations (the
+    /// per-iteration benchmarks): after [`VisualTracker::initialize`] the method is initialised
+    /// on the template and the context's parameters are where the tracker is.
+    pub fn into_parts(self) -> (Context, Box<dyn SearchMethod>) {
+        (self.ctx, self.sm)
+    }
+
     /// The pre-smoothing kernel (of the finest level).
     pub fn smoothing(&self) -> &crate::imaging::GaussianKernel {
         self.pre.kernel()
@@ -456,8 +463,9 @@ impl RegistrationTracker {
         observer: &mut dyn Observer,
         (frame, level, iteration): (usize, usize, usize),
         (corners, similarity, step): (Quad, f64, f64),
-        started: Instant,
+        (started, iteration_started): (Instant, Instant),
     ) {
+        let duration = iteration_started.elapsed();
         let patch = if observer.wants_patches() {
             let p = ctx.params;
             ctx.sample_at(view, &p);
@@ -474,6 +482,7 @@ impl RegistrationTracker {
             similarity,
             step,
             elapsed: started.elapsed(),
+            duration,
             patch,
         });
     }
@@ -558,6 +567,7 @@ impl RegistrationTracker {
         let mut best: Option<(Params, f64, f64)> = None;
         let mut iterations = 0;
         for it in 0..params.max_iters {
+            let iteration_started = Instant::now();
             let p = ctx.params;
             ctx.sample_gradients_at(view, &p);
             let c = confidence.of(&ctx.work.values);
@@ -598,7 +608,7 @@ impl RegistrationTracker {
                 observer,
                 (frame, 0, first + it),
                 (corners, f, step),
-                started,
+                (started, iteration_started),
             );
             if step < params.eps {
                 break;
@@ -783,6 +793,7 @@ impl RegistrationTracker {
         let mut best: Option<(Params, f64, Params, super::Update)> = None;
         let mut halvings = 0;
         for it in 0..budget {
+            let iteration_started = Instant::now();
             let from = ctx.params;
             ctx.last_step = None;
             let s = sm.iterate(ctx, view)?;
@@ -824,7 +835,7 @@ impl RegistrationTracker {
                 observer,
                 (frame, level, first + it),
                 (corners, f, step),
-                started,
+                (started, iteration_started),
             );
             if observer.wants_method_visuals()
                 && let Some(v) = sm.visual(ctx)

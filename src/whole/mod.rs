@@ -297,6 +297,7 @@ impl Base {
                 similarity,
                 step: corners.change_norm(&start),
                 elapsed,
+                duration: elapsed,
                 patch: None,
             });
         }

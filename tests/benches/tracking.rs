@@ -1,7 +1,8 @@
-//! Criterion benchmarks of the hot paths: one iteration of ICLK, FCLK and ESM (SSD, homography,
-//! 50x50) on a real texture, the pre-processing of a tracker's region, and the many-patch
-//! tracker's frame (its time divided by the patches is the cost of one patch update). The
-//! whole-tracker figures are in `regtrack bench`.
+//! Criterion benchmarks of the hot paths: one iteration of ICLK, FCLK and ESM (the search
+//! method's `iterate` alone, SSD and ZNCC, homography and affine, 50x50) on a real texture, the
+//! stages of an iteration, the pre-processing of a tracker's region, one frame of the sampling
+//! methods, and the many-patch tracker's frame (its time divided by the patches is the cost of
+//! one patch update). The whole-tracker figures are in `regtrack bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use regtrack::geometry::Quad;
@@ -19,26 +20,49 @@ fn bench(c: &mut Criterion) {
     let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
     let start = Quad::from_array([251.5, 149.0, 351.0, 151.2, 349.0, 250.8, 248.9, 249.0]);
     let smoothed = regtrack::imaging::gaussian_blur(&img, &gaussian_kernel(5, 3.0));
-    // One update limited to one iteration, from the same start each time.
+    // One update limited to one iteration, from the same start each time (a whole frame:
+    // the loss checks included).
     let one_iteration = |c: &mut Criterion, spec: &TrackerSpec| {
         let mut one = spec.clone();
         one.set_param("max_iters", "1").expect("param");
         let mut t = Tracker::new(&one).expect("tracker");
         t.initialize(FrameInput::Smoothed(&smoothed), &truth)
             .expect("init");
-        c.bench_function(&format!("{} one iteration", one.label()), |b| {
-            b.iter(|| {
-                t.set_corners(&start).expect("corners");
-                black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
-            })
-        });
-    };
-    for sm in ["iclk", "fclk", "esm"] {
-        one_iteration(
-            c,
-            &TrackerSpec::from_names(sm, "ssd", "homography").expect("spec"),
+        c.bench_function(
+            &format!("{} one frame of one iteration", one.label()),
+            |b| {
+                b.iter(|| {
+                    t.set_corners(&start).expect("corners");
+                    black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
+                })
+            },
         );
+    };
+    // The search method's iteration alone, from the same start each time.
+    let view = smoothed.view();
+    let mut g = c.benchmark_group("iteration");
+    for sm in ["iclk", "fclk", "esm"] {
+        for am in ["ssd", "zncc"] {
+            for ssm in ["homography", "affine"] {
+                let spec = TrackerSpec::from_names(sm, am, ssm).expect("spec");
+                let mut t = RegistrationTracker::new(spec.registration().expect("registration"))
+                    .expect("tracker");
+                t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+                    .expect("init");
+                t.set_corners(&start).expect("corners");
+                let (mut ctx, mut method) = t.into_parts();
+                let from = ctx.params;
+                g.bench_function(format!("{sm}_{am}_{ssm}"), |b| {
+                    b.iter(|| {
+                        ctx.params = from;
+                        method.start_frame(&mut ctx);
+                        black_box(method.iterate(&mut ctx, black_box(&view)).expect("step"))
+                    })
+                });
+            }
+        }
     }
+    g.finish();
     // The stages of one iteration, on the context of a built tracker.
     let spec = TrackerSpec::from_names("fclk", "ssd", "homography").expect("spec");
     let mut t =
@@ -46,7 +70,6 @@ fn bench(c: &mut Criterion) {
     t.initialize(FrameInput::Smoothed(&smoothed), &truth)
         .expect("init");
     let mut ctx = t.into_context();
-    let view = smoothed.view();
     let p = ctx.params;
     let mut g = c.benchmark_group("stage");
     g.bench_function("warp_grid", |b| b.iter(|| ctx.warp_grid(black_box(&p))));

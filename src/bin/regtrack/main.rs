@@ -691,7 +691,7 @@ fn run_bench(
     };
     let loaded = bench::load_frames(&seq, frames)?;
     println!(
-        "{} frames of {}, {} repeats (medians); tracker-only = search on pre-smoothed frames, live = from 8-bit frames",
+        "{} frames of {}, {} repeats (medians); us/iter = an iteration's own time, other = the rest of a frame (pyramid, loss checks); tracker-only = search on pre-smoothed frames, live = from 8-bit frames",
         loaded.gray.len(),
         seq.name,
         repeats

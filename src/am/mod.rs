@@ -309,11 +309,9 @@ pub fn block_correlation(template: &[f32], current: &[f32], res: usize, cells: u
 ///
 /// What depends on the template and the grid only (each block's plane fit, the template's
 /// moments) is computed once, by [`BlockCorrelation::new`]; [`BlockCorrelation::of`] then makes
-/// five sums per sample and does not allocate.
+/// five sums per sample (row segment by row segment, four lanes) and does not allocate.
 #[derive(Clone, Debug, Default)]
 pub struct BlockCorrelation {
-    /// Per sample: its block and its coordinates in the block.
-    samples: Vec<(u8, f32, f32)>,
     template: Vec<f32>,
     blocks: Vec<Block>,
     /// What depends on the grid only, kept while `res` and `cells` stay: `(res, cells)` and per
@@ -344,14 +342,12 @@ impl BlockCorrelation {
         self.template.clear();
         self.blocks.clear();
         if res == 0 || template.len() < res * res {
-            self.samples.clear();
             self.geometry = None;
             return;
         }
-        // The grid's part, once per (res, cells): each sample's block and block-local
-        // coordinates (small sums), and per block the sums of 1, x, y, xx, xy, yy.
+        // The grid's part, once per (res, cells): per block the sums of 1, x, y, xx, xy, yy of
+        // the samples' block-local coordinates.
         if self.geometry != Some((res, cells)) {
-            self.samples.clear();
             self.geometry_sums.clear();
             self.geometry_sums.resize(cells * cells, [0.0; 6]);
             for r in 0..res {
@@ -361,7 +357,6 @@ impl BlockCorrelation {
                     let bc = c * cells / res;
                     let x = (c - bc * res / cells) as f64;
                     let b = br * cells + bc;
-                    self.samples.push((b as u8, x as f32, y as f32));
                     let terms = [1.0, x, y, x * x, x * y, y * y];
                     for (a, v) in self.geometry_sums[b].iter_mut().zip(terms) {
                         *a += v;
@@ -371,15 +366,8 @@ impl BlockCorrelation {
             self.geometry = Some((res, cells));
         }
         // The template's part: per block, sums of t, tx, ty, tt.
-        let mut sums = [[0.0f64; 4]; MAX_BLOCKS * MAX_BLOCKS];
-        for (&(b, x, y), &t) in self.samples.iter().zip(&template[..res * res]) {
-            let (x, y, t) = (x as f64, y as f64, t as f64);
-            let a = &mut sums[b as usize];
-            a[0] += t;
-            a[1] += t * x;
-            a[2] += t * y;
-            a[3] += t * t;
-        }
+        let template = &template[..res * res];
+        let sums = self.moments(template, template);
         let acc = self
             .geometry_sums
             .iter()
@@ -396,25 +384,47 @@ impl BlockCorrelation {
             let vt = b[9] - ut.dot(&(inv * ut));
             (vt.is_finite() && vt > 1e-6 * n).then_some((inv, ut, vt, n))
         }));
-        self.template.extend_from_slice(&template[..res * res]);
+        self.template.extend_from_slice(template);
+    }
+
+    /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` over its samples (`x`, `y` the
+    /// block-local coordinates), `p` and `q` being `res x res` patches. Each row of a block is a
+    /// run of neighbouring samples with the same `y`: summed in four f64 lanes, then added to
+    /// the block's sums.
+    fn moments(&self, p: &[f32], q: &[f32]) -> [[f64; 5]; MAX_BLOCKS * MAX_BLOCKS] {
+        let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
+        let Some((res, cells)) = self.geometry else {
+            return acc;
+        };
+        // The first column of each block (the first c with c cells / res = bc) and its
+        // block-local x (the origin of block bc is column bc res / cells).
+        let start = |bc: usize| (bc * res).div_ceil(cells);
+        for (r, (pr, qr)) in p.chunks_exact(res).zip(q.chunks_exact(res)).enumerate() {
+            let br = r * cells / res;
+            let y = (r - br * res / cells) as f64;
+            for bc in 0..cells {
+                let (c0, c1) = (start(bc), start(bc + 1).min(res));
+                let x0 = (c0 - bc * res / cells) as f64;
+                let [sp, spx, spp, sqp] = run_sums(&pr[c0..c1], &qr[c0..c1], x0);
+                let a = &mut acc[br * cells + bc];
+                a[0] += sp;
+                a[1] += spx;
+                a[2] += sp * y;
+                a[3] += spp;
+                a[4] += sqp;
+            }
+        }
+        acc
     }
 
     /// The confidence of `current` (0 when it is shorter than the template, flat or not finite).
     pub fn of(&self, current: &[f32]) -> f64 {
-        if current.len() < self.samples.len() {
+        let n = self.geometry.map_or(0, |(res, _)| res * res);
+        if current.len() < n {
             return 0.0;
         }
         // Per block, sums of: c, cx, cy, cc, tc.
-        let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
-        for ((&(b, x, y), &t), &v) in self.samples.iter().zip(&self.template).zip(current) {
-            let (x, y, t, v) = (x as f64, y as f64, t as f64, v as f64);
-            let a = &mut acc[b as usize];
-            a[0] += v;
-            a[1] += v * x;
-            a[2] += v * y;
-            a[3] += v * v;
-            a[4] += t * v;
-        }
+        let acc = self.moments(&current[..n], &self.template);
         let (mut num, mut den) = (0.0, 0.0);
         for (block, a) in self.blocks.iter().zip(&acc) {
             let Some((inv, ut, vt, n)) = block else {
@@ -439,6 +449,36 @@ impl BlockCorrelation {
     }
 }
 
+/// `[sum p, sum p x, sum p p, sum q p]` over a run of samples whose `x` is `x0, x0 + 1, ...`, in
+/// four f64 lanes.
+#[inline]
+fn run_sums(p: &[f32], q: &[f32], x0: f64) -> [f64; 4] {
+    let mut lanes = [[0.0f64; 4]; 4];
+    let (ep, eq) = (p.chunks_exact(4), q.chunks_exact(4));
+    let (rp, rq) = (ep.remainder(), eq.remainder());
+    let mut x = [x0, x0 + 1.0, x0 + 2.0, x0 + 3.0];
+    for (a, b) in ep.zip(eq) {
+        for l in 0..4 {
+            let (v, t) = (a[l] as f64, b[l] as f64);
+            lanes[0][l] += v;
+            lanes[1][l] += v * x[l];
+            lanes[2][l] += v * v;
+            lanes[3][l] += t * v;
+            x[l] += 4.0;
+        }
+    }
+    let mut out = lanes.map(|l| (l[0] + l[1]) + (l[2] + l[3]));
+    for (&a, &b) in rp.iter().zip(rq) {
+        let (v, t) = (a as f64, b as f64);
+        out[0] += v;
+        out[1] += v * x[0];
+        out[2] += v * v;
+        out[3] += t * v;
+        x[0] += 1.0;
+    }
+    out
+}
+
 /// The sum of a patch (vectorised like [`dot`]).
 pub fn sum(a: &[f32]) -> f64 {
     let mut total = 0.0f64;
@@ -456,15 +496,208 @@ pub fn sum(a: &[f32]) -> f64 {
     total
 }
 
+/// Samples per block of [`accumulate_jtj`] and [`jt_times`]: every column's block stays in the
+/// L1 cache while it is read; sums within a block are f32, across blocks f64 (as in [`dot`]).
+const JT_BLOCK: usize = 256;
+
+/// Eight f32 lanes (one AVX register).
+type Lanes = [f32; 8];
+
+/// `acc += x * y`, lane by lane (fused multiply-adds).
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+#[inline(always)]
+fn fma_lanes(acc: &mut Lanes, x: &Lanes, y: &Lanes) {
+    for l in 0..8 {
+        acc[l] = x[l].mul_add(y[l], acc[l]);
+    }
+}
+
+/// The sum of the lanes.
+#[inline(always)]
+fn lanes_sum(a: &Lanes) -> f32 {
+    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]))
+}
+
+/// Eight consecutive values from `i`.
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+#[inline(always)]
+fn lanes_at(v: &[f32], i: usize) -> &Lanes {
+    v[i..i + 8].try_into().expect("eight values")
+}
+
+/// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
+#[cfg(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+))]
+fn tile_2x4(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
+    use std::arch::x86_64::*;
+    assert!(rows.iter().chain(&cols).all(|c| c.len() >= full) && full.is_multiple_of(8));
+    let mut out = [[[0f32; 8]; 4]; 2];
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
+    // index i with i + 8 <= full <= the slice's length (asserted above).
+    unsafe {
+        let mut s = [[_mm256_setzero_ps(); 4]; 2];
+        let mut i = 0;
+        while i < full {
+            let x0 = _mm256_loadu_ps(rows[0].as_ptr().add(i));
+            let x1 = _mm256_loadu_ps(rows[1].as_ptr().add(i));
+            for t in 0..4 {
+                let y = _mm256_loadu_ps(cols[t].as_ptr().add(i));
+                s[0][t] = _mm256_fmadd_ps(x0, y, s[0][t]);
+                s[1][t] = _mm256_fmadd_ps(x1, y, s[1][t]);
+            }
+            i += 8;
+        }
+        for r in 0..2 {
+            for t in 0..4 {
+                _mm256_storeu_ps(out[r][t].as_mut_ptr(), s[r][t]);
+            }
+        }
+    }
+    out
+}
+
+/// [`tile_2x4`] without SIMD intrinsics (the build for CPUs without AVX2 and FMA; compared
+/// with the SIMD version by a test).
+#[cfg(not(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+)))]
+use tile_2x4_portable as tile_2x4;
+
+/// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn tile_2x4_portable(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
+    let mut s = [[[0f32; 8]; 4]; 2];
+    for i in (0..full).step_by(8) {
+        let x = [lanes_at(rows[0], i), lanes_at(rows[1], i)];
+        for (t, c) in cols.iter().enumerate() {
+            let y = lanes_at(c, i);
+            fma_lanes(&mut s[0][t], x[0], y);
+            fma_lanes(&mut s[1][t], x[1], y);
+        }
+    }
+    s
+}
+
+/// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
+#[cfg(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+))]
+fn columns_times(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [Lanes; MAX_DOF] {
+    use std::arch::x86_64::*;
+    assert!(cols.iter().all(|c| c.len() >= full) && v.len() >= full && full.is_multiple_of(8));
+    let mut out = [[0f32; 8]; MAX_DOF];
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
+    // index i with i + 8 <= full <= the slice's length (asserted above).
+    unsafe {
+        let mut s = [_mm256_setzero_ps(); MAX_DOF];
+        let mut i = 0;
+        while i < full {
+            let x = _mm256_loadu_ps(v.as_ptr().add(i));
+            for k in 0..MAX_DOF {
+                s[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(cols[k].as_ptr().add(i)), s[k]);
+            }
+            i += 8;
+        }
+        for k in 0..MAX_DOF {
+            _mm256_storeu_ps(out[k].as_mut_ptr(), s[k]);
+        }
+    }
+    out
+}
+
+#[cfg(not(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+)))]
+use columns_times_portable as columns_times;
+
+/// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn columns_times_portable(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [Lanes; MAX_DOF] {
+    let mut s = [[0f32; 8]; MAX_DOF];
+    for i in (0..full).step_by(8) {
+        let x = lanes_at(v, i);
+        for (sk, c) in s.iter_mut().zip(cols) {
+            fma_lanes(sk, x, lanes_at(c, i));
+        }
+    }
+    s
+}
+
 /// Adds `J^T J` into `acc` (stride [`MAX_DOF`]). `J` is stored by parameter: column `k` is
 /// `jac[k N..(k + 1) N]` (the layout of [`crate::ssm::Ssm::jacobian`]'s projection).
+///
+/// Block by block of [`JT_BLOCK`] samples, the upper triangle in tiles of two rows by four
+/// columns: each load feeds more than one multiply-add, and the eight accumulators of a tile
+/// keep both FMA units busy.
 pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
-    let n = jac.len() / dof.max(1);
-    for a in 0..dof {
-        let ja = &jac[a * n..(a + 1) * n];
-        for b in a..dof {
-            acc[a * MAX_DOF + b] += dot(ja, &jac[b * n..(b + 1) * n]);
+    let dof = dof.min(MAX_DOF);
+    if dof == 0 {
+        return;
+    }
+    let n = jac.len() / dof;
+    let mut start = 0;
+    while start < n {
+        let len = JT_BLOCK.min(n - start);
+        let full = len / 8 * 8;
+        // Rows and columns past `dof` read the last column; their sums are dropped.
+        let col = |k: usize| &jac[k.min(dof - 1) * n + start..][..len];
+        for a in (0..dof).step_by(2) {
+            for b in (a / 4 * 4..dof).step_by(4) {
+                let rows = [col(a), col(a + 1)];
+                let cols = [col(b), col(b + 1), col(b + 2), col(b + 3)];
+                let s = tile_2x4(rows, cols, full);
+                for (r, (row, sr)) in rows.iter().zip(&s).enumerate() {
+                    for (t, (c, st)) in cols.iter().zip(sr).enumerate() {
+                        let (i, j) = (a + r, b + t);
+                        if i < dof && j < dof && j >= i {
+                            let mut v = lanes_sum(st);
+                            for k in full..len {
+                                v = row[k].mul_add(c[k], v);
+                            }
+                            acc[i * MAX_DOF + j] += v as f64;
+                        }
+                    }
+                }
+            }
         }
+        start += len;
     }
     for i in 0..dof {
         for j in 0..i {
@@ -473,12 +706,32 @@ pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF
     }
 }
 
-/// `out[k] = sum_i J[k N + i] v[i]` (`J` stored by parameter).
+/// `out[k] = sum_i J[k N + i] v[i]` (`J` stored by parameter): every column in one pass over
+/// `v`, block by block of [`JT_BLOCK`] samples.
 pub fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
-    let n = jac.len() / dof.max(1);
     out.fill(0.0);
-    for k in 0..dof {
-        out[k] = dot(&jac[k * n..(k + 1) * n], v);
+    let dof = dof.min(MAX_DOF);
+    if dof == 0 {
+        return;
+    }
+    let n = (jac.len() / dof).min(v.len());
+    let stride = jac.len() / dof;
+    let mut start = 0;
+    while start < n {
+        let len = JT_BLOCK.min(n - start);
+        let full = len / 8 * 8;
+        let vv = &v[start..start + len];
+        let cols: [&[f32]; MAX_DOF] =
+            std::array::from_fn(|k| &jac[k.min(dof - 1) * stride + start..][..len]);
+        let s = columns_times(&cols, vv, full);
+        for k in 0..dof {
+            let mut t = lanes_sum(&s[k]);
+            for q in full..len {
+                t = vv[q].mul_add(cols[k][q], t);
+            }
+            out[k] += t as f64;
+        }
+        start += len;
     }
 }
 

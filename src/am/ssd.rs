@@ -35,10 +35,7 @@ impl Am for Ssd {
             Wrt::Current => 1.0,
             Wrt::Template => -1.0,
         };
-        for ((g, &t), &c) in grad.iter_mut().zip(&self.template).zip(current) {
-            *g = sign * (t - c);
-        }
-        -0.5 * sum_sq_diff(&self.template, current)
+        -0.5 * residual(&self.template, current, sign, grad)
     }
     fn hessian(
         &mut self,
@@ -54,11 +51,65 @@ impl Am for Ssd {
     }
 }
 
+/// Eight f32 lanes.
+type Lanes = [f32; 8];
+
+/// `sum_i (a_i - b_i)^2`: eight lanes within blocks of 256 pixels, f64 across blocks.
 fn sum_sq_diff(a: &[f32], b: &[f32]) -> f64 {
     let mut total = 0.0f64;
     for (ca, cb) in a.chunks(256).zip(b.chunks(256)) {
-        let s: f32 = ca.iter().zip(cb).map(|(x, y)| (x - y) * (x - y)).sum();
-        total += s as f64;
+        let mut lanes: Lanes = [0.0; 8];
+        let (ea, eb) = (ca.chunks_exact(8), cb.chunks_exact(8));
+        let tail: f32 = ea
+            .remainder()
+            .iter()
+            .zip(eb.remainder())
+            .map(|(x, y)| (x - y) * (x - y))
+            .sum();
+        for (x, y) in ea.zip(eb) {
+            for l in 0..8 {
+                let d = x[l] - y[l];
+                lanes[l] = d.mul_add(d, lanes[l]);
+            }
+        }
+        total += (lanes.iter().sum::<f32>() + tail) as f64;
+    }
+    total
+}
+
+/// `grad_i = sign (t_i - c_i)` and, in the same pass, `sum_i (t_i - c_i)^2`.
+fn residual(template: &[f32], current: &[f32], sign: f32, grad: &mut [f32]) -> f64 {
+    let mut total = 0.0f64;
+    for ((ct, cc), cg) in template
+        .chunks(256)
+        .zip(current.chunks(256))
+        .zip(grad.chunks_mut(256))
+    {
+        let mut lanes: Lanes = [0.0; 8];
+        let (mut et, mut ec, mut eg) = (
+            ct.chunks_exact(8),
+            cc.chunks_exact(8),
+            cg.chunks_exact_mut(8),
+        );
+        for ((t, c), g) in (&mut et).zip(&mut ec).zip(&mut eg) {
+            for l in 0..8 {
+                let d = t[l] - c[l];
+                g[l] = sign * d;
+                lanes[l] = d.mul_add(d, lanes[l]);
+            }
+        }
+        let mut tail = 0.0f32;
+        for ((t, c), g) in et
+            .remainder()
+            .iter()
+            .zip(ec.remainder())
+            .zip(eg.into_remainder())
+        {
+            let d = t - c;
+            *g = sign * d;
+            tail += d * d;
+        }
+        total += (lanes.iter().sum::<f32>() + tail) as f64;
     }
     total
 }

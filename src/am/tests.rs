@@ -359,3 +359,107 @@ fn block_correlation_reused_equals_fresh() {
         );
     }
 }
+
+/// `J^T J` and `J^T v` against plain double-precision sums, for every number of parameters and
+/// lengths with and without a tail after the last whole group of eight and block of 256; the
+/// portable kernels against the SIMD ones.
+#[test]
+fn the_jacobian_products_match_plain_sums() {
+    let mut rng = Rng::new(31);
+    for dof in 1..=MAX_DOF {
+        for n in [1, 7, 8, 50, 257, 2500] {
+            let jac: Vec<f32> = (0..n * dof).map(|_| rng.range(-2.0, 2.0) as f32).collect();
+            let v: Vec<f32> = (0..n).map(|_| rng.range(-50.0, 50.0) as f32).collect();
+            let col = |k: usize| &jac[k * n..(k + 1) * n];
+            let plain = |a: &[f32], b: &[f32]| -> f64 {
+                a.iter().zip(b).map(|(&x, &y)| x as f64 * y as f64).sum()
+            };
+            let mut h = [0.0; MAX_DOF * MAX_DOF];
+            accumulate_jtj(&jac, dof, &mut h);
+            let mut g = [0.0; MAX_DOF];
+            jt_times(&jac, &v, dof, &mut g);
+            for a in 0..dof {
+                let want = plain(col(a), &v);
+                assert!(
+                    (g[a] - want).abs() <= 1e-5 * (1.0 + want.abs()) * n as f64,
+                    "J^T v"
+                );
+                for b in 0..dof {
+                    let want = plain(col(a), col(b));
+                    let got = h[a * MAX_DOF + b];
+                    assert!(
+                        (got - want).abs() <= 1e-5 * (1.0 + want.abs()),
+                        "dof {dof}, n {n}, H[{a},{b}]: {got} vs {want}"
+                    );
+                }
+            }
+            // Entries past dof are left alone.
+            assert!(h[dof..MAX_DOF].iter().all(|&x| x == 0.0));
+            let full = n / 8 * 8;
+            let cols: [&[f32]; MAX_DOF] = std::array::from_fn(|k| col(k.min(dof - 1)));
+            assert_eq!(
+                super::columns_times(&cols, &v, full),
+                super::columns_times_portable(&cols, &v, full)
+            );
+            let rows = [col(0), col(dof.min(2) - 1)];
+            let four = [cols[0], cols[1], cols[2], cols[3]];
+            let (simd, portable) = (
+                super::tile_2x4(rows, four, full),
+                super::tile_2x4_portable(rows, four, full),
+            );
+            for (x, y) in simd
+                .iter()
+                .flatten()
+                .flatten()
+                .zip(portable.iter().flatten().flatten())
+            {
+                assert!((x - y).abs() <= 1e-4 * (1.0 + y.abs()), "{x} vs {y}");
+            }
+        }
+    }
+}
+
+/// The block correlation against its definition written plainly: per block, a plane fitted to
+/// each patch by least squares (global coordinates: the fit does not depend on the origin), the
+/// residuals correlated, the blocks averaged with the template's residual variance as weight.
+#[test]
+fn the_block_correlation_is_its_definition() {
+    let mut rng = Rng::new(5);
+    for &(res, cells) in &[(50usize, 4usize), (13, 3), (7, 7), (21, 8), (5, 4)] {
+        let t = smooth_patch(&mut rng, res);
+        let c: Vec<f32> = t
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| 0.8 * v + 0.3 * (i % res) as f32 + rng.range(-9.0, 9.0) as f32)
+            .collect();
+        let mut blocks: Vec<Vec<(f64, f64, f64, f64)>> = vec![Vec::new(); cells * cells];
+        for r in 0..res {
+            for col in 0..res {
+                let b = (r * cells / res) * cells + col * cells / res;
+                let i = r * res + col;
+                blocks[b].push((col as f64, r as f64, t[i] as f64, c[i] as f64));
+            }
+        }
+        let residuals = |pts: &[(f64, f64, f64, f64)], pick: fn(&(f64, f64, f64, f64)) -> f64| {
+            let a = nalgebra::DMatrix::from_fn(pts.len(), 3, |i, k| [1.0, pts[i].0, pts[i].1][k]);
+            let z = nalgebra::DVector::from_iterator(pts.len(), pts.iter().map(pick));
+            // A block one sample wide or high has no plane: it is left out.
+            let inv = (a.transpose() * &a).try_inverse()?;
+            let coef = inv * a.transpose() * &z;
+            Some(z - a * coef)
+        };
+        let (mut num, mut den) = (0.0, 0.0);
+        for pts in blocks.iter().filter(|b| b.len() >= 4) {
+            let (Some(rt), Some(rc)) = (residuals(pts, |p| p.2), residuals(pts, |p| p.3)) else {
+                continue;
+            };
+            let (vt, vc) = (rt.dot(&rt), rc.dot(&rc));
+            num += vt * rt.dot(&rc) / (vt * vc).sqrt();
+            den += vt;
+        }
+        // No block with a plane: 0.
+        let want = if den > 0.0 { num / den } else { 0.0 };
+        let got = block_correlation(&t, &c, res, cells);
+        assert!((got - want).abs() < 1e-9, "{res} {cells}: {got} vs {want}");
+    }
+}

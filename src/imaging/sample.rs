@@ -205,7 +205,7 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
     let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
     let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
-    // Whole groups of eight points with AVX2 gathers, the rest below.
+    // Whole groups of eight points with AVX2, the rest below.
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     let done = avx2::values(img, xs, ys, out);
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
@@ -332,7 +332,7 @@ pub fn sample_values_gradients(
         }
         return;
     }
-    // Whole groups of eight points with AVX2 gathers, the rest below.
+    // Whole groups of eight points with AVX2, the rest below.
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     let done = avx2::values_gradients(img, xs, ys, values, gx, gy);
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
@@ -385,11 +385,48 @@ pub fn sample_values_gradients(
     }
 }
 
-/// AVX2 versions of the sampling loops: eight points at a time with gathers.
+/// AVX2 versions of the sampling loops: eight points at a time, the pixels of each point read
+/// with short loads of neighbouring pixels and transposed (gathers are several times slower on
+/// CPUs with the gather-data-sampling mitigation).
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
 mod avx2 {
     use super::ImageView;
     use std::arch::x86_64::*;
+
+    /// Two pixels at `a` and two at `b`: `[a[0], a[1], b[0], b[1]]`.
+    ///
+    /// # Safety
+    /// `a` and `b` must each point to two readable `f32`.
+    #[inline(always)]
+    unsafe fn pairs(a: *const f32, b: *const f32) -> __m128 {
+        // SAFETY: the caller's contract; unaligned 8-byte loads.
+        unsafe {
+            let lo = _mm_load_sd(a as *const f64);
+            _mm_castpd_ps(_mm_loadh_pd(lo, b as *const f64))
+        }
+    }
+
+    /// Eight points' four values each (`q[k]`: point `k`) as four vectors of eight points (one
+    /// per value).
+    #[inline(always)]
+    fn transpose8x4(q: [__m128; 8]) -> [__m256; 4] {
+        // SAFETY: AVX is enabled at compile time (the module's cfg); no memory is touched.
+        unsafe {
+            let r0 = _mm256_set_m128(q[4], q[0]);
+            let r1 = _mm256_set_m128(q[5], q[1]);
+            let r2 = _mm256_set_m128(q[6], q[2]);
+            let r3 = _mm256_set_m128(q[7], q[3]);
+            let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+            let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+            let pd = _mm256_castps_pd;
+            [
+                _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2))),
+                _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2))),
+                _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3))),
+                _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3))),
+            ]
+        }
+    }
 
     /// Bilinear values (border replicated) of the first `8 * (len / 8)` points; returns how many
     /// were done. The view is at least 2x2 and uses [`super::Border::Replicate`].
@@ -402,7 +439,7 @@ mod avx2 {
             return 0;
         }
         // SAFETY: AVX2 is enabled at compile time (cfg above); the loads and stores stay within
-        // `xs`, `ys` and `out` (i + 8 <= n); the gathers read `data` at the clamped indices
+        // `xs`, `ys` and `out` (i + 8 <= n); the loads read `data` at the clamped indices
         // bounded as explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
@@ -442,10 +479,15 @@ mod avx2 {
                     _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), vw),
                     _mm256_cvttps_epi32(fx),
                 );
-                let p00 = _mm256_i32gather_ps::<4>(base, idx);
-                let p10 = _mm256_i32gather_ps::<4>(base.add(1), idx);
-                let p01 = _mm256_i32gather_ps::<4>(base.add(w), idx);
-                let p11 = _mm256_i32gather_ps::<4>(base.add(w + 1), idx);
+                // Each point's two pixel pairs, (p00, p10) and (p01, p11), are two 8-byte
+                // loads (cheaper than four gathers, which microcode mitigations make slow),
+                // transposed into one vector per corner.
+                let mut at = [0i32; 8];
+                _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, idx);
+                let [p00, p10, p01, p11] = transpose8x4(std::array::from_fn(|k| {
+                    let p = base.add(at[k] as usize);
+                    pairs(p, p.add(w))
+                }));
                 let top = _mm256_fmadd_ps(ax, _mm256_sub_ps(p10, p00), p00);
                 let bot = _mm256_fmadd_ps(ax, _mm256_sub_ps(p11, p01), p01);
                 let v = _mm256_fmadd_ps(ay, _mm256_sub_ps(bot, top), top);
@@ -481,8 +523,8 @@ mod avx2 {
             return 0;
         }
         // SAFETY: AVX2 is enabled at compile time; loads and stores stay within the slices
-        // (i + 8 <= n); a group is gathered only when all its points are inside, so every
-        // gathered index is within `data` as explained above.
+        // (i + 8 <= n); a group is read only when all its points are inside, so every
+        // index read is within `data` as explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
             let inv = _mm256_set1_ps(1.0 / img.scale);
@@ -520,14 +562,31 @@ mod avx2 {
                     _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_sub_ps(fy, one)), vw),
                     _mm256_cvttps_epi32(_mm256_sub_ps(fx, one)),
                 );
-                let g = |r: usize, c: usize| {
-                    _mm256_i32gather_ps::<4>(img.data.as_ptr().add(r * w + c), idx)
-                };
+                let mut at = [0i32; 8];
+                _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, idx);
+                let base = img.data.as_ptr();
+                let p = |k: usize| base.add(at[k] as usize);
+                // Rows 1 and 2 of each point's 4x4 neighbourhood, columns 0 to 3, and rows 0
+                // and 3, columns 1 and 2: loads of neighbouring pixels, transposed into one
+                // vector per pixel of the cross.
+                let r1 = transpose8x4(std::array::from_fn(|k| _mm_loadu_ps(p(k).add(w))));
+                let r2 = transpose8x4(std::array::from_fn(|k| _mm_loadu_ps(p(k).add(2 * w))));
+                let r03 = transpose8x4(std::array::from_fn(|k| {
+                    pairs(p(k).add(1), p(k).add(3 * w + 1))
+                }));
                 let lerp =
                     |a: __m256, b: __m256, t: __m256| _mm256_fmadd_ps(t, _mm256_sub_ps(b, a), a);
-                let hz = |r: usize, c: usize| lerp(g(r, c), g(r, c + 1), ax);
-                let (h01, h10, h11, h12) = (hz(0, 1), hz(1, 0), hz(1, 1), hz(1, 2));
-                let (h20, h21, h22, h31) = (hz(2, 0), hz(2, 1), hz(2, 2), hz(3, 1));
+                let (h10, h11, h12) = (
+                    lerp(r1[0], r1[1], ax),
+                    lerp(r1[1], r1[2], ax),
+                    lerp(r1[2], r1[3], ax),
+                );
+                let (h20, h21, h22) = (
+                    lerp(r2[0], r2[1], ax),
+                    lerp(r2[1], r2[2], ax),
+                    lerp(r2[2], r2[3], ax),
+                );
+                let (h01, h31) = (lerp(r03[0], r03[1], ax), lerp(r03[2], r03[3], ax));
                 let v = lerp(h11, h21, ay);
                 let right = lerp(h12, h22, ay);
                 let left = lerp(h10, h20, ay);

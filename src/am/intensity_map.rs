@@ -37,7 +37,6 @@
 //! The normal equations are a `K x K` pentadiagonal SPD system, solved by a banded Cholesky
 //! factorisation (`O(K)`) at each update.
 
-use super::dot;
 use crate::linalg::MAX_DOF;
 
 /// Number of nodes of a map.
@@ -60,7 +59,7 @@ impl PlMap {
 
     /// The segment of `x` and the position in it (outside `0..1` when extrapolating).
     #[inline]
-    fn locate(x: f64) -> (usize, f64) {
+    pub fn locate(x: f64) -> (usize, f64) {
         let s = x / STEP;
         let k = if s.is_finite() {
             (s.floor().max(0.0) as usize).min(NODES - 2)
@@ -74,6 +73,12 @@ impl PlMap {
     #[inline]
     pub fn eval(&self, x: f64) -> (f64, f64) {
         let (k, f) = Self::locate(x);
+        self.eval_at(k, f)
+    }
+
+    /// [`PlMap::eval`] at the point [`PlMap::locate`] placed (segment `k`, position `f`).
+    #[inline]
+    pub fn eval_at(&self, k: usize, f: f64) -> (f64, f64) {
         let (a, b) = (self.0[k], self.0[k + 1]);
         (a + f * (b - a), (b - a) / STEP)
     }
@@ -108,6 +113,12 @@ impl MapFit {
     #[inline]
     pub fn add(&mut self, x: f64, y: f64, w: f64) {
         let (k, f) = PlMap::locate(x);
+        self.add_at(k, f, y, w);
+    }
+
+    /// [`MapFit::add`] at the point [`PlMap::locate`] placed (segment `k`, position `f`).
+    #[inline]
+    pub fn add_at(&mut self, k: usize, f: f64, y: f64, w: f64) {
         let (h0, h1) = (1.0 - f, f);
         self.diag[k] += w * h0 * h0;
         self.diag[k + 1] += w * h1 * h1;
@@ -167,12 +178,13 @@ fn banded_cholesky_solve(
     d2: &[f64; NODES],
     b: &mut [f64; NODES],
 ) -> bool {
-    // (L[j][j - 2], L[j][j - 1], L[j][j]) per row.
+    // (L[j][j - 2], L[j][j - 1], 1 / L[j][j]) per row: the reciprocal of the diagonal, so
+    // that the substitutions multiply (one division per row, on the factorisation's chain).
     let mut l = [[0.0f64; 3]; NODES];
     for j in 0..NODES {
-        let l2 = if j >= 2 { d2[j - 2] / l[j - 2][2] } else { 0.0 };
+        let l2 = if j >= 2 { d2[j - 2] * l[j - 2][2] } else { 0.0 };
         let l1 = if j >= 1 {
-            (d1[j - 1] - l2 * l[j - 1][1]) / l[j - 1][2]
+            (d1[j - 1] - l2 * l[j - 1][1]) * l[j - 1][2]
         } else {
             0.0
         };
@@ -180,7 +192,7 @@ fn banded_cholesky_solve(
         if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return false;
         }
-        l[j] = [l2, l1, d.sqrt()];
+        l[j] = [l2, l1, 1.0 / d.sqrt()];
     }
     for j in 0..NODES {
         let mut s = b[j];
@@ -190,7 +202,7 @@ fn banded_cholesky_solve(
         if j >= 2 {
             s -= l[j][0] * b[j - 2];
         }
-        b[j] = s / l[j][2];
+        b[j] = s * l[j][2];
     }
     for j in (0..NODES).rev() {
         let mut s = b[j];
@@ -200,32 +212,19 @@ fn banded_cholesky_solve(
         if j + 2 < NODES {
             s -= l[j + 2][0] * b[j + 2];
         }
-        b[j] = s / l[j][2];
+        b[j] = s * l[j][2];
     }
     true
 }
 
-/// `out = J^T diag(d) J` (row-major `dof x dof`, `J` stored by parameter); `tmp` is an `N`
-/// scratch.
-pub(crate) fn jt_diag_j(
-    jac: &[f32],
-    d: &[f32],
-    dof: usize,
-    tmp: &mut Vec<f32>,
-    out: &mut [f64; MAX_DOF * MAX_DOF],
-) {
-    let n = d.len();
-    tmp.resize(n, 0.0);
+/// `out = J^T diag(d) J` (row-major `dof x dof`, `J` stored by parameter).
+pub(crate) fn jt_diag_j(jac: &[f32], d: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_DOF]) {
+    let mut acc = [0.0f64; MAX_DOF * MAX_DOF];
+    super::accumulate_weighted_jtj(jac, Some(d), dof, &mut acc);
     out.iter_mut().for_each(|v| *v = 0.0);
     for a in 0..dof {
-        let ja = &jac[a * n..(a + 1) * n];
-        for ((t, &x), &w) in tmp.iter_mut().zip(ja).zip(d) {
-            *t = x * w;
-        }
-        for b in a..dof {
-            let v = dot(tmp, &jac[b * n..(b + 1) * n]);
-            out[a * dof + b] = v;
-            out[b * dof + a] = v;
+        for b in 0..dof {
+            out[a * dof + b] = acc[a * MAX_DOF + b];
         }
     }
 }

@@ -175,7 +175,6 @@ pub struct Kld {
     vp: Vec<f64>,
     v0: Vec<f64>,
     diag: Vec<f32>,
-    tmp: Vec<f32>,
 }
 
 impl Kld {
@@ -350,7 +349,7 @@ impl Am for Kld {
             self.diag[j] = dj as f32;
         }
         if with_diag {
-            super::intensity_map::jt_diag_j(jac, &self.diag, dof, &mut self.tmp, out);
+            super::intensity_map::jt_diag_j(jac, &self.diag, dof, out);
             let s = SCALE * SCALE * inv_n;
             out[..dof * dof].iter_mut().for_each(|v| *v *= s);
         } else {

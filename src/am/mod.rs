@@ -667,11 +667,23 @@ fn columns_times_portable(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [
 /// columns: each load feeds more than one multiply-add, and the eight accumulators of a tile
 /// keep both FMA units busy.
 pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
+    accumulate_weighted_jtj(jac, None, dof, acc);
+}
+
+/// Adds `J^T diag(d) J` into `acc` (stride [`MAX_DOF`]), or `J^T J` without `d`; as
+/// [`accumulate_jtj`], each block's rows weighed by `d` once before the tiles read them.
+pub fn accumulate_weighted_jtj(
+    jac: &[f32],
+    d: Option<&[f32]>,
+    dof: usize,
+    acc: &mut [f64; MAX_DOF * MAX_DOF],
+) {
     let dof = dof.min(MAX_DOF);
     if dof == 0 {
         return;
     }
     let n = jac.len() / dof;
+    let mut weighed = [[0f32; JT_BLOCK]; 2];
     let mut start = 0;
     while start < n {
         let len = JT_BLOCK.min(n - start);
@@ -679,8 +691,19 @@ pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF
         // Rows and columns past `dof` read the last column; their sums are dropped.
         let col = |k: usize| &jac[k.min(dof - 1) * n + start..][..len];
         for a in (0..dof).step_by(2) {
+            let rows: [&[f32]; 2] = match d {
+                Some(d) => {
+                    let d = &d[start..start + len];
+                    for (r, w) in weighed.iter_mut().enumerate() {
+                        for ((o, &x), &y) in w.iter_mut().zip(col(a + r)).zip(d) {
+                            *o = x * y;
+                        }
+                    }
+                    [&weighed[0][..len], &weighed[1][..len]]
+                }
+                None => [col(a), col(a + 1)],
+            };
             for b in (a / 4 * 4..dof).step_by(4) {
-                let rows = [col(a), col(a + 1)];
                 let cols = [col(b), col(b + 1), col(b + 2), col(b + 3)];
                 let s = tile_2x4(rows, cols, full);
                 for (r, (row, sr)) in rows.iter().zip(&s).enumerate() {

@@ -358,7 +358,6 @@ pub(crate) struct Parzen {
     /// Scratch: one `dof`-vector per histogram row or column.
     lines: Vec<[f64; MAX_DOF]>,
     diag: Vec<f32>,
-    tmp: Vec<f32>,
 }
 
 impl Parzen {
@@ -378,7 +377,6 @@ impl Parzen {
             v: vec![0.0; bins.side * bins.side * MAX_DOF],
             lines: vec![[0.0; MAX_DOF]; bins.side],
             diag: Vec::new(),
-            tmp: Vec::new(),
         }
     }
 
@@ -394,7 +392,6 @@ impl Parzen {
         self.valid = false;
         self.self_valid = false;
         self.diag.resize(template.len(), 0.0);
-        self.tmp.resize(template.len(), 0.0);
     }
 
     pub fn template(&self) -> &[f32] {
@@ -476,7 +473,6 @@ impl Parzen {
             &mut self.v,
             &mut self.lines,
             &mut self.diag,
-            &mut self.tmp,
             out,
         );
         if kind == HessianKind::GaussNewton {
@@ -500,7 +496,6 @@ fn newton(
     v: &mut [f64],
     lines: &mut [[f64; MAX_DOF]],
     diag: &mut [f32],
-    tmp: &mut Vec<f32>,
     out: &mut [f64; MAX_DOF * MAX_DOF],
 ) {
     let n = tw.base.len();
@@ -532,8 +527,12 @@ fn newton(
                 let cell = row + w;
                 dj += x2[u] * y2[w] * g[cell];
                 let coef = x[u] * y[w];
-                let vc = &mut v[cell * MAX_DOF..cell * MAX_DOF + dof];
-                for (e, &q) in vc.iter_mut().zip(&jj[..dof]) {
+                // All MAX_DOF lanes (those past `dof` add zeros and are never read): a fixed
+                // length the compiler turns into two vector operations.
+                let vc: &mut [f64; MAX_DOF] = (&mut v[cell * MAX_DOF..(cell + 1) * MAX_DOF])
+                    .try_into()
+                    .expect("a cell of MAX_DOF sums");
+                for (e, &q) in vc.iter_mut().zip(&jj) {
                     *e += coef * q;
                 }
             }
@@ -542,7 +541,7 @@ fn newton(
     }
     let kn = scale * inv_n;
     // Diagonal part: k^2/N sum_j D_j J_j J_j^T.
-    super::intensity_map::jt_diag_j(jac, diag, dof, tmp, out);
+    super::intensity_map::jt_diag_j(jac, diag, dof, out);
     let s_diag = scale * scale * inv_n;
     let mut q = [0.0f64; MAX_DOF * MAX_DOF];
     let add = |q: &mut [f64; MAX_DOF * MAX_DOF], x: &[f64], y: &[f64], w: f64| {

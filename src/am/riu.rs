@@ -66,7 +66,6 @@ pub struct Riu {
     rp: Vec<f32>,
     rcp: Vec<f32>,
     diag: Vec<f32>,
-    tmp: Vec<f32>,
 }
 
 /// Mean and variance of the ratio image.
@@ -211,7 +210,7 @@ impl Am for Riu {
             };
             self.diag[i] = rpp * (k0 + fq2 * (self.r[i] - m)) + fq2 * rp * rp;
         }
-        super::intensity_map::jt_diag_j(jac, &self.diag, dof, &mut self.tmp, out);
+        super::intensity_map::jt_diag_j(jac, &self.diag, dof, out);
         for v in out[..dof * dof].iter_mut() {
             *v /= nf;
         }

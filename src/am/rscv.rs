@@ -34,9 +34,8 @@ pub struct Rscv {
     map: PlMap,
     identity: bool,
     fit: MapFit,
-    /// Scratch: `m'(x)^2` per pixel, and a product buffer.
+    /// Scratch: `m'(x)^2` per pixel.
     slope_sq: Vec<f32>,
-    tmp: Vec<f32>,
 }
 
 impl Default for Rscv {
@@ -47,7 +46,6 @@ impl Default for Rscv {
             identity: true,
             fit: MapFit::default(),
             slope_sq: Vec::new(),
-            tmp: Vec::new(),
         }
     }
 }
@@ -77,7 +75,6 @@ impl Am for Rscv {
         self.map = PlMap::identity();
         self.identity = true;
         self.slope_sq.resize(template.len(), 0.0);
-        self.tmp.resize(template.len(), 0.0);
     }
     fn template(&self) -> &[f32] {
         &self.template
@@ -127,7 +124,7 @@ impl Am for Rscv {
             let s = self.map.eval(x as f64).1;
             *d = (s * s) as f32;
         }
-        jt_diag_j(jac, &self.slope_sq, dof, &mut self.tmp, out);
+        jt_diag_j(jac, &self.slope_sq, dof, out);
         out.iter_mut().for_each(|v| *v = -*v);
     }
     fn updates_model(&self) -> bool {

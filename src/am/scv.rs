@@ -52,7 +52,9 @@ pub struct Scv {
     unit_slope: bool,
     /// `m'(I*)` per pixel.
     slope: Vec<f32>,
-    tmp: Vec<f32>,
+    /// Where each template pixel falls on the maps' nodes ([`PlMap::locate`]): fixed with the
+    /// template, so a new map costs a table lookup per pixel.
+    located: Vec<(u8, f64)>,
 }
 
 impl Scv {
@@ -68,7 +70,7 @@ impl Scv {
             slope_sq: Vec::new(),
             unit_slope: true,
             slope: Vec::new(),
-            tmp: Vec::new(),
+            located: Vec::new(),
         }
     }
 
@@ -76,11 +78,11 @@ impl Scv {
     fn apply_maps(&mut self) {
         let mut unit = true;
         for i in 0..self.template.len() {
-            let t = self.template[i] as f64;
+            let (k, f) = self.located[i];
             let (mut v, mut s) = (0.0, 0.0);
             for &(r, w) in &self.regions.weights[i] {
                 if w != 0.0 {
-                    let (mv, ms) = self.maps[r as usize].eval(t);
+                    let (mv, ms) = self.maps[r as usize].eval_at(k as usize, f);
                     v += w as f64 * mv;
                     s += w as f64 * ms;
                 }
@@ -94,12 +96,7 @@ impl Scv {
     }
 
     fn value(&self, current: &[f32]) -> f64 {
-        let mut total = 0.0f64;
-        for (ca, cb) in self.mapped.chunks(256).zip(current.chunks(256)) {
-            let s: f32 = ca.iter().zip(cb).map(|(x, y)| (x - y) * (x - y)).sum();
-            total += s as f64;
-        }
-        -0.5 * total
+        -0.5 * super::ssd::sum_sq_diff(&self.mapped, current)
     }
 }
 
@@ -121,7 +118,11 @@ impl Am for Scv {
         self.mapped.resize(n, 0.0);
         self.slope.resize(n, 0.0);
         self.slope_sq.resize(n, 0.0);
-        self.tmp.resize(n, 0.0);
+        self.located.clear();
+        self.located.extend(template.iter().map(|&t| {
+            let (k, f) = PlMap::locate(t as f64);
+            (k as u8, f)
+        }));
         self.apply_maps();
     }
     fn template(&self) -> &[f32] {
@@ -132,11 +133,8 @@ impl Am for Scv {
     }
     fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
         match wrt {
-            Wrt::Current => {
-                for ((g, &t), &c) in grad.iter_mut().zip(&self.mapped).zip(current) {
-                    *g = t - c;
-                }
-            }
+            // The residual and its sum of squares in one pass.
+            Wrt::Current => return -0.5 * super::ssd::residual(&self.mapped, current, 1.0, grad),
             Wrt::Template => {
                 for (((g, &t), &c), &s) in grad
                     .iter_mut()
@@ -162,7 +160,7 @@ impl Am for Scv {
         if wrt == Wrt::Current || self.unit_slope {
             minus_jtj(jac, dof, out);
         } else {
-            jt_diag_j(jac, &self.slope_sq, dof, &mut self.tmp, out);
+            jt_diag_j(jac, &self.slope_sq, dof, out);
             out.iter_mut().for_each(|v| *v = -*v);
         }
     }
@@ -174,10 +172,10 @@ impl Am for Scv {
             return;
         }
         self.fits.iter_mut().for_each(MapFit::clear);
-        for (i, (&t, &c)) in self.template.iter().zip(current).enumerate() {
+        for (i, (&(k, f), &c)) in self.located.iter().zip(current).enumerate() {
             for &(r, w) in &self.regions.weights[i] {
                 if w != 0.0 {
-                    self.fits[r as usize].add(t as f64, c as f64, w as f64);
+                    self.fits[r as usize].add_at(k as usize, f, c as f64, w as f64);
                 }
             }
         }

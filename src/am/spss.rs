@@ -47,9 +47,8 @@ const C: f32 = (0.2 * 255.0) * (0.2 * 255.0);
 #[derive(Debug, Default, Clone)]
 pub struct Spss {
     template: Vec<f32>,
-    /// Scratch: the per-pixel Hessian diagonal and a product buffer.
+    /// Scratch: the per-pixel Hessian diagonal.
     diag: Vec<f32>,
-    tmp: Vec<f32>,
 }
 
 /// `1 - s(x, y) = (x - y)^2 / (x^2 + y^2 + c)`: summing these deficits (small numbers) instead of
@@ -141,7 +140,7 @@ impl Am for Spss {
                 }
             };
         }
-        jt_diag_j(jac, &self.diag, dof, &mut self.tmp, out);
+        jt_diag_j(jac, &self.diag, dof, out);
     }
 }
 

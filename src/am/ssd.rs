@@ -55,7 +55,7 @@ impl Am for Ssd {
 type Lanes = [f32; 8];
 
 /// `sum_i (a_i - b_i)^2`: eight lanes within blocks of 256 pixels, f64 across blocks.
-fn sum_sq_diff(a: &[f32], b: &[f32]) -> f64 {
+pub(crate) fn sum_sq_diff(a: &[f32], b: &[f32]) -> f64 {
     let mut total = 0.0f64;
     for (ca, cb) in a.chunks(256).zip(b.chunks(256)) {
         let mut lanes: Lanes = [0.0; 8];
@@ -78,7 +78,7 @@ fn sum_sq_diff(a: &[f32], b: &[f32]) -> f64 {
 }
 
 /// `grad_i = sign (t_i - c_i)` and, in the same pass, `sum_i (t_i - c_i)^2`.
-fn residual(template: &[f32], current: &[f32], sign: f32, grad: &mut [f32]) -> f64 {
+pub(crate) fn residual(template: &[f32], current: &[f32], sign: f32, grad: &mut [f32]) -> f64 {
     let mut total = 0.0f64;
     for ((ct, cc), cg) in template
         .chunks(256)

@@ -50,6 +50,9 @@ pub struct Context {
     pub template_gy: Vec<f32>,
     /// `dw/dp` at the identity on the grid (layout of [`Ssm::jacobian`]).
     pub dwdp0: Vec<f32>,
+    /// Which rows of `dwdp0` (`2 k` for `dw_x/dp_k`, `2 k + 1` for `dw_y/dp_k`) are zero on the
+    /// whole grid (half of them for the affine and projective warps): the projection skips them.
+    pub dwdp0_zero: [bool; 2 * MAX_DOF],
     /// Per-iteration buffers.
     pub work: Workspace,
     /// The last step [`Context::apply`] made, and how: the driver's line search shortens it
@@ -75,6 +78,11 @@ pub struct Workspace {
     pub grad: Vec<f32>,
     /// Pixel Jacobian `dI/dp` (`N x S`, stored by parameter).
     pub jac: Vec<f32>,
+    /// The parameters whose patch `values` holds, when [`Context::sample_at`] or
+    /// [`Context::sample_gradients_at`] sampled it and nothing has written `values` since;
+    /// cleared by [`Context::sample`] and by whoever changes the frame or region being read
+    /// (the driver, when it pre-processes). [`Context::patch_at`] then skips sampling again.
+    pub sampled_at: Option<Params>,
 }
 
 impl Context {
@@ -103,6 +111,7 @@ impl Context {
             template_gx: z(n),
             template_gy: z(n),
             dwdp0: z(2 * n * dof),
+            dwdp0_zero: [false; 2 * MAX_DOF],
             work: Workspace {
                 dwdp: z(2 * n * dof),
                 px: z(n),
@@ -112,6 +121,7 @@ impl Context {
                 gy: z(n),
                 grad: z(n),
                 jac: z(n * dof),
+                sampled_at: None,
             },
             last_step: None,
         }
@@ -165,6 +175,16 @@ impl Context {
     pub fn sample_at(&mut self, img: &ImageView, p: &Params) {
         self.warp_grid(p);
         self.sample(img, false);
+        self.work.sampled_at = Some(*p);
+    }
+
+    /// The patch of `img` under `p` in `work.values`, as [`Context::sample_at`] leaves it,
+    /// sampled only if `work.values` does not hold it already (`work.sampled_at`; the caller
+    /// reads the same view as when it was sampled).
+    pub fn patch_at(&mut self, img: &ImageView, p: &Params) {
+        if self.work.sampled_at != Some(*p) {
+            self.sample_at(img, p);
+        }
     }
 
     /// [`Context::sample_at`] with the frame's gradients (frame pixels) too, into `work.gx`,
@@ -172,10 +192,12 @@ impl Context {
     pub fn sample_gradients_at(&mut self, img: &ImageView, p: &Params) {
         self.warp_grid(p);
         self.sample(img, true);
+        self.work.sampled_at = Some(*p);
     }
 
     /// Samples the frame at the warped grid: values, and gradients (frame pixels) if asked.
     pub fn sample(&mut self, img: &ImageView, gradients: bool) {
+        self.work.sampled_at = None;
         if gradients {
             sample_values_gradients(
                 img,
@@ -212,13 +234,40 @@ impl Context {
     /// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
     /// [`Ssm::jacobian`].
     pub fn project(gx: &[f32], gy: &[f32], dwdp: &[f32], dof: usize, jac: &mut [f32]) {
+        Self::project_skipping(gx, gy, dwdp, &[false; 2 * MAX_DOF], dof, jac);
+    }
+
+    /// [`Context::project`] with the rows of `dwdp` marked in `zero` known to be zero (not read).
+    fn project_skipping(
+        gx: &[f32],
+        gy: &[f32],
+        dwdp: &[f32],
+        zero: &[bool; 2 * MAX_DOF],
+        dof: usize,
+        jac: &mut [f32],
+    ) {
         let n = gx.len();
-        for k in 0..dof {
+        for k in 0..dof.min(MAX_DOF) {
             let dx = &dwdp[2 * k * n..(2 * k + 1) * n];
             let dy = &dwdp[(2 * k + 1) * n..(2 * k + 2) * n];
             let jk = &mut jac[k * n..(k + 1) * n];
-            for ((((j, &a), &b), &u), &v) in jk.iter_mut().zip(gx).zip(gy).zip(dx).zip(dy) {
-                *j = a * u + b * v;
+            match (zero[2 * k], zero[2 * k + 1]) {
+                (false, false) => {
+                    for ((((j, &a), &b), &u), &v) in jk.iter_mut().zip(gx).zip(gy).zip(dx).zip(dy) {
+                        *j = a * u + b * v;
+                    }
+                }
+                (false, true) => {
+                    for ((j, &a), &u) in jk.iter_mut().zip(gx).zip(dx) {
+                        *j = a * u;
+                    }
+                }
+                (true, false) => {
+                    for ((j, &b), &v) in jk.iter_mut().zip(gy).zip(dy) {
+                        *j = b * v;
+                    }
+                }
+                (true, true) => jk.fill(0.0),
             }
         }
     }
@@ -227,18 +276,19 @@ impl Context {
     /// `dw/dp` into the pixel Jacobian `jac`: `dw/dp` at the identity (compositional methods)
     /// or, given `p`, at `p` (additive methods).
     pub fn project_gradients(&mut self, at: Option<&Params>) {
-        let dwdp = match at {
+        let (dwdp, zero) = match at {
             Some(p) => {
                 self.ssm
                     .jacobian(p, &self.grid_x, &self.grid_y, &mut self.work.dwdp);
-                &self.work.dwdp
+                (&self.work.dwdp, [false; 2 * MAX_DOF])
             }
-            None => &self.dwdp0,
+            None => (&self.dwdp0, self.dwdp0_zero),
         };
-        Self::project(
+        Self::project_skipping(
             &self.work.gx,
             &self.work.gy,
             dwdp,
+            &zero,
             self.dof,
             &mut self.work.jac,
         );
@@ -354,6 +404,10 @@ impl Context {
         self.params = self.ssm.identity();
         let (gx, gy) = (self.grid_x.clone(), self.grid_y.clone());
         self.ssm.jacobian(&self.params, &gx, &gy, &mut self.dwdp0);
+        let n = gx.len();
+        for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
+            *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
+        }
         Ok(())
     }
 

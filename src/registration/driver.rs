@@ -245,6 +245,8 @@ impl RegistrationTracker {
 
     /// Pre-processes the region the trackers read (and its pyramid levels).
     fn prepare(&mut self, input: FrameInput<'_>, region: (f64, f64, f64, f64)) {
+        // Another frame or region: the last sampled patch is not this view's.
+        self.ctx.work.sampled_at = None;
         let (x0, y0, x1, y1) = region;
         let levels = self.coarse.len();
         let pre = match input {
@@ -447,7 +449,8 @@ impl RegistrationTracker {
             && self.has_previous
         {
             let q = out.params;
-            self.ctx.sample_at(&view, &q);
+            // Usually just sampled there, for the confidence.
+            self.ctx.patch_at(&view, &q);
             out.frame_confidence = Some(self.previous.of(&self.ctx.work.values));
         }
         timing.search += t1.elapsed();
@@ -918,7 +921,7 @@ impl RegistrationTracker {
             self.prepare(input, region);
         }
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
-        self.ctx.sample_at(&view, &out.params);
+        self.ctx.patch_at(&view, &out.params);
         self.previous
             .set_template(&self.ctx.work.values, self.params.res, CONFIDENCE_BLOCKS);
         self.has_previous = true;

@@ -112,9 +112,11 @@ impl SearchMethod for Esm {
             ctx.params = bp;
             return Ok(Step::done(bf));
         }
-        for i in 0..ctx.len() {
-            ctx.work.gx[i] = 0.5 * (ctx.work.gx[i] + ctx.template_gx[i]);
-            ctx.work.gy[i] = 0.5 * (ctx.work.gy[i] + ctx.template_gy[i]);
+        for (g, &t) in ctx.work.gx.iter_mut().zip(&ctx.template_gx) {
+            *g = 0.5 * (*g + t);
+        }
+        for (g, &t) in ctx.work.gy.iter_mut().zip(&ctx.template_gy) {
+            *g = 0.5 * (*g + t);
         }
         ctx.project_gradients(None);
         ctx.forward_step_from_gradient(Update::Compose)?;

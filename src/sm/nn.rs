@@ -140,7 +140,9 @@ pub struct Nn {
     data: Vec<f32>,
     norms: Vec<f32>,
     /// Sparse projection: per dimension `per_dim` (entry index, sign) pairs; projected samples
-    /// `samples x dims`.
+    /// in blocks of eight, dimension by dimension within a block (`reduced[(k / 8) dims 8 +
+    /// j 8 + k % 8]`), so that the scan computes eight distances at once; the last block is
+    /// padded with copies of sample 0's row.
     proj_idx: Vec<u32>,
     proj_sign: Vec<f32>,
     per_dim: usize,
@@ -276,10 +278,24 @@ impl Nn {
         let c = self.candidates.min(self.samples).max(1);
         self.order.clear();
         self.best.clear();
+        // Eight samples' distances at a time (no horizontal sums), then the `c` smallest: most
+        // samples are rejected by one comparison.
+        for (block, dk) in self
+            .reduced
+            .chunks_exact(8 * d)
+            .zip(self.dist.chunks_mut(8))
+        {
+            let mut acc = [0.0f32; 8];
+            for (lanes, &q) in block.chunks_exact(8).zip(&self.qred) {
+                for l in 0..8 {
+                    let e = lanes[l] - q;
+                    acc[l] += e * e;
+                }
+            }
+            dk.copy_from_slice(&acc[..dk.len()]);
+        }
         let mut worst = f32::INFINITY;
-        for k in 0..self.samples {
-            let dk = sq_dist(&self.reduced[k * d..(k + 1) * d], &self.qred);
-            self.dist[k] = dk;
+        for (k, &dk) in self.dist.iter().enumerate() {
             if self.order.len() < c || dk < worst {
                 let at = self.best.partition_point(|&b| b <= dk);
                 if self.order.len() == c {
@@ -317,25 +333,6 @@ fn unit_patch(patch: &[f32], out: &mut Vec<f32>) {
     let scale = if norm > 1e-12 { 1.0 / norm } else { 0.0 };
     out.clear();
     out.extend(patch.iter().map(|&v| ((v as f64 - mean) * scale) as f32));
-}
-
-/// `|a - b|^2` over 8 independent lanes (so that it vectorises).
-fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    let mut lanes = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            let e = x[l] - y[l];
-            lanes[l] += e * e;
-        }
-    }
-    lanes.iter().sum::<f32>() + tail
 }
 
 fn argmin(v: &[f32]) -> usize {
@@ -418,18 +415,24 @@ impl SearchMethod for Nn {
                 self.proj_sign
                     .push(if rng.uniform() < 0.5 { -scale } else { scale });
             }
-            self.reduced.resize(s * d, 0.0);
+            let blocks = s.div_ceil(8);
+            self.reduced.clear();
+            self.reduced.resize(blocks * 8 * d, 0.0);
             self.qred.resize(d, 0.0);
-            for k in 0..s {
-                let (mut row, out) = (
-                    &self.data[k * n..(k + 1) * n],
-                    &mut self.reduced[k * d..(k + 1) * d],
-                );
+            let mut out = vec![0.0f32; d];
+            for k in 0..blocks * 8 {
+                // The padding of the last block repeats sample 0 (its distances are not read).
+                let src = if k < s { k } else { 0 };
+                let mut row = &self.data[src * n..(src + 1) * n];
                 if self.scorer.is_some() {
                     unit_patch(row, &mut self.unit);
                     row = &self.unit;
                 }
-                Self::project(&self.proj_idx, &self.proj_sign, per, row, out);
+                Self::project(&self.proj_idx, &self.proj_sign, per, row, &mut out);
+                let block = &mut self.reduced[(k / 8) * 8 * d..][..8 * d];
+                for (j, &v) in out.iter().enumerate() {
+                    block[j * 8 + k % 8] = v;
+                }
             }
             self.order.reserve(self.candidates + 1);
             self.best.reserve(self.candidates + 1);

@@ -233,7 +233,8 @@ fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut V
     // Horizontal pass at the kept columns, for every row: the columns whose five taps are all
     // inside the row without clamping, the others (at most two on each side) with it.
     scratch.resize(ow * h, 0.0);
-    let inner = 1..ow.min((w.saturating_sub(3)) / 2 + 1).max(1);
+    // Inner columns x: pixels 2 x - 2 to 2 x + 3 (the last pair's odd pixel included) in the row.
+    let inner = 1..ow.min((w.saturating_sub(4)) / 2 + 1).max(1);
     for (row, line) in src.chunks_exact(w).zip(scratch.chunks_exact_mut(ow)) {
         let tap = |c: isize| row[c.clamp(0, w as isize - 1) as usize];
         for x in (0..inner.start).chain(inner.end..ow) {
@@ -244,9 +245,11 @@ fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut V
                 + K[3] * tap(c + 1)
                 + K[4] * tap(c + 2);
         }
+        // The row as (even, odd) pixel pairs: output x reads pairs x - 1, x and x + 1.
+        let (pairs, _) = row.as_chunks::<2>();
         for x in inner.clone() {
-            let r = &row[2 * x - 2..2 * x + 3];
-            line[x] = K[0] * (r[0] + r[4]) + K[1] * (r[1] + r[3]) + K[2] * r[2];
+            let (a, b, c) = (pairs[x - 1], pairs[x], pairs[x + 1]);
+            line[x] = K[0] * (a[0] + c[0]) + K[1] * (a[1] + b[1]) + K[2] * b[0];
         }
     }
     // Vertical pass at the kept rows: five whole rows of the scratch, weighted.

@@ -663,7 +663,7 @@ fn columns_times_portable(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [
 /// Adds `J^T J` into `acc` (stride [`MAX_DOF`]). `J` is stored by parameter: column `k` is
 /// `jac[k N..(k + 1) N]` (the layout of [`crate::ssm::Ssm::jacobian`]'s projection).
 ///
-/// Block by block of [`JT_BLOCK`] samples, the upper triangle in tiles of two rows by four
+/// Block by block of 256 samples, the upper triangle in tiles of two rows by four
 /// columns: each load feeds more than one multiply-add, and the eight accumulators of a tile
 /// keep both FMA units busy.
 pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
@@ -730,7 +730,7 @@ pub fn accumulate_weighted_jtj(
 }
 
 /// `out[k] = sum_i J[k N + i] v[i]` (`J` stored by parameter): every column in one pass over
-/// `v`, block by block of [`JT_BLOCK`] samples.
+/// `v`, block by block of 256 samples.
 pub fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
     out.fill(0.0);
     let dof = dof.min(MAX_DOF);

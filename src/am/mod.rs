@@ -503,144 +503,81 @@ const JT_BLOCK: usize = 256;
 /// Eight f32 lanes (one AVX register).
 type Lanes = [f32; 8];
 
-/// `acc += x * y`, lane by lane (fused multiply-adds).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
-#[inline(always)]
-fn fma_lanes(acc: &mut Lanes, x: &Lanes, y: &Lanes) {
-    for l in 0..8 {
-        acc[l] = x[l].mul_add(y[l], acc[l]);
-    }
-}
-
 /// The sum of the lanes.
 #[inline(always)]
 fn lanes_sum(a: &Lanes) -> f32 {
     ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]))
 }
 
-/// Eight consecutive values from `i`.
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
-#[inline(always)]
-fn lanes_at(v: &[f32], i: usize) -> &Lanes {
-    v[i..i + 8].try_into().expect("eight values")
-}
-
-/// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
+/// The products' kernels with AVX2 and FMA intrinsics (the build's CPU baseline, x86-64-v3).
 #[cfg(all(
     target_arch = "x86_64",
     target_feature = "avx2",
     target_feature = "fma"
 ))]
-fn tile_2x4(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
-    use std::arch::x86_64::*;
-    assert!(rows.iter().chain(&cols).all(|c| c.len() >= full) && full.is_multiple_of(8));
-    let mut out = [[[0f32; 8]; 4]; 2];
-    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
-    // index i with i + 8 <= full <= the slice's length (asserted above).
-    unsafe {
-        let mut s = [[_mm256_setzero_ps(); 4]; 2];
-        let mut i = 0;
-        while i < full {
-            let x0 = _mm256_loadu_ps(rows[0].as_ptr().add(i));
-            let x1 = _mm256_loadu_ps(rows[1].as_ptr().add(i));
-            for t in 0..4 {
-                let y = _mm256_loadu_ps(cols[t].as_ptr().add(i));
-                s[0][t] = _mm256_fmadd_ps(x0, y, s[0][t]);
-                s[1][t] = _mm256_fmadd_ps(x1, y, s[1][t]);
+mod simd {
+    use super::{Lanes, MAX_DOF};
+
+    /// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
+    pub(super) fn tile_2x4(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
+        use std::arch::x86_64::*;
+        assert!(rows.iter().chain(&cols).all(|c| c.len() >= full) && full.is_multiple_of(8));
+        let mut out = [[[0f32; 8]; 4]; 2];
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
+        // index i with i + 8 <= full <= the slice's length (asserted above).
+        unsafe {
+            let mut s = [[_mm256_setzero_ps(); 4]; 2];
+            let mut i = 0;
+            while i < full {
+                let x0 = _mm256_loadu_ps(rows[0].as_ptr().add(i));
+                let x1 = _mm256_loadu_ps(rows[1].as_ptr().add(i));
+                for t in 0..4 {
+                    let y = _mm256_loadu_ps(cols[t].as_ptr().add(i));
+                    s[0][t] = _mm256_fmadd_ps(x0, y, s[0][t]);
+                    s[1][t] = _mm256_fmadd_ps(x1, y, s[1][t]);
+                }
+                i += 8;
             }
-            i += 8;
-        }
-        for r in 0..2 {
-            for t in 0..4 {
-                _mm256_storeu_ps(out[r][t].as_mut_ptr(), s[r][t]);
+            for r in 0..2 {
+                for t in 0..4 {
+                    _mm256_storeu_ps(out[r][t].as_mut_ptr(), s[r][t]);
+                }
             }
         }
+        out
     }
-    out
-}
 
-/// [`tile_2x4`] without SIMD intrinsics (the build for CPUs without AVX2 and FMA; compared
-/// with the SIMD version by a test).
-#[cfg(not(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-)))]
-use tile_2x4_portable as tile_2x4;
-
-/// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
-fn tile_2x4_portable(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
-    let mut s = [[[0f32; 8]; 4]; 2];
-    for i in (0..full).step_by(8) {
-        let x = [lanes_at(rows[0], i), lanes_at(rows[1], i)];
-        for (t, c) in cols.iter().enumerate() {
-            let y = lanes_at(c, i);
-            fma_lanes(&mut s[0][t], x[0], y);
-            fma_lanes(&mut s[1][t], x[1], y);
-        }
-    }
-    s
-}
-
-/// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
-#[cfg(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-))]
-fn columns_times(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [Lanes; MAX_DOF] {
-    use std::arch::x86_64::*;
-    assert!(cols.iter().all(|c| c.len() >= full) && v.len() >= full && full.is_multiple_of(8));
-    let mut out = [[0f32; 8]; MAX_DOF];
-    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
-    // index i with i + 8 <= full <= the slice's length (asserted above).
-    unsafe {
-        let mut s = [_mm256_setzero_ps(); MAX_DOF];
-        let mut i = 0;
-        while i < full {
-            let x = _mm256_loadu_ps(v.as_ptr().add(i));
+    /// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
+    pub(super) fn columns_times(
+        cols: &[&[f32]; MAX_DOF],
+        v: &[f32],
+        full: usize,
+    ) -> [Lanes; MAX_DOF] {
+        use std::arch::x86_64::*;
+        assert!(cols.iter().all(|c| c.len() >= full) && v.len() >= full && full.is_multiple_of(8));
+        let mut out = [[0f32; 8]; MAX_DOF];
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
+        // index i with i + 8 <= full <= the slice's length (asserted above).
+        unsafe {
+            let mut s = [_mm256_setzero_ps(); MAX_DOF];
+            let mut i = 0;
+            while i < full {
+                let x = _mm256_loadu_ps(v.as_ptr().add(i));
+                for k in 0..MAX_DOF {
+                    s[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(cols[k].as_ptr().add(i)), s[k]);
+                }
+                i += 8;
+            }
             for k in 0..MAX_DOF {
-                s[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(cols[k].as_ptr().add(i)), s[k]);
+                _mm256_storeu_ps(out[k].as_mut_ptr(), s[k]);
             }
-            i += 8;
         }
-        for k in 0..MAX_DOF {
-            _mm256_storeu_ps(out[k].as_mut_ptr(), s[k]);
-        }
+        out
     }
-    out
 }
 
-#[cfg(not(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-)))]
-use columns_times_portable as columns_times;
-
-/// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
+/// The same kernels in plain Rust: the build for other CPUs, and compared with [`simd`] by a
+/// test.
 #[cfg_attr(
     all(
         target_arch = "x86_64",
@@ -649,16 +586,66 @@ use columns_times_portable as columns_times;
     ),
     allow(dead_code)
 )]
-fn columns_times_portable(cols: &[&[f32]; MAX_DOF], v: &[f32], full: usize) -> [Lanes; MAX_DOF] {
-    let mut s = [[0f32; 8]; MAX_DOF];
-    for i in (0..full).step_by(8) {
-        let x = lanes_at(v, i);
-        for (sk, c) in s.iter_mut().zip(cols) {
-            fma_lanes(sk, x, lanes_at(c, i));
+mod portable {
+    use super::{Lanes, MAX_DOF};
+
+    /// `acc += x * y`, lane by lane (fused multiply-adds).
+    #[inline(always)]
+    fn fma_lanes(acc: &mut Lanes, x: &Lanes, y: &Lanes) {
+        for l in 0..8 {
+            acc[l] = x[l].mul_add(y[l], acc[l]);
         }
     }
-    s
+
+    /// Eight consecutive values from `i`.
+    #[inline(always)]
+    fn lanes_at(v: &[f32], i: usize) -> &Lanes {
+        v[i..i + 8].try_into().expect("eight values")
+    }
+
+    /// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
+    pub(super) fn tile_2x4(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
+        let mut s = [[[0f32; 8]; 4]; 2];
+        for i in (0..full).step_by(8) {
+            let x = [lanes_at(rows[0], i), lanes_at(rows[1], i)];
+            for (t, c) in cols.iter().enumerate() {
+                let y = lanes_at(c, i);
+                fma_lanes(&mut s[0][t], x[0], y);
+                fma_lanes(&mut s[1][t], x[1], y);
+            }
+        }
+        s
+    }
+
+    /// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
+    pub(super) fn columns_times(
+        cols: &[&[f32]; MAX_DOF],
+        v: &[f32],
+        full: usize,
+    ) -> [Lanes; MAX_DOF] {
+        let mut s = [[0f32; 8]; MAX_DOF];
+        for i in (0..full).step_by(8) {
+            let x = lanes_at(v, i);
+            for (sk, c) in s.iter_mut().zip(cols) {
+                fma_lanes(sk, x, lanes_at(c, i));
+            }
+        }
+        s
+    }
 }
+
+#[cfg(not(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+)))]
+use portable::{columns_times, tile_2x4};
+#[cfg(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+))]
+use simd::{columns_times, tile_2x4};
 
 /// Adds `J^T J` into `acc` (stride [`MAX_DOF`]). `J` is stored by parameter: column `k` is
 /// `jac[k N..(k + 1) N]` (the layout of [`crate::ssm::Ssm::jacobian`]'s projection).

@@ -399,13 +399,13 @@ fn the_jacobian_products_match_plain_sums() {
             let cols: [&[f32]; MAX_DOF] = std::array::from_fn(|k| col(k.min(dof - 1)));
             assert_eq!(
                 super::columns_times(&cols, &v, full),
-                super::columns_times_portable(&cols, &v, full)
+                super::portable::columns_times(&cols, &v, full)
             );
             let rows = [col(0), col(dof.min(2) - 1)];
             let four = [cols[0], cols[1], cols[2], cols[3]];
             let (simd, portable) = (
                 super::tile_2x4(rows, four, full),
-                super::tile_2x4_portable(rows, four, full),
+                super::portable::tile_2x4(rows, four, full),
             );
             for (x, y) in simd
                 .iter()

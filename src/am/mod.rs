@@ -111,7 +111,7 @@ impl Capabilities {
 /// twice. For the models that say so in [`Am::updates_model`], each time the search settles on a
 /// frame the driver calls [`Am::update_model`] with the patch sampled there and lets the search go
 /// on (up to three times a frame), so that the model follows the light of the frame being tracked.
-pub trait Am: Send + Sync + std::fmt::Debug {
+pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     /// The registry name.
     fn name(&self) -> &'static str;
     /// What the model can do.
@@ -151,6 +151,14 @@ pub trait Am: Send + Sync + std::fmt::Debug {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     );
+    /// Whether the similarity is built from per-pixel terms only (a sum, or a ratio of sums
+    /// such as a correlation), so that an even sub-grid of the patch ranks patches as the whole
+    /// grid does, less precisely: a particle filter may then weigh its particles on one (`pf`'s
+    /// parameter `stride`). Not so for models fitted to the whole patch (histograms, intensity
+    /// maps, blocks, gradient fields), which need every sample.
+    fn pixelwise(&self) -> bool {
+        false
+    }
     /// Whether [`Am::update_model`] does something (the driver then samples the patch where the
     /// search settles for it).
     fn updates_model(&self) -> bool {
@@ -165,6 +173,20 @@ pub trait Am: Send + Sync + std::fmt::Debug {
     /// default is the patch itself (SSD's geometry).
     fn embed(&self, patch: &[f32], out: &mut [f32]) {
         out.copy_from_slice(patch);
+    }
+}
+
+/// A copy of a boxed model, its parameters and state included: a search method that scores
+/// patches apart from the [`crate::registration::Context`] (PF's particles on a sub-grid, NN's
+/// exact ranking) keeps its own. Every `Clone` model has it.
+pub trait CloneAm {
+    /// The copy.
+    fn clone_am(&self) -> Box<dyn Am>;
+}
+
+impl<T: Am + Clone + 'static> CloneAm for T {
+    fn clone_am(&self) -> Box<dyn Am> {
+        Box::new(self.clone())
     }
 }
 

@@ -21,6 +21,9 @@ impl Am for Ncc {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn default_hessian(&self) -> HessianKind {
         HessianKind::AfterConvergence
     }

@@ -31,6 +31,9 @@ impl Am for Nssd {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn set_template(&mut self, template: &[f32]) {
         self.0.set_template(template)
     }

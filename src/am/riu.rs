@@ -131,6 +131,9 @@ impl Am for Riu {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn capabilities(&self) -> Capabilities {
         Capabilities::DERIVATIVES_ONLY
     }

@@ -46,6 +46,9 @@ impl Am for Sad {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             derivatives: false,

@@ -72,6 +72,9 @@ impl Am for Spss {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn capabilities(&self) -> Capabilities {
         Capabilities::DERIVATIVES_ONLY
     }

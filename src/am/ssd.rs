@@ -20,6 +20,9 @@ impl Am for Ssd {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     fn set_template(&mut self, template: &[f32]) {
         self.template.clear();
         self.template.extend_from_slice(template);

@@ -21,6 +21,9 @@ impl Am for Zncc {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    fn pixelwise(&self) -> bool {
+        true
+    }
     super::forward_to_engine!();
     fn embed(&self, patch: &[f32], out: &mut [f32]) {
         self.0.embed(patch, out)

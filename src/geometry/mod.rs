@@ -5,7 +5,7 @@
 mod error;
 pub use error::{alignment_error, center_error, iou, polygon_area};
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A point in image (or normalised) coordinates.
@@ -202,33 +202,45 @@ pub fn apply_homography(h: &Matrix3<f64>, p: Point) -> Point {
 
 /// The homography (h33 = 1) mapping the four `src` points onto the four `dst` points exactly,
 /// or `None` when three of them are collinear.
+///
+/// Solved in closed form through the unit square: `H = S(dst) S(src)^-1`, where `S(q)` takes the
+/// corners `(0, 0), (1, 0), (1, 1), (0, 1)` to `q`. Writing `S(q) = [a b c; d e f; g h 1]`, the
+/// first, second and fourth corners give `c, f`, then `a, d` and `b, e` in terms of `g, h`, and
+/// the third gives the 2 x 2 system `g (q1 - q2) + h (q3 - q2) = q0 - q1 + q2 - q3` (zero for a
+/// parallelogram, whose `S` is affine). A particle filter fits thousands of these a frame.
 pub fn homography_from_points(src: &[Point; 4], dst: &[Point; 4]) -> Option<Matrix3<f64>> {
-    let mut a = SMatrix::<f64, 8, 8>::zeros();
-    let mut b = SVector::<f64, 8>::zeros();
-    for k in 0..4 {
-        let (x, y) = (src[k].x, src[k].y);
-        let (u, v) = (dst[k].x, dst[k].y);
-        let r = 2 * k;
-        a[(r, 0)] = x;
-        a[(r, 1)] = y;
-        a[(r, 2)] = 1.0;
-        a[(r, 6)] = -u * x;
-        a[(r, 7)] = -u * y;
-        b[r] = u;
-        a[(r + 1, 3)] = x;
-        a[(r + 1, 4)] = y;
-        a[(r + 1, 5)] = 1.0;
-        a[(r + 1, 6)] = -v * x;
-        a[(r + 1, 7)] = -v * y;
-        b[r + 1] = v;
-    }
-    let h = a.lu().solve(&b)?;
-    if !h.iter().all(|v| v.is_finite()) {
+    let to_src = square_to_quad(src)?.try_inverse()?;
+    let h = square_to_quad(dst)? * to_src;
+    let h = h / h[(2, 2)];
+    h.iter().all(|v| v.is_finite()).then_some(h)
+}
+
+/// The homography taking the corners `(0, 0), (1, 0), (1, 1), (0, 1)` of the unit square to `q`
+/// in that order; `None` when three of `q` are collinear.
+fn square_to_quad(q: &[Point; 4]) -> Option<Matrix3<f64>> {
+    let [p0, p1, p2, p3] = *q;
+    let (sx, sy) = (p0.x - p1.x + p2.x - p3.x, p0.y - p1.y + p2.y - p3.y);
+    let (dx1, dy1) = (p1.x - p2.x, p1.y - p2.y);
+    let (dx2, dy2) = (p3.x - p2.x, p3.y - p2.y);
+    let det = dx1 * dy2 - dx2 * dy1;
+    if det == 0.0 || !det.is_finite() {
         return None;
     }
-    Some(Matrix3::new(
-        h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0,
-    ))
+    let g = (sx * dy2 - dx2 * sy) / det;
+    let h = (dx1 * sy - sx * dy1) / det;
+    let m = Matrix3::new(
+        p1.x - p0.x + g * p1.x,
+        p3.x - p0.x + h * p3.x,
+        p0.x,
+        p1.y - p0.y + g * p1.y,
+        p3.y - p0.y + h * p3.y,
+        p0.y,
+        g,
+        h,
+        1.0,
+    );
+    // Three collinear corners make `S` singular although `det` is not zero.
+    (m.determinant().abs() > 1e-12 * m.norm().powi(3)).then_some(m)
 }
 
 /// The homography mapping quad `a` onto quad `b`.
@@ -272,5 +284,71 @@ impl Normaliser {
         Matrix3::new(
             self.scale, 0.0, self.cx, 0.0, self.scale, self.cy, 0.0, 0.0, 1.0,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{SMatrix, SVector};
+
+    /// The direct linear transform written plainly: the 8 x 8 system of `h33 = 1`.
+    fn dlt(src: &[Point; 4], dst: &[Point; 4]) -> Option<Matrix3<f64>> {
+        let mut a = SMatrix::<f64, 8, 8>::zeros();
+        let mut b = SVector::<f64, 8>::zeros();
+        for k in 0..4 {
+            let (x, y, u, v) = (src[k].x, src[k].y, dst[k].x, dst[k].y);
+            let r = 2 * k;
+            a.row_mut(r)
+                .copy_from_slice(&[x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y]);
+            a.row_mut(r + 1)
+                .copy_from_slice(&[0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y]);
+            b[r] = u;
+            b[r + 1] = v;
+        }
+        let h = a.lu().solve(&b)?;
+        Some(Matrix3::new(
+            h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0,
+        ))
+    }
+
+    #[test]
+    fn the_closed_form_homography_is_the_linear_systems() {
+        // A small seeded generator (the crate's is a layer above): uniform in [-1, 1).
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        };
+        let mut quad = |spread: f64| {
+            let base = [(0.0, 0.0), (100.0, 0.0), (100.0, 80.0), (0.0, 80.0)];
+            base.map(|(x, y)| {
+                Point::new(
+                    200.0 + x + spread * uniform(),
+                    50.0 + y + spread * uniform(),
+                )
+            })
+        };
+        for k in 0..500 {
+            // Parallelograms (affine), then ever more projective quads.
+            let spread = [0.0, 1.0, 10.0, 25.0][k % 4];
+            let (src, dst) = (quad(spread), quad(spread));
+            let h = homography_from_points(&src, &dst).expect("a homography");
+            let reference = dlt(&src, &dst).unwrap();
+            assert!(
+                (h - reference).norm() < 1e-9 * reference.norm(),
+                "{h} against {reference}"
+            );
+            for (s, d) in src.iter().zip(&dst) {
+                assert!(apply_homography(&h, *s).dist(*d) < 1e-8);
+            }
+        }
+        // Three collinear points: none.
+        let line = [(0.0, 0.0), (1.0, 1.0), (2.0, 2.0), (0.0, 3.0)].map(|(x, y)| Point::new(x, y));
+        let square = Quad::unit_square().0;
+        assert!(homography_from_points(&line, &square).is_none());
+        assert!(homography_from_points(&square, &line).is_none());
     }
 }

@@ -151,16 +151,14 @@ impl Context {
 
     /// Warps the grid by `p` into frame pixels (`px`, `py`).
     pub fn warp_grid(&mut self, p: &Params) {
-        let m = self.pixel_matrix(p).cast::<f32>();
-        let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
-        let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
-        let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
-        for i in 0..self.grid_x.len() {
-            let (x, y) = (self.grid_x[i], self.grid_y[i]);
-            let w = 1.0 / (m20 * x + m21 * y + m22);
-            self.work.px[i] = (m00 * x + m01 * y + m02) * w;
-            self.work.py[i] = (m10 * x + m11 * y + m12) * w;
-        }
+        let m = self.pixel_matrix(p);
+        warp_points(
+            &m,
+            &self.grid_x,
+            &self.grid_y,
+            &mut self.work.px,
+            &mut self.work.py,
+        );
     }
 
     /// The objective of `p_t = argmax_p f(I*, I_t(w(x, p)))` at `p`: the grid warped by `p`,
@@ -421,6 +419,22 @@ impl Context {
         self.template_gx.copy_from_slice(&self.work.gx);
         self.template_gy.copy_from_slice(&self.work.gy);
         self.am.set_template(&self.template);
+    }
+}
+
+/// The points `(xs, ys)` under the homography `m`, into `(px, py)` (computed in `f32`).
+pub fn warp_points(m: &Matrix3<f64>, xs: &[f32], ys: &[f32], px: &mut [f32], py: &mut [f32]) {
+    let m = m.cast::<f32>();
+    let (m00, m01, m02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+    let (m10, m11, m12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+    let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+    let n = xs.len();
+    let (ys, px, py) = (&ys[..n], &mut px[..n], &mut py[..n]);
+    for i in 0..n {
+        let (x, y) = (xs[i], ys[i]);
+        let w = 1.0 / (m20 * x + m21 * y + m22);
+        px[i] = (m00 * x + m01 * y + m02) * w;
+        py[i] = (m10 * x + m11 * y + m12) * w;
     }
 }
 

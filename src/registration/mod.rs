@@ -14,6 +14,6 @@ mod method;
 mod sweep;
 
 pub use confidence::{Judged, LossCheck};
-pub use context::{Context, Update, Workspace};
+pub use context::{Context, Update, Workspace, warp_points};
 pub use driver::{HIERARCHY, MIN_LEVEL_RES, RegistrationTracker, Stage, level_res};
 pub use method::{Control, SearchMethod, SmConfig, Step};

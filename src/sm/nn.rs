@@ -358,8 +358,8 @@ impl SearchMethod for Nn {
         self.scorer = if ctx.am.capabilities().distance {
             None
         } else {
-            // The registry built the tracker's model under this name, so it builds again.
-            Some(crate::am::build(ctx.am.name()).map_err(|_| LossReason::Singular)?)
+            // A copy: the tracker's model with its parameters.
+            Some(ctx.am.clone_am())
         };
         let s = self.samples;
         self.n = n;

@@ -11,6 +11,7 @@ const LAYERS: &[&str] = &[
     "error",
     "geometry",
     "linalg",
+    "crew",
     "rng",
     "registry",
     "params",

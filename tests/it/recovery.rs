@@ -175,10 +175,14 @@ fn sampling_methods_are_precise_on_low_dof_and_seeded() {
             assert!(ok >= 38, "{sm} {m}: {ok}/40 within 0.5 px");
         }
     }
-    // The same seed gives the same result; another seed another one.
-    let run = |seed: u64| {
+    // The same seed gives the same result, on any number of threads; another seed another one.
+    let run_on = |seed: u64, threads: f64| {
         let mut spec = TrackerSpec::from_names("pf", "ssd", "homography").unwrap();
         spec.params_mut().unwrap().seed = seed;
+        spec.registration_mut()
+            .unwrap()
+            .method
+            .set("threads", threads);
         let img = texture("skimage_coffee.png");
         let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
         let mut t = Tracker::new(&spec).unwrap();
@@ -187,7 +191,10 @@ fn sampling_methods_are_precise_on_low_dof_and_seeded() {
         t.set_corners(&start).unwrap();
         t.update(FrameInput::Gray8(&img), &mut NoObserver).corners
     };
+    let run = |seed: u64| run_on(seed, 1.0);
     assert_eq!(run(3), run(3));
+    assert_eq!(run(3), run_on(3, 2.0));
+    assert_eq!(run(3), run_on(3, 3.0));
     assert_ne!(run(3), run(4));
 }
 

@@ -1,0 +1,240 @@
+//! A fixed crew of threads for work inside one frame, without allocating per frame.
+//!
+//! A [`Crew`] keeps `n` states, one per member: the calling thread is member 0 and `n - 1`
+//! threads, started once, are the others. [`Crew::run`] hands every member the same job (a
+//! closure that borrows the caller's data) with its own state and its index, and returns when all
+//! have finished. Nothing is allocated per call (a mutex and two condition variables), unlike a
+//! general-purpose pool, whose job queue allocates now and then: the trackers' hot path does not
+//! allocate (`tests/it/alloc.rs`). What a job computes goes into the members' states, which
+//! [`Crew::states`] reads afterwards.
+//!
+//! Which member does what depends only on the index, so a job that splits its work by the index
+//! and keeps it independent gives the same result with any number of members.
+
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+
+/// A job: runs on a member's state with the member's index.
+type Job<'a, S> = dyn Fn(&mut S, usize) + Sync + 'a;
+
+/// What the caller and the members share.
+struct Shared<S> {
+    control: Mutex<Control<S>>,
+    /// Rung when a job is posted or the crew disbands.
+    start: Condvar,
+    /// Rung when the last member finishes a job.
+    done: Condvar,
+    /// The members' states (member 0's too); a member holds its own while it works.
+    states: Vec<Mutex<S>>,
+}
+
+struct Control<S> {
+    /// Counts the jobs posted; a member runs each generation once.
+    generation: u64,
+    /// The current job, with its lifetime erased: valid while `pending > 0` (see `run`).
+    job: Option<*const Job<'static, S>>,
+    /// Members (other than the caller) that have not finished the current job.
+    pending: usize,
+    /// A member's job panicked.
+    panicked: bool,
+    quit: bool,
+}
+
+// SAFETY: the job pointer is only dereferenced while `Crew::run`, which owns the borrow it was
+// made from, waits for the members; the closure is `Sync`, so sharing it between threads is sound.
+unsafe impl<S: Send> Send for Control<S> {}
+
+/// A fixed set of threads, each with a state of type `S`.
+pub struct Crew<S: Send + 'static> {
+    shared: Arc<Shared<S>>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl<S: Send + 'static> std::fmt::Debug for Crew<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Crew")
+            .field("members", &self.shared.states.len())
+            .finish()
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A job that panicked is reported by `run`; the data under the locks stays usable.
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The number of threads a setting of `threads` means: `0` is every core.
+pub fn threads_for(threads: usize) -> usize {
+    match threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        t => t,
+    }
+}
+
+impl<S: Send + 'static> Crew<S> {
+    /// A crew of `states.len()` members (at least one), the calling thread being the first:
+    /// starts `states.len() - 1` threads.
+    ///
+    /// # Panics
+    /// If `states` is empty, or a thread cannot be started.
+    pub fn new(states: Vec<S>) -> Self {
+        assert!(!states.is_empty(), "a crew needs at least one member");
+        let n = states.len();
+        let shared = Arc::new(Shared {
+            control: Mutex::new(Control {
+                generation: 0,
+                job: None,
+                pending: 0,
+                panicked: false,
+                quit: false,
+            }),
+            start: Condvar::new(),
+            done: Condvar::new(),
+            states: states.into_iter().map(Mutex::new).collect(),
+        });
+        let threads = (1..n)
+            .map(|index| {
+                let shared = Arc::clone(&shared);
+                std::thread::Builder::new()
+                    .name(format!("regtrack-crew-{index}"))
+                    .spawn(move || member(&shared, index))
+                    .expect("cannot start a thread")
+            })
+            .collect();
+        Crew { shared, threads }
+    }
+
+    /// The number of members, the calling thread included.
+    pub fn len(&self) -> usize {
+        self.shared.states.len()
+    }
+
+    /// Whether the crew is empty (never: it has the calling thread).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Runs `job` on every member (its state and index, `0..len()`); returns when all have
+    /// finished. A panic in any member's job is raised here, after all have finished.
+    pub fn run(&mut self, job: &(dyn Fn(&mut S, usize) + Sync)) {
+        if self.threads.is_empty() {
+            job(&mut lock(&self.shared.states[0]), 0);
+            return;
+        }
+        let erased: *const Job<'_, S> = job;
+        // SAFETY: only the lifetime changes; the pointer is used by the members only until
+        // `pending` is back to zero, which this function waits for before it returns (also
+        // when the caller's own share panics).
+        let erased: *const Job<'static, S> = unsafe { std::mem::transmute(erased) };
+        {
+            let mut c = lock(&self.shared.control);
+            c.job = Some(erased);
+            c.pending = self.threads.len();
+            c.panicked = false;
+            c.generation += 1;
+        }
+        self.shared.start.notify_all();
+        let own = catch_unwind(AssertUnwindSafe(|| {
+            job(&mut lock(&self.shared.states[0]), 0)
+        }));
+        let panicked = {
+            let mut c = lock(&self.shared.control);
+            while c.pending > 0 {
+                c = self
+                    .shared
+                    .done
+                    .wait(c)
+                    .unwrap_or_else(PoisonError::into_inner);
+            }
+            c.job = None;
+            c.panicked
+        };
+        if let Err(payload) = own {
+            resume_unwind(payload);
+        }
+        assert!(!panicked, "a crew member's job panicked");
+    }
+
+    /// Each member's state, in the order of their indices (between runs).
+    pub fn states(&mut self) -> impl Iterator<Item = MutexGuard<'_, S>> {
+        self.shared.states.iter().map(|s| lock(s))
+    }
+}
+
+/// A member's loop: waits for a job, runs it on its state, reports, until the crew disbands.
+fn member<S: Send>(shared: &Shared<S>, index: usize) {
+    let mut seen = 0;
+    loop {
+        let job = {
+            let mut c = lock(&shared.control);
+            while c.generation == seen && !c.quit {
+                c = shared.start.wait(c).unwrap_or_else(PoisonError::into_inner);
+            }
+            if c.quit {
+                return;
+            }
+            seen = c.generation;
+            c.job
+        };
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            if let Some(job) = job {
+                // SAFETY: `run` keeps the job alive until this member reports below.
+                let job = unsafe { &*job };
+                job(&mut lock(&shared.states[index]), index);
+            }
+        }));
+        let mut c = lock(&shared.control);
+        c.panicked |= result.is_err();
+        c.pending -= 1;
+        if c.pending == 0 {
+            shared.done.notify_all();
+        }
+    }
+}
+
+impl<S: Send + 'static> Drop for Crew<S> {
+    fn drop(&mut self) {
+        lock(&self.shared.control).quit = true;
+        self.shared.start.notify_all();
+        for t in self.threads.drain(..) {
+            // A member that panicked has reported it already.
+            let _ = t.join();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_member_runs_each_job_once_on_its_own_state() {
+        for n in 1..=4 {
+            let mut crew = Crew::new(vec![Vec::<usize>::new(); n]);
+            let data: Vec<usize> = (0..100).collect();
+            for round in 0..50 {
+                crew.run(&|s: &mut Vec<usize>, k| {
+                    // Member k takes every n-th item from k.
+                    s.clear();
+                    s.extend(data.iter().skip(k).step_by(n).map(|v| v * round));
+                });
+                let mut all: Vec<usize> = crew.states().flat_map(|s| s.clone()).collect();
+                all.sort();
+                assert_eq!(all, data.iter().map(|v| v * round).collect::<Vec<_>>());
+            }
+            assert_eq!(crew.len(), n);
+        }
+    }
+
+    #[test]
+    fn a_member_that_panics_is_reported_and_the_crew_goes_on() {
+        let mut crew = Crew::new(vec![0usize; 2]);
+        let r = catch_unwind(AssertUnwindSafe(|| {
+            crew.run(&|_: &mut usize, k| assert!(k == 0, "member {k} fails"))
+        }));
+        assert!(r.is_err());
+        crew.run(&|s: &mut usize, k| *s = k + 1);
+        assert_eq!(crew.states().map(|s| *s).collect::<Vec<_>>(), [1, 2]);
+    }
+}

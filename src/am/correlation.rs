@@ -21,6 +21,13 @@ pub(crate) struct Correlation {
     /// `P I*` in double precision, for an accurate `rho`.
     t_centered: Vec<f64>,
     c_unit: Vec<f32>,
+    /// `(|P I|, rho)` of the patch [`Correlation::gradient`] last saw (`c_unit` is its unit
+    /// vector), for the [`Correlation::hessian`] that follows on the same patch; cleared by
+    /// anything else that reads a patch.
+    /// (The patch is identified by its address and length.)
+    seen: Option<(usize, usize, f64, f64)>,
+    /// A patch of ones: `J^T 1` (the sums of `J`'s columns) in one pass with [`jt_times`].
+    ones: Vec<f32>,
 }
 
 /// Writes the unit vector of `P x` into `out`; returns `|P x|` (0 for a flat patch, with `out`
@@ -104,6 +111,9 @@ impl Correlation {
     }
 
     pub fn set_template(&mut self, template: &[f32]) {
+        self.seen = None;
+        self.ones.clear();
+        self.ones.resize(template.len(), 1.0);
         self.template.clear();
         self.template.extend_from_slice(template);
         self.t_norm = unit(template, self.centered, &mut self.t_unit);
@@ -155,12 +165,14 @@ impl Correlation {
     }
 
     pub fn similarity(&mut self, current: &[f32]) -> f64 {
+        self.seen = None;
         let (_, rho) = self.current(current);
         self.value(rho)
     }
 
     pub fn gradient(&mut self, wrt: Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
         let (nc, rho) = self.current(current);
+        self.seen = Some((current.as_ptr() as usize, current.len(), nc, rho));
         let beta = self.beta();
         let (n, var, other) = match wrt {
             Wrt::Current => (nc, &self.c_unit, &self.t_unit),
@@ -190,10 +202,15 @@ impl Correlation {
         let beta = self.beta();
         let npx = self.template.len() as f64;
         let after = kind == HessianKind::AfterConvergence;
-        let (nc, rho) = if after {
-            (self.t_norm, 1.0)
-        } else {
-            self.current(current)
+        // The gradient just computed the patch's statistics (the trait's contract: the Hessian
+        // follows the gradient on the same patch); anything else computes them.
+        let seen = self.seen.take();
+        let (nc, rho) = match seen {
+            _ if after => (self.t_norm, 1.0),
+            Some((at, len, nc, rho)) if at == current.as_ptr() as usize && len == current.len() => {
+                (nc, rho)
+            }
+            _ => self.current(current),
         };
         let (n, var, other): (f64, &[f32], &[f32]) = match (after, wrt) {
             (true, _) => (self.t_norm, &self.t_unit, &self.t_unit),
@@ -211,10 +228,7 @@ impl Correlation {
         jt_times(jac, var, dof, &mut v);
         if self.centered {
             // w = J^T 1: the sums of J's columns.
-            let n = jac.len() / dof.max(1);
-            for k in 0..dof {
-                w[k] = sum(&jac[k * n..(k + 1) * n]);
-            }
+            jt_times(jac, &self.ones, dof, &mut w);
         }
         let s = beta / (n * n);
         let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);

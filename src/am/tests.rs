@@ -136,6 +136,17 @@ fn hessians_match_finite_differences() {
             am.set_template(&t);
             let mut h = [0.0; 64];
             am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut h);
+            // After a gradient on the same patch (whose statistics a model may reuse): the same.
+            let mut g = vec![0f32; n];
+            am.gradient(wrt, &c, &mut g);
+            let mut again = [0.0; 64];
+            am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut again);
+            for (a, b) in h.iter().zip(&again) {
+                assert!(
+                    (a - b).abs() <= 1e-9 * (1.0 + a.abs()),
+                    "{name} {wrt:?}: {a} after a gradient, {b} alone"
+                );
+            }
             let jtg = |am: &mut dyn Am, d: &[f64]| -> [f64; 8] {
                 let moved = |x: &[f32]| -> Vec<f32> {
                     x.iter()

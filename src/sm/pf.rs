@@ -16,9 +16,10 @@
 //! and CCRE's histograms, the SCV family's maps) keep every sample: on 25 x 25, PF-MI missed one
 //! of ten trials of the recovery test on the projective warps and settled 1.36 px from the truth
 //! instead of 1.00. The particles are
-//! weighed over `threads` threads (a [`Crew`] started at initialisation, each member with its own
-//! copy of the AM); the random moves are drawn on the tracker's thread, so the result is the same,
-//! bit for bit, with any number of threads.
+//! moved and weighed over `threads` threads (a [`Crew`] started at initialisation, each member
+//! with its own copy of the AM); each particle draws its move from its own random stream, seeded
+//! from the tracker's generator, so the result is the same, bit for bit, with any number of
+//! threads.
 //! Each frame runs up to `rounds` rounds, the noise shrinking by `anneal` each round (an annealed
 //! filter), so that the estimate settles; the driver's stop test may end the frame earlier. When
 //! something else moved the estimate between frames (a cascade's earlier stage, a re-initialisation), the
@@ -109,8 +110,6 @@ pub struct Pf {
     threads: usize,
     /// What weighs the particles, one scorer per thread (made at initialisation).
     crew: Option<Crew<Scorer>>,
-    /// The particles' matrices from the template's normalised frame to frame pixels.
-    matrices: Vec<Matrix3<f64>>,
     vis_quads: Vec<Quad>,
     vis_weights: Vec<f32>,
 }
@@ -127,7 +126,6 @@ impl Pf {
             stride: cfg.get(&PARAMS[5]) as usize,
             threads: cfg.get(&PARAMS[6]) as usize,
             crew: None,
-            matrices: Vec::new(),
             round: 0,
             seed,
             rng: Rng::new(seed),
@@ -172,7 +170,8 @@ struct Scorer {
     px: Vec<f32>,
     py: Vec<f32>,
     values: Vec<f32>,
-    /// The similarities of this scorer's share of the particles.
+    /// This scorer's share of the particles, moved, and their similarities.
+    moved: Vec<Params>,
     out: Vec<f64>,
 }
 
@@ -215,6 +214,7 @@ impl Scorer {
             px: vec![0.0; n],
             py: vec![0.0; n],
             values: vec![0.0; n],
+            moved: Vec::with_capacity(particles),
             out: Vec::with_capacity(particles),
         }
     }
@@ -253,7 +253,6 @@ impl SearchMethod for Pf {
             .resize(self.particles, 1.0 / self.particles as f64);
         self.next.reserve(self.particles);
         self.last = Some(ctx.params);
-        self.matrices.resize(self.particles, Matrix3::identity());
         let threads = threads_for(self.threads).clamp(1, self.particles);
         let scorer = || Scorer::new(ctx, self.stride, self.particles.div_ceil(threads));
         match self.crew.as_mut() {
@@ -282,29 +281,32 @@ impl SearchMethod for Pf {
         let base = ctx.template_corners;
         let sigma = self.sigma * self.anneal.powi(self.round as i32);
         self.round += 1;
-        // Motion model, on this thread (the random numbers in one order).
-        for (state, m) in self.states.iter_mut().zip(&mut self.matrices) {
-            let moved = random_warp(&*ctx.ssm, &base, sigma, &mut self.rng)
-                .and_then(|q| ctx.ssm.compose(state, &q));
-            if let Some(s) = moved.filter(|s| s.iter().all(|v| v.is_finite())) {
-                *state = s;
-            }
-            *m = ctx.pixel_matrix(state);
-        }
-        // Measurement, member k of the crew weighing the k-th share of the particles.
+        // Motion model and measurement, member k of the crew moving and weighing the k-th
+        // share of the particles. Particle i of this round draws from its own stream, seeded
+        // from the tracker's generator and i: the same numbers whichever thread draws them.
+        let round_seed = self.rng.next_u64();
         let crew = self.crew.as_mut().ok_or(LossReason::Singular)?;
-        let (matrices, members) = (&self.matrices, crew.len());
+        let (states, members, shared) = (&self.states, crew.len(), &*ctx);
         crew.run(&|scorer: &mut Scorer, k| {
-            let mine = &matrices[share(matrices.len(), members, k)];
+            let mine = share(states.len(), members, k);
             scorer.out.clear();
-            for m in mine {
-                let f = scorer.similarity(img, m);
+            scorer.moved.clear();
+            for i in mine {
+                let mut rng = Rng::new(round_seed.wrapping_add(i as u64));
+                let moved = random_warp(&*shared.ssm, &base, sigma, &mut rng)
+                    .and_then(|q| shared.ssm.compose(&states[i], &q))
+                    .filter(|s| s.iter().all(|v| v.is_finite()))
+                    .unwrap_or(states[i]);
+                let f = scorer.similarity(img, &shared.pixel_matrix(&moved));
+                scorer.moved.push(moved);
                 scorer.out.push(f);
             }
         });
         let mut filled = 0;
         for scorer in crew.states() {
-            self.sims[filled..filled + scorer.out.len()].copy_from_slice(&scorer.out);
+            let range = filled..filled + scorer.out.len();
+            self.sims[range.clone()].copy_from_slice(&scorer.out);
+            self.states[range].copy_from_slice(&scorer.moved);
             filled += scorer.out.len();
         }
         let best = self.sims.iter().copied().fold(f64::NEG_INFINITY, f64::max);

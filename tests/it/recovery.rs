@@ -196,6 +196,41 @@ fn sampling_methods_are_precise_on_low_dof_and_seeded() {
     assert_eq!(run(3), run_on(3, 2.0));
     assert_eq!(run(3), run_on(3, 3.0));
     assert_ne!(run(3), run(4));
+    // What the inspector draws: each round's particles (before resampling) and their weights.
+    let spec = TrackerSpec::from_names("pf", "ssd", "homography").unwrap();
+    let img = texture("skimage_coffee.png");
+    let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    let mut t = Tracker::new(&spec).unwrap();
+    t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
+    t.set_corners(&Quad::from_rect(252.0, 149.0, 100.0, 100.0))
+        .unwrap();
+    let mut seen = regtrack::observe::Recorder {
+        visuals: true,
+        ..Default::default()
+    };
+    t.update(FrameInput::Gray8(&img), &mut seen);
+    assert!(!seen.method_visuals.is_empty());
+    for v in &seen.method_visuals {
+        assert_eq!(
+            (v.quads.len(), v.weights.len()),
+            (1000, 1000),
+            "{}",
+            v.label
+        );
+        let top = v.weights.iter().copied().fold(0.0, f32::max);
+        assert!(top == 1.0 && v.weights.iter().all(|w| (0.0..=1.0).contains(w)));
+        // Particles spread around the target, a few pixels at most.
+        let mean_error = v
+            .quads
+            .iter()
+            .map(|q| alignment_error(q, &truth))
+            .sum::<f64>()
+            / 1000.0;
+        assert!(
+            mean_error < 8.0,
+            "particles {mean_error} px from the target"
+        );
+    }
 }
 
 #[test]

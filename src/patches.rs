@@ -1402,7 +1402,7 @@ pub fn write_tracks(path: &Path, run: &PatchRun) -> Result<()> {
     for (i, states) in run.frames.iter().enumerate() {
         for (k, s) in states.iter().enumerate() {
             let status = match s.status {
-                TrackStatus::Lost(r) => format!("lost:{}", reason_key(r)),
+                TrackStatus::Lost(r) => format!("lost:{}", r.key()),
                 _ => "tracking".to_string(),
             };
             let [a, b, c, d] = s.linear;
@@ -1415,17 +1415,6 @@ pub fn write_tracks(path: &Path, run: &PatchRun) -> Result<()> {
         }
     }
     out.flush().map_err(io)
-}
-
-fn reason_key(r: LossReason) -> &'static str {
-    match r {
-        LossReason::NonFinite => "non_finite",
-        LossReason::Singular => "singular",
-        LossReason::Degenerate => "degenerate",
-        LossReason::OutOfFrame => "out_of_frame",
-        LossReason::NotFound => "not_found",
-        LossReason::LowConfidence => "low_confidence",
-    }
 }
 
 /// Reads a tracks file written by [`write_tracks`] (or by another tracker in its layout: the
@@ -1477,18 +1466,7 @@ pub fn read_tracks(path: &Path) -> Result<PatchRun> {
         let (frame, patch) = (int(0)?, int(1)?);
         let status = match f[2] {
             "tracking" => TrackStatus::Tracking,
-            s => match s.strip_prefix("lost:").map(|r| {
-                [
-                    LossReason::NonFinite,
-                    LossReason::Singular,
-                    LossReason::Degenerate,
-                    LossReason::OutOfFrame,
-                    LossReason::NotFound,
-                    LossReason::LowConfidence,
-                ]
-                .into_iter()
-                .find(|x| reason_key(*x) == r)
-            }) {
+            s => match s.strip_prefix("lost:").map(LossReason::from_key) {
                 Some(Some(r)) => TrackStatus::Lost(r),
                 _ => {
                     return Err(bad(

@@ -196,6 +196,16 @@ pub struct PyTracker {
     last_us: f64,
 }
 
+/// A C-ordered, non-empty grey `uint8` array as an image where it is (numpy's buffer, read
+/// without a copy), or `None` for any other array.
+fn gray_u8_view<'a>(
+    a: &'a numpy::PyReadonlyArray2<'_, u8>,
+) -> Option<crate::imaging::ImageRef<'a, u8>> {
+    let data = a.as_slice().ok().filter(|_| a.is_c_contiguous())?;
+    let [h, w] = [a.shape()[0], a.shape()[1]];
+    crate::imaging::ImageRef::new(w, h, data).filter(|_| w > 0 && h > 0)
+}
+
 impl PyTracker {
     /// Runs `f` on the tracker and `frame` with the GIL released: a C-ordered grey `uint8`
     /// frame is read where it is (numpy's buffer; do not write to it from another thread
@@ -208,14 +218,9 @@ impl PyTracker {
     ) -> PyResult<(R, f64)> {
         let t = self.inner.get_mut().unwrap_or_else(|e| e.into_inner());
         if let Ok(a) = frame.extract::<numpy::PyReadonlyArray2<'_, u8>>()
-            && a.is_c_contiguous()
-            && let Ok(data) = a.as_slice()
+            && let Some(view) = gray_u8_view(&a)
         {
-            let [h, w] = [a.shape()[0], a.shape()[1]];
-            if let Some(view) = crate::imaging::ImageRef::new(w, h, data).filter(|_| w > 0 && h > 0)
-            {
-                return Ok(py.detach(|| timed(|| f(t, FrameInput::View8(view)))));
-            }
+            return Ok(py.detach(|| timed(|| f(t, FrameInput::View8(view)))));
         }
         self.frames.load(frame)?;
         let frames = &self.frames;
@@ -772,16 +777,11 @@ impl PyPatchTracker {
     ) -> PyResult<R> {
         let t = &mut self.inner;
         if let Ok(a) = frame.extract::<numpy::PyReadonlyArray2<'_, u8>>()
-            && a.is_c_contiguous()
-            && let Ok(data) = a.as_slice()
+            && let Some(view) = gray_u8_view(&a)
         {
-            let [h, w] = [a.shape()[0], a.shape()[1]];
-            if let Some(view) = crate::imaging::ImageRef::new(w, h, data).filter(|_| w > 0 && h > 0)
-            {
-                let (r, us) = py.detach(|| timed(|| f(t, view)));
-                self.last_us = us;
-                return Ok(r);
-            }
+            let (r, us) = py.detach(|| timed(|| f(t, view)));
+            self.last_us = us;
+            return Ok(r);
         }
         self.frames.load(frame)?;
         if self.frames.is_float {

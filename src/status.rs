@@ -24,6 +24,35 @@ pub enum LossReason {
     LowConfidence,
 }
 
+impl LossReason {
+    /// Every reason, in the order of declaration.
+    pub const ALL: [LossReason; 6] = [
+        LossReason::NonFinite,
+        LossReason::Singular,
+        LossReason::Degenerate,
+        LossReason::OutOfFrame,
+        LossReason::NotFound,
+        LossReason::LowConfidence,
+    ];
+
+    /// The reason's key in files (its serde name: `non_finite`, `out_of_frame`...).
+    pub fn key(self) -> &'static str {
+        match self {
+            LossReason::NonFinite => "non_finite",
+            LossReason::Singular => "singular",
+            LossReason::Degenerate => "degenerate",
+            LossReason::OutOfFrame => "out_of_frame",
+            LossReason::NotFound => "not_found",
+            LossReason::LowConfidence => "low_confidence",
+        }
+    }
+
+    /// The reason whose [`LossReason::key`] is `key`.
+    pub fn from_key(key: &str) -> Option<LossReason> {
+        LossReason::ALL.into_iter().find(|r| r.key() == key)
+    }
+}
+
 impl std::fmt::Display for LossReason {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
@@ -103,4 +132,29 @@ pub struct FrameTiming {
     pub preprocess: std::time::Duration,
     /// The search method's iterations (what MTF reports as the tracker's speed).
     pub search: std::time::Duration,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_loss_reason_is_listed_once_and_its_key_is_its_serde_name() {
+        for (i, r) in LossReason::ALL.into_iter().enumerate() {
+            // A new variant fails to compile here until it is given its place in `ALL`.
+            let place = match r {
+                LossReason::NonFinite => 0,
+                LossReason::Singular => 1,
+                LossReason::Degenerate => 2,
+                LossReason::OutOfFrame => 3,
+                LossReason::NotFound => 4,
+                LossReason::LowConfidence => 5,
+            };
+            assert_eq!(place, i);
+            let serde = serde_json::to_string(&r).unwrap();
+            assert_eq!(serde, format!("\"{}\"", r.key()));
+            assert_eq!(LossReason::from_key(r.key()), Some(r));
+        }
+        assert_eq!(LossReason::from_key("tracking"), None);
+    }
 }

@@ -103,6 +103,8 @@ pub struct Pf {
     states: Vec<Params>,
     next: Vec<Params>,
     sims: Vec<f64>,
+    /// The particles' corners in the template's normalised frame.
+    corners: Vec<Quad>,
     weights: Vec<f64>,
     /// The estimate given last; a different `ctx.params` at the next frame resets the particles.
     last: Option<Params>,
@@ -132,6 +134,7 @@ impl Pf {
             states: Vec::new(),
             next: Vec::new(),
             sims: Vec::new(),
+            corners: Vec::new(),
             weights: Vec::new(),
             last: None,
             vis_quads: Vec::new(),
@@ -170,8 +173,10 @@ struct Scorer {
     px: Vec<f32>,
     py: Vec<f32>,
     values: Vec<f32>,
-    /// This scorer's share of the particles, moved, and their similarities.
+    /// This scorer's share of the particles, moved, their corners (normalised frame) and their
+    /// similarities.
     moved: Vec<Params>,
+    corners: Vec<Quad>,
     out: Vec<f64>,
 }
 
@@ -215,6 +220,7 @@ impl Scorer {
             py: vec![0.0; n],
             values: vec![0.0; n],
             moved: Vec::with_capacity(particles),
+            corners: Vec::with_capacity(particles),
             out: Vec::with_capacity(particles),
         }
     }
@@ -249,6 +255,7 @@ impl SearchMethod for Pf {
         self.states.clear();
         self.states.resize(self.particles, ctx.params);
         self.sims.resize(self.particles, 0.0);
+        self.corners.resize(self.particles, Quad::unit_square());
         self.weights
             .resize(self.particles, 1.0 / self.particles as f64);
         self.next.reserve(self.particles);
@@ -291,6 +298,7 @@ impl SearchMethod for Pf {
             let mine = share(states.len(), members, k);
             scorer.out.clear();
             scorer.moved.clear();
+            scorer.corners.clear();
             for i in mine {
                 let mut rng = Rng::new(round_seed.wrapping_add(i as u64));
                 let moved = random_warp(&*shared.ssm, &base, sigma, &mut rng)
@@ -299,6 +307,9 @@ impl SearchMethod for Pf {
                     .unwrap_or(states[i]);
                 let f = scorer.similarity(img, &shared.pixel_matrix(&moved));
                 scorer.moved.push(moved);
+                scorer
+                    .corners
+                    .push(crate::ssm::warp_quad(&*shared.ssm, &moved, &base));
                 scorer.out.push(f);
             }
         });
@@ -306,7 +317,8 @@ impl SearchMethod for Pf {
         for scorer in crew.states() {
             let range = filled..filled + scorer.out.len();
             self.sims[range.clone()].copy_from_slice(&scorer.out);
-            self.states[range].copy_from_slice(&scorer.moved);
+            self.states[range.clone()].copy_from_slice(&scorer.moved);
+            self.corners[range].copy_from_slice(&scorer.corners);
             filled += scorer.out.len();
         }
         let best = self.sims.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -334,8 +346,7 @@ impl SearchMethod for Pf {
         self.weights.iter_mut().for_each(|w| *w /= total);
         // The estimate: the SSM fitted to the weighted mean of the corners.
         let mut mean = [Point::new(0.0, 0.0); 4];
-        for (s, &w) in self.states.iter().zip(&self.weights) {
-            let q = crate::ssm::warp_quad(&*ctx.ssm, s, &base);
+        for (q, &w) in self.corners.iter().zip(&self.weights) {
             for c in 0..4 {
                 mean[c].x += w * q.0[c].x;
                 mean[c].y += w * q.0[c].y;

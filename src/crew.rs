@@ -12,8 +12,10 @@
 //! and keeps it independent gives the same result with any number of members.
 
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 /// A job: runs on a member's state with the member's index.
 type Job<'a, S> = dyn Fn(&mut S, usize) + Sync + 'a;
@@ -27,6 +29,27 @@ struct Shared<S> {
     done: Condvar,
     /// The members' states (member 0's too); a member holds its own while it works.
     states: Vec<Mutex<S>>,
+    /// Copies of `Control::generation` and `Control::pending`, read without the lock while a
+    /// thread spins briefly before it sleeps (a wake-up through the condition variable costs
+    /// tens of microseconds on a virtual machine); the locked values decide.
+    posted: AtomicU64,
+    remaining: AtomicUsize,
+}
+
+/// How long a thread spins on `posted` or `remaining` before it sleeps.
+const SPIN: Duration = Duration::from_micros(50);
+
+/// Spins until `done()` or [`SPIN`] has passed.
+fn spin_until(done: impl Fn() -> bool) {
+    let start = Instant::now();
+    while !done() {
+        for _ in 0..64 {
+            std::hint::spin_loop();
+        }
+        if start.elapsed() > SPIN {
+            return;
+        }
+    }
 }
 
 struct Control<S> {
@@ -92,6 +115,8 @@ impl<S: Send + 'static> Crew<S> {
             start: Condvar::new(),
             done: Condvar::new(),
             states: states.into_iter().map(Mutex::new).collect(),
+            posted: AtomicU64::new(0),
+            remaining: AtomicUsize::new(0),
         });
         let threads = (1..n)
             .map(|index| {
@@ -133,11 +158,16 @@ impl<S: Send + 'static> Crew<S> {
             c.pending = self.threads.len();
             c.panicked = false;
             c.generation += 1;
+            self.shared
+                .remaining
+                .store(self.threads.len(), Ordering::Release);
+            self.shared.posted.store(c.generation, Ordering::Release);
         }
         self.shared.start.notify_all();
         let own = catch_unwind(AssertUnwindSafe(|| {
             job(&mut lock(&self.shared.states[0]), 0)
         }));
+        spin_until(|| self.shared.remaining.load(Ordering::Acquire) == 0);
         let panicked = {
             let mut c = lock(&self.shared.control);
             while c.pending > 0 {
@@ -166,6 +196,7 @@ impl<S: Send + 'static> Crew<S> {
 fn member<S: Send>(shared: &Shared<S>, index: usize) {
     let mut seen = 0;
     loop {
+        spin_until(|| shared.posted.load(Ordering::Acquire) != seen);
         let job = {
             let mut c = lock(&shared.control);
             while c.generation == seen && !c.quit {
@@ -187,6 +218,7 @@ fn member<S: Send>(shared: &Shared<S>, index: usize) {
         let mut c = lock(&shared.control);
         c.panicked |= result.is_err();
         c.pending -= 1;
+        shared.remaining.store(c.pending, Ordering::Release);
         if c.pending == 0 {
             shared.done.notify_all();
         }

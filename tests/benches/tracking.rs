@@ -1,7 +1,7 @@
 //! Criterion benchmarks of the hot paths: one iteration of ICLK, FCLK and ESM (the search
 //! method's `iterate` alone, SSD and ZNCC, homography and affine, 50x50) on a real texture, the
 //! stages of an iteration, the pre-processing of a tracker's region, one frame of the sampling
-//! methods, and the many-patch tracker's frame (its time divided by the patches is the cost of
+//! methods (PF-1000 on one thread and on every core: its target is 200 frames/s, 5 ms), and the many-patch tracker's frame (its time divided by the patches is the cost of
 //! one patch update). The whole-tracker figures are in `regtrack bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -135,6 +135,29 @@ fn bench(c: &mut Criterion) {
             })
         });
         one_iteration(c, &spec);
+    }
+
+    // The particle filter at 1,000 particles: a whole frame (5 rounds), from the same start each
+    // time, on one thread and on every core.
+    for ssm in ["translation", "homography"] {
+        for threads in ["1", "0"] {
+            let mut spec = TrackerSpec::from_names("pf", "ssd", ssm).expect("spec");
+            spec.set_param("threads", threads).expect("param");
+            let mut t = Tracker::new(&spec).expect("tracker");
+            t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+                .expect("init");
+            let on = if threads == "1" {
+                "one thread"
+            } else {
+                "every core"
+            };
+            c.bench_function(&format!("pf_ssd_{ssm} frame, {on}"), |b| {
+                b.iter(|| {
+                    t.set_corners(&start).expect("corners");
+                    black_box(t.update(FrameInput::Smoothed(&smoothed), &mut NoObserver))
+                })
+            });
+        }
     }
 }
 

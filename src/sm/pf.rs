@@ -357,8 +357,8 @@ impl SearchMethod for Pf {
             .fit(&base.0, &Quad(mean).0)
             .filter(|p| p.iter().all(|v| v.is_finite()))
             .ok_or(LossReason::Singular)?;
-        // After it, `next` holds the particles before resampling, which `weights` weigh (the
-        // teaching view).
+        // `corners` and `weights` stay those of the particles before resampling (the teaching
+        // view).
         self.resample();
         ctx.params = estimate;
         self.last = Some(estimate);
@@ -370,14 +370,13 @@ impl SearchMethod for Pf {
         })
     }
     fn visual(&mut self, ctx: &Context) -> Option<MethodVisual<'_>> {
-        // Where the particles of the last round were and what they weighed.
-        let base = ctx.template_corners;
+        // Where the particles of the last round were (their corners, kept in the order of the
+        // weights) and what they weighed.
         let wmax = self.weights.iter().copied().fold(0.0, f64::max).max(1e-300);
         let m = ctx.pixel_matrix(&ctx.ssm.identity());
         self.vis_quads.clear();
         self.vis_weights.clear();
-        for (s, &w) in self.next.iter().zip(&self.weights) {
-            let q = crate::ssm::warp_quad(&*ctx.ssm, s, &base);
+        for (q, &w) in self.corners.iter().zip(&self.weights) {
             self.vis_quads
                 .push(q.map(|c| crate::geometry::apply_homography(&m, c)));
             self.vis_weights.push((w / wmax) as f32);

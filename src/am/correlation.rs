@@ -21,10 +21,9 @@ pub(crate) struct Correlation {
     /// `P I*` in double precision, for an accurate `rho`.
     t_centered: Vec<f64>,
     c_unit: Vec<f32>,
-    /// `(|P I|, rho)` of the patch [`Correlation::gradient`] last saw (`c_unit` is its unit
-    /// vector), for the [`Correlation::hessian`] that follows on the same patch; cleared by
-    /// anything else that reads a patch.
-    /// (The patch is identified by its address and length.)
+    /// The patch [`Correlation::gradient`] last saw (its address and length) with its
+    /// `(|P I|, rho)` (`c_unit` is its unit vector), for the [`Correlation::hessian`] that
+    /// follows on the same patch; cleared by anything else that reads a patch.
     seen: Option<(usize, usize, f64, f64)>,
     /// A patch of ones: `J^T 1` (the sums of `J`'s columns) in one pass with [`jt_times`].
     ones: Vec<f32>,

@@ -192,6 +192,49 @@ impl<S: Send + 'static> Crew<S> {
     }
 }
 
+/// A slice handed out in blocks to whoever asks first: each block once, so the members of a
+/// crew can each take `&mut` blocks of the same slice as they become free (work that costs
+/// unevenly spreads evenly) without locks.
+pub struct Shares<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    block: usize,
+    next: AtomicUsize,
+    _items: std::marker::PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: `Shares` hands out disjoint `&mut [T]` (each block index once, through the atomic
+// counter), so sharing it between threads is sharing `&mut` borrows of `T` across threads,
+// which `T: Send` allows.
+unsafe impl<T: Send> Sync for Shares<'_, T> {}
+unsafe impl<T: Send> Send for Shares<'_, T> {}
+
+impl<'a, T> Shares<'a, T> {
+    /// `items` in blocks of `block` (at least 1) items; the last may be shorter.
+    pub fn new(items: &'a mut [T], block: usize) -> Self {
+        Shares {
+            ptr: items.as_mut_ptr(),
+            len: items.len(),
+            block: block.max(1),
+            next: AtomicUsize::new(0),
+            _items: std::marker::PhantomData,
+        }
+    }
+
+    /// The next block nobody took yet, with the index of its first item; `None` when all are
+    /// taken.
+    pub fn take(&self) -> Option<(usize, &'a mut [T])> {
+        let b = self.next.fetch_add(1, Ordering::Relaxed);
+        let start = b.checked_mul(self.block).filter(|&s| s < self.len)?;
+        let n = self.block.min(self.len - start);
+        // SAFETY: `start + n <= len`, inside the slice borrowed for 'a; block `b` is returned
+        // once only (the counter only grows), and blocks do not overlap.
+        Some((start, unsafe {
+            std::slice::from_raw_parts_mut(self.ptr.add(start), n)
+        }))
+    }
+}
+
 /// A member's loop: waits for a job, runs it on its state, reports, until the crew disbands.
 fn member<S: Send>(shared: &Shared<S>, index: usize) {
     let mut seen = 0;
@@ -256,6 +299,29 @@ mod tests {
                 assert_eq!(all, data.iter().map(|v| v * round).collect::<Vec<_>>());
             }
             assert_eq!(crew.len(), n);
+        }
+    }
+
+    #[test]
+    fn shares_hand_every_block_out_once() {
+        for n in 1..=3 {
+            let mut crew = Crew::new(vec![0usize; n]);
+            let mut items = vec![0u32; 1001];
+            for round in 1..=20u32 {
+                let shares = Shares::new(&mut items, 16);
+                crew.run(&|taken: &mut usize, _| {
+                    while let Some((start, block)) = shares.take() {
+                        assert_eq!(start % 16, 0);
+                        for v in block.iter_mut() {
+                            *v += 1;
+                        }
+                        *taken += 1;
+                    }
+                });
+                assert!(shares.take().is_none());
+                assert!(items.iter().all(|&v| v == round));
+            }
+            assert_eq!(crew.states().map(|s| *s).sum::<usize>(), 20 * 63);
         }
     }
 

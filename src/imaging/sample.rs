@@ -275,6 +275,52 @@ pub fn sample_grid_shifted(
     );
     let row_of = |y: i64| y.clamp(0, h as i64 - 1) as usize * w;
     let inside_x = ix >= 0 && ix + (cols as i64) < w as i64;
+    if inside_x
+        && cols.is_multiple_of(8)
+        && cols <= PADDED
+        && iy >= 0
+        && iy + (rows as i64) < h as i64
+    {
+        // Whole rows of eight inside: each image row weighed across once (`h`), each output
+        // row the vertical blend of two of them, in lanes of eight.
+        let (ix, iy) = (ix as usize, iy as usize);
+        #[inline(always)]
+        fn across(src: &[f32], ax: f32, h: &mut [f32]) {
+            let (a, b) = (&src[..h.len()], &src[1..=h.len()]);
+            for ((h, a), b) in h
+                .chunks_exact_mut(8)
+                .zip(a.chunks_exact(8))
+                .zip(b.chunks_exact(8))
+            {
+                for l in 0..8 {
+                    h[l] = a[l] + ax * (b[l] - a[l]);
+                }
+            }
+        }
+        let row = |r: usize| &img.data[(iy + r) * w + ix..][..cols + 1];
+        // Two buffers, used in turn as the upper and the lower row.
+        let mut bufs = [[0f32; PADDED]; 2];
+        across(row(0), ax, &mut bufs[0][..cols]);
+        for (j, o) in out[..cols * rows].chunks_exact_mut(cols).enumerate() {
+            let (a, b) = bufs.split_at_mut(1);
+            let (up, down) = if j % 2 == 0 {
+                (&a[0], &mut b[0])
+            } else {
+                (&b[0], &mut a[0])
+            };
+            across(row(j + 1), ax, &mut down[..cols]);
+            for ((o, u), d) in o
+                .chunks_exact_mut(8)
+                .zip(up[..cols].chunks_exact(8))
+                .zip(down[..cols].chunks_exact(8))
+            {
+                for l in 0..8 {
+                    o[l] = u[l] + ay * (d[l] - u[l]);
+                }
+            }
+        }
+        return true;
+    }
     let col = |x: i64| x.clamp(0, w as i64 - 1) as usize;
     for (j, o) in out[..cols * rows].chunks_exact_mut(cols).enumerate() {
         let (r0, r1) = (row_of(iy + j as i64), row_of(iy + j as i64 + 1));
@@ -627,15 +673,16 @@ mod tests {
             (-30.0, -30.0),
             (0.0, 0.0),
         ] {
-            let (c, r) = (9, 7);
-            let mut fast = vec![0f32; c * r];
-            assert!(sample_grid_shifted(&img, x0, y0, c, r, &mut fast));
-            let xs: Vec<f32> = (0..c * r).map(|k| x0 + (k % c) as f32).collect();
-            let ys: Vec<f32> = (0..c * r).map(|k| y0 + (k / c) as f32).collect();
-            let mut slow = vec![0f32; c * r];
-            sample_values(&img.view(), &xs, &ys, &mut slow);
-            for (a, b) in fast.iter().zip(&slow) {
-                assert!((a - b).abs() < 1e-3, "at ({x0}, {y0}): {a} vs {b}");
+            for (c, r) in [(9, 7), (16, 7), (8, 3)] {
+                let mut fast = vec![0f32; c * r];
+                assert!(sample_grid_shifted(&img, x0, y0, c, r, &mut fast));
+                let xs: Vec<f32> = (0..c * r).map(|k| x0 + (k % c) as f32).collect();
+                let ys: Vec<f32> = (0..c * r).map(|k| y0 + (k / c) as f32).collect();
+                let mut slow = vec![0f32; c * r];
+                sample_values(&img.view(), &xs, &ys, &mut slow);
+                for (a, b) in fast.iter().zip(&slow) {
+                    assert!((a - b).abs() < 1e-3, "at ({x0}, {y0}): {a} vs {b}");
+                }
             }
         }
         assert!(!sample_grid_shifted(

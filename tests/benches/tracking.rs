@@ -161,7 +161,8 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-/// The many-patch tracker: a frame of 500 patches (21 x 21, 3 levels, one thread) moving by
+/// The many-patch tracker: a frame of 500 patches (21 x 21, 3 levels, one thread; translation
+/// also on every core) moving by
 /// about a pixel and a half, back and forth between two frames of a real texture.
 fn patches(c: &mut Criterion) {
     use regtrack::imaging::{GrayU8, sample_value};
@@ -180,21 +181,22 @@ fn patches(c: &mut Criterion) {
         }
     }
     let mut g = c.benchmark_group("patches");
-    for warp in ["translation", "affine"] {
+    for (warp, threads) in [("translation", 1), ("affine", 1), ("translation", 0)] {
         let params = PatchParams::parse(&[
             ("warp".into(), warp.into()),
             ("size".into(), "21".into()),
             ("levels".into(), "3".into()),
-            ("threads".into(), "1".into()),
+            ("threads".into(), threads.to_string()),
             ("min_distance".into(), "4".into()),
         ])
         .expect("params");
+        let on = if threads == 1 { "" } else { ", every core" };
         let mut t = PatchTracker::new(params).expect("tracker");
         let points = t.detect(&img, 500, None);
         t.initialize(&img, &points).expect("init");
         let frames = [&moved, &img];
         let mut k = 0;
-        g.bench_function(format!("{warp} frame, {} patches", points.len()), |b| {
+        g.bench_function(format!("{warp} frame, {} patches{on}", points.len()), |b| {
             b.iter(|| {
                 t.update(frames[k % 2]).expect("update");
                 k += 1;

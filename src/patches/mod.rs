@@ -26,6 +26,7 @@
 //! (of that level). A translation warp samples a grid that only shifts, whose bilinear weights
 //! are the same for every sample ([`imaging::sample_grid_shifted`]).
 
+use crate::crew::{self, Crew, Shares};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad, apply_homography, homography_between};
@@ -33,10 +34,12 @@ use crate::imaging::{self, GaussianKernel, GrayF32, ImageRef, ImageView, keypoin
 use crate::params::{MethodParams, ParamDef};
 use crate::status::{LossReason, TrackStatus};
 use nalgebra::{Matrix2, SMatrix};
-use rayon::prelude::*;
 use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
+
+mod kernels;
+use kernels::{dot, dot2};
 
 /// The warps a patch can have.
 pub const WARPS: &[&str] = &["translation", "affine"];
@@ -298,13 +301,24 @@ impl Warp {
 }
 
 /// The sampling grid's offsets from a patch's centre, shared by all patches.
+///
+/// Every per-sample array of a patch (template, steepest-descent images, samples) is stored
+/// row by row with `stride` entries a row: `side` rounded up to lanes of eight, so the loops
+/// over them run whole lanes. The entries past `side` are padding: the template and its
+/// steepest-descent images are zero there (they weigh nothing in the sums) and `mask` is 0.
 #[derive(Clone, Debug)]
 struct Grid {
     side: usize,
     half: f64,
+    stride: usize,
     ux: Vec<f32>,
     uy: Vec<f32>,
-    /// The grid grown by one sample on every side (for the template's central differences).
+    /// 1 on the grid's samples, 0 on the padding.
+    mask: Vec<f32>,
+    /// The grid grown by one sample on every side (for the template's central differences):
+    /// `side + 2` rows of `ext_stride` (at least `stride + 2`, in lanes of eight) samples from
+    /// `-half - 1`.
+    ext_stride: usize,
     ex: Vec<f32>,
     ey: Vec<f32>,
 }
@@ -312,30 +326,44 @@ struct Grid {
 impl Grid {
     fn new(side: usize) -> Self {
         let half = (side as f64 - 1.0) / 2.0;
-        let offsets = |from: f64, n: usize| {
+        let stride = side.div_ceil(8) * 8;
+        let ext_stride = (stride + 2).div_ceil(8) * 8;
+        let offsets = |from: f64, rows: usize, cols: usize| {
             let (mut xs, mut ys) = (Vec::new(), Vec::new());
-            for j in 0..n {
-                for i in 0..n {
+            for j in 0..rows {
+                for i in 0..cols {
                     xs.push((i as f64 - from) as f32);
                     ys.push((j as f64 - from) as f32);
                 }
             }
             (xs, ys)
         };
-        let (ux, uy) = offsets(half, side);
-        let (ex, ey) = offsets(half + 1.0, side + 2);
+        let (ux, uy) = offsets(half, side, stride);
+        let (ex, ey) = offsets(half + 1.0, side + 2, ext_stride);
+        let mask = (0..side * stride)
+            .map(|k| if k % stride < side { 1.0 } else { 0.0 })
+            .collect();
         Grid {
             side,
             half,
+            stride,
             ux,
             uy,
+            mask,
+            ext_stride,
             ex,
             ey,
         }
     }
 
+    /// The grid's samples.
     fn len(&self) -> usize {
         self.side * self.side
+    }
+
+    /// The entries of a per-sample array, padding included.
+    fn padded_len(&self) -> usize {
+        self.side * self.stride
     }
 }
 
@@ -405,13 +433,28 @@ struct Template {
     usable: Vec<bool>,
 }
 
-/// One patch: its state, warp, templates and scratch.
+/// One patch: its state, warp and, when it keeps the first frame's, its template.
 #[derive(Clone, Debug)]
 struct Patch {
     state: PatchState,
     warp: Warp,
+    /// The first frame's template (`template=first`); made again each frame otherwise.
+    first: Option<Box<Template>>,
+}
+
+/// What a thread tracking patches works in, one patch after the other: the template made
+/// each frame, the backward one and the samples. Kept by the thread (not by each patch), so
+/// it stays in the core's cache.
+#[derive(Clone, Debug)]
+struct Scratch {
     fwd: Template,
     back: Template,
+    buf: Buffers,
+}
+
+/// The samples of one search or template.
+#[derive(Clone, Debug)]
+struct Buffers {
     vals: Vec<f32>,
     xs: Vec<f32>,
     ys: Vec<f32>,
@@ -419,40 +462,46 @@ struct Patch {
     ext: Vec<f32>,
 }
 
+/// Patches a thread takes at a time.
+const PATCH_BLOCK: usize = 16;
+
 /// The stop threshold of the coarse pyramid levels at least (pixels of the level).
 const COARSE_EPS: f64 = 0.05;
 
 /// Why a search failed.
 type Search = std::result::Result<(Warp, usize, f64), LossReason>;
 
-/// `sum a[i] * b[i]` over eight lanes (vectorised; the order of the sums is fixed).
-#[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    let mut s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
-    for (x, y) in ra.iter().zip(rb) {
-        s += x * y;
-    }
-    s
-}
-
-impl Patch {
-    fn new(centre: Point, grid: &Grid, levels: usize, dof: usize) -> Self {
-        let n = grid.len();
-        let template = || Template {
+impl Template {
+    fn new(grid: &Grid, levels: usize, dof: usize) -> Self {
+        let n = grid.padded_len();
+        Template {
             t: vec![0.0; levels * n],
             sd: vec![0.0; levels * dof * n],
             hinv: vec![[0.0; 36]; levels],
             sdt: vec![[0.0; 6]; levels],
             usable: vec![false; levels],
-        };
+        }
+    }
+}
+
+impl Scratch {
+    fn new(grid: &Grid, levels: usize, dof: usize) -> Self {
+        let n = grid.padded_len().max(grid.ex.len());
+        Scratch {
+            fwd: Template::new(grid, levels, dof),
+            back: Template::new(grid, levels, dof),
+            buf: Buffers {
+                vals: vec![0.0; grid.padded_len()],
+                xs: vec![0.0; n],
+                ys: vec![0.0; n],
+                ext: vec![0.0; grid.ex.len()],
+            },
+        }
+    }
+}
+
+impl Patch {
+    fn new(centre: Point) -> Self {
         Patch {
             state: PatchState {
                 centre,
@@ -463,15 +512,14 @@ impl Patch {
                 iterations: 0,
             },
             warp: Warp::at(centre),
-            fwd: template(),
-            back: template(),
-            vals: vec![0.0; n],
-            xs: vec![0.0; grid.ex.len()],
-            ys: vec![0.0; grid.ex.len()],
-            ext: vec![0.0; grid.ex.len()],
+            first: None,
         }
     }
 }
+
+/// A grid's layout for [`sample`]: columns (the row stride), rows, the offset of its first
+/// sample from the centre (negated) and every sample's offsets.
+type Layout<'a> = (usize, usize, f64, &'a [f32], &'a [f32]);
 
 /// Samples `img` at the grid warped by `w` at level `l` into `out` (`xs`, `ys` are scratch).
 #[allow(clippy::too_many_arguments)]
@@ -479,7 +527,7 @@ fn sample(
     (img, border): (&GrayF32, usize),
     w: &Warp,
     l: usize,
-    (side, half, ux, uy): (usize, f64, &[f32], &[f32]),
+    (cols, rows, half, ux, uy): Layout<'_>,
     out: &mut [f32],
     xs: &mut [f32],
     ys: &mut [f32],
@@ -492,8 +540,8 @@ fn sample(
             img,
             (cx - half) as f32,
             (cy - half) as f32,
-            side,
-            side,
+            cols,
+            rows,
             out,
         )
     {
@@ -501,7 +549,7 @@ fn sample(
     }
     let [a, b, c, d] = w.a.map(|v| v as f32);
     let (cx, cy) = (cx as f32, cy as f32);
-    let n = side * side;
+    let n = cols * rows;
     let (xs, ys, out) = (&mut xs[..n], &mut ys[..n], &mut out[..n]);
     for i in 0..n {
         let (u, v) = (ux[i], uy[i]);
@@ -514,13 +562,19 @@ fn sample(
 
 impl Grid {
     /// The grid, for [`sample`].
-    fn plain(&self) -> (usize, f64, &[f32], &[f32]) {
-        (self.side, self.half, &self.ux, &self.uy)
+    fn plain(&self) -> Layout<'_> {
+        (self.stride, self.side, self.half, &self.ux, &self.uy)
     }
 
     /// The grid grown by one sample on every side, for [`sample`].
-    fn grown(&self) -> (usize, f64, &[f32], &[f32]) {
-        (self.side + 2, self.half + 1.0, &self.ex, &self.ey)
+    fn grown(&self) -> Layout<'_> {
+        (
+            self.ext_stride,
+            self.side + 2,
+            self.half + 1.0,
+            &self.ex,
+            &self.ey,
+        )
     }
 }
 
@@ -549,17 +603,16 @@ fn level_window(prm: &PatchParams, l: usize, w: &Warp) -> Warp {
 /// The template of the patch warped by `w` in `frame`, at every level, into `tp`. Flat levels
 /// are marked unusable; `false` when the finest is flat.
 fn make_template(
-    p: &mut Patch,
-    which_back: bool,
+    tp: &mut Template,
+    b: &mut Buffers,
     frame: &Frame,
     start: &Warp,
     grid: &Grid,
     prm: &PatchParams,
 ) -> bool {
-    let n = grid.len();
+    let (n, np) = (grid.len(), grid.padded_len());
     let full = prm.warp.dof();
     let min_eigen = prm.min_eigen;
-    let tp = if which_back { &mut p.back } else { &mut p.fwd };
     for l in 0..frame.levels.len() {
         let dof = level_warp(prm, l).dof();
         let w = &level_window(prm, l, start);
@@ -571,42 +624,30 @@ fn make_template(
             w,
             l,
             grid.grown(),
-            &mut p.ext,
-            &mut p.xs,
-            &mut p.ys,
+            &mut b.ext,
+            &mut b.xs,
+            &mut b.ys,
         );
-        let (side, e) = (grid.side, grid.side + 2);
-        let t = &mut tp.t[l * n..(l + 1) * n];
-        let sd = &mut tp.sd[l * full * n..(l * full + dof) * n];
-        let (tx, rest) = sd.split_at_mut(n);
-        let (ty, rest) = rest.split_at_mut(n);
-        for j in 0..side {
-            let (up, row, down) = (
-                &p.ext[j * e..(j + 1) * e],
-                &p.ext[(j + 1) * e..(j + 2) * e],
-                &p.ext[(j + 2) * e..(j + 3) * e],
-            );
-            let (t, tx, ty) = (
-                &mut t[j * side..(j + 1) * side],
-                &mut tx[j * side..(j + 1) * side],
-                &mut ty[j * side..(j + 1) * side],
-            );
-            let (left, mid, right) = (&row[..side], &row[1..side + 1], &row[2..side + 2]);
-            let (up, down) = (&up[1..side + 1], &down[1..side + 1]);
-            t.copy_from_slice(mid);
-            for ((o, a), b) in tx.iter_mut().zip(left).zip(right) {
-                *o = 0.5 * (b - a);
-            }
-            for ((o, a), b) in ty.iter_mut().zip(up).zip(down) {
-                *o = 0.5 * (b - a);
-            }
-        }
+        let t = &mut tp.t[l * np..(l + 1) * np];
+        let sd = &mut tp.sd[l * full * np..(l * full + dof) * np];
+        let (tx, rest) = sd.split_at_mut(np);
+        let (ty, rest) = rest.split_at_mut(np);
+        // One pass in lanes of eight: the template, its gradients (zero on the padding) and
+        // the sums of their products: SD^T T and the shift's 2x2 Hessian.
+        let rows = kernels::Rows {
+            ext: &b.ext,
+            ext_stride: grid.ext_stride,
+            stride: grid.stride,
+            side: grid.side,
+            mask: &grid.mask,
+        };
+        let [stx, sty, hxx, hxy, hyy] = kernels::template_rows(&rows, t, tx, ty).map(f64::from);
         if dof == 6 {
             // Columns: tx ux, tx uy, ty ux, ty uy, tx, ty (the shift last).
-            let (c0, rest) = rest.split_at_mut(n);
-            let (c1, rest) = rest.split_at_mut(n);
-            let (c2, c3) = rest.split_at_mut(n);
-            for i in 0..n {
+            let (c0, rest) = rest.split_at_mut(np);
+            let (c1, rest) = rest.split_at_mut(np);
+            let (c2, c3) = rest.split_at_mut(np);
+            for i in 0..np {
                 let (u, v) = (grid.ux[i], grid.uy[i]);
                 c0[i] = tx[i] * u;
                 c1[i] = tx[i] * v;
@@ -614,20 +655,16 @@ fn make_template(
                 c3[i] = ty[i] * v;
             }
             // Reorder so the shift's columns come last: [c0 c1 c2 c3 tx ty].
-            sd.rotate_left(2 * n);
+            sd.rotate_left(2 * np);
         }
-        let sd = &tp.sd[l * full * n..(l * full + dof) * n];
-        let col = |k: usize| &sd[k * n..(k + 1) * n];
-        let t = &tp.t[l * n..(l + 1) * n];
-        for k in 0..dof {
+        let sd = &tp.sd[l * full * np..(l * full + dof) * np];
+        let col = |k: usize| &sd[k * np..(k + 1) * np];
+        let t = &tp.t[l * np..(l + 1) * np];
+        for k in 0..dof - 2 {
             tp.sdt[l][k] = dot(col(k), t) as f64;
         }
-        let (ix, iy) = (dof - 2, dof - 1);
-        let (hxx, hxy, hyy) = (
-            dot(col(ix), col(ix)) as f64,
-            dot(col(ix), col(iy)) as f64,
-            dot(col(iy), col(iy)) as f64,
-        );
+        tp.sdt[l][dof - 2] = stx;
+        tp.sdt[l][dof - 1] = sty;
         let tr = hxx + hyy;
         let det = hxx * hyy - hxy * hxy;
         let min_eig = 0.5 * (tr - (tr * tr - 4.0 * det).max(0.0).sqrt()) / n as f64;
@@ -670,21 +707,20 @@ fn make_template(
 /// fine. Returns the warp, the iterations and the template's NCC with the last samples.
 #[allow(clippy::too_many_arguments)]
 fn search(
-    p: &mut Patch,
-    which_back: bool,
+    tp: &Template,
+    b: &mut Buffers,
     frame: &Frame,
     start: Warp,
     grid: &Grid,
     prm: &PatchParams,
 ) -> Search {
-    let n = grid.len();
+    let np = grid.padded_len();
     let full = prm.warp.dof();
     let mut w = start;
     let mut iterations = 0;
     let levels = frame.levels.len();
     let mut last_level_sampled = false;
     for l in (0..levels).rev() {
-        let tp = if which_back { &p.back } else { &p.fwd };
         if !tp.usable[l] {
             continue;
         }
@@ -706,17 +742,22 @@ fn search(
                 &win,
                 l,
                 grid.plain(),
-                &mut p.vals,
-                &mut p.xs,
-                &mut p.ys,
+                &mut b.vals,
+                &mut b.xs,
+                &mut b.ys,
             );
             iterations += 1;
-            let tp = if which_back { &p.back } else { &p.fwd };
             // SD^T (I(W(u)) - T), with SD^T T made once per template.
-            let sd = &tp.sd[l * full * n..(l * full + dof) * n];
+            let sd = &tp.sd[l * full * np..(l * full + dof) * np];
             let mut g = [0f64; 6];
-            for k in 0..dof {
-                g[k] = dot(&sd[k * n..(k + 1) * n], &p.vals) as f64 - tp.sdt[l][k];
+            for k in (0..dof).step_by(2) {
+                let (a, b) = dot2(
+                    &sd[k * np..(k + 1) * np],
+                    &sd[(k + 1) * np..(k + 2) * np],
+                    &b.vals,
+                );
+                g[k] = a as f64 - tp.sdt[l][k];
+                g[k + 1] = b as f64 - tp.sdt[l][k + 1];
             }
             let hinv = &tp.hinv[l];
             let mut dp = [0f64; 6];
@@ -782,27 +823,35 @@ fn search(
         return Err(LossReason::Degenerate);
     }
     // The NCC of the finest level's last samples with the template.
-    let tp = if which_back { &p.back } else { &p.fwd };
     if !last_level_sampled {
         return Err(LossReason::Singular);
     }
-    Ok((w, iterations, ncc(&p.vals, &tp.t[..n])))
+    Ok((
+        w,
+        iterations,
+        ncc(&b.vals, &tp.t[..np], &grid.mask, grid.len()),
+    ))
 }
 
-/// The zero-mean normalised cross-correlation of two equally long vectors (0 when either is
-/// flat). One pass over eight lanes, on values shifted by the first of `b` (gray levels are
-/// small enough that the single-precision sums keep the correlation to about 1e-4).
-fn ncc(a: &[f32], b: &[f32]) -> f64 {
-    let n = a.len().min(b.len());
+/// The zero-mean normalised cross-correlation of two equally long vectors over the entries
+/// where `mask` is 1 (`mask` is 0 or 1; 0 when either is flat). One pass over eight lanes, on
+/// values shifted by the first of `b` (gray levels are small enough that the single-precision
+/// sums keep the correlation to about 1e-4).
+fn ncc(a: &[f32], b: &[f32], mask: &[f32], count: usize) -> f64 {
+    let n = a.len().min(b.len()).min(mask.len());
     let Some(&k) = b.first() else {
         return 0.0;
     };
     let mut acc = [[0f32; 8]; 5];
-    let (ca, cb) = (a[..n].chunks_exact(8), b[..n].chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
+    let (ca, cb, cm) = (
+        a[..n].chunks_exact(8),
+        b[..n].chunks_exact(8),
+        mask[..n].chunks_exact(8),
+    );
+    let (ra, rb, rm) = (ca.remainder(), cb.remainder(), cm.remainder());
+    for ((x, y), m) in ca.zip(cb).zip(cm) {
         for l in 0..8 {
-            let (x, y) = (x[l] - k, y[l] - k);
+            let (x, y) = ((x[l] - k) * m[l], (y[l] - k) * m[l]);
             acc[0][l] += x;
             acc[1][l] += y;
             acc[2][l] += x * x;
@@ -811,15 +860,15 @@ fn ncc(a: &[f32], b: &[f32]) -> f64 {
         }
     }
     let mut s = acc.map(|a| a.iter().map(|&v| v as f64).sum::<f64>());
-    for (&x, &y) in ra.iter().zip(rb) {
-        let (x, y) = ((x - k) as f64, (y - k) as f64);
+    for ((&x, &y), &m) in ra.iter().zip(rb).zip(rm) {
+        let (x, y) = (((x - k) * m) as f64, ((y - k) * m) as f64);
         s[0] += x;
         s[1] += y;
         s[2] += x * x;
         s[3] += y * y;
         s[4] += x * y;
     }
-    let nf = n.max(1) as f64;
+    let nf = count.max(1) as f64;
     let aa = s[2] - s[0] * s[0] / nf;
     let bb = s[3] - s[1] * s[1] / nf;
     let ab = s[4] - s[0] * s[1] / nf;
@@ -842,7 +891,8 @@ pub struct PatchTracker {
     patches: Vec<Patch>,
     /// Where each patch, in the order it was given, is in `patches`.
     order: Vec<usize>,
-    pool: Option<rayon::ThreadPool>,
+    /// The threads, each with its own [`Scratch`] (member 0 is the caller's).
+    crew: Crew<Scratch>,
     size: (usize, usize),
     frames: usize,
 }
@@ -856,17 +906,11 @@ impl PatchTracker {
         } else {
             imaging::gaussian_kernel(1, 0.0)
         };
-        let pool = match params.threads {
-            0 | 1 => None,
-            t => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(t)
-                    .build()
-                    .map_err(|e| Error::InvalidParameter(format!("patches: threads: {e}")))?,
-            ),
-        };
+        let grid = Grid::new(params.size);
+        let scratch = Scratch::new(&grid, params.levels, params.warp.dof());
+        let crew = Crew::new(vec![scratch; crew::threads_for(params.threads)]);
         Ok(PatchTracker {
-            grid: Grid::new(params.size),
+            grid,
             prep: Prep {
                 kernel,
                 tmp: Vec::new(),
@@ -877,7 +921,7 @@ impl PatchTracker {
             prev: Frame::default(),
             patches: Vec::new(),
             order: Vec::new(),
-            pool,
+            crew,
             size: (0, 0),
             frames: 0,
             params,
@@ -963,6 +1007,8 @@ impl PatchTracker {
         let dof = self.params.warp.dof();
         let grid = &self.grid;
         let (w, h) = self.size;
+        let mut scratch = self.crew.states().next().expect("a crew has a member");
+        let scratch = &mut *scratch;
         // Raster order of the points, by rows of 16 pixels (ties keep the given order).
         let mut by_place: Vec<usize> = (0..points.len()).collect();
         let key = |p: Point| {
@@ -984,7 +1030,11 @@ impl PatchTracker {
             .iter()
             .map(|&k| points[k])
             .map(|c| {
-                let mut p = Patch::new(c, grid, levels, dof);
+                let mut p = Patch::new(c);
+                let keep = self.params.template == TemplateSource::First;
+                if keep {
+                    p.first = Some(Box::new(Template::new(grid, levels, dof)));
+                }
                 if !(c.is_finite()
                     && c.x >= 0.0
                     && c.y >= 0.0
@@ -996,9 +1046,21 @@ impl PatchTracker {
                         p.state.centre = Point::default();
                         p.warp = Warp::at(Point::default());
                     }
-                } else if !make_template(&mut p, false, &self.cur, &Warp::at(c), grid, &self.params)
-                {
-                    p.state.status = TrackStatus::Lost(LossReason::Singular);
+                } else {
+                    let tp = match p.first.as_deref_mut() {
+                        Some(tp) => tp,
+                        None => &mut scratch.fwd,
+                    };
+                    if !make_template(
+                        tp,
+                        &mut scratch.buf,
+                        &self.cur,
+                        &Warp::at(c),
+                        grid,
+                        &self.params,
+                    ) {
+                        p.state.status = TrackStatus::Lost(LossReason::Singular);
+                    }
                 }
                 p
             })
@@ -1026,12 +1088,16 @@ impl PatchTracker {
             .build(frame, self.params.levels, self.border(), &mut self.prep);
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
-        let work = |p: &mut Patch| track_patch(p, prev, cur, grid, prm, size);
-        match &self.pool {
-            _ if prm.threads == 1 => self.patches.iter_mut().for_each(work),
-            Some(pool) => pool.install(|| self.patches.par_iter_mut().for_each(work)),
-            None => self.patches.par_iter_mut().for_each(work),
-        }
+        // Blocks of neighbouring patches (they read the same rows of the frame), taken by
+        // whichever thread is free.
+        let shares = Shares::new(&mut self.patches, PATCH_BLOCK);
+        self.crew.run(&|scratch: &mut Scratch, _| {
+            while let Some((_, block)) = shares.take() {
+                for p in block {
+                    track_patch(p, scratch, prev, cur, grid, prm, size);
+                }
+            }
+        });
         self.frames += 1;
         Ok(())
     }
@@ -1048,7 +1114,8 @@ impl PatchTracker {
 
     /// The border the frame's levels get: a patch whose centre is inside reads inside it.
     fn border(&self) -> usize {
-        self.grid.half.ceil() as usize + 3
+        // The grown grid's rows (`ext_stride` samples from `-half - 1`) read one pixel more.
+        (self.grid.ext_stride as f64 - self.grid.half).ceil() as usize + 3
     }
 
     /// Half the side of a patch's window (pixels at the finest level).
@@ -1060,6 +1127,7 @@ impl PatchTracker {
 /// One patch, one frame.
 fn track_patch(
     p: &mut Patch,
+    scratch: &mut Scratch,
     prev: &Frame,
     cur: &Frame,
     grid: &Grid,
@@ -1078,15 +1146,21 @@ fn track_patch(
     let relative = prm.warp == PatchWarp::Affine && prm.template == TemplateSource::Previous;
     let start = if relative { Warp::at(p.warp.c) } else { p.warp };
     p.state.fb_error = None;
-    if prm.template == TemplateSource::Previous && !make_template(p, false, prev, &start, grid, prm)
-    {
-        p.state.status = TrackStatus::Lost(LossReason::Singular);
-        return;
-    }
+    let Scratch { fwd, back, buf } = scratch;
+    let fwd: &Template = match p.first.as_deref() {
+        Some(first) => first,
+        None => {
+            if !make_template(fwd, buf, prev, &start, grid, prm) {
+                p.state.status = TrackStatus::Lost(LossReason::Singular);
+                return;
+            }
+            fwd
+        }
+    };
     let lose = |p: &mut Patch, r: LossReason| {
         p.state.status = TrackStatus::Lost(r);
     };
-    match search(p, false, cur, start, grid, prm) {
+    match search(fwd, buf, cur, start, grid, prm) {
         Err(r) => lose(p, r),
         Ok((found, iterations, similarity)) => {
             p.state.iterations = iterations;
@@ -1114,10 +1188,10 @@ fn track_patch(
             }
             if prm.fb_max > 0.0 {
                 let back_start = if relative { Warp::at(c) } else { found };
-                if !make_template(p, true, cur, &back_start, grid, prm) {
+                if !make_template(back, buf, cur, &back_start, grid, prm) {
                     return lose(p, LossReason::Singular);
                 }
-                match search(p, true, prev, back_start, grid, prm) {
+                match search(back, buf, prev, back_start, grid, prm) {
                     Err(r) => return lose(p, r),
                     Ok((back, _, _)) => {
                         let e = back.c.dist(start.c);
@@ -1509,23 +1583,25 @@ mod tests {
     use super::*;
 
     #[test]
-    fn dot_equals_the_plain_sum() {
-        let a: Vec<f32> = (0..37).map(|i| (i as f32 * 0.37).sin()).collect();
-        let b: Vec<f32> = (0..37).map(|i| (i as f32 * 0.11).cos()).collect();
-        let plain: f64 = a.iter().zip(&b).map(|(x, y)| (x * y) as f64).sum();
-        assert!((dot(&a, &b) as f64 - plain).abs() < 1e-5);
-    }
-
-    #[test]
     fn ncc_is_one_up_to_gain_and_bias_and_zero_for_a_flat_patch() {
         let a: Vec<f32> = (0..441)
             .map(|i| 100.0 + 60.0 * (i as f32 * 0.3).sin())
             .collect();
         let b: Vec<f32> = a.iter().map(|v| 0.5 * v + 40.0).collect();
-        assert!((ncc(&a, &b) - 1.0).abs() < 1e-4, "{}", ncc(&a, &b));
+        let m = vec![1.0; 441];
+        let r = ncc(&a, &b, &m, 441);
+        assert!((r - 1.0).abs() < 1e-4, "{r}");
         let c: Vec<f32> = a.iter().map(|v| 255.0 - v).collect();
-        assert!((ncc(&a, &c) + 1.0).abs() < 1e-4);
-        assert_eq!(ncc(&a, &vec![7.0; 441]), 0.0);
+        assert!((ncc(&a, &c, &m, 441) + 1.0).abs() < 1e-4);
+        assert_eq!(ncc(&a, &vec![7.0; 441], &m, 441), 0.0);
+        // The masked entries do not count, whatever they hold.
+        let mut d = b.clone();
+        let mut half = m.clone();
+        for k in (1..441).step_by(3) {
+            d[k] = -1e4;
+            half[k] = 0.0;
+        }
+        assert!((ncc(&a, &d, &half, 294) - 1.0).abs() < 1e-4);
     }
 
     #[test]

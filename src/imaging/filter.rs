@@ -43,14 +43,44 @@ pub fn gaussian_kernel(size: usize, sigma: f32) -> GaussianKernel {
 fn blur_region<T: Pixel>(
     src: ImageRef<'_, T>,
     kernel: &GaussianKernel,
-    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    region: (usize, usize, usize, usize),
     out: &mut Vec<f32>,
     tmp: &mut Vec<f32>,
     line: &mut Vec<f32>,
 ) {
-    let w = x1 - x0;
-    let h = y1 - y0;
-    out.resize(w * h, 0.0);
+    out.resize((region.2 - region.0) * (region.3 - region.1), 0.0);
+    blur_region_into(src, kernel, region, out, tmp, line);
+}
+
+/// [`gaussian_blur_into`] for the rows `rows` of the result only, into `out` (`rows.len()` rows
+/// of `src.width` pixels, the same values as those rows of the whole image's): bands of rows
+/// can be smoothed by different threads.
+pub fn gaussian_blur_rows_into<'a, T: Pixel>(
+    src: impl Into<ImageRef<'a, T>>,
+    kernel: &GaussianKernel,
+    rows: std::ops::Range<usize>,
+    out: &mut [f32],
+    tmp: &mut Vec<f32>,
+    line: &mut Vec<f32>,
+) {
+    let src = src.into();
+    let region = (0, rows.start, src.width, rows.end.min(src.height));
+    blur_region_into(src, kernel, region, out, tmp, line);
+}
+
+/// [`blur_region`] into `out`, which holds at least the region's pixels.
+#[allow(clippy::too_many_arguments)]
+fn blur_region_into<T: Pixel>(
+    src: ImageRef<'_, T>,
+    kernel: &GaussianKernel,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    out: &mut [f32],
+    tmp: &mut Vec<f32>,
+    line: &mut Vec<f32>,
+) {
+    let w = x1.saturating_sub(x0);
+    let h = y1.saturating_sub(y0);
+    assert!(out.len() >= w * h, "the output holds the region");
     if w == 0 || h == 0 {
         return;
     }
@@ -225,17 +255,47 @@ pub fn downsample_half_into(src: &GrayF32, out: &mut GrayF32, scratch: &mut Vec<
 fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut Vec<f32>) {
     let (ow, oh) = (w.div_ceil(2).max(1), h.div_ceil(2).max(1));
     out.resize(ow, oh);
+    half_rows_into(src, w, h, 0..oh, &mut out.data, scratch);
+}
+
+/// [`downsample_half_into`] for the rows `rows` of the result only, into `out` (`rows.len()`
+/// rows of `src.width.div_ceil(2)` pixels, the same values as those rows of the whole
+/// result's): bands of rows can be halved by different threads.
+pub fn downsample_half_rows_into(
+    src: &GrayF32,
+    rows: std::ops::Range<usize>,
+    out: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    half_rows_into(&src.data, src.width, src.height, rows, out, scratch);
+}
+
+/// Rows `rows` of the halving of `src` (`w x h`) into `out`.
+fn half_rows_into(
+    src: &[f32],
+    w: usize,
+    h: usize,
+    rows: std::ops::Range<usize>,
+    out: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    let ow = w.div_ceil(2).max(1);
+    let out = &mut out[..rows.len() * ow];
     if w == 0 || h == 0 {
-        out.data.fill(0.0);
+        out.fill(0.0);
         return;
     }
     const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    // Horizontal pass at the kept columns, for every row: the columns whose five taps are all
+    // The source rows the band reads: 2 y - 2 to 2 y + 2, clamped.
+    let first = (2 * rows.start).saturating_sub(2).min(h - 1);
+    let last = (2 * rows.end + 1).min(h - 1);
+    // Horizontal pass at the kept columns, for those rows: the columns whose five taps are all
     // inside the row without clamping, the others (at most two on each side) with it.
-    scratch.resize(ow * h, 0.0);
+    scratch.resize(ow * (last + 1 - first), 0.0);
     // Inner columns x: pixels 2 x - 2 to 2 x + 3 (the last pair's odd pixel included) in the row.
     let inner = 1..ow.min((w.saturating_sub(4)) / 2 + 1).max(1);
-    for (row, line) in src.chunks_exact(w).zip(scratch.chunks_exact_mut(ow)) {
+    let band = &src[first * w..(last + 1) * w];
+    for (row, line) in band.chunks_exact(w).zip(scratch.chunks_exact_mut(ow)) {
         let tap = |c: isize| row[c.clamp(0, w as isize - 1) as usize];
         for x in (0..inner.start).chain(inner.end..ow) {
             let c = 2 * x as isize;
@@ -253,9 +313,9 @@ fn half_into(src: &[f32], w: usize, h: usize, out: &mut GrayF32, scratch: &mut V
         }
     }
     // Vertical pass at the kept rows: five whole rows of the scratch, weighted.
-    for (y, dst) in out.data.chunks_exact_mut(ow).enumerate() {
+    for (y, dst) in rows.zip(out.chunks_exact_mut(ow)) {
         let row = |t: isize| {
-            let sy = (2 * y as isize + t).clamp(0, h as isize - 1) as usize;
+            let sy = (2 * y as isize + t).clamp(0, h as isize - 1) as usize - first;
             &scratch[sy * ow..(sy + 1) * ow]
         };
         let (a, b, c, d, e) = (row(-2), row(-1), row(0), row(1), row(2));
@@ -397,6 +457,50 @@ impl Preprocessor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A band of rows smoothed or halved alone equals those rows of the whole image's, for
+    /// bands that touch the image's top, bottom or neither.
+    #[test]
+    fn bands_of_rows_equal_the_whole_images_rows() {
+        let mut rng = crate::rng::Rng::new(11);
+        for (w, h) in [(37usize, 23usize), (8, 9), (64, 40)] {
+            let src = GrayF32::from_vec(
+                w,
+                h,
+                (0..w * h).map(|_| 255.0 * rng.uniform() as f32).collect(),
+            )
+            .unwrap();
+            let kernel = gaussian_kernel(5, 1.0);
+            let (mut whole, mut tmp, mut line) = (GrayF32::default(), Vec::new(), Vec::new());
+            gaussian_blur_into(&src, &kernel, &mut whole, &mut tmp, &mut line);
+            let half = downsample_half(&src);
+            for n in [1, 2, 3, 7] {
+                for k in 0..n {
+                    let rows = k * h / n..(k + 1) * h / n;
+                    let mut band = vec![0.0; rows.len() * w];
+                    gaussian_blur_rows_into(
+                        &src,
+                        &kernel,
+                        rows.clone(),
+                        &mut band,
+                        &mut tmp,
+                        &mut line,
+                    );
+                    assert_eq!(
+                        band,
+                        whole.data[rows.start * w..rows.end * w],
+                        "{w}x{h} {n} {k}"
+                    );
+                    let oh = half.height;
+                    let rows = k * oh / n..(k + 1) * oh / n;
+                    let mut band = vec![0.0; rows.len() * half.width];
+                    downsample_half_rows_into(&src, rows.clone(), &mut band, &mut tmp);
+                    let want = &half.data[rows.start * half.width..rows.end * half.width];
+                    assert_eq!(band, want, "half {w}x{h} {n} {k}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn padding_replicates_the_edges() {

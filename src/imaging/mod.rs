@@ -14,8 +14,9 @@ mod resample;
 mod sample;
 
 pub use filter::{
-    GaussianKernel, Preprocessor, downsample_half, downsample_half_into, gaussian_blur,
-    gaussian_blur_into, gaussian_kernel, pad_replicate_into, pyramid,
+    GaussianKernel, Preprocessor, downsample_half, downsample_half_into, downsample_half_rows_into,
+    gaussian_blur, gaussian_blur_into, gaussian_blur_rows_into, gaussian_kernel,
+    pad_replicate_into, pyramid,
 };
 pub use integral::Integral;
 pub use resample::resample_window;

@@ -384,42 +384,118 @@ impl Frame {
     }
 }
 
-/// Buffers the pre-processing reuses from frame to frame.
-#[derive(Clone, Debug)]
-struct Prep {
-    kernel: GaussianKernel,
-    tmp: Vec<f32>,
-    line: Vec<f32>,
-    scratch: Vec<f32>,
+/// Bands of rows a level is split into, at most (for the threads building a frame).
+const MAX_BANDS: usize = 16;
+
+/// One band of a level's rows being built: its rows, their pixels and the padded level's rows
+/// that copy them (with the top or bottom border when the band has the first or last row).
+struct Band<'a> {
+    rows: std::ops::Range<usize>,
+    out: &'a mut [f32],
+    pad: &'a mut [f32],
+    /// The padded level's first row in `pad`.
+    pad_from: usize,
 }
 
 impl Frame {
-    fn build(&mut self, src: ImageRef<'_, u8>, levels: usize, border: usize, prep: &mut Prep) {
-        self.levels.resize_with(levels.max(1), GrayF32::default);
-        imaging::gaussian_blur_into(
-            src,
-            &prep.kernel,
-            &mut self.levels[0],
-            &mut prep.tmp,
-            &mut prep.line,
-        );
+    /// The smoothed frame's pyramid of at most `levels` levels and their padded copies. Each
+    /// level is split into bands of rows that the crew's threads take as they are free; the
+    /// result is the same for any number of threads.
+    fn build(
+        &mut self,
+        src: ImageRef<'_, u8>,
+        levels: usize,
+        border: usize,
+        kernel: &GaussianKernel,
+        crew: &mut Crew<Scratch>,
+    ) {
+        // The levels' sizes: each half the one below, while that is at least 32 x 32.
         let mut kept = 1;
-        while kept < levels {
-            let (done, todo) = self.levels.split_at_mut(kept);
-            let below = &done[kept - 1];
-            if below.width < 32 || below.height < 32 {
-                break;
-            }
-            imaging::downsample_half_into(below, &mut todo[0], &mut prep.scratch);
+        let (mut w, mut h) = (src.width, src.height);
+        self.levels.resize_with(levels.max(1), GrayF32::default);
+        self.levels[0].resize(w, h);
+        while kept < levels && w >= 32 && h >= 32 {
+            (w, h) = (w.div_ceil(2), h.div_ceil(2));
+            self.levels[kept].resize(w, h);
             kept += 1;
         }
         self.levels.truncate(kept);
         self.border = border;
         self.padded.resize_with(kept, GrayF32::default);
-        for (l, p) in self.levels.iter().zip(self.padded.iter_mut()) {
-            imaging::pad_replicate_into(l, border, p);
+        let b = border;
+        for l in 0..kept {
+            let (done, todo) = self.levels.split_at_mut(l);
+            let below = done.last();
+            let level = &mut todo[0];
+            let (w, h) = (level.width, level.height);
+            let (pw, ph) = (w + 2 * b, h + 2 * b);
+            let pad = &mut self.padded[l];
+            pad.resize(pw, ph);
+            if w == 0 || h == 0 {
+                pad.data.fill(0.0);
+                continue;
+            }
+            // Bands: twice the threads (so one that is late does not hold the others up).
+            let n = (2 * crew.len()).min(MAX_BANDS).min(h).max(1);
+            let mut bands: [Option<Band<'_>>; MAX_BANDS] = std::array::from_fn(|_| None);
+            let (mut out, mut padded) = (&mut level.data[..w * h], &mut pad.data[..pw * ph]);
+            let mut pad_at = 0;
+            for (k, band) in bands.iter_mut().take(n).enumerate() {
+                let rows = k * h / n..(k + 1) * h / n;
+                let pad_to = if rows.end == h { ph } else { rows.end + b };
+                let (o, rest) = std::mem::take(&mut out).split_at_mut(rows.len() * w);
+                let (q, prest) = std::mem::take(&mut padded).split_at_mut((pad_to - pad_at) * pw);
+                (out, padded) = (rest, prest);
+                *band = Some(Band {
+                    rows,
+                    out: o,
+                    pad: q,
+                    pad_from: pad_at,
+                });
+                pad_at = pad_to;
+            }
+            let shares = Shares::new(&mut bands[..n], 1);
+            crew.run(&|s: &mut Scratch, _| {
+                while let Some((_, taken)) = shares.take() {
+                    let Some(band) = taken[0].take() else {
+                        continue;
+                    };
+                    match below {
+                        None => imaging::gaussian_blur_rows_into(
+                            src,
+                            kernel,
+                            band.rows.clone(),
+                            band.out,
+                            &mut s.prep.tmp,
+                            &mut s.prep.line,
+                        ),
+                        Some(below) => imaging::downsample_half_rows_into(
+                            below,
+                            band.rows.clone(),
+                            band.out,
+                            &mut s.prep.half,
+                        ),
+                    }
+                    // The padded rows: pixel (x, y) at (x + b, y + b), edges replicated.
+                    for (r, dst) in band.pad.chunks_exact_mut(pw).enumerate() {
+                        let sy = (band.pad_from + r).saturating_sub(b).min(h - 1);
+                        let row = &band.out[(sy - band.rows.start) * w..][..w];
+                        dst[..b].fill(row[0]);
+                        dst[b..b + w].copy_from_slice(row);
+                        dst[b + w..].fill(row[w - 1]);
+                    }
+                }
+            });
         }
     }
+}
+
+/// The pre-processing's buffers of one thread.
+#[derive(Clone, Debug, Default)]
+struct PrepBuffers {
+    tmp: Vec<f32>,
+    line: Vec<f32>,
+    half: Vec<f32>,
 }
 
 /// A template at every level: values, steepest-descent images and the inverse Hessian.
@@ -450,6 +526,7 @@ struct Scratch {
     fwd: Template,
     back: Template,
     buf: Buffers,
+    prep: PrepBuffers,
 }
 
 /// The samples of one search or template.
@@ -496,6 +573,7 @@ impl Scratch {
                 ys: vec![0.0; n],
                 ext: vec![0.0; grid.ex.len()],
             },
+            prep: PrepBuffers::default(),
         }
     }
 }
@@ -883,7 +961,8 @@ fn ncc(a: &[f32], b: &[f32], mask: &[f32], count: usize) -> f64 {
 pub struct PatchTracker {
     params: PatchParams,
     grid: Grid,
-    prep: Prep,
+    /// The frames' pre-smoothing.
+    kernel: GaussianKernel,
     cur: Frame,
     prev: Frame,
     /// The patches in raster order of their first positions (neighbours read the same rows
@@ -911,12 +990,7 @@ impl PatchTracker {
         let crew = Crew::new(vec![scratch; crew::threads_for(params.threads)]);
         Ok(PatchTracker {
             grid,
-            prep: Prep {
-                kernel,
-                tmp: Vec::new(),
-                line: Vec::new(),
-                scratch: Vec::new(),
-            },
+            kernel,
             cur: Frame::default(),
             prev: Frame::default(),
             patches: Vec::new(),
@@ -944,7 +1018,7 @@ impl PatchTracker {
     ) -> Vec<Point> {
         let frame = frame.into();
         let mut f = Frame::default();
-        f.build(frame, 1, 0, &mut self.prep);
+        f.build(frame, 1, 0, &self.kernel, &mut self.crew);
         let img = &f.levels[0];
         let half = self.grid.half;
         let border = half.ceil() as usize + 2;
@@ -1001,8 +1075,13 @@ impl PatchTracker {
             )));
         }
         self.size = (frame.width, frame.height);
-        self.cur
-            .build(frame, self.params.levels, self.border(), &mut self.prep);
+        self.cur.build(
+            frame,
+            self.params.levels,
+            self.border(),
+            &self.kernel,
+            &mut self.crew,
+        );
         let levels = self.params.levels;
         let dof = self.params.warp.dof();
         let grid = &self.grid;
@@ -1084,8 +1163,13 @@ impl PatchTracker {
             )));
         }
         std::mem::swap(&mut self.cur, &mut self.prev);
-        self.cur
-            .build(frame, self.params.levels, self.border(), &mut self.prep);
+        self.cur.build(
+            frame,
+            self.params.levels,
+            self.border(),
+            &self.kernel,
+            &mut self.crew,
+        );
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
         // Blocks of neighbouring patches (they read the same rows of the frame), taken by
@@ -1146,7 +1230,7 @@ fn track_patch(
     let relative = prm.warp == PatchWarp::Affine && prm.template == TemplateSource::Previous;
     let start = if relative { Warp::at(p.warp.c) } else { p.warp };
     p.state.fb_error = None;
-    let Scratch { fwd, back, buf } = scratch;
+    let Scratch { fwd, back, buf, .. } = scratch;
     let fwd: &Template = match p.first.as_deref() {
         Some(first) => first,
         None => {

@@ -208,7 +208,8 @@ fn the_forward_backward_check_measures_and_rejects() {
     }
 }
 
-/// One thread or two, and again: the same tracks, bit for bit.
+/// One thread, two or three (each taking blocks of patches and bands of the frame's levels as
+/// it is free), and again: the same tracks, bit for bit.
 #[test]
 fn the_same_tracks_on_any_number_of_threads() {
     let seq = sequence();
@@ -227,6 +228,7 @@ fn the_same_tracks_on_any_number_of_threads() {
     };
     let one = track("1");
     assert_eq!(one, track("2"));
+    assert_eq!(one, track("3"));
     assert_eq!(one, track("1"));
 }
 

@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
+use crate::params::MethodParams;
 use crate::spec::DEFAULT_TRACKER;
 use crate::tracker::{RegistrationSpec, TrackerSpec};
 use serde::{Deserialize, Serialize};
@@ -137,6 +138,38 @@ pub struct State {
     pub selected_tracker: usize,
     /// The SSM the ground truth is shown and corrected in (`homography` = full 8 DOF).
     pub gt_ssm: String,
+    /// The sidebar's many-patch run.
+    pub patches: PatchSettings,
+}
+
+/// The many-patch run's settings (the sidebar's *Patches*; `regtrack track --patches`): how
+/// many corners to track and the patch tracker's parameters by name
+/// ([`crate::patches::PATCH_PARAMS`]; unset ones keep their defaults).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PatchSettings {
+    pub count: usize,
+    pub params: MethodParams,
+}
+
+/// How many patches a run may ask for.
+pub const PATCH_COUNT: std::ops::RangeInclusive<usize> = 1..=10_000;
+
+impl Default for PatchSettings {
+    fn default() -> Self {
+        PatchSettings {
+            count: 300,
+            params: MethodParams::default(),
+        }
+    }
+}
+
+impl PatchSettings {
+    /// The patch tracker's parameters (an unknown name or a value out of range is an error
+    /// naming it).
+    pub fn patch_params(&self) -> Result<crate::patches::PatchParams> {
+        crate::patches::PatchParams::from_values(&self.params)
+    }
 }
 
 /// The frame view's zoom (screen pixels per image pixel) besides 0 (fit): what the scroll wheel
@@ -189,6 +222,7 @@ impl Default for State {
             view: View::default(),
             selected_tracker: 0,
             gt_ssm: "homography".into(),
+            patches: PatchSettings::default(),
         }
     }
 }
@@ -235,18 +269,18 @@ impl State {
         }
         state.validate().map_err(|(key, message)| Error::Parse {
             path: path.to_path_buf(),
-            line: key_line(&text, key),
+            line: key_line(&text, &key),
             message,
         })?;
         Ok(state)
     }
 
     /// Checks every value against the ranges the widgets allow; the error names the key.
-    fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
+    fn validate(&self) -> std::result::Result<(), (std::borrow::Cow<'static, str>, String)> {
         let fps = self.playback_fps;
         if !(fps == 0.0 || PLAYBACK_FPS.contains(&fps)) {
             return Err((
-                "playback_fps",
+                "playback_fps".into(),
                 format!(
                     "playback_fps = {} must be 0 (as fast as possible) or in {}..={}",
                     crate::error::short_number(fps as f64, 2),
@@ -258,7 +292,7 @@ impl State {
         let zoom = self.view.zoom;
         if !(zoom == 0.0 || ZOOM.contains(&zoom)) {
             return Err((
-                "zoom",
+                "zoom".into(),
                 format!(
                     "zoom = {} must be 0 (fit) or in {}..={}",
                     crate::error::short_number(zoom as f64, 2),
@@ -274,7 +308,7 @@ impl State {
             .find(|c| !c.is_finite() || c.abs() > MAX_CENTER)
         {
             return Err((
-                "center",
+                "center".into(),
                 format!(
                     "center coordinate {} is not an image position",
                     crate::error::short_number(*c as f64, 2)
@@ -283,7 +317,7 @@ impl State {
         }
         if self.selected_tracker > 0 && self.selected_tracker >= self.trackers.len() {
             return Err((
-                "selected_tracker",
+                "selected_tracker".into(),
                 format!(
                     "selected_tracker = {} but the session has {} tracker(s)",
                     self.selected_tracker,
@@ -295,7 +329,7 @@ impl State {
             && (a >= self.trackers.len() || b >= self.trackers.len())
         {
             return Err((
-                "ab",
+                "ab".into(),
                 format!(
                     "ab = [{a}, {b}] but the session has {} tracker(s)",
                     self.trackers.len()
@@ -305,7 +339,7 @@ impl State {
         let l = &self.view.landscape;
         if !LANDSCAPE_RADIUS.contains(&l.radius) {
             return Err((
-                "radius",
+                "radius".into(),
                 format!(
                     "landscape radius = {} must be in {}..={} px",
                     crate::error::short_number(l.radius, 2),
@@ -318,11 +352,29 @@ impl State {
         // clamps to it).
         if let Some(k) = std::iter::once(l.x).chain(l.y).find(|&k| k >= 8) {
             return Err((
-                if k == l.x { "x" } else { "y" },
+                if k == l.x { "x" } else { "y" }.into(),
                 format!("landscape parameter {k} does not exist (0..=7)"),
             ));
         }
-        crate::gt::ssm_key(&self.gt_ssm).map_err(|e| ("gt_ssm", e.to_string()))?;
+        crate::gt::ssm_key(&self.gt_ssm).map_err(|e| ("gt_ssm".into(), e.to_string()))?;
+        let p = &self.patches;
+        if !PATCH_COUNT.contains(&p.count) {
+            return Err((
+                "count".into(),
+                format!(
+                    "patches: count = {} must be in {}..={}",
+                    p.count,
+                    PATCH_COUNT.start(),
+                    PATCH_COUNT.end()
+                ),
+            ));
+        }
+        for name in p.params.0.keys() {
+            let key = name.clone().into();
+            let mut one = MethodParams::default();
+            one.0.insert(name.clone(), p.params.0[name]);
+            crate::patches::PatchParams::from_values(&one).map_err(|e| (key, e.to_string()))?;
+        }
         Ok(())
     }
 

@@ -78,13 +78,12 @@ pub enum Command {
     /// many times at each noise level 1..10 px around the ground truth (see
     /// [`crate::converge`]); the plot shows the fraction that converges.
     ConvergenceFrequency(usize),
-    /// Track this many patches (Shi-Tomasi corners, inside the ground truth when the frame has
-    /// one) from the shown frame to the end of the sequence, translation or affine, on a task
-    /// thread; the frame view draws them.
-    TrackPatches {
-        count: usize,
-        affine: bool,
-    },
+    /// Track the session's patches ([`crate::session::PatchSettings`]: that many Shi-Tomasi
+    /// corners, inside the ground truth when the frame has one, with those parameters) from the
+    /// shown frame to the end of the sequence, on a task thread; the frame view draws them.
+    TrackPatches,
+    /// The session's many-patch settings.
+    SetPatchSettings(crate::session::PatchSettings),
     ClearPatches,
     ClearExperiment,
     /// Write the plots shown (success rates, errors per frame, a landscape curve) as SVG and
@@ -358,7 +357,8 @@ impl InspectorApp {
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
             Command::ExportPlots(dir) => self.export_plots(dir),
             Command::ConvergenceFrequency(starts) => self.convergence_frequency(starts),
-            Command::TrackPatches { count, affine } => self.track_patches(count, affine),
+            Command::TrackPatches => self.track_patches(),
+            Command::SetPatchSettings(p) => self.state.patches = p,
             Command::ClearPatches => self.rt.ui.patches = None,
             Command::ClearExperiment => {
                 self.rt.ui.experiment = None;

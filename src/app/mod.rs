@@ -371,9 +371,9 @@ impl InspectorApp {
         }
     }
 
-    /// Tracks `count` patches from the shown frame to the end on a thread of its own (see
+    /// Tracks the session's patches from the shown frame to the end on a thread of its own (see
     /// [`Command::TrackPatches`]).
-    fn track_patches(&mut self, count: usize, affine: bool) {
+    fn track_patches(&mut self) {
         let from = self.state.frame;
         let Some(seq) = self.rt.seq.sequence.clone() else {
             return;
@@ -388,18 +388,18 @@ impl InspectorApp {
             self.rt.msg.status = "patches are being tracked".into();
             return;
         }
-        let count = count.clamp(1, 10_000);
-        let params = match crate::patches::PatchParams::parse(&[(
-            "warp".to_string(),
-            if affine { "affine" } else { "translation" }.to_string(),
-        )]) {
+        let count = self.state.patches.count.clamp(
+            *crate::session::PATCH_COUNT.start(),
+            *crate::session::PATCH_COUNT.end(),
+        );
+        let params = match self.state.patches.patch_params() {
             Ok(p) => p,
             Err(e) => return self.error(e.to_string()),
         };
         self.rt.ui.patches = Some(runtime::Patches {
             from,
             count,
-            affine,
+            affine: params.warp == crate::patches::PatchWarp::Affine,
             half: (params.size as f64 - 1.0) / 2.0,
             result: None,
         });

@@ -959,6 +959,10 @@ fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
         radius: 7.5,
         around_truth: true,
     };
+    // So are the many-patch settings.
+    state.patches.count = 120;
+    state.patches.params.set("warp", 1.0);
+    state.patches.params.set("size", 11.0);
     state.save(&session).unwrap();
     assert_eq!(State::load(&session).unwrap(), state);
     State::default().save(&session).unwrap();
@@ -1002,12 +1006,25 @@ fn a_session_with_values_out_of_range_or_unknown_keys_is_refused_at_the_line() {
             "landscape radius = 1000.00 must be in 0.5..=100",
         ),
         ("x", "9", "landscape parameter 9 does not exist"),
+        ("count", "0", "patches: count = 0 must be in 1..=10000"),
     ] {
         let text = set(key, value);
         assert_ne!(text, good, "{key} is in the saved session");
         std::fs::write(&session, &text).unwrap();
         let e = State::load(&session).unwrap_err().to_string();
         let line = line_of(&text, key);
+        assert!(
+            e.contains(&format!("s.toml:{line}:")) && e.contains(what),
+            "{key}: {e}"
+        );
+    }
+    // A patch parameter out of range, and one that does not exist.
+    assert!(good.contains("[patches.params]"), "{good}");
+    for (key, what) in [("size = 99.0", "size"), ("window = 3.0", "window")] {
+        let text = good.replace("[patches.params]", &format!("[patches.params]\n{key}"));
+        std::fs::write(&session, &text).unwrap();
+        let e = State::load(&session).unwrap_err().to_string();
+        let line = line_of(&text, key.split(' ').next().unwrap());
         assert!(
             e.contains(&format!("s.toml:{line}:")) && e.contains(what),
             "{key}: {e}"
@@ -1549,10 +1566,11 @@ fn patches_are_tracked_from_the_shown_frame_and_drawn() {
     h.state_mut().send(Command::Seek(1));
     h.step();
     step_until(&mut h, "frame 2", |a| a.state.frame == 1);
-    h.state_mut().send(Command::TrackPatches {
-        count: 40,
-        affine: true,
-    });
+    let mut settings = h.state().state.patches.clone();
+    settings.count = 40;
+    settings.params.set("warp", 1.0);
+    h.state_mut().send(Command::SetPatchSettings(settings));
+    h.state_mut().send(Command::TrackPatches);
     h.step();
     step_until(&mut h, "the patches", |a| {
         a.patches().is_some_and(|p| p.result.is_some())

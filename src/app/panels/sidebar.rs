@@ -137,21 +137,32 @@ fn patch_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>)
         .id_salt("patches")
         .show(ui, |ui| {
             let running = app.patches().is_some_and(|p| p.result.is_none());
-            let id = ui.make_persistent_id("patch_settings");
-            let (mut count, mut affine): (usize, bool) = ui
-                .data(|d| d.get_temp(id))
-                .or(app.patches().map(|p| (p.count, p.affine)))
-                .unwrap_or((300, false));
-            ui.horizontal_wrapped(|ui| {
-                ui.add(
-                    egui::DragValue::new(&mut count)
-                        .range(1..=10_000)
-                        .suffix(" patches"),
-                );
-                ui.checkbox(&mut affine, "affine")
-                    .on_hover_text("Affine patches (6 parameters) instead of translation (2)");
+            let mut next = app.state.patches.clone();
+            ui.add(
+                egui::DragValue::new(&mut next.count)
+                    .range(crate::session::PATCH_COUNT)
+                    .suffix(" patches"),
+            )
+            .on_hover_text("How many corners to track (the strongest first)");
+            ui.collapsing("Patch parameters", |ui| {
+                egui::Grid::new("patch_params").num_columns(2).show(ui, |ui| {
+                    for d in crate::patches::PATCH_PARAMS {
+                        let old = next.params.get(d);
+                        let v = param_widget(ui, (usize::MAX, d.name), d, old);
+                        if v != old {
+                            next.params.set(d.name, v);
+                        }
+                    }
+                });
             });
-            ui.data_mut(|d| d.insert_temp(id, (count, affine)));
+            if next != app.state.patches {
+                out.push(Command::SetPatchSettings(next));
+            }
+            let side = app
+                .state
+                .patches
+                .patch_params()
+                .map_or(15, |p| p.size);
             ui.horizontal_wrapped(|ui| {
                 if ui
                     .add_enabled(
@@ -163,14 +174,17 @@ fn patch_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>)
                         }),
                     )
                     .on_hover_text(
-                        "The strongest Shi-Tomasi corners of this frame (inside its ground truth \
-                         when it has one), each a 15x15 patch tracked to the end of the sequence \
-                         by inverse-compositional LK over one shared pyramid (regtrack track \
-                         --patches on the command line). Green: tracking; red: lost.",
+                        format!(
+                            "The strongest Shi-Tomasi corners of this frame (inside its ground \
+                             truth when it has one), each a {side}x{side} patch tracked to the end \
+                             of the sequence by inverse-compositional LK over one shared pyramid \
+                             (regtrack track --patches on the command line). Green: tracking; \
+                             red: lost."
+                        ),
                     )
                     .clicked()
                 {
-                    out.push(Command::TrackPatches { count, affine });
+                    out.push(Command::TrackPatches);
                 }
                 if app.patches().is_some() && ui.button("Clear").clicked() {
                     out.push(Command::ClearPatches);

@@ -4,9 +4,11 @@
 //! A [`PatchTracker`] follows N small patches (a square grid of `size` x `size` samples each),
 //! every one with its own warp, translation or affine ([`PatchWarp`]), by inverse-compositional
 //! Lucas-Kanade (Baker and Matthews) over one pre-processed frame shared by all: one smoothing,
-//! one Gaussian pyramid and its gradient images, built once per frame. Patches are independent,
-//! so they are tracked in parallel over the cores (rayon) and give the same result, bit for bit,
-//! on any number of threads.
+//! one Gaussian pyramid, built once per frame (in bands of rows, by the threads). Patches are
+//! independent, so they are tracked in parallel over the cores (a [`Crew`]: each thread takes
+//! blocks of neighbouring patches and works in its own scratch, so a patch's template, made
+//! again each frame, never leaves that core's cache) and give the same result, bit for bit, on
+//! any number of threads.
 //!
 //! The template of a patch is the previous frame's patch (`template=previous`, as KLT does:
 //! no appearance drift, a slow positional one) or the first frame's (`template=first`: no

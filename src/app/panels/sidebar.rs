@@ -145,24 +145,22 @@ fn patch_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>)
             )
             .on_hover_text("How many corners to track (the strongest first)");
             ui.collapsing("Patch parameters", |ui| {
-                egui::Grid::new("patch_params").num_columns(2).show(ui, |ui| {
-                    for d in crate::patches::PATCH_PARAMS {
-                        let old = next.params.get(d);
-                        let v = param_widget(ui, (usize::MAX, d.name), d, old);
-                        if v != old {
-                            next.params.set(d.name, v);
+                egui::Grid::new("patch_params")
+                    .num_columns(2)
+                    .show(ui, |ui| {
+                        for d in crate::patches::PATCH_PARAMS {
+                            let old = next.params.get(d);
+                            let v = param_widget(ui, (usize::MAX, d.name), d, old);
+                            if v != old {
+                                next.params.set(d.name, v);
+                            }
                         }
-                    }
-                });
+                    });
             });
             if next != app.state.patches {
                 out.push(Command::SetPatchSettings(next));
             }
-            let side = app
-                .state
-                .patches
-                .patch_params()
-                .map_or(15, |p| p.size);
+            let side = app.state.patches.patch_params().map_or(15, |p| p.size);
             ui.horizontal_wrapped(|ui| {
                 if ui
                     .add_enabled(
@@ -173,15 +171,13 @@ fn patch_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>)
                             "Track from this frame"
                         }),
                     )
-                    .on_hover_text(
-                        format!(
-                            "The strongest Shi-Tomasi corners of this frame (inside its ground \
+                    .on_hover_text(format!(
+                        "The strongest Shi-Tomasi corners of this frame (inside its ground \
                              truth when it has one), each a {side}x{side} patch tracked to the end \
                              of the sequence by inverse-compositional LK over one shared pyramid \
                              (regtrack track --patches on the command line). Green: tracking; \
                              red: lost."
-                        ),
-                    )
+                    ))
                     .clicked()
                 {
                     out.push(Command::TrackPatches);

@@ -155,6 +155,223 @@ pub(crate) struct Weights {
     pub hi: usize,
 }
 
+/// The cubic B-spline's four weights as polynomials in the fraction `f` of a bin coordinate:
+/// `w_k = A_k + B_k f + C_k f^2 + D_k f^3`, so each of `w`, `dw/df` and `d2w/df2` is one
+/// four-lane expression.
+const A: [f64; 4] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0, 0.0];
+const B: [f64; 4] = [-0.5, 0.0, 0.5, 0.0];
+const C: [f64; 4] = [0.5, -1.0, 0.5, 0.0];
+const D: [f64; 4] = [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0];
+
+/// The four weights of fraction `f` and their derivatives (times `inside`, 0 or 1).
+#[inline(always)]
+fn spline(f: f64, inside: f64, w: &mut [f64; 4], d: &mut [f64; 4], d2: &mut [f64; 4]) {
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each store writes the four
+    // values of a `[f64; 4]`, each load reads one.
+    unsafe {
+        use std::arch::x86_64::*;
+        let load = |a: &[f64; 4]| _mm256_loadu_pd(a.as_ptr());
+        let (a, b, c, dd) = (load(&A), load(&B), load(&C), load(&D));
+        let fv = _mm256_set1_pd(f);
+        let m = _mm256_set1_pd(inside);
+        let two = _mm256_set1_pd(2.0);
+        let three = _mm256_set1_pd(3.0);
+        let six = _mm256_set1_pd(6.0);
+        let wv = _mm256_fmadd_pd(_mm256_fmadd_pd(_mm256_fmadd_pd(dd, fv, c), fv, b), fv, a);
+        let c2 = _mm256_mul_pd(two, c);
+        let dv = _mm256_fmadd_pd(_mm256_fmadd_pd(_mm256_mul_pd(three, dd), fv, c2), fv, b);
+        let d2v = _mm256_fmadd_pd(_mm256_mul_pd(six, dd), fv, c2);
+        _mm256_storeu_pd(w.as_mut_ptr(), wv);
+        _mm256_storeu_pd(d.as_mut_ptr(), _mm256_mul_pd(dv, m));
+        _mm256_storeu_pd(d2.as_mut_ptr(), _mm256_mul_pd(d2v, m));
+    }
+    #[cfg(not(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )))]
+    spline_portable(f, inside, w, d, d2);
+}
+
+/// `cells[u side + v] += x_u y_v` for the 4 x 4 cells (rows `side` apart) of one pixel.
+#[inline(always)]
+fn add_outer(cells: &mut [f64], side: usize, x: &[f64; 4], y: &[f64; 4]) {
+    assert!(cells.len() >= 3 * side + 4);
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); row u reads and writes cells
+    // u side .. u side + 4, inside `cells` (asserted above).
+    unsafe {
+        use std::arch::x86_64::*;
+        let yv = _mm256_loadu_pd(y.as_ptr());
+        for (u, &xu) in x.iter().enumerate() {
+            let p = cells.as_mut_ptr().add(u * side);
+            _mm256_storeu_pd(
+                p,
+                _mm256_fmadd_pd(_mm256_set1_pd(xu), yv, _mm256_loadu_pd(p)),
+            );
+        }
+    }
+    #[cfg(not(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )))]
+    add_outer_portable(cells, side, x, y);
+}
+
+/// `sum_uv x_u cells[u side + v] y_v` over the 4 x 4 cells (rows `side` apart) of one pixel.
+#[inline(always)]
+fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 {
+    assert!(cells.len() >= 3 * side + 4);
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); row u reads cells u side ..
+    // u side + 4, inside `cells` (asserted above).
+    unsafe {
+        use std::arch::x86_64::*;
+        let p = cells.as_ptr();
+        let mut rows = _mm256_mul_pd(_mm256_set1_pd(x[0]), _mm256_loadu_pd(p));
+        for u in 1..4 {
+            rows = _mm256_fmadd_pd(_mm256_set1_pd(x[u]), _mm256_loadu_pd(p.add(u * side)), rows);
+        }
+        let mut r = [0.0; 4];
+        _mm256_storeu_pd(
+            r.as_mut_ptr(),
+            _mm256_mul_pd(rows, _mm256_loadu_pd(y.as_ptr())),
+        );
+        (r[0] + r[1]) + (r[2] + r[3])
+    }
+    #[cfg(not(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )))]
+    bilinear_form_portable(cells, side, x, y)
+}
+
+/// `cells[u side + v] += (x_u y_v) jj` (eight lanes a cell) for the 4 x 4 cells (rows `side`
+/// apart) of one pixel: its share of the Newton Hessian's `V`.
+#[inline(always)]
+fn add_v(
+    cells: &mut [[f32; MAX_DOF]],
+    side: usize,
+    x: &[f64; 4],
+    y: &[f64; 4],
+    jj: &[f32; MAX_DOF],
+) {
+    assert!(cells.len() >= 3 * side + 4);
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma",
+    ))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a cell is eight f32 (MAX_DOF
+        // == 8), and row u touches cells u side .. u side + 4, inside `cells` (asserted above).
+        unsafe {
+            use std::arch::x86_64::*;
+            let j = _mm256_loadu_ps(jj.as_ptr());
+            let yv = _mm256_cvtpd_ps(_mm256_loadu_pd(y.as_ptr()));
+            let mut ys = [0f32; 4];
+            _mm_storeu_ps(ys.as_mut_ptr(), yv);
+            for (u, &xu) in x.iter().enumerate() {
+                let xu = xu as f32;
+                let p = cells.as_mut_ptr().add(u * side) as *mut f32;
+                for (w, &yw) in ys.iter().enumerate() {
+                    let c = p.add(w * MAX_DOF);
+                    let coef = _mm256_set1_ps(xu * yw);
+                    _mm256_storeu_ps(c, _mm256_fmadd_ps(coef, j, _mm256_loadu_ps(c)));
+                }
+            }
+        }
+        return;
+    }
+    add_v_portable(cells, side, x, y, jj);
+}
+
+/// [`add_v`] in plain Rust.
+fn add_v_portable(
+    cells: &mut [[f32; MAX_DOF]],
+    side: usize,
+    x: &[f64; 4],
+    y: &[f64; 4],
+    jj: &[f32; MAX_DOF],
+) {
+    for u in 0..4 {
+        for w in 0..4 {
+            let coef = (x[u] as f32) * (y[w] as f32);
+            for (e, &q) in cells[u * side + w].iter_mut().zip(jj) {
+                *e = coef.mul_add(q, *e);
+            }
+        }
+    }
+}
+
+/// [`add_outer`] in plain Rust.
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn add_outer_portable(cells: &mut [f64], side: usize, x: &[f64; 4], y: &[f64; 4]) {
+    for u in 0..4 {
+        for v in 0..4 {
+            cells[u * side + v] = x[u].mul_add(y[v], cells[u * side + v]);
+        }
+    }
+}
+
+/// [`bilinear_form`] in plain Rust.
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn bilinear_form_portable(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 {
+    let mut rows = [0.0; 4];
+    for u in 0..4 {
+        for v in 0..4 {
+            rows[v] = x[u].mul_add(cells[u * side + v], rows[v]);
+        }
+    }
+    (rows[0] * y[0] + rows[1] * y[1]) + (rows[2] * y[2] + rows[3] * y[3])
+}
+
+/// [`spline`] in plain Rust (the build for other CPUs; compared with it by a test).
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn spline_portable(f: f64, inside: f64, w: &mut [f64; 4], d: &mut [f64; 4], d2: &mut [f64; 4]) {
+    for k in 0..4 {
+        w[k] = D[k].mul_add(f, C[k]).mul_add(f, B[k]).mul_add(f, A[k]);
+        d[k] = (3.0 * D[k]).mul_add(f, 2.0 * C[k]).mul_add(f, B[k]) * inside;
+        d2[k] = (6.0 * D[k]).mul_add(f, 2.0 * C[k]) * inside;
+    }
+}
+
 impl Weights {
     /// The weights of `x` with the default bins.
     pub fn fill(&mut self, x: &[f32]) {
@@ -168,39 +385,23 @@ impl Weights {
         self.d.resize(n, [0.0; 4]);
         self.d2.resize(n, [0.0; 4]);
         let (mut lo, mut hi) = (bins.side, 0);
-        for (i, &v) in x.iter().enumerate() {
+        let cells = self.w.iter_mut().zip(&mut self.d).zip(&mut self.d2);
+        for ((&v, base), ((w, d), d2)) in x.iter().zip(&mut self.base).zip(cells) {
             let raw = v as f64 * bins.scale;
             let s = if raw.is_finite() {
                 raw.clamp(bins.s_min, bins.s_max)
             } else {
                 0.0
             };
-            let inside = s == raw;
+            // Outside the bins' range the derivatives are zero (the value is clamped).
+            let inside = if s == raw { 1.0 } else { 0.0 };
             let fl = s.floor();
             let f = s - fl;
-            let g = 1.0 - f;
             let b = (fl as i64 - 1 + bins.offset) as usize;
-            self.base[i] = b as u32;
+            *base = b as u32;
             lo = lo.min(b);
             hi = hi.max(b + 4);
-            self.w[i] = [
-                g * g * g / 6.0,
-                2.0 / 3.0 - f * f + 0.5 * f * f * f,
-                2.0 / 3.0 - g * g + 0.5 * g * g * g,
-                f * f * f / 6.0,
-            ];
-            if inside {
-                self.d[i] = [
-                    -0.5 * g * g,
-                    -2.0 * f + 1.5 * f * f,
-                    2.0 * g - 1.5 * g * g,
-                    0.5 * f * f,
-                ];
-                self.d2[i] = [g, 3.0 * f - 2.0, 1.0 - 3.0 * f, f];
-            } else {
-                self.d[i] = [0.0; 4];
-                self.d2[i] = [0.0; 4];
-            }
+            spline(f, inside, w, d, d2);
         }
         if lo >= hi {
             (lo, hi) = (0, 0);
@@ -270,14 +471,10 @@ impl Stats {
         }
         let n = t.base.len();
         for i in 0..n {
-            let (ta, cb) = (t.base[i] as usize, c.base[i] as usize);
-            let (tw, cw) = (&t.w[i], &c.w[i]);
-            for (u, &x) in tw.iter().enumerate() {
-                let row = &mut self.p[(ta + u) * side + cb..(ta + u) * side + cb + 4];
-                for (cell, &y) in row.iter_mut().zip(cw) {
-                    *cell += x * y;
-                }
-            }
+            let at = t.base[i] as usize * side + c.base[i] as usize;
+            // The pixel's 4 x 4 cells: four rows of four, `side` apart.
+            let cells = &mut self.p[at..at + 3 * side + 4];
+            add_outer(cells, side, &t.w[i], &c.w[i]);
         }
         let inv = 1.0 / n.max(1) as f64;
         self.pt.fill(0.0);
@@ -425,17 +622,12 @@ impl Parzen {
         let k = self.bins.scale / current.len().max(1) as f64;
         let (tw, cw) = (&self.tw, &self.cw);
         for (j, out) in grad.iter_mut().enumerate() {
-            let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
+            let at = tw.base[j] as usize * side + cw.base[j] as usize;
             let (x, y) = match wrt {
                 super::Wrt::Current => (&tw.w[j], &cw.d[j]),
                 super::Wrt::Template => (&tw.d[j], &cw.w[j]),
             };
-            let mut acc = 0.0;
-            for u in 0..4 {
-                let row = &g[(ta + u) * side + cb..(ta + u) * side + cb + 4];
-                acc += x[u] * (row[0] * y[0] + row[1] * y[1] + row[2] * y[2] + row[3] * y[3]);
-            }
-            *out = (k * acc) as f32;
+            *out = (k * bilinear_form(&g[at..at + 3 * side + 4], side, x, y)) as f32;
         }
         self.stats.value
     }
@@ -518,34 +710,28 @@ fn newton(
     }
     let g = &st.g;
     const BLOCK: usize = 256;
+    // The block's Jacobian rows (eight lanes a pixel; those past `dof` zero), read column by
+    // column (the Jacobian is stored by parameter).
+    let mut rows = [[0.0f32; MAX_DOF]; BLOCK];
     for start in (0..n).step_by(BLOCK) {
-        for j in start..(start + BLOCK).min(n) {
+        let end = (start + BLOCK).min(n);
+        for k in 0..dof {
+            for (r, &q) in rows.iter_mut().zip(&jac[k * n + start..k * n + end]) {
+                r[k] = q;
+            }
+        }
+        for j in start..end {
             let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
             let (x, y, x2, y2) = if current {
                 (&tw.w[j], &cw.d[j], &tw.w[j], &cw.d2[j])
             } else {
                 (&tw.d[j], &cw.w[j], &tw.d2[j], &cw.w[j])
             };
-            // All MAX_DOF lanes (those past `dof` are zero and never read): a fixed length the
-            // compiler turns into one vector operation.
-            let mut jj = [0.0f32; MAX_DOF];
-            for (k, e) in jj.iter_mut().enumerate().take(dof) {
-                *e = jac[k * n + j];
-            }
-            let mut dj = 0.0;
-            for u in 0..4 {
-                let row = (ta + u) * side + cb;
-                let cells: &mut [[f32; MAX_DOF]; 4] = (&mut v_block[row..row + 4])
-                    .try_into()
-                    .expect("four cells of a row");
-                for (w, vc) in cells.iter_mut().enumerate() {
-                    dj += x2[u] * y2[w] * g[row + w];
-                    let coef = (x[u] * y[w]) as f32;
-                    for (e, &q) in vc.iter_mut().zip(&jj) {
-                        *e = coef.mul_add(q, *e);
-                    }
-                }
-            }
+            // All MAX_DOF lanes (those past `dof` are zero and never read).
+            let jj = &rows[j - start];
+            let at = ta * side + cb;
+            let dj = bilinear_form(&g[at..at + 3 * side + 4], side, x2, y2);
+            add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, jj);
             diag[j] = dj as f32;
         }
         for a in r0..r1 {
@@ -742,6 +928,52 @@ mod tests {
             assert!((fd - w.d[0][u]).abs() < 1e-4, "{u}: {fd} {}", w.d[0][u]);
             let fd2 = (p.d[0][u] - m.d[0][u]) / ds;
             assert!((fd2 - w.d2[0][u]).abs() < 1e-4);
+        }
+    }
+
+    /// The vectorised kernels equal their plain versions, and the weights their textbook form.
+    #[test]
+    fn kernels_equal_their_plain_versions() {
+        let mut rng = crate::rng::Rng::new(7);
+        for _ in 0..200 {
+            let f = rng.uniform();
+            let inside = if rng.uniform() < 0.8 { 1.0 } else { 0.0 };
+            let (mut w, mut d, mut d2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+            let (mut pw, mut pd, mut pd2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+            spline(f, inside, &mut w, &mut d, &mut d2);
+            spline_portable(f, inside, &mut pw, &mut pd, &mut pd2);
+            let g = 1.0 - f;
+            let book = [
+                g * g * g / 6.0,
+                2.0 / 3.0 - f * f + 0.5 * f * f * f,
+                2.0 / 3.0 - g * g + 0.5 * g * g * g,
+                f * f * f / 6.0,
+            ];
+            for k in 0..4 {
+                assert!((w[k] - book[k]).abs() < 1e-14 && (w[k] - pw[k]).abs() < 1e-14);
+                assert!((d[k] - pd[k]).abs() < 1e-14 && (d2[k] - pd2[k]).abs() < 1e-14);
+            }
+            let side = 7;
+            let x: [f64; 4] = std::array::from_fn(|_| rng.uniform());
+            let y: [f64; 4] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
+            let cells: Vec<f64> = (0..3 * side + 4).map(|_| rng.range(-2.0, 2.0)).collect();
+            let (a, b) = (
+                bilinear_form(&cells, side, &x, &y),
+                bilinear_form_portable(&cells, side, &x, &y),
+            );
+            assert!((a - b).abs() < 1e-12, "{a} {b}");
+            let (mut c1, mut c2) = (cells.clone(), cells.clone());
+            add_outer(&mut c1, side, &x, &y);
+            add_outer_portable(&mut c2, side, &x, &y);
+            assert!(c1.iter().zip(&c2).all(|(p, q)| (p - q).abs() < 1e-12));
+            let jj: [f32; MAX_DOF] = std::array::from_fn(|_| rng.range(-3.0, 3.0) as f32);
+            let mut v1 = vec![[0.5f32; MAX_DOF]; 3 * side + 4];
+            let mut v2 = v1.clone();
+            add_v(&mut v1, side, &x, &y, &jj);
+            add_v_portable(&mut v2, side, &x, &y, &jj);
+            for (p, q) in v1.iter().flatten().zip(v2.iter().flatten()) {
+                assert!((p - q).abs() < 1e-5, "{p} {q}");
+            }
         }
     }
 

@@ -9,7 +9,7 @@
 //! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
-use super::{HessianKind, Wrt, accumulate_jtj, jt_times, sum};
+use super::{HessianKind, Wrt, accumulate_jtj, jt_times_many, sum};
 use crate::linalg::MAX_DOF;
 
 #[derive(Debug, Clone, Default)]
@@ -25,7 +25,7 @@ pub(crate) struct Correlation {
     /// `(|P I|, rho)` (`c_unit` is its unit vector), for the [`Correlation::hessian`] that
     /// follows on the same patch; cleared by anything else that reads a patch.
     seen: Option<(usize, usize, f64, f64)>,
-    /// A patch of ones: `J^T 1` (the sums of `J`'s columns) in one pass with [`jt_times`].
+    /// A patch of ones: `J^T 1` (the sums of `J`'s columns) with the other products in one pass ([`jt_times_many`]).
     ones: Vec<f32>,
 }
 
@@ -222,13 +222,17 @@ impl Correlation {
         }
         let mut jtj = [0.0f64; MAX_DOF * MAX_DOF];
         accumulate_jtj(jac, dof, &mut jtj);
-        let (mut u, mut v, mut w) = ([0.0; MAX_DOF], [0.0; MAX_DOF], [0.0; MAX_DOF]);
-        jt_times(jac, other, dof, &mut u);
-        jt_times(jac, var, dof, &mut v);
-        if self.centered {
-            // w = J^T 1: the sums of J's columns.
-            jt_times(jac, &self.ones, dof, &mut w);
-        }
+        // u = J^T other, v = J^T var and, centred, w = J^T 1 (the sums of J's columns), in one
+        // pass over J.
+        let (u, v, w) = if self.centered {
+            let mut uvw = [[0.0; MAX_DOF]; 3];
+            jt_times_many(jac, [other, var, &self.ones], dof, &mut uvw);
+            (uvw[0], uvw[1], uvw[2])
+        } else {
+            let mut uv = [[0.0; MAX_DOF]; 2];
+            jt_times_many(jac, [other, var], dof, &mut uv);
+            (uv[0], uv[1], [0.0; MAX_DOF])
+        };
         let s = beta / (n * n);
         let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);
         for i in 0..dof {

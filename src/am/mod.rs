@@ -741,27 +741,45 @@ pub fn accumulate_weighted_jtj(
 /// `out[k] = sum_i J[k N + i] v[i]` (`J` stored by parameter): every column in one pass over
 /// `v`, block by block of 256 samples.
 pub fn jt_times(jac: &[f32], v: &[f32], dof: usize, out: &mut [f64; MAX_DOF]) {
-    out.fill(0.0);
+    let mut outs = [[0.0; MAX_DOF]];
+    jt_times_many(jac, [v], dof, &mut outs);
+    *out = outs[0];
+}
+
+/// [`jt_times`] of several vectors in one pass over `J` (each block of `J`'s columns is read
+/// from memory once and stays in the L1 cache for the others); the same sums, in the same
+/// order, as [`jt_times`] of each.
+pub fn jt_times_many<const V: usize>(
+    jac: &[f32],
+    vs: [&[f32]; V],
+    dof: usize,
+    outs: &mut [[f64; MAX_DOF]; V],
+) {
+    for o in outs.iter_mut() {
+        o.fill(0.0);
+    }
     let dof = dof.min(MAX_DOF);
     if dof == 0 {
         return;
     }
-    let n = (jac.len() / dof).min(v.len());
     let stride = jac.len() / dof;
+    let n = vs.iter().fold(stride, |n, v| n.min(v.len()));
     let mut start = 0;
     while start < n {
         let len = JT_BLOCK.min(n - start);
         let full = len / 8 * 8;
-        let vv = &v[start..start + len];
         let cols: [&[f32]; MAX_DOF] =
             std::array::from_fn(|k| &jac[k.min(dof - 1) * stride + start..][..len]);
-        let s = columns_times(&cols, vv, full);
-        for k in 0..dof {
-            let mut t = lanes_sum(&s[k]);
-            for q in full..len {
-                t = vv[q].mul_add(cols[k][q], t);
+        for (v, out) in vs.iter().zip(outs.iter_mut()) {
+            let vv = &v[start..start + len];
+            let s = columns_times(&cols, vv, full);
+            for k in 0..dof {
+                let mut t = lanes_sum(&s[k]);
+                for q in full..len {
+                    t = vv[q].mul_add(cols[k][q], t);
+                }
+                out[k] += t as f64;
             }
-            out[k] += t as f64;
         }
         start += len;
     }

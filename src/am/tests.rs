@@ -389,6 +389,12 @@ fn the_jacobian_products_match_plain_sums() {
             accumulate_jtj(&jac, dof, &mut h);
             let mut g = [0.0; MAX_DOF];
             jt_times(&jac, &v, dof, &mut g);
+            // Several vectors in one pass: the same sums as one at a time.
+            let w: Vec<f32> = v.iter().map(|x| 0.5 - x).collect();
+            let (mut gw, mut many) = ([0.0; MAX_DOF], [[1.0; MAX_DOF]; 2]);
+            jt_times(&jac, &w, dof, &mut gw);
+            jt_times_many(&jac, [&v, &w], dof, &mut many);
+            assert_eq!(many, [g, gw], "dof {dof}, n {n}");
             for a in 0..dof {
                 let want = plain(col(a), &v);
                 assert!(

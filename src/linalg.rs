@@ -197,6 +197,13 @@ pub fn expm3_frechet(a: &Matrix3<f64>, e: &Matrix3<f64>) -> Matrix3<f64> {
     ex.fixed_view::<3, 3>(0, 3).into_owned()
 }
 
+/// The sum of eight f32 lanes (one AVX register's) in a fixed order: the vectorised sums'
+/// last step.
+#[inline(always)]
+pub fn lanes_sum(a: &[f32; 8]) -> f32 {
+    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]))
+}
+
 /// The median (the mean of the two middle values for an even count).
 pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {

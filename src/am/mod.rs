@@ -525,11 +525,7 @@ const JT_BLOCK: usize = 256;
 /// Eight f32 lanes (one AVX register).
 type Lanes = [f32; 8];
 
-/// The sum of the lanes.
-#[inline(always)]
-fn lanes_sum(a: &Lanes) -> f32 {
-    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]))
-}
+use crate::linalg::lanes_sum;
 
 /// The products' kernels with AVX2 and FMA intrinsics (the build's CPU baseline, x86-64-v3).
 #[cfg(all(

@@ -78,11 +78,7 @@ pub(super) fn dot(a: &[f32], b: &[f32]) -> f32 {
     dot2(a, a, b).0
 }
 
-/// The sum of eight lanes, in a fixed order.
-#[inline(always)]
-fn lanes_sum(a: &[f32; 8]) -> f32 {
-    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]))
-}
+use crate::linalg::lanes_sum;
 
 #[cfg(all(
     target_arch = "x86_64",

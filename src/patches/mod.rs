@@ -1077,13 +1077,7 @@ impl PatchTracker {
             )));
         }
         self.size = (frame.width, frame.height);
-        self.cur.build(
-            frame,
-            self.params.levels,
-            self.border(),
-            &self.kernel,
-            &mut self.crew,
-        );
+        self.build_current(frame);
         let levels = self.params.levels;
         let dof = self.params.warp.dof();
         let grid = &self.grid;
@@ -1165,13 +1159,7 @@ impl PatchTracker {
             )));
         }
         std::mem::swap(&mut self.cur, &mut self.prev);
-        self.cur.build(
-            frame,
-            self.params.levels,
-            self.border(),
-            &self.kernel,
-            &mut self.crew,
-        );
+        self.build_current(frame);
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
         // Blocks of neighbouring patches (they read the same rows of the frame), taken by
@@ -1196,6 +1184,13 @@ impl PatchTracker {
     /// Patches followed now.
     pub fn tracking(&self) -> usize {
         self.states().filter(|s| s.tracking()).count()
+    }
+
+    /// Pre-processes `frame` into the current frame (its pyramid, by the crew).
+    fn build_current(&mut self, frame: ImageRef<'_, u8>) {
+        let (levels, border) = (self.params.levels, self.border());
+        self.cur
+            .build(frame, levels, border, &self.kernel, &mut self.crew);
     }
 
     /// The border the frame's levels get: a patch whose centre is inside reads inside it.

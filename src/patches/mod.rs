@@ -783,9 +783,8 @@ fn make_template(
     tp.usable.first().copied().unwrap_or(false)
 }
 
-/// Searches `frame` for the patch's template (`back`: the backward one) from `start`, coarse to
+/// Searches `frame` for the template `tp` (forward or backward) from `start`, coarse to
 /// fine. Returns the warp, the iterations and the template's NCC with the last samples.
-#[allow(clippy::too_many_arguments)]
 fn search(
     tp: &Template,
     b: &mut Buffers,

@@ -198,6 +198,59 @@ fn spline(f: f64, inside: f64, w: &mut [f64; 4], d: &mut [f64; 4], d2: &mut [f64
     spline_portable(f, inside, w, d, d2);
 }
 
+/// A value's first bin, its fraction of a bin and whether it is inside the bins' range (1) or
+/// clamped to it (0; a value that is not finite is bin coordinate 0).
+#[inline(always)]
+fn bin_coordinate(v: f32, bins: &Bins) -> (usize, f64, f64) {
+    let raw = v as f64 * bins.scale;
+    let s = if raw.is_finite() {
+        raw.clamp(bins.s_min, bins.s_max)
+    } else {
+        0.0
+    };
+    // Outside the bins' range the derivatives are zero (the value is clamped).
+    let inside = if s == raw { 1.0 } else { 0.0 };
+    let fl = s.floor();
+    ((fl as i64 - 1 + bins.offset) as usize, s - fl, inside)
+}
+
+/// [`bin_coordinate`] of four values at once (AVX2).
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[inline(always)]
+fn bin_coordinates4(
+    v: &[f32; 4],
+    bins: &Bins,
+    first: &mut [u32; 4],
+    fr: &mut [f64; 4],
+    inside: &mut [f64; 4],
+) {
+    // SAFETY: AVX2 is enabled at compile time (cfg); every load and store reads or writes the
+    // four values of a fixed-size array.
+    unsafe {
+        use std::arch::x86_64::*;
+        let raw = _mm256_mul_pd(
+            _mm256_cvtps_pd(_mm_loadu_ps(v.as_ptr())),
+            _mm256_set1_pd(bins.scale),
+        );
+        // raw - raw is 0 for a finite value, NaN otherwise.
+        let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(raw, raw), _mm256_setzero_pd());
+        let clamped = _mm256_min_pd(
+            _mm256_max_pd(raw, _mm256_set1_pd(bins.s_min)),
+            _mm256_set1_pd(bins.s_max),
+        );
+        let s = _mm256_and_pd(clamped, finite);
+        let ins = _mm256_and_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(s, raw), _mm256_set1_pd(1.0));
+        let fl = _mm256_floor_pd(s);
+        let b = _mm_add_epi32(
+            _mm256_cvttpd_epi32(fl),
+            _mm_set1_epi32((bins.offset - 1) as i32),
+        );
+        _mm_storeu_si128(first.as_mut_ptr() as *mut __m128i, b);
+        _mm256_storeu_pd(fr.as_mut_ptr(), _mm256_sub_pd(s, fl));
+        _mm256_storeu_pd(inside.as_mut_ptr(), ins);
+    }
+}
+
 /// `cells[u side + v] += x_u y_v` for the 4 x 4 cells (rows `side` apart) of one pixel.
 #[inline(always)]
 fn add_outer(cells: &mut [f64], side: usize, x: &[f64; 4], y: &[f64; 4]) {
@@ -385,23 +438,39 @@ impl Weights {
         self.d.resize(n, [0.0; 4]);
         self.d2.resize(n, [0.0; 4]);
         let (mut lo, mut hi) = (bins.side, 0);
-        let cells = self.w.iter_mut().zip(&mut self.d).zip(&mut self.d2);
-        for ((&v, base), ((w, d), d2)) in x.iter().zip(&mut self.base).zip(cells) {
-            let raw = v as f64 * bins.scale;
-            let s = if raw.is_finite() {
-                raw.clamp(bins.s_min, bins.s_max)
-            } else {
-                0.0
-            };
-            // Outside the bins' range the derivatives are zero (the value is clamped).
-            let inside = if s == raw { 1.0 } else { 0.0 };
-            let fl = s.floor();
-            let f = s - fl;
-            let b = (fl as i64 - 1 + bins.offset) as usize;
-            *base = b as u32;
+        // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
+        // then each pixel's weights.
+        let mut done = 0;
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        {
+            let mut fr = [0.0f64; 4];
+            let mut inside = [0.0f64; 4];
+            let cells = self.w.chunks_exact_mut(4).zip(self.d.chunks_exact_mut(4));
+            let fours = x.chunks_exact(4).zip(self.base.chunks_exact_mut(4));
+            for ((v, first), ((w, d), d2)) in fours.zip(cells.zip(self.d2.chunks_exact_mut(4))) {
+                let first: &mut [u32; 4] = first.try_into().expect("four");
+                bin_coordinates4(
+                    v.try_into().expect("four"),
+                    bins,
+                    first,
+                    &mut fr,
+                    &mut inside,
+                );
+                for k in 0..4 {
+                    let b = first[k] as usize;
+                    lo = lo.min(b);
+                    hi = hi.max(b + 4);
+                    spline(fr[k], inside[k], &mut w[k], &mut d[k], &mut d2[k]);
+                }
+                done += 4;
+            }
+        }
+        for i in done..n {
+            let (b, f, inside) = bin_coordinate(x[i], bins);
+            self.base[i] = b as u32;
             lo = lo.min(b);
             hi = hi.max(b + 4);
-            spline(f, inside, w, d, d2);
+            spline(f, inside, &mut self.w[i], &mut self.d[i], &mut self.d2[i]);
         }
         if lo >= hi {
             (lo, hi) = (0, 0);
@@ -470,11 +539,11 @@ impl Stats {
             self.p[a * side + c0..a * side + c1].fill(0.0);
         }
         let n = t.base.len();
-        for i in 0..n {
-            let at = t.base[i] as usize * side + c.base[i] as usize;
+        let bases = t.base.iter().zip(&c.base);
+        for ((&ta, &cb), (x, y)) in bases.zip(t.w.iter().zip(&c.w)) {
+            let at = ta as usize * side + cb as usize;
             // The pixel's 4 x 4 cells: four rows of four, `side` apart.
-            let cells = &mut self.p[at..at + 3 * side + 4];
-            add_outer(cells, side, &t.w[i], &c.w[i]);
+            add_outer(&mut self.p[at..at + 3 * side + 4], side, x, y);
         }
         let inv = 1.0 / n.max(1) as f64;
         self.pt.fill(0.0);
@@ -621,12 +690,13 @@ impl Parzen {
         let side = self.bins.side;
         let k = self.bins.scale / current.len().max(1) as f64;
         let (tw, cw) = (&self.tw, &self.cw);
-        for (j, out) in grad.iter_mut().enumerate() {
-            let at = tw.base[j] as usize * side + cw.base[j] as usize;
-            let (x, y) = match wrt {
-                super::Wrt::Current => (&tw.w[j], &cw.d[j]),
-                super::Wrt::Template => (&tw.d[j], &cw.w[j]),
-            };
+        let (xs, ys) = match wrt {
+            super::Wrt::Current => (&tw.w, &cw.d),
+            super::Wrt::Template => (&tw.d, &cw.w),
+        };
+        let bases = tw.base.iter().zip(&cw.base);
+        for ((out, (&ta, &cb)), (x, y)) in grad.iter_mut().zip(bases).zip(xs.iter().zip(ys)) {
+            let at = ta as usize * side + cb as usize;
             *out = (k * bilinear_form(&g[at..at + 3 * side + 4], side, x, y)) as f32;
         }
         self.stats.value
@@ -935,6 +1005,44 @@ mod tests {
     #[test]
     fn kernels_equal_their_plain_versions() {
         let mut rng = crate::rng::Rng::new(7);
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        for bins in [Bins::default(), Bins::new(16)] {
+            let odd = [
+                f32::NAN,
+                f32::INFINITY,
+                -f32::INFINITY,
+                -300.0,
+                600.0,
+                0.0,
+                255.0,
+            ];
+            let values: Vec<f32> = (0..400)
+                .map(|i| {
+                    odd.get(i)
+                        .copied()
+                        .unwrap_or(rng.range(-400.0, 700.0) as f32)
+                })
+                .collect();
+            for four in values.chunks_exact(4) {
+                let (mut first, mut fr, mut inside) = ([0u32; 4], [0.0; 4], [0.0; 4]);
+                bin_coordinates4(
+                    four.try_into().unwrap(),
+                    &bins,
+                    &mut first,
+                    &mut fr,
+                    &mut inside,
+                );
+                for k in 0..4 {
+                    let (b, f, i) = bin_coordinate(four[k], &bins);
+                    assert_eq!(
+                        (first[k] as usize, fr[k], inside[k]),
+                        (b, f, i),
+                        "{}",
+                        four[k]
+                    );
+                }
+            }
+        }
         for _ in 0..200 {
             let f = rng.uniform();
             let inside = if rng.uniform() < 0.8 { 1.0 } else { 0.0 };

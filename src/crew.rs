@@ -100,8 +100,18 @@ impl<S: Send + 'static> Crew<S> {
     /// starts `states.len() - 1` threads.
     ///
     /// # Panics
-    /// If `states` is empty, or a thread cannot be started.
+    /// If `states` is empty, or a thread cannot be started ([`Crew::try_new`] returns that
+    /// error instead).
     pub fn new(states: Vec<S>) -> Self {
+        Self::try_new(states).expect("cannot start a thread")
+    }
+
+    /// [`Crew::new`], with the error of a thread that cannot be started (the threads already
+    /// started are stopped).
+    ///
+    /// # Panics
+    /// If `states` is empty.
+    pub fn try_new(states: Vec<S>) -> std::io::Result<Self> {
         assert!(!states.is_empty(), "a crew needs at least one member");
         let n = states.len();
         let shared = Arc::new(Shared {
@@ -118,16 +128,19 @@ impl<S: Send + 'static> Crew<S> {
             posted: AtomicU64::new(0),
             remaining: AtomicUsize::new(0),
         });
-        let threads = (1..n)
-            .map(|index| {
-                let shared = Arc::clone(&shared);
-                std::thread::Builder::new()
-                    .name(format!("regtrack-crew-{index}"))
-                    .spawn(move || member(&shared, index))
-                    .expect("cannot start a thread")
-            })
-            .collect();
-        Crew { shared, threads }
+        let mut crew = Crew {
+            shared,
+            threads: Vec::with_capacity(n - 1),
+        };
+        for index in 1..n {
+            let shared = Arc::clone(&crew.shared);
+            // On an error, dropping `crew` stops the members started so far.
+            let thread = std::thread::Builder::new()
+                .name(format!("regtrack-crew-{index}"))
+                .spawn(move || member(&shared, index))?;
+            crew.threads.push(thread);
+        }
+        Ok(crew)
     }
 
     /// The number of members, the calling thread included.

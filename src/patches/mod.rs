@@ -988,7 +988,8 @@ impl PatchTracker {
         };
         let grid = Grid::new(params.size);
         let scratch = Scratch::new(&grid, params.levels, params.warp.dof());
-        let crew = Crew::new(vec![scratch; crew::threads_for(params.threads)]);
+        let crew = Crew::try_new(vec![scratch; crew::threads_for(params.threads)])
+            .map_err(|e| Error::InvalidParameter(format!("patches: threads: {e}")))?;
         Ok(PatchTracker {
             grid,
             kernel,

@@ -205,46 +205,75 @@ impl<S: Send + 'static> Crew<S> {
     }
 }
 
-/// A slice handed out in blocks to whoever asks first: each block once, so the members of a
-/// crew can each take `&mut` blocks of the same slice as they become free (work that costs
-/// unevenly spreads evenly) without locks.
+/// Parts a [`Shares`] keeps its own cursor for (more members share parts).
+const MAX_PARTS: usize = 8;
+
+/// A slice handed out in blocks, each block once, so the members of a crew can each take `&mut`
+/// blocks of the same slice as they become free (work that costs unevenly spreads evenly)
+/// without locks. The blocks are split into as many contiguous parts as members: a member takes
+/// its own part's blocks first, in order, then helps with the others'. Work on neighbouring
+/// items (rows of a frame, patches in raster order) thus stays with the member whose core
+/// holds their data in its cache from the last time (on a virtual machine the two cores may
+/// share no cache: data one wrote, the other fetches from far).
 pub struct Shares<'a, T> {
     ptr: *mut T,
     len: usize,
     block: usize,
-    next: AtomicUsize,
+    blocks: usize,
+    parts: usize,
+    /// Per part, the next block to hand out (past the part's end once it is done).
+    next: [AtomicUsize; MAX_PARTS],
     _items: std::marker::PhantomData<&'a mut [T]>,
 }
 
 // SAFETY: `Shares` hands out disjoint `&mut [T]` (each block index once, through the atomic
-// counter), so sharing it between threads is sharing `&mut` borrows of `T` across threads,
-// which `T: Send` allows.
+// counters of disjoint parts), so sharing it between threads is sharing `&mut` borrows of `T`
+// across threads, which `T: Send` allows.
 unsafe impl<T: Send> Sync for Shares<'_, T> {}
 unsafe impl<T: Send> Send for Shares<'_, T> {}
 
 impl<'a, T> Shares<'a, T> {
-    /// `items` in blocks of `block` (at least 1) items; the last may be shorter.
-    pub fn new(items: &'a mut [T], block: usize) -> Self {
+    /// `items` in blocks of `block` (at least 1) items, the last maybe shorter, in `parts`
+    /// parts (at least one; usually the crew's [`Crew::len`]).
+    pub fn new(items: &'a mut [T], block: usize, parts: usize) -> Self {
+        let block = block.max(1);
+        let blocks = items.len().div_ceil(block);
+        let parts = parts.clamp(1, MAX_PARTS);
         Shares {
             ptr: items.as_mut_ptr(),
             len: items.len(),
-            block: block.max(1),
-            next: AtomicUsize::new(0),
+            block,
+            blocks,
+            parts,
+            next: std::array::from_fn(|p| AtomicUsize::new(p * blocks / parts)),
             _items: std::marker::PhantomData,
         }
     }
 
-    /// The next block nobody took yet, with the index of its first item; `None` when all are
-    /// taken.
-    pub fn take(&self) -> Option<(usize, &'a mut [T])> {
-        let b = self.next.fetch_add(1, Ordering::Relaxed);
-        let start = b.checked_mul(self.block).filter(|&s| s < self.len)?;
-        let n = self.block.min(self.len - start);
-        // SAFETY: `start + n <= len`, inside the slice borrowed for 'a; block `b` is returned
-        // once only (the counter only grows), and blocks do not overlap.
-        Some((start, unsafe {
-            std::slice::from_raw_parts_mut(self.ptr.add(start), n)
-        }))
+    /// The next block nobody took yet, for member `member` (its own part first), with the index
+    /// of its first item; `None` when all are taken.
+    pub fn take(&self, member: usize) -> Option<(usize, &'a mut [T])> {
+        let own = member % self.parts;
+        for k in 0..self.parts {
+            let p = (own + k) % self.parts;
+            let end = (p + 1) * self.blocks / self.parts;
+            if self.next[p].load(Ordering::Relaxed) >= end {
+                continue;
+            }
+            let b = self.next[p].fetch_add(1, Ordering::Relaxed);
+            if b >= end {
+                continue;
+            }
+            let start = b * self.block;
+            let n = self.block.min(self.len - start);
+            // SAFETY: `b < end <= blocks`, so `start < len` and `start + n <= len`, inside the
+            // slice borrowed for 'a; block `b` lies in part `p` only and is returned once (the
+            // part's counter only grows), and blocks do not overlap.
+            return Some((start, unsafe {
+                std::slice::from_raw_parts_mut(self.ptr.add(start), n)
+            }));
+        }
+        None
     }
 }
 
@@ -321,9 +350,9 @@ mod tests {
             let mut crew = Crew::new(vec![0usize; n]);
             let mut items = vec![0u32; 1001];
             for round in 1..=20u32 {
-                let shares = Shares::new(&mut items, 16);
-                crew.run(&|taken: &mut usize, _| {
-                    while let Some((start, block)) = shares.take() {
+                let shares = Shares::new(&mut items, 16, n);
+                crew.run(&|taken: &mut usize, m| {
+                    while let Some((start, block)) = shares.take(m) {
                         assert_eq!(start % 16, 0);
                         for v in block.iter_mut() {
                             *v += 1;
@@ -331,11 +360,35 @@ mod tests {
                         *taken += 1;
                     }
                 });
-                assert!(shares.take().is_none());
+                assert!((0..n).all(|m| shares.take(m).is_none()));
                 assert!(items.iter().all(|&v| v == round));
             }
             assert_eq!(crew.states().map(|s| *s).sum::<usize>(), 20 * 63);
         }
+    }
+
+    #[test]
+    fn shares_give_each_member_its_own_part_first() {
+        // 10 items in blocks of 2: 5 blocks, parts [0, 2) and [2, 5).
+        let mut items = [0u8; 10];
+        let shares = Shares::new(&mut items, 2, 2);
+        let first = |m| shares.take(m).map(|(start, b)| (start, b.len()));
+        assert_eq!(first(1), Some((4, 2)));
+        assert_eq!(first(0), Some((0, 2)));
+        assert_eq!(first(0), Some((2, 2)));
+        // Member 0's part is done: it helps with member 1's.
+        assert_eq!(first(0), Some((6, 2)));
+        assert_eq!(first(1), Some((8, 2)));
+        assert_eq!(first(1), None);
+        assert_eq!(first(0), None);
+        // More members than blocks: the parts that are empty send their members to the others.
+        let mut few = [0u8; 3];
+        let shares = Shares::new(&mut few, 1, 8);
+        let mut got: Vec<usize> = (0..8)
+            .filter_map(|m| shares.take(m).map(|(s, _)| s))
+            .collect();
+        got.sort_unstable();
+        assert_eq!(got, [0, 1, 2]);
     }
 
     #[test]

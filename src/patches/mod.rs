@@ -456,9 +456,10 @@ impl Frame {
                 });
                 pad_at = pad_to;
             }
-            let shares = Shares::new(&mut bands[..n], 1);
-            crew.run(&|s: &mut Scratch, _| {
-                while let Some((_, taken)) = shares.take() {
+            // Each member its own rows first (the patches are handed out the same way).
+            let shares = Shares::new(&mut bands[..n], 1, crew.len());
+            crew.run(&|s: &mut Scratch, m| {
+                while let Some((_, taken)) = shares.take(m) {
                     let Some(band) = taken[0].take() else {
                         continue;
                     };
@@ -1164,9 +1165,9 @@ impl PatchTracker {
         let size = self.size;
         // Blocks of neighbouring patches (they read the same rows of the frame), taken by
         // whichever thread is free.
-        let shares = Shares::new(&mut self.patches, PATCH_BLOCK);
-        self.crew.run(&|scratch: &mut Scratch, _| {
-            while let Some((_, block)) = shares.take() {
+        let shares = Shares::new(&mut self.patches, PATCH_BLOCK, self.crew.len());
+        self.crew.run(&|scratch: &mut Scratch, m| {
+            while let Some((_, block)) = shares.take(m) {
                 for p in block {
                     track_patch(p, scratch, prev, cur, grid, prm, size);
                 }

@@ -1,5 +1,6 @@
 //! Criterion benchmarks of the hot paths: one iteration of ICLK, FCLK and ESM (the search
-//! method's `iterate` alone, SSD and ZNCC, homography and affine, 50x50) on a real texture, the
+//! method's `iterate` alone, SSD and ZNCC on homography and affine, MI and CCRE on homography,
+//! 50x50) on a real texture, the
 //! stages of an iteration, the pre-processing of a tracker's region, one frame of the sampling
 //! methods (PF-1000 on one thread and on every core: its target is 200 frames/s, 5 ms), and the many-patch tracker's frame (its time divided by the patches is the cost of
 //! one patch update). The whole-tracker figures are in `regtrack bench`.
@@ -38,28 +39,36 @@ fn bench(c: &mut Criterion) {
             },
         );
     };
-    // The search method's iteration alone, from the same start each time.
+    // The search method's iteration alone, from one of two starts in turn (the AMs that keep
+    // the statistics of the last patch, MI and CCRE, would otherwise skip them).
+    let start2 = Quad::from_array([249.2, 151.0, 350.1, 148.8, 351.3, 249.5, 250.4, 251.1]);
     let view = smoothed.view();
     let mut g = c.benchmark_group("iteration");
-    for sm in ["iclk", "fclk", "esm"] {
-        for am in ["ssd", "zncc"] {
-            for ssm in ["homography", "affine"] {
-                let spec = TrackerSpec::from_names(sm, am, ssm).expect("spec");
-                let mut t = RegistrationTracker::new(spec.registration().expect("registration"))
-                    .expect("tracker");
-                t.initialize(FrameInput::Smoothed(&smoothed), &truth)
-                    .expect("init");
-                t.set_corners(&start).expect("corners");
-                let (mut ctx, mut method) = t.into_parts();
-                let from = ctx.params;
-                g.bench_function(format!("{sm}_{am}_{ssm}"), |b| {
-                    b.iter(|| {
-                        ctx.params = from;
-                        method.start_frame(&mut ctx);
-                        black_box(method.iterate(&mut ctx, black_box(&view)).expect("step"))
-                    })
-                });
-            }
+    let cases = ["ssd", "zncc"]
+        .into_iter()
+        .flat_map(|am| [(am, "homography"), (am, "affine")])
+        .chain([("mi", "homography"), ("ccre", "homography")]);
+    for (am, ssm) in cases {
+        for sm in ["iclk", "fclk", "esm"] {
+            let spec = TrackerSpec::from_names(sm, am, ssm).expect("spec");
+            let mut t = RegistrationTracker::new(spec.registration().expect("registration"))
+                .expect("tracker");
+            t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+                .expect("init");
+            t.set_corners(&start2).expect("corners");
+            let other = t.context().params;
+            t.set_corners(&start).expect("corners");
+            let (mut ctx, mut method) = t.into_parts();
+            let starts = [ctx.params, other];
+            let mut turn = 0;
+            g.bench_function(format!("{sm}_{am}_{ssm}"), |b| {
+                b.iter(|| {
+                    turn ^= 1;
+                    ctx.params = starts[turn];
+                    method.start_frame(&mut ctx);
+                    black_box(method.iterate(&mut ctx, black_box(&view)).expect("step"))
+                })
+            });
         }
     }
     g.finish();

@@ -312,6 +312,9 @@ pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     total
 }
 
+/// Columns [`BlockCorrelation`]'s moments are summed at a time (four sums each, on the stack).
+const MOMENT_COLUMNS: usize = 64;
+
 /// The most blocks per side of [`block_correlation`].
 pub const MAX_BLOCKS: usize = 8;
 
@@ -410,30 +413,53 @@ impl BlockCorrelation {
     }
 
     /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` over its samples (`x`, `y` the
-    /// block-local coordinates), `p` and `q` being `res x res` patches. Each row of a block is a
-    /// run of neighbouring samples with the same `y`: summed in four f64 lanes, then added to
-    /// the block's sums.
+    /// block-local coordinates), `p` and `q` being `res x res` patches. Per row of blocks, the
+    /// columns' sums of `p`, `p y`, `p p` and `q p` over the block row's rows (whole rows at a
+    /// time, vectorised, [`MOMENT_COLUMNS`] columns at a time), then each column's into its block
+    /// (`p x` from the column's `p`).
     fn moments(&self, p: &[f32], q: &[f32]) -> [[f64; 5]; MAX_BLOCKS * MAX_BLOCKS] {
         let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
         let Some((res, cells)) = self.geometry else {
             return acc;
         };
-        // The first column of each block (the first c with c cells / res = bc) and its
-        // block-local x (the origin of block bc is column bc res / cells).
-        let start = |bc: usize| (bc * res).div_ceil(cells);
-        for (r, (pr, qr)) in p.chunks_exact(res).zip(q.chunks_exact(res)).enumerate() {
-            let br = r * cells / res;
-            let y = (r - br * res / cells) as f64;
-            for bc in 0..cells {
-                let (c0, c1) = (start(bc), start(bc + 1).min(res));
-                let x0 = (c0 - bc * res / cells) as f64;
-                let [sp, spx, spp, sqp] = run_sums(&pr[c0..c1], &qr[c0..c1], x0);
-                let a = &mut acc[br * cells + bc];
-                a[0] += sp;
-                a[1] += spx;
-                a[2] += sp * y;
-                a[3] += spp;
-                a[4] += sqp;
+        // The first row (or column) of block b: the first r with r cells / res = b; its
+        // block-local coordinate is r - b res / cells.
+        let start = |b: usize| (b * res).div_ceil(cells);
+        for br in 0..cells {
+            let rows = start(br)..start(br + 1).min(res);
+            let origin = (br * res / cells) as f64;
+            for c0 in (0..res).step_by(MOMENT_COLUMNS) {
+                let w = MOMENT_COLUMNS.min(res - c0);
+                let mut sp = [0.0f64; MOMENT_COLUMNS];
+                let mut spy = [0.0f64; MOMENT_COLUMNS];
+                let mut spp = [0.0f64; MOMENT_COLUMNS];
+                let mut sqp = [0.0f64; MOMENT_COLUMNS];
+                for r in rows.clone() {
+                    let y = r as f64 - origin;
+                    let (pr, qr) = (&p[r * res + c0..][..w], &q[r * res + c0..][..w]);
+                    let sums = sp[..w]
+                        .iter_mut()
+                        .zip(&mut spy[..w])
+                        .zip(spp[..w].iter_mut().zip(&mut sqp[..w]));
+                    for (((a, b), (c, d)), (&v, &t)) in sums.zip(pr.iter().zip(qr)) {
+                        let (v, t) = (v as f64, t as f64);
+                        *a += v;
+                        *b += v * y;
+                        *c += v * v;
+                        *d += t * v;
+                    }
+                }
+                for k in 0..w {
+                    let c = c0 + k;
+                    let bc = c * cells / res;
+                    let x = (c - bc * res / cells) as f64;
+                    let a = &mut acc[br * cells + bc];
+                    a[0] += sp[k];
+                    a[1] += sp[k] * x;
+                    a[2] += spy[k];
+                    a[3] += spp[k];
+                    a[4] += sqp[k];
+                }
             }
         }
         acc
@@ -469,36 +495,6 @@ impl BlockCorrelation {
         }
         if den > 0.0 { num / den } else { 0.0 }
     }
-}
-
-/// `[sum p, sum p x, sum p p, sum q p]` over a run of samples whose `x` is `x0, x0 + 1, ...`, in
-/// four f64 lanes.
-#[inline]
-fn run_sums(p: &[f32], q: &[f32], x0: f64) -> [f64; 4] {
-    let mut lanes = [[0.0f64; 4]; 4];
-    let (ep, eq) = (p.chunks_exact(4), q.chunks_exact(4));
-    let (rp, rq) = (ep.remainder(), eq.remainder());
-    let mut x = [x0, x0 + 1.0, x0 + 2.0, x0 + 3.0];
-    for (a, b) in ep.zip(eq) {
-        for l in 0..4 {
-            let (v, t) = (a[l] as f64, b[l] as f64);
-            lanes[0][l] += v;
-            lanes[1][l] += v * x[l];
-            lanes[2][l] += v * v;
-            lanes[3][l] += t * v;
-            x[l] += 4.0;
-        }
-    }
-    let mut out = lanes.map(|l| (l[0] + l[1]) + (l[2] + l[3]));
-    for (&a, &b) in rp.iter().zip(rq) {
-        let (v, t) = (a as f64, b as f64);
-        out[0] += v;
-        out[1] += v * x[0];
-        out[2] += v * v;
-        out[3] += t * v;
-        x[0] += 1.0;
-    }
-    out
 }
 
 /// The sum of a patch (vectorised like [`dot`]).

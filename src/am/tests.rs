@@ -343,6 +343,43 @@ fn the_block_correlation_ignores_light_that_varies_smoothly_and_sees_anything_el
     assert_eq!(block_correlation(&t[..10], &t[..10], 50, 4), 0.0);
 }
 
+/// The block moments are their definition: per block, sums over its samples.
+#[test]
+fn block_moments_are_sums_over_each_blocks_samples() {
+    let mut rng = crate::rng::Rng::new(3);
+    for (res, cells) in [(50, 4), (7, 3), (130, 8), (64, 5), (3, 3)] {
+        let p: Vec<f32> = (0..res * res)
+            .map(|_| rng.range(0.0, 255.0) as f32)
+            .collect();
+        let q: Vec<f32> = (0..res * res)
+            .map(|_| rng.range(0.0, 255.0) as f32)
+            .collect();
+        let bc = super::BlockCorrelation::new(&q, res, cells);
+        let got = bc.moments(&p, &q);
+        let mut want = [[0.0f64; 5]; super::MAX_BLOCKS * super::MAX_BLOCKS];
+        for r in 0..res {
+            for c in 0..res {
+                let (br, bcol) = (r * cells / res, c * cells / res);
+                let y = (r - br * res / cells) as f64;
+                let x = (c - bcol * res / cells) as f64;
+                let (v, t) = (p[r * res + c] as f64, q[r * res + c] as f64);
+                let a = &mut want[br * cells + bcol];
+                for (s, term) in a.iter_mut().zip([v, v * x, v * y, v * v, t * v]) {
+                    *s += term;
+                }
+            }
+        }
+        for (g, w) in got.iter().zip(&want) {
+            for (a, b) in g.iter().zip(w) {
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+                    "{res} {cells}: {a} {b}"
+                );
+            }
+        }
+    }
+}
+
 /// A [`super::BlockCorrelation`] set again to other templates (as the tracker does every frame,
 /// keeping the grid's sums) gives exactly what a fresh one gives, also when the grid changes.
 #[test]

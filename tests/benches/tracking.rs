@@ -126,6 +126,13 @@ fn bench(c: &mut Criterion) {
     g.bench_function("J^T g", |b| {
         b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.work.grad, 8, &mut jg))
     });
+    // The loss checks' confidence (4 x 4 blocks of the 50 x 50 patch), twice a frame at least.
+    let (t0, t1): (Vec<f32>, Vec<f32>) = (
+        smoothed.data[..2500].to_vec(),
+        smoothed.data[2500..5000].to_vec(),
+    );
+    let confidence = regtrack::am::BlockCorrelation::new(&t0, 50, 4);
+    g.bench_function("confidence", |b| b.iter(|| confidence.of(black_box(&t1))));
     g.finish();
 
     let mut pre = Preprocessor::new(gaussian_kernel(5, 3.0));

@@ -989,8 +989,12 @@ impl PatchTracker {
         };
         let grid = Grid::new(params.size);
         let scratch = Scratch::new(&grid, params.levels, params.warp.dof());
-        let crew = Crew::try_new(vec![scratch; crew::threads_for(params.threads)])
+        let mut crew = Crew::try_new(vec![scratch; crew::threads_for(params.threads)])
             .map_err(|e| Error::InvalidParameter(format!("patches: threads: {e}")))?;
+        // Each member's buffers made again by its own thread (from its own allocator arena):
+        // the copies above lie side by side, and two cores writing the ends of neighbouring
+        // buffers would share cache lines.
+        crew.run(&|s: &mut Scratch, _| *s = s.clone());
         Ok(PatchTracker {
             grid,
             kernel,

@@ -67,7 +67,63 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// Frames [`Sequence::each_frame`] decodes ahead of the one being used, at most.
+const READ_AHEAD: usize = 4;
+
 impl Sequence {
+    /// Calls `f` with each frame of `range` in order ([`Sequence::load_gray`]'s result: an
+    /// error names the file) until `f` breaks (its value is returned) or the frames end
+    /// (`None`). With `ahead`, another thread decodes the next frames meanwhile (at most
+    /// [`READ_AHEAD`] ahead): a tracker then waits for no decoding (on a sequence of JPEG
+    /// files, most of a run's time), at the cost of a core; without it, or when no thread can
+    /// be started, the frames are read in turn. `f` runs on the calling thread.
+    pub fn each_frame<B>(
+        &self,
+        range: std::ops::Range<usize>,
+        ahead: bool,
+        mut f: impl FnMut(usize, Result<GrayU8>) -> std::ops::ControlFlow<B>,
+    ) -> Option<B> {
+        use std::ops::ControlFlow::{Break, Continue};
+        let in_turn =
+            |range: std::ops::Range<usize>,
+             f: &mut dyn FnMut(usize, Result<GrayU8>) -> std::ops::ControlFlow<B>| {
+                for i in range {
+                    if let Break(b) = f(i, self.load_gray(i)) {
+                        return Some(b);
+                    }
+                }
+                None
+            };
+        if !ahead || range.len() < 2 {
+            return in_turn(range, &mut f);
+        }
+        std::thread::scope(|scope| {
+            let (tx, rx) = std::sync::mpsc::sync_channel(READ_AHEAD);
+            let frames = range.clone();
+            let reader = std::thread::Builder::new()
+                .name("regtrack-frames".into())
+                .spawn_scoped(scope, move || {
+                    for i in frames {
+                        // The receiver is gone once `f` broke: stop reading.
+                        if tx.send((i, self.load_gray(i))).is_err() {
+                            break;
+                        }
+                    }
+                });
+            if reader.is_err() {
+                return in_turn(range, &mut f);
+            }
+            // Dropping the receiver (on a break) ends the reader's loop.
+            for (i, frame) in rx {
+                match f(i, frame) {
+                    Break(b) => return Some(b),
+                    Continue(()) => {}
+                }
+            }
+            None
+        })
+    }
+
     /// Opens a sequence from a ground-truth file (MTF `<seq>.txt` or POT `_gt_points.txt`) or a
     /// folder of images, finding the other half as described in the module documentation.
     pub fn open(path: &Path) -> Result<Self> {

@@ -2,7 +2,7 @@
 //! of it, writing each run's files as soon as it ends and resuming the runs an earlier batch in
 //! the same folder finished. The command line, the tests and the bindings drive it the same way.
 
-use super::{EvalOptions, RunResult, Summary, files, run_sequence, summarize};
+use super::{EvalOptions, RunResult, Summary, files, run_sequence_reading, summarize};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::observe::NoObserver;
@@ -145,11 +145,14 @@ impl<'a> Batch<'a> {
                 threads: self.jobs,
                 message: e.to_string(),
             })?;
+        // Runs that leave a core free have their frames decoded ahead by it.
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let ahead = pool.current_num_threads().min(total) < cores;
         let made: Vec<Result<RunResult>> = pool.install(|| {
             plan.todo
                 .par_iter()
                 .map(|&(s, p)| {
-                    let r = self.run_one(&self.sequences[s], &self.specs[p]);
+                    let r = self.run_one(&self.sequences[s], &self.specs[p], ahead);
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
                     r
                 })
@@ -187,8 +190,8 @@ impl<'a> Batch<'a> {
     }
 
     /// One run; its files are written as soon as it ends, so that a killed batch keeps them.
-    fn run_one(&self, seq: &Sequence, spec: &TrackerSpec) -> Result<RunResult> {
-        let run = run_sequence(seq, spec, &self.options, None, &mut NoObserver)?;
+    fn run_one(&self, seq: &Sequence, spec: &TrackerSpec, ahead: bool) -> Result<RunResult> {
+        let run = run_sequence_reading(seq, spec, &self.options, None, &mut NoObserver, ahead)?;
         if let Some(out) = self.out {
             files::write_run_files(out, &run)?;
         }

@@ -47,6 +47,7 @@ use crate::geometry::{Quad, alignment_error, center_error, iou};
 use crate::observe::Observer;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
 
 /// Largest threshold of the success curve (px).
 pub const SR_MAX: f64 = 20.0;
@@ -430,6 +431,20 @@ pub fn run_sequence(
     init: Option<Quad>,
     observer: &mut dyn Observer,
 ) -> Result<RunResult> {
+    run_sequence_reading(seq, spec, opts, init, observer, false)
+}
+
+/// [`run_sequence`], the frames decoded ahead by another thread when `ahead` (see
+/// [`Sequence::each_frame`]): for a run that leaves a core free (one run at a time on a
+/// machine of two cores or more), whose speed figures another thread then does not disturb.
+pub fn run_sequence_reading(
+    seq: &Sequence,
+    spec: &TrackerSpec,
+    opts: &EvalOptions,
+    init: Option<Quad>,
+    observer: &mut dyn Observer,
+    ahead: bool,
+) -> Result<RunResult> {
     // Before anything is read: what the run is made from.
     let inputs = files::input_stamp(seq);
     let gt_ssm = match opts.gt_ssm.as_deref() {
@@ -484,21 +499,24 @@ pub fn run_sequence(
                 confidence: None,
             }
         };
-    for i in 0..seq.len() {
-        let img = match seq.load_gray(i) {
+    // With `ahead`, each frame decoded while the tracker works on the one before.
+    let ended = seq.each_frame(0..seq.len(), ahead, |i, img| -> ControlFlow<Result<()>> {
+        let img = match img {
             Ok(img) => img,
             Err(e) if i > 0 => {
                 stopped = Some(format!("stopped at frame {}: {e}", i + 1));
-                break;
+                return ControlFlow::Break(Ok(()));
             }
-            Err(e) => return Err(e),
+            Err(e) => return ControlFlow::Break(Err(e)),
         };
         let reinit_here = match skip_until {
             Some(k) if i >= k => ground_truth(i).is_some(),
             _ => false,
         };
         if i == 0 {
-            tracker.initialize(FrameInput::Gray8(&img), &first)?;
+            if let Err(e) = tracker.initialize(FrameInput::Gray8(&img), &first) {
+                return ControlFlow::Break(Err(e));
+            }
             frames.push(record(
                 i,
                 Some(first),
@@ -508,7 +526,7 @@ pub fn run_sequence(
                 0.0,
                 true,
             ));
-            continue;
+            return ControlFlow::Continue(());
         }
         if reinit_here {
             let q = ground_truth(i).unwrap_or(first);
@@ -521,12 +539,12 @@ pub fn run_sequence(
                 skip_until = Some(i + 1);
                 frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
             }
-            continue;
+            return ControlFlow::Continue(());
         }
         if skip_until.is_some() {
             // Skipped after a failure, before re-initialisation: counts as failed.
             frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
-            continue;
+            return ControlFlow::Continue(());
         }
         let out = tracker.update(FrameInput::Gray8(&img), observer);
         let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
@@ -552,6 +570,10 @@ pub fn run_sequence(
         if opts.reinit && failed {
             skip_until = Some(i + 1 + opts.reinit_skip);
         }
+        ControlFlow::Continue(())
+    });
+    if let Some(Err(e)) = ended {
+        return Err(e);
     }
     Ok(RunResult {
         sequence: seq.name.clone(),

@@ -66,6 +66,51 @@ fn an_undecodable_frame_names_its_path() {
     assert!(err.contains("frame00002.png"), "{err}");
 }
 
+/// Frames read ahead come in order, each once; an undecodable one arrives as its error in its
+/// place; a break stops the reading (and returns its value).
+#[test]
+fn frames_read_ahead_come_in_order_with_their_errors() {
+    use std::ops::ControlFlow::{Break, Continue};
+    let d = TempDir::new("ahead");
+    let gt = mtf_layout(d.path(), 12);
+    std::fs::write(d.path().join("seq/frame00007.png"), b"not a png").unwrap();
+    let s = Sequence::open(&gt).unwrap();
+    let mut seen = Vec::new();
+    let none: Option<()> = s.each_frame(1..12, true, |i, frame| {
+        match frame {
+            // Frame i holds the gray level i + 1 (`mtf_layout`).
+            Ok(img) => seen.push((i, img.data[0])),
+            Err(e) => {
+                assert!(e.to_string().contains("frame00007.png"), "{e}");
+                seen.push((i, 0));
+            }
+        }
+        Continue(())
+    });
+    assert!(none.is_none());
+    let want: Vec<(usize, u8)> = (1..12)
+        .map(|i| (i, if i == 6 { 0 } else { i as u8 + 1 }))
+        .collect();
+    assert_eq!(seen, want);
+    // A break at the fourth frame: its value back, no frame after it seen.
+    let mut count = 0;
+    let stopped = s.each_frame(0..12, true, |i, _| {
+        count += 1;
+        if i == 3 { Break(i * 10) } else { Continue(()) }
+    });
+    assert_eq!((stopped, count), (Some(30), 4));
+    // One frame or none, or not ahead: read in turn.
+    assert_eq!(
+        s.each_frame(5..6, true, |i, f| Break((i, f.is_ok()))),
+        Some((5, true))
+    );
+    assert_eq!(
+        s.each_frame(5..9, false, |i, f| Break((i, f.is_ok()))),
+        Some((5, true))
+    );
+    assert_eq!(s.each_frame(5..5, true, |_, _| Break(())), None);
+}
+
 #[test]
 fn folder_of_images_with_and_without_ground_truth() {
     let d = TempDir::new("folder");

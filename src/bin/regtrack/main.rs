@@ -390,7 +390,10 @@ fn run_track(
     let seq = Sequence::open(seq)?;
     warn_about(std::slice::from_ref(&seq));
     let spec = spec_of(t)?;
-    let run = eval::run_sequence(&seq, &spec, &EvalOptions::default(), init, &mut NoObserver)?;
+    // One run: a second core (if any) decodes the frames ahead.
+    let spare = std::thread::available_parallelism().is_ok_and(|n| n.get() > 1);
+    let options = EvalOptions::default();
+    let run = eval::run_sequence_reading(&seq, &spec, &options, init, &mut NoObserver, spare)?;
     let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
     dataset::write_corners(out, &corners, "jpg")?;
     let lost = run.frames.iter().filter(|f| f.corners.is_none()).count();

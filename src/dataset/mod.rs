@@ -74,7 +74,7 @@ impl Sequence {
     /// Calls `f` with each frame of `range` in order ([`Sequence::load_gray`]'s result: an
     /// error names the file) until `f` breaks (its value is returned) or the frames end
     /// (`None`). With `ahead`, another thread decodes the next frames meanwhile (at most
-    /// four ahead): a tracker then waits for no decoding (on a sequence of JPEG
+    /// `READ_AHEAD` ahead): a tracker then waits for no decoding (on a sequence of JPEG
     /// files, most of a run's time), at the cost of a core; without it, or when no thread can
     /// be started, the frames are read in turn. `f` runs on the calling thread.
     pub fn each_frame<B>(

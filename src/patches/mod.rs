@@ -1167,8 +1167,8 @@ impl PatchTracker {
         self.build_current(frame);
         let (cur, prev, grid, prm) = (&self.cur, &self.prev, &self.grid, &self.params);
         let size = self.size;
-        // Blocks of neighbouring patches (they read the same rows of the frame), taken by
-        // whichever thread is free.
+        // Blocks of neighbouring patches (they read the same rows of the frame): each thread
+        // takes those of its own part first (the rows it built), then whichever are left.
         let shares = Shares::new(&mut self.patches, PATCH_BLOCK, self.crew.len());
         self.crew.run(&|scratch: &mut Scratch, m| {
             while let Some((_, block)) = shares.take(m) {

@@ -314,16 +314,85 @@ fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 
     bilinear_form_portable(cells, side, x, y)
 }
 
-/// `cells[u side + v] += (x_u y_v) jj` (eight lanes a cell) for the 4 x 4 cells (rows `side`
+/// `out[i] = (k * bilinear_form(cells from ta[i] side + cb[i], x[i], y[i])) as f32` for every
+/// pixel `i`: the same sums in the same order as [`bilinear_form`], four pixels at a time (their
+/// four horizontal sums in two vector additions).
+#[allow(clippy::too_many_arguments)]
+fn bilinear_forms(
+    cells: &[f64],
+    side: usize,
+    ta: &[u32],
+    cb: &[u32],
+    x: &[[f64; 4]],
+    y: &[[f64; 4]],
+    k: f64,
+    out: &mut [f32],
+) {
+    let n = out
+        .len()
+        .min(ta.len())
+        .min(cb.len())
+        .min(x.len())
+        .min(y.len());
+    let span = 3 * side + 4;
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); pixel l's loads read its cells,
+    // a bounds-checked slice of `span` cells (row u: cells u side .. u side + 4 < span), and
+    // its `x` and `y` (four f64 each); the store writes out[done .. done + 4], done + 4 <= n.
+    unsafe {
+        use std::arch::x86_64::*;
+        while done + 4 <= n {
+            let p: [__m256d; 4] = std::array::from_fn(|l| {
+                let j = done + l;
+                let at = ta[j] as usize * side + cb[j] as usize;
+                let c = cells[at..at + span].as_ptr();
+                let xj = &x[j];
+                let mut rows = _mm256_mul_pd(_mm256_set1_pd(xj[0]), _mm256_loadu_pd(c));
+                for u in 1..4 {
+                    rows = _mm256_fmadd_pd(
+                        _mm256_set1_pd(xj[u]),
+                        _mm256_loadu_pd(c.add(u * side)),
+                        rows,
+                    );
+                }
+                _mm256_mul_pd(rows, _mm256_loadu_pd(y[j].as_ptr()))
+            });
+            // [p0 + p1 of pixels 0, 1, then p2 + p3 of pixels 0, 1] and the same for 2, 3;
+            // the halves' sum is (p0 + p1) + (p2 + p3) of each pixel, as `bilinear_form`'s.
+            let h01 = _mm256_hadd_pd(p[0], p[1]);
+            let h23 = _mm256_hadd_pd(p[2], p[3]);
+            let s = _mm256_add_pd(
+                _mm256_permute2f128_pd::<0x20>(h01, h23),
+                _mm256_permute2f128_pd::<0x31>(h01, h23),
+            );
+            let r = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_set1_pd(k), s));
+            _mm_storeu_ps(out.as_mut_ptr().add(done), r);
+            done += 4;
+        }
+    }
+    for j in done..n {
+        let at = ta[j] as usize * side + cb[j] as usize;
+        out[j] = (k * bilinear_form(&cells[at..at + span], side, &x[j], &y[j])) as f32;
+    }
+}
+
+/// Eight f32 lanes (one per parameter) on a 32-byte boundary: a vector load or store of a
+/// cell never straddles two cache lines (a split store also stalls the next pixel's load of
+/// the same cell).
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(32))]
+pub(crate) struct Lanes(pub [f32; MAX_DOF]);
+
+/// `cells[u side + v] += x_u (y_v jj)` (eight lanes a cell) for the 4 x 4 cells (rows `side`
 /// apart) of one pixel: its share of the Newton Hessian's `V`.
 #[inline(always)]
-fn add_v(
-    cells: &mut [[f32; MAX_DOF]],
-    side: usize,
-    x: &[f64; 4],
-    y: &[f64; 4],
-    jj: &[f32; MAX_DOF],
-) {
+fn add_v(cells: &mut [Lanes], side: usize, x: &[f64; 4], y: &[f64; 4], jj: &[f32; MAX_DOF]) {
     assert!(cells.len() >= 3 * side + 4);
     #[cfg(all(
         target_arch = "x86_64",
@@ -354,9 +423,110 @@ fn add_v(
     add_v_portable(cells, side, x, y, jj);
 }
 
+/// `acc[k] += b[k]` in f64 for the eight lanes of a cell, then `b` zeroed: a block's `V`
+/// sums folded into the whole patch's.
+#[inline(always)]
+fn flush_lanes(acc: &mut [f64], b: &mut Lanes) {
+    let acc: &mut [f64; MAX_DOF] = acc.try_into().expect("a cell is MAX_DOF lanes");
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 is enabled at compile time (cfg); `acc` and `b` are eight lanes each
+        // (MAX_DOF == 8), `b` on a 32-byte boundary (`Lanes`' alignment).
+        unsafe {
+            use std::arch::x86_64::*;
+            let v = _mm256_load_ps(b.0.as_ptr());
+            let p = acc.as_mut_ptr();
+            let lo = _mm256_add_pd(
+                _mm256_loadu_pd(p),
+                _mm256_cvtps_pd(_mm256_castps256_ps128(v)),
+            );
+            let hi = _mm256_add_pd(
+                _mm256_loadu_pd(p.add(4)),
+                _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)),
+            );
+            _mm256_storeu_pd(p, lo);
+            _mm256_storeu_pd(p.add(4), hi);
+            _mm256_store_ps(b.0.as_mut_ptr(), _mm256_setzero_ps());
+        }
+        return;
+    }
+    for (e, q) in acc.iter_mut().zip(b.0.iter_mut()) {
+        *e += *q as f64;
+        *q = 0.0;
+    }
+}
+
+/// The Jacobian's rows of the pixels `block` (the Jacobian is stored by parameter, `n` pixels a
+/// parameter) into `rows[0..]`, eight lanes a pixel, the lanes past `dof` zero.
+fn jacobian_rows(
+    jac: &[f32],
+    n: usize,
+    dof: usize,
+    block: std::ops::Range<usize>,
+    rows: &mut [Lanes],
+) {
+    let len = block.len();
+    assert!(dof <= MAX_DOF && rows.len() >= len && jac.len() >= dof * n && block.end <= n);
+    let mut done = 0;
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 is enabled at compile time (cfg); parameter k's loads read
+        // jac[k n + block.start + i .. + 8] with i + 8 <= len (inside, asserted above); the
+        // stores write rows[i .. i + 8], each a 32-byte aligned `Lanes`.
+        unsafe {
+            use std::arch::x86_64::*;
+            while done + 8 <= len {
+                let at = block.start + done;
+                let c: [__m256; 8] = std::array::from_fn(|k| {
+                    if k < dof {
+                        _mm256_loadu_ps(jac.as_ptr().add(k * n + at))
+                    } else {
+                        _mm256_setzero_ps()
+                    }
+                });
+                // 8 x 8 transpose: pairs, then quads, then the 128-bit halves.
+                let t0 = _mm256_unpacklo_ps(c[0], c[1]);
+                let t1 = _mm256_unpackhi_ps(c[0], c[1]);
+                let t2 = _mm256_unpacklo_ps(c[2], c[3]);
+                let t3 = _mm256_unpackhi_ps(c[2], c[3]);
+                let t4 = _mm256_unpacklo_ps(c[4], c[5]);
+                let t5 = _mm256_unpackhi_ps(c[4], c[5]);
+                let t6 = _mm256_unpacklo_ps(c[6], c[7]);
+                let t7 = _mm256_unpackhi_ps(c[6], c[7]);
+                let s0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+                let s1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+                let s2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+                let s3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+                let s4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+                let s5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+                let s6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+                let s7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+                let r = [
+                    _mm256_permute2f128_ps::<0x20>(s0, s4),
+                    _mm256_permute2f128_ps::<0x20>(s1, s5),
+                    _mm256_permute2f128_ps::<0x20>(s2, s6),
+                    _mm256_permute2f128_ps::<0x20>(s3, s7),
+                    _mm256_permute2f128_ps::<0x31>(s0, s4),
+                    _mm256_permute2f128_ps::<0x31>(s1, s5),
+                    _mm256_permute2f128_ps::<0x31>(s2, s6),
+                    _mm256_permute2f128_ps::<0x31>(s3, s7),
+                ];
+                for (i, r) in r.into_iter().enumerate() {
+                    _mm256_store_ps(rows[done + i].0.as_mut_ptr(), r);
+                }
+                done += 8;
+            }
+        }
+    }
+    for (i, row) in rows[done..len].iter_mut().enumerate() {
+        let at = block.start + done + i;
+        row.0 = std::array::from_fn(|k| if k < dof { jac[k * n + at] } else { 0.0 });
+    }
+}
+
 /// [`add_v`] in plain Rust.
 fn add_v_portable(
-    cells: &mut [[f32; MAX_DOF]],
+    cells: &mut [Lanes],
     side: usize,
     x: &[f64; 4],
     y: &[f64; 4],
@@ -364,9 +534,9 @@ fn add_v_portable(
 ) {
     for u in 0..4 {
         for w in 0..4 {
-            let coef = (x[u] as f32) * (y[w] as f32);
-            for (e, &q) in cells[u * side + w].iter_mut().zip(jj) {
-                *e = coef.mul_add(q, *e);
+            let (xu, yw) = (x[u] as f32, y[w] as f32);
+            for (e, &q) in cells[u * side + w].0.iter_mut().zip(jj) {
+                *e = xu.mul_add(yw * q, *e);
             }
         }
     }
@@ -622,7 +792,7 @@ pub(crate) struct Parzen {
     /// Scratch: `V` (`side x side x MAX_DOF`), per-pixel diagonal terms, a product buffer.
     v: Vec<f64>,
     /// Scratch: `V` over one block of pixels, in f32 (one AVX register a cell).
-    v_block: Vec<[f32; MAX_DOF]>,
+    v_block: Vec<Lanes>,
     /// Scratch: one `dof`-vector per histogram row or column.
     lines: Vec<[f64; MAX_DOF]>,
     diag: Vec<f32>,
@@ -643,7 +813,7 @@ impl Parzen {
             self_stats: Stats::new(bins.side),
             self_valid: false,
             v: vec![0.0; bins.side * bins.side * MAX_DOF],
-            v_block: vec![[0.0; MAX_DOF]; bins.side * bins.side],
+            v_block: vec![Lanes::default(); bins.side * bins.side],
             lines: vec![[0.0; MAX_DOF]; bins.side],
             diag: Vec::new(),
         }
@@ -694,11 +864,7 @@ impl Parzen {
             super::Wrt::Current => (&tw.w, &cw.d),
             super::Wrt::Template => (&tw.d, &cw.w),
         };
-        let bases = tw.base.iter().zip(&cw.base);
-        for ((out, (&ta, &cb)), (x, y)) in grad.iter_mut().zip(bases).zip(xs.iter().zip(ys)) {
-            let at = ta as usize * side + cb as usize;
-            *out = (k * bilinear_form(&g[at..at + 3 * side + 4], side, x, y)) as f32;
-        }
+        bilinear_forms(g, side, &tw.base, &cw.base, xs, ys, k, grad);
         self.stats.value
     }
 
@@ -760,7 +926,7 @@ fn newton(
     jac: &[f32],
     dof: usize,
     v: &mut [f64],
-    v_block: &mut [[f32; MAX_DOF]],
+    v_block: &mut [Lanes],
     lines: &mut [[f64; MAX_DOF]],
     diag: &mut [f32],
     out: &mut [f64; MAX_DOF * MAX_DOF],
@@ -776,42 +942,48 @@ fn newton(
     // blocks, as `jt_times` does.
     for a in r0..r1 {
         v[(a * side + c0) * MAX_DOF..(a * side + c1) * MAX_DOF].fill(0.0);
-        v_block[a * side + c0..a * side + c1].fill([0.0; MAX_DOF]);
+        v_block[a * side + c0..a * side + c1].fill(Lanes::default());
     }
     let g = &st.g;
     const BLOCK: usize = 256;
     // The block's Jacobian rows (eight lanes a pixel; those past `dof` zero), read column by
     // column (the Jacobian is stored by parameter).
-    let mut rows = [[0.0f32; MAX_DOF]; BLOCK];
+    let mut rows = [Lanes::default(); BLOCK];
     for start in (0..n).step_by(BLOCK) {
         let end = (start + BLOCK).min(n);
-        for k in 0..dof {
-            for (r, &q) in rows.iter_mut().zip(&jac[k * n + start..k * n + end]) {
-                r[k] = q;
-            }
-        }
-        for j in start..end {
-            let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
-            let (x, y, x2, y2) = if current {
-                (&tw.w[j], &cw.d[j], &tw.w[j], &cw.d2[j])
-            } else {
-                (&tw.d[j], &cw.w[j], &tw.d2[j], &cw.w[j])
-            };
-            // All MAX_DOF lanes (those past `dof` are zero and never read).
-            let jj = &rows[j - start];
-            let at = ta * side + cb;
-            let dj = bilinear_form(&g[at..at + 3 * side + 4], side, x2, y2);
-            add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, jj);
-            diag[j] = dj as f32;
+        jacobian_rows(jac, n, dof, start..end, &mut rows);
+        // The template's and the current patch's weights of the block: `x` and `y` for `V`,
+        // `x2` and `y2` for the diagonal.
+        let block = start..end;
+        let (ta, cb) = (&tw.base[block.clone()], &cw.base[block.clone()]);
+        let (x, y, x2, y2) = if current {
+            (
+                &tw.w[block.clone()],
+                &cw.d[block.clone()],
+                &tw.w[block.clone()],
+                &cw.d2[block.clone()],
+            )
+        } else {
+            (
+                &tw.d[block.clone()],
+                &cw.w[block.clone()],
+                &tw.d2[block.clone()],
+                &cw.w[block.clone()],
+            )
+        };
+        // The diagonal in a pass of its own: each pixel's chain of products is independent of
+        // the others', and of `V`'s stores.
+        bilinear_forms(g, side, ta, cb, x2, y2, 1.0, &mut diag[block]);
+        // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
+        for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {
+            let at = ta as usize * side + cb as usize;
+            add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, &jj.0);
         }
         for a in r0..r1 {
             let cells = a * side + c0..a * side + c1;
             let sums = &mut v[cells.start * MAX_DOF..cells.end * MAX_DOF];
             for (acc, vb) in sums.chunks_exact_mut(MAX_DOF).zip(&mut v_block[cells]) {
-                for (e, b) in acc.iter_mut().zip(vb.iter_mut()) {
-                    *e += *b as f64;
-                    *b = 0.0;
-                }
+                flush_lanes(acc, vb);
             }
         }
     }
@@ -820,18 +992,21 @@ fn newton(
     super::intensity_map::jt_diag_j(jac, diag, dof, out);
     let s_diag = scale * scale * inv_n;
     let mut q = [0.0f64; MAX_DOF * MAX_DOF];
-    let add = |q: &mut [f64; MAX_DOF * MAX_DOF], x: &[f64], y: &[f64], w: f64| {
-        for i in 0..dof {
-            let xi = w * x[i];
-            for j in 0..dof {
-                q[i * MAX_DOF + j] += xi * y[j];
+    // Every lane (those past `dof` are zero in `V` and so in every sum of its cells): fixed
+    // sizes, so the products run in vector registers.
+    let add = |q: &mut [f64; MAX_DOF * MAX_DOF], x: &[f64; MAX_DOF], y: &[f64; MAX_DOF], w: f64| {
+        for (qi, &xi) in q.chunks_exact_mut(MAX_DOF).zip(x) {
+            let xi = w * xi;
+            for (e, &yj) in qi.iter_mut().zip(y) {
+                *e += xi * yj;
             }
         }
     };
     let cell = |a: usize, b: usize| -> [f64; MAX_DOF] {
-        let mut r = [0.0; MAX_DOF];
-        r[..dof].copy_from_slice(&v[(a * side + b) * MAX_DOF..(a * side + b) * MAX_DOF + dof]);
-        r
+        let at = (a * side + b) * MAX_DOF;
+        v[at..at + MAX_DOF]
+            .try_into()
+            .expect("a cell is MAX_DOF lanes")
     };
     match measure {
         Measure::Mi => {
@@ -1075,12 +1250,62 @@ mod tests {
             add_outer_portable(&mut c2, side, &x, &y);
             assert!(c1.iter().zip(&c2).all(|(p, q)| (p - q).abs() < 1e-12));
             let jj: [f32; MAX_DOF] = std::array::from_fn(|_| rng.range(-3.0, 3.0) as f32);
-            let mut v1 = vec![[0.5f32; MAX_DOF]; 3 * side + 4];
+            let mut v1 = vec![Lanes([0.5f32; MAX_DOF]); 3 * side + 4];
             let mut v2 = v1.clone();
             add_v(&mut v1, side, &x, &y, &jj);
             add_v_portable(&mut v2, side, &x, &y, &jj);
-            for (p, q) in v1.iter().flatten().zip(v2.iter().flatten()) {
+            for (p, q) in v1.iter().flat_map(|c| c.0).zip(v2.iter().flat_map(|c| c.0)) {
                 assert!((p - q).abs() < 1e-5, "{p} {q}");
+            }
+            let mut acc: [f64; MAX_DOF] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
+            let before = acc;
+            let mut lanes = Lanes(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
+            let added = lanes;
+            flush_lanes(&mut acc, &mut lanes);
+            for k in 0..MAX_DOF {
+                assert_eq!(acc[k], before[k] + added.0[k] as f64);
+            }
+            assert_eq!(lanes.0, [0.0; MAX_DOF]);
+        }
+        // Four pixels' forms at a time: the same values, to the bit, as one at a time.
+        let side = 7;
+        let cells: Vec<f64> = (0..side * side).map(|_| rng.range(-2.0, 2.0)).collect();
+        for n in [0usize, 3, 4, 9, 16] {
+            let ta: Vec<u32> = (0..n)
+                .map(|_| (rng.next_u64() % (side as u64 - 3)) as u32)
+                .collect();
+            let cb: Vec<u32> = (0..n)
+                .map(|_| (rng.next_u64() % (side as u64 - 3)) as u32)
+                .collect();
+            let x: Vec<[f64; 4]> = (0..n)
+                .map(|_| std::array::from_fn(|_| rng.uniform()))
+                .collect();
+            let y: Vec<[f64; 4]> = (0..n)
+                .map(|_| std::array::from_fn(|_| rng.range(-1.0, 1.0)))
+                .collect();
+            let mut out = vec![0f32; n];
+            bilinear_forms(&cells, side, &ta, &cb, &x, &y, 0.37, &mut out);
+            for j in 0..n {
+                let at = ta[j] as usize * side + cb[j] as usize;
+                let one = (0.37 * bilinear_form(&cells[at..], side, &x[j], &y[j])) as f32;
+                assert_eq!(out[j].to_bits(), one.to_bits(), "pixel {j} of {n}");
+            }
+        }
+        // The Jacobian's rows of a block: every parameter's value in its lane, zeros past `dof`,
+        // for blocks with and without a tail of fewer than eight pixels.
+        for (n, dof, block) in [(37, 8, 3..37), (40, 6, 8..40), (19, 2, 0..19), (8, 8, 0..8)] {
+            let jac: Vec<f32> = (0..dof * n).map(|_| rng.range(-5.0, 5.0) as f32).collect();
+            let mut rows = vec![Lanes([9.0; MAX_DOF]); block.len()];
+            jacobian_rows(&jac, n, dof, block.clone(), &mut rows);
+            for (i, row) in rows.iter().enumerate() {
+                for k in 0..MAX_DOF {
+                    let want = if k < dof {
+                        jac[k * n + block.start + i]
+                    } else {
+                        0.0
+                    };
+                    assert_eq!(row.0[k], want, "pixel {i}, parameter {k} of {dof}");
+                }
             }
         }
     }

@@ -122,6 +122,29 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    // MI's Newton Hessian (FCLK and ESM, every iteration) on the same patch and Jacobian: the
+    // histogram's statistics are those of the last call, so this is the projection alone.
+    let spec = TrackerSpec::from_names("fclk", "mi", "homography").expect("spec");
+    let mut t =
+        RegistrationTracker::new(spec.registration().expect("registration")).expect("tracker");
+    t.initialize(FrameInput::Smoothed(&smoothed), &truth)
+        .expect("init");
+    t.set_corners(&start).expect("corners");
+    let mut mi = t.into_context();
+    let q = mi.params;
+    mi.sample_at(&view, &q);
+    g.bench_function("MI Newton Hessian", |b| {
+        b.iter(|| {
+            mi.am.hessian(
+                regtrack::am::Wrt::Current,
+                regtrack::am::HessianKind::Newton,
+                &mi.work.values,
+                black_box(&jac),
+                8,
+                &mut h,
+            )
+        })
+    });
     let mut jg = [0.0; 8];
     g.bench_function("J^T g", |b| {
         b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.work.grad, 8, &mut jg))

@@ -657,6 +657,9 @@ impl Weights {
 struct Stats {
     side: usize,
     p: Vec<f64>,
+    /// The odd pixels' share of the joint histogram while it is built: neighbouring pixels
+    /// often fall in the same cells, and two copies halve the chain of each cell's updates.
+    p_odd: Vec<f64>,
     pt: Vec<f64>,
     pc: Vec<f64>,
     /// CCRE: `P` (cumulative over `a`), `P_t`, `S`.
@@ -675,6 +678,7 @@ impl Stats {
         Stats {
             side,
             p: vec![0.0; side * side],
+            p_odd: vec![0.0; side * side],
             pt: vec![0.0; side],
             pc: vec![0.0; side],
             cum: vec![0.0; side * side],
@@ -707,20 +711,27 @@ impl Stats {
         self.cols = (c0, c1);
         for a in r0..r1 {
             self.p[a * side + c0..a * side + c1].fill(0.0);
+            self.p_odd[a * side + c0..a * side + c1].fill(0.0);
         }
         let n = t.base.len();
         let bases = t.base.iter().zip(&c.base);
-        for ((&ta, &cb), (x, y)) in bases.zip(t.w.iter().zip(&c.w)) {
+        // The pixel's 4 x 4 cells: four rows of four, `side` apart; even pixels into `p`, odd
+        // ones into `p_odd`.
+        for (j, ((&ta, &cb), (x, y))) in bases.zip(t.w.iter().zip(&c.w)).enumerate() {
             let at = ta as usize * side + cb as usize;
-            // The pixel's 4 x 4 cells: four rows of four, `side` apart.
-            add_outer(&mut self.p[at..at + 3 * side + 4], side, x, y);
+            let hist = if j % 2 == 0 {
+                &mut self.p
+            } else {
+                &mut self.p_odd
+            };
+            add_outer(&mut hist[at..at + 3 * side + 4], side, x, y);
         }
         let inv = 1.0 / n.max(1) as f64;
         self.pt.fill(0.0);
         self.pc.fill(0.0);
         for a in r0..r1 {
             for b in c0..c1 {
-                let v = self.p[a * side + b] * inv;
+                let v = (self.p[a * side + b] + self.p_odd[a * side + b]) * inv;
                 self.p[a * side + b] = v;
                 self.pt[a] += v;
                 self.pc[b] += v;
@@ -1305,6 +1316,71 @@ mod tests {
                         0.0
                     };
                     assert_eq!(row.0[k], want, "pixel {i}, parameter {k} of {dof}");
+                }
+            }
+        }
+    }
+
+    /// The joint histogram (built in two copies, even and odd pixels) is the plain sum of every
+    /// pixel's weight products, and MI is its definition over that histogram.
+    #[test]
+    fn the_joint_histogram_and_mi_are_their_definitions() {
+        let mut rng = crate::rng::Rng::new(5);
+        for n in [1usize, 2, 37, 256] {
+            let t: Vec<f32> = (0..n).map(|_| rng.range(0.0, 255.0) as f32).collect();
+            let c: Vec<f32> = t
+                .iter()
+                .map(|&v| 0.7 * v + 20.0 + rng.range(-10.0, 10.0) as f32)
+                .collect();
+            let bins = Bins::new(DEFAULT_BINS);
+            let side = bins.side;
+            let (mut tw, mut cw) = (Weights::default(), Weights::default());
+            tw.fill_with(&t, &bins);
+            cw.fill_with(&c, &bins);
+            let mut p = vec![0.0f64; side * side];
+            for j in 0..n {
+                for u in 0..4 {
+                    for v in 0..4 {
+                        let at = (tw.base[j] as usize + u) * side + cw.base[j] as usize + v;
+                        p[at] += tw.w[j][u] * cw.w[j][v] / n as f64;
+                    }
+                }
+            }
+            let (mut pt, mut pc) = (vec![0.0; side], vec![0.0; side]);
+            for a in 0..side {
+                for b in 0..side {
+                    pt[a] += p[a * side + b];
+                    pc[b] += p[a * side + b];
+                }
+            }
+            let mut mi = 0.0;
+            for a in 0..side {
+                for b in 0..side {
+                    let v = p[a * side + b];
+                    if v > 0.0 {
+                        mi += v * (v / (pt[a] * pc[b])).ln();
+                    }
+                }
+            }
+            for measure in [Measure::Mi, Measure::Ccre] {
+                let mut model = Parzen::new(measure, DEFAULT_BINS);
+                model.set_template(&t);
+                let value = model.similarity(&c);
+                let st = &model.stats;
+                for a in 0..side {
+                    for b in 0..side {
+                        let inside = (st.rows.0..st.rows.1).contains(&a)
+                            && (st.cols.0..st.cols.1).contains(&b);
+                        let got = if inside { st.p[a * side + b] } else { 0.0 };
+                        assert!(
+                            (got - p[a * side + b]).abs() < 1e-12,
+                            "{n} pixels, cell ({a}, {b}): {got} vs {}",
+                            p[a * side + b]
+                        );
+                    }
+                }
+                if measure == Measure::Mi {
+                    assert!((value - mi).abs() < 1e-9, "{n} pixels: MI {value} vs {mi}");
                 }
             }
         }

@@ -153,6 +153,12 @@ pub(crate) struct Weights {
     /// Range of histogram indices in use (`lo..hi`).
     pub lo: usize,
     pub hi: usize,
+    /// Each pixel's fraction of a bin and whether it is inside the bins' range (1 or 0): what
+    /// the derivatives are made from.
+    fr: Vec<f64>,
+    inside: Vec<f64>,
+    /// Whether `d` and `d2` are those of the values `w` was filled with.
+    derivatives: bool,
 }
 
 /// The cubic B-spline's four weights as polynomials in the fraction `f` of a bin coordinate:
@@ -602,35 +608,43 @@ impl Weights {
     }
 
     pub fn fill_with(&mut self, x: &[f32], bins: &Bins) {
+        self.fill_values(x, bins);
+        self.fill_derivatives();
+    }
+
+    /// The first bins and weights of `x`, without their derivatives (an ICLK iteration reads
+    /// only the weights of the current patch; [`Weights::fill_derivatives`] makes them).
+    pub fn fill_values(&mut self, x: &[f32], bins: &Bins) {
         let n = x.len();
         self.base.resize(n, 0);
         self.w.resize(n, [0.0; 4]);
-        self.d.resize(n, [0.0; 4]);
-        self.d2.resize(n, [0.0; 4]);
+        self.fr.resize(n, 0.0);
+        self.inside.resize(n, 0.0);
+        self.derivatives = false;
         let (mut lo, mut hi) = (bins.side, 0);
+        // Derivatives computed alongside and dropped (the compiler leaves them out).
+        let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
         // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
         // then each pixel's weights.
         let mut done = 0;
         #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
         {
-            let mut fr = [0.0f64; 4];
-            let mut inside = [0.0f64; 4];
-            let cells = self.w.chunks_exact_mut(4).zip(self.d.chunks_exact_mut(4));
             let fours = x.chunks_exact(4).zip(self.base.chunks_exact_mut(4));
-            for ((v, first), ((w, d), d2)) in fours.zip(cells.zip(self.d2.chunks_exact_mut(4))) {
+            let coords = self
+                .fr
+                .chunks_exact_mut(4)
+                .zip(self.inside.chunks_exact_mut(4));
+            for ((v, first), (w, (fr, inside))) in fours.zip(self.w.chunks_exact_mut(4).zip(coords))
+            {
                 let first: &mut [u32; 4] = first.try_into().expect("four");
-                bin_coordinates4(
-                    v.try_into().expect("four"),
-                    bins,
-                    first,
-                    &mut fr,
-                    &mut inside,
-                );
+                let fr: &mut [f64; 4] = fr.try_into().expect("four");
+                let inside: &mut [f64; 4] = inside.try_into().expect("four");
+                bin_coordinates4(v.try_into().expect("four"), bins, first, fr, inside);
                 for k in 0..4 {
                     let b = first[k] as usize;
                     lo = lo.min(b);
                     hi = hi.max(b + 4);
-                    spline(fr[k], inside[k], &mut w[k], &mut d[k], &mut d2[k]);
+                    spline(fr[k], inside[k], &mut w[k], &mut d, &mut d2);
                 }
                 done += 4;
             }
@@ -638,15 +652,32 @@ impl Weights {
         for i in done..n {
             let (b, f, inside) = bin_coordinate(x[i], bins);
             self.base[i] = b as u32;
+            (self.fr[i], self.inside[i]) = (f, inside);
             lo = lo.min(b);
             hi = hi.max(b + 4);
-            spline(f, inside, &mut self.w[i], &mut self.d[i], &mut self.d2[i]);
+            spline(f, inside, &mut self.w[i], &mut d, &mut d2);
         }
         if lo >= hi {
             (lo, hi) = (0, 0);
         }
         self.lo = lo;
         self.hi = hi;
+    }
+
+    /// The weights' first and second derivatives (`d`, `d2`) of the values last filled, once.
+    pub fn fill_derivatives(&mut self) {
+        if self.derivatives {
+            return;
+        }
+        let n = self.fr.len();
+        self.d.resize(n, [0.0; 4]);
+        self.d2.resize(n, [0.0; 4]);
+        let mut w = [0.0; 4];
+        let coords = self.fr.iter().zip(&self.inside);
+        for ((&f, &inside), (d, d2)) in coords.zip(self.d.iter_mut().zip(self.d2.iter_mut())) {
+            spline(f, inside, &mut w, d, d2);
+        }
+        self.derivatives = true;
     }
 }
 
@@ -853,7 +884,7 @@ impl Parzen {
         if self.valid && self.last.as_slice() == current {
             return;
         }
-        self.cw.fill_with(current, &self.bins);
+        self.cw.fill_values(current, &self.bins);
         self.stats.compute(self.measure, &self.tw, &self.cw);
         self.last.clear();
         self.last.extend_from_slice(current);
@@ -867,6 +898,9 @@ impl Parzen {
 
     pub fn gradient(&mut self, wrt: super::Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
         self.observe(current);
+        if wrt == super::Wrt::Current {
+            self.cw.fill_derivatives();
+        }
         let g = &self.stats.g;
         let side = self.bins.side;
         let k = self.bins.scale / current.len().max(1) as f64;
@@ -897,6 +931,9 @@ impl Parzen {
             }
         } else {
             self.observe(current);
+            if wrt == super::Wrt::Current {
+                self.cw.fill_derivatives();
+            }
         }
         let (stats, cw) = if after {
             (&self.self_stats, &self.tw)
@@ -1319,6 +1356,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Weights filled without their derivatives, then the derivatives made on demand, equal
+    /// those filled at once, for new values too (the derivatives of older values are not kept).
+    #[test]
+    fn derivatives_made_on_demand_are_those_of_the_last_values() {
+        let bins = Bins::new(DEFAULT_BINS);
+        let a: Vec<f32> = (0..23).map(|i| -40.0 + i as f32 * 15.3).collect();
+        let b: Vec<f32> = (0..23).map(|i| 300.0 - i as f32 * 11.1).collect();
+        let mut whole = Weights::default();
+        whole.fill_with(&b, &bins);
+        let mut lazy = Weights::default();
+        lazy.fill_with(&a, &bins);
+        lazy.fill_values(&b, &bins);
+        assert_eq!(
+            (lazy.base.clone(), lazy.w.clone()),
+            (whole.base.clone(), whole.w.clone())
+        );
+        assert_eq!((lazy.lo, lazy.hi), (whole.lo, whole.hi));
+        lazy.fill_derivatives();
+        assert_eq!(
+            (lazy.d.clone(), lazy.d2.clone()),
+            (whole.d.clone(), whole.d2.clone())
+        );
     }
 
     /// The joint histogram (built in two copies, even and odd pixels) is the plain sum of every

@@ -143,7 +143,8 @@ pub(crate) enum Measure {
 }
 
 /// The B-spline weights of every pixel of a patch: the first of its four bins, the weights, and
-/// their first and second derivatives with respect to the bin coordinate.
+/// their first and second derivatives with respect to the bin coordinate (`d` and `d2` are
+/// those of the last values once [`Weights::fill_with`] or [`Weights::fill_derivatives`] ran).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Weights {
     pub base: Vec<u32>,

@@ -623,7 +623,7 @@ impl Weights {
         self.inside.resize(n, 0.0);
         self.derivatives = false;
         let (mut lo, mut hi) = (bins.side, 0);
-        // Derivatives computed alongside and dropped (the compiler leaves them out).
+        // The derivatives go to these locals and are dropped: only `w` is kept.
         let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
         // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
         // then each pixel's weights.
@@ -1020,8 +1020,7 @@ fn newton(
                 &cw.w[block.clone()],
             )
         };
-        // The diagonal in a pass of its own: each pixel's chain of products is independent of
-        // the others', and of `V`'s stores.
+        // The diagonal in a pass of its own, four pixels at a time.
         bilinear_forms(g, side, ta, cb, x2, y2, 1.0, &mut diag[block]);
         // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
         for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {

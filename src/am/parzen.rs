@@ -60,7 +60,7 @@
 //!
 //! - Newton: the above at the current patch.
 //! - After convergence: the above with the current patch replaced by the template (its
-//!   statistics are computed once per template and kept).
+//!   statistics and the per-pixel diagonal terms are computed once per template and kept).
 //! - Gauss-Newton: these models are maximised and their "first-order" term `Q` is positive
 //!   semi-definite (by Cauchy-Schwarz for MI), so the least-squares Gauss-Newton idea does not
 //!   apply. What is used is the negative semi-definite part of the projected Newton Hessian
@@ -70,7 +70,8 @@
 //!
 //! The statistics of the last patch (weights, histogram, `G`) are kept from the similarity or
 //! gradient call and reused by the Hessian when it is asked for the same patch (recomputed
-//! otherwise, e.g. when a search method asks for a Hessian first).
+//! otherwise, e.g. when a search method asks for a Hessian first). When the Hessians are Newton's
+//! at the current patch, the gradient's pass also makes the Hessian's per-pixel diagonal terms.
 
 use crate::linalg::MAX_DOF;
 
@@ -321,26 +322,25 @@ fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 
     bilinear_form_portable(cells, side, x, y)
 }
 
-/// `out[i] = (k * bilinear_form(cells from ta[i] side + cb[i], x[i], y[i])) as f32` for every
-/// pixel `i`: the same sums in the same order as [`bilinear_form`], four pixels at a time (their
-/// four horizontal sums in two vector additions).
+/// `outs[m][i] = (ks[m] * bilinear_form(cells from ta[i] side + cb[i], x[i], ys[m][i])) as f32`
+/// for every pixel `i` and each of the `M` right-hand weights: the same sums in the same order
+/// as [`bilinear_form`], four pixels at a time (their four horizontal sums in two vector
+/// additions), `x`'s half of the form made once for all `M`.
 #[allow(clippy::too_many_arguments)]
-fn bilinear_forms(
+fn bilinear_forms<const M: usize>(
     cells: &[f64],
     side: usize,
     ta: &[u32],
     cb: &[u32],
     x: &[[f64; 4]],
-    y: &[[f64; 4]],
-    k: f64,
-    out: &mut [f32],
+    ys: [&[[f64; 4]]; M],
+    ks: [f64; M],
+    outs: [&mut [f32]; M],
 ) {
-    let n = out
-        .len()
-        .min(ta.len())
-        .min(cb.len())
-        .min(x.len())
-        .min(y.len());
+    let mut n = ta.len().min(cb.len()).min(x.len());
+    for m in 0..M {
+        n = n.min(ys[m].len()).min(outs[m].len());
+    }
     let span = 3 * side + 4;
     #[allow(unused_mut)]
     let mut done = 0;
@@ -350,12 +350,14 @@ fn bilinear_forms(
         target_feature = "fma"
     ))]
     // SAFETY: AVX2 and FMA are enabled at compile time (cfg); pixel l's loads read its cells,
-    // a bounds-checked slice of `span` cells (row u: cells u side .. u side + 4 < span), and
-    // its `x` and `y` (four f64 each); the store writes out[done .. done + 4], done + 4 <= n.
+    // a bounds-checked slice of `span` cells (row u: cells u side .. u side + 4 < span), its
+    // `x` and its `ys[m]` (four f64 each, j < n); the stores write outs[m][done .. done + 4],
+    // done + 4 <= n.
     unsafe {
         use std::arch::x86_64::*;
         while done + 4 <= n {
-            let p: [__m256d; 4] = std::array::from_fn(|l| {
+            // Pixel l's sum over u of x_u times row u of its cells.
+            let rows: [__m256d; 4] = std::array::from_fn(|l| {
                 let j = done + l;
                 let at = ta[j] as usize * side + cb[j] as usize;
                 let c = cells[at..at + span].as_ptr();
@@ -368,24 +370,34 @@ fn bilinear_forms(
                         rows,
                     );
                 }
-                _mm256_mul_pd(rows, _mm256_loadu_pd(y[j].as_ptr()))
+                rows
             });
-            // [p0 + p1 of pixels 0, 1, then p2 + p3 of pixels 0, 1] and the same for 2, 3;
-            // the halves' sum is (p0 + p1) + (p2 + p3) of each pixel, as `bilinear_form`'s.
-            let h01 = _mm256_hadd_pd(p[0], p[1]);
-            let h23 = _mm256_hadd_pd(p[2], p[3]);
-            let s = _mm256_add_pd(
-                _mm256_permute2f128_pd::<0x20>(h01, h23),
-                _mm256_permute2f128_pd::<0x31>(h01, h23),
-            );
-            let r = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_set1_pd(k), s));
-            _mm_storeu_ps(out.as_mut_ptr().add(done), r);
+            for m in 0..M {
+                let y = ys[m];
+                let p: [__m256d; 4] = std::array::from_fn(|l| {
+                    _mm256_mul_pd(rows[l], _mm256_loadu_pd(y[done + l].as_ptr()))
+                });
+                // [p0 + p1 of pixels 0, 1, then p2 + p3 of pixels 0, 1] and the same for 2,
+                // 3; the halves' sum is (p0 + p1) + (p2 + p3) of each pixel, as
+                // `bilinear_form`'s.
+                let h01 = _mm256_hadd_pd(p[0], p[1]);
+                let h23 = _mm256_hadd_pd(p[2], p[3]);
+                let s = _mm256_add_pd(
+                    _mm256_permute2f128_pd::<0x20>(h01, h23),
+                    _mm256_permute2f128_pd::<0x31>(h01, h23),
+                );
+                let r = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_set1_pd(ks[m]), s));
+                _mm_storeu_ps(outs[m][done..done + 4].as_mut_ptr(), r);
+            }
             done += 4;
         }
     }
     for j in done..n {
         let at = ta[j] as usize * side + cb[j] as usize;
-        out[j] = (k * bilinear_form(&cells[at..at + span], side, &x[j], &y[j])) as f32;
+        for m in 0..M {
+            outs[m][j] =
+                (ks[m] * bilinear_form(&cells[at..at + span], side, &x[j], &ys[m][j])) as f32;
+        }
     }
 }
 
@@ -838,7 +850,25 @@ pub(crate) struct Parzen {
     v_block: Vec<Lanes>,
     /// Scratch: one `dof`-vector per histogram row or column.
     lines: Vec<[f64; MAX_DOF]>,
+    /// The Newton Hessian's per-pixel diagonal terms, and which Hessian they are of.
     diag: Vec<f32>,
+    diag_of: DiagOf,
+    /// The last Hessian was a Newton Hessian with respect to the current pixels, so the next
+    /// gradient with respect to them makes `diag` too (FCLK and ESM ask for both each step).
+    want_diag: bool,
+}
+
+/// Which Newton Hessian [`Parzen`]'s per-pixel diagonal terms are those of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum DiagOf {
+    /// None that can be reused.
+    Stale,
+    /// With respect to the current pixels of the last patch's statistics (made with their
+    /// gradient, whose pass reads the same cells and template weights, or by the Hessian).
+    Current,
+    /// After convergence (the template against itself), with respect to the current pixels or
+    /// the template's: constant until the template changes.
+    AfterConvergence(super::Wrt),
 }
 
 impl Parzen {
@@ -859,6 +889,8 @@ impl Parzen {
             v_block: vec![Lanes::default(); bins.side * bins.side],
             lines: vec![[0.0; MAX_DOF]; bins.side],
             diag: Vec::new(),
+            diag_of: DiagOf::Stale,
+            want_diag: false,
         }
     }
 
@@ -873,6 +905,7 @@ impl Parzen {
         self.tw.fill_with(template, &self.bins);
         self.valid = false;
         self.self_valid = false;
+        self.diag_of = DiagOf::Stale;
         self.diag.resize(template.len(), 0.0);
     }
 
@@ -887,6 +920,9 @@ impl Parzen {
         }
         self.cw.fill_values(current, &self.bins);
         self.stats.compute(self.measure, &self.tw, &self.cw);
+        if self.diag_of == DiagOf::Current {
+            self.diag_of = DiagOf::Stale;
+        }
         self.last.clear();
         self.last.extend_from_slice(current);
         self.valid = true;
@@ -902,15 +938,36 @@ impl Parzen {
         if wrt == super::Wrt::Current {
             self.cw.fill_derivatives();
         }
+        self.diag.resize(current.len(), 0.0);
         let g = &self.stats.g;
         let side = self.bins.side;
         let k = self.bins.scale / current.len().max(1) as f64;
         let (tw, cw) = (&self.tw, &self.cw);
-        let (xs, ys) = match wrt {
-            super::Wrt::Current => (&tw.w, &cw.d),
-            super::Wrt::Template => (&tw.d, &cw.w),
-        };
-        bilinear_forms(g, side, &tw.base, &cw.base, xs, ys, k, grad);
+        match wrt {
+            super::Wrt::Current if self.want_diag && self.diag_of != DiagOf::Current => {
+                // The Newton diagonal's forms share the gradient's left half (the template's
+                // weights): both in one pass.
+                let (d, d2) = (&cw.d[..], &cw.d2[..]);
+                let diag = &mut self.diag[..];
+                bilinear_forms(
+                    g,
+                    side,
+                    &tw.base,
+                    &cw.base,
+                    &tw.w,
+                    [d, d2],
+                    [k, 1.0],
+                    [grad, diag],
+                );
+                self.diag_of = DiagOf::Current;
+            }
+            super::Wrt::Current => {
+                bilinear_forms(g, side, &tw.base, &cw.base, &tw.w, [&cw.d], [k], [grad]);
+            }
+            super::Wrt::Template => {
+                bilinear_forms(g, side, &tw.base, &cw.base, &tw.d, [&cw.w], [k], [grad]);
+            }
+        }
         self.stats.value
     }
 
@@ -941,6 +998,14 @@ impl Parzen {
         } else {
             (&self.stats, &self.cw)
         };
+        // The diagonal this Hessian needs: made already (with the gradient, or by an earlier
+        // Hessian after convergence), else made below and kept for the next if it can be.
+        let needed = match (after, wrt) {
+            (true, wrt) => DiagOf::AfterConvergence(wrt),
+            (false, super::Wrt::Current) => DiagOf::Current,
+            (false, super::Wrt::Template) => DiagOf::Stale,
+        };
+        let reuse = needed != DiagOf::Stale && self.diag_of == needed;
         newton(
             self.measure,
             &self.bins,
@@ -953,9 +1018,11 @@ impl Parzen {
             &mut self.v,
             &mut self.v_block,
             &mut self.lines,
-            &mut self.diag,
+            (&mut self.diag, reuse),
             out,
         );
+        self.diag_of = needed;
+        self.want_diag = needed == DiagOf::Current;
         if kind == HessianKind::GaussNewton {
             negative_part(out, dof);
         }
@@ -977,7 +1044,7 @@ fn newton(
     v: &mut [f64],
     v_block: &mut [Lanes],
     lines: &mut [[f64; MAX_DOF]],
-    diag: &mut [f32],
+    (diag, diag_ready): (&mut [f32], bool),
     out: &mut [f64; MAX_DOF * MAX_DOF],
 ) {
     let n = tw.base.len();
@@ -1020,8 +1087,10 @@ fn newton(
                 &cw.w[block.clone()],
             )
         };
-        // The diagonal in a pass of its own, four pixels at a time.
-        bilinear_forms(g, side, ta, cb, x2, y2, 1.0, &mut diag[block]);
+        // The diagonal in a pass of its own, four pixels at a time (unless made already).
+        if !diag_ready {
+            bilinear_forms(g, side, ta, cb, x2, [y2], [1.0], [&mut diag[block]]);
+        }
         // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
         for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {
             let at = ta as usize * side + cb as usize;
@@ -1332,7 +1401,7 @@ mod tests {
                 .map(|_| std::array::from_fn(|_| rng.range(-1.0, 1.0)))
                 .collect();
             let mut out = vec![0f32; n];
-            bilinear_forms(&cells, side, &ta, &cb, &x, &y, 0.37, &mut out);
+            bilinear_forms(&cells, side, &ta, &cb, &x, [&y], [0.37], [&mut out]);
             for j in 0..n {
                 let at = ta[j] as usize * side + cb[j] as usize;
                 let one = (0.37 * bilinear_form(&cells[at..], side, &x[j], &y[j])) as f32;
@@ -1380,6 +1449,75 @@ mod tests {
             (lazy.d.clone(), lazy.d2.clone()),
             (whole.d.clone(), whole.d2.clone())
         );
+    }
+
+    /// The Newton diagonal made in the gradient's pass (FCLK's and ESM's order: gradient, then
+    /// Hessian, each step) gives the Hessian bit for bit that of a model making it in the
+    /// Hessian's own pass, and so does the diagonal kept after convergence; neither is reused
+    /// for another patch, side or kind.
+    #[test]
+    fn a_diagonal_made_with_the_gradient_gives_the_same_hessian() {
+        use super::super::{HessianKind, Wrt};
+        let mut rng = crate::rng::Rng::new(11);
+        let n = 257;
+        let t: Vec<f32> = (0..n).map(|_| rng.range(0.0, 255.0) as f32).collect();
+        let patches: Vec<Vec<f32>> = (0..3)
+            .map(|_| {
+                t.iter()
+                    .map(|&v| 0.8 * v + 15.0 + rng.range(-12.0, 12.0) as f32)
+                    .collect()
+            })
+            .collect();
+        let dof = 8;
+        let jac: Vec<f32> = (0..dof * n).map(|_| rng.range(-3.0, 3.0) as f32).collect();
+        for measure in [Measure::Mi, Measure::Ccre] {
+            let mut steps = Parzen::new(measure, DEFAULT_BINS);
+            steps.set_template(&t);
+            // (the template, the patch, with respect to what, the kind) of each call, in the
+            // order of a run that also switches side, kind and template.
+            let calls = [
+                (0, 0, Wrt::Current, HessianKind::Newton),
+                (0, 1, Wrt::Current, HessianKind::Newton),
+                (0, 1, Wrt::Current, HessianKind::Newton),
+                (0, 2, Wrt::Template, HessianKind::Newton),
+                (0, 2, Wrt::Current, HessianKind::Newton),
+                (0, 2, Wrt::Current, HessianKind::AfterConvergence),
+                (0, 2, Wrt::Current, HessianKind::Newton),
+                (0, 2, Wrt::Current, HessianKind::AfterConvergence),
+                (0, 0, Wrt::Current, HessianKind::AfterConvergence),
+                (0, 1, Wrt::Template, HessianKind::AfterConvergence),
+                (0, 0, Wrt::Template, HessianKind::AfterConvergence),
+                (0, 1, Wrt::Current, HessianKind::AfterConvergence),
+                (0, 0, Wrt::Current, HessianKind::GaussNewton),
+                (0, 2, Wrt::Current, HessianKind::Newton),
+                (0, 1, Wrt::Current, HessianKind::AfterConvergence),
+                // Another template: what was kept of the first is not reused.
+                (1, 1, Wrt::Current, HessianKind::AfterConvergence),
+                (1, 2, Wrt::Current, HessianKind::AfterConvergence),
+            ];
+            let templates = [&t, &patches[0]];
+            let mut template = 0;
+            for (i, &(tpl, k, wrt, kind)) in calls.iter().enumerate() {
+                if tpl != template {
+                    steps.set_template(templates[tpl]);
+                    template = tpl;
+                }
+                let (mut g1, mut g2) = (vec![0f32; n], vec![0f32; n]);
+                let (mut h1, mut h2) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF * MAX_DOF]);
+                steps.gradient(wrt, &patches[k], &mut g1);
+                steps.hessian(wrt, kind, &patches[k], &jac, dof, &mut h1);
+                let mut fresh = Parzen::new(measure, DEFAULT_BINS);
+                fresh.set_template(templates[tpl]);
+                fresh.gradient(wrt, &patches[k], &mut g2);
+                fresh.hessian(wrt, kind, &patches[k], &jac, dof, &mut h2);
+                assert_eq!(g1, g2, "{measure:?} call {i}: gradient");
+                assert_eq!(
+                    h1.map(f64::to_bits),
+                    h2.map(f64::to_bits),
+                    "{measure:?} call {i}: Hessian"
+                );
+            }
+        }
     }
 
     /// The joint histogram (built in two copies, even and odd pixels) is the plain sum of every

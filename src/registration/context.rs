@@ -274,6 +274,17 @@ impl Context {
     /// `dw/dp` into the pixel Jacobian `jac`: `dw/dp` at the identity (compositional methods)
     /// or, given `p`, at `p` (additive methods).
     pub fn project_gradients(&mut self, at: Option<&Params>) {
+        if at.is_none()
+            && self.ssm.project_at_identity(
+                &self.work.gx,
+                &self.work.gy,
+                &self.grid_x,
+                &self.grid_y,
+                &mut self.work.jac,
+            )
+        {
+            return;
+        }
         let (dwdp, zero) = match at {
             Some(p) => {
                 self.ssm

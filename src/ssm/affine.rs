@@ -61,6 +61,35 @@ impl Ssm for Affine {
             put(out, n, i, 5, 0.0, y);
         }
     }
+    fn project_at_identity(
+        &self,
+        gx: &[f32],
+        gy: &[f32],
+        xs: &[f32],
+        ys: &[f32],
+        jac: &mut [f32],
+    ) -> bool {
+        // dw/dp is (1, 0, x, y, 0, 0) for w_x and (0, 1, 0, 0, x, y) for w_y.
+        let n = gx.len();
+        assert!(gy.len() == n && xs.len() == n && ys.len() == n && jac.len() >= 6 * n);
+        if n == 0 {
+            return true;
+        }
+        let mut rows = jac[..6 * n].chunks_exact_mut(n);
+        let mut row = || rows.next().expect("six rows of n");
+        let (j0, j1, j2, j3, j4, j5) = (row(), row(), row(), row(), row(), row());
+        assert!([&j0, &j1, &j2, &j3, &j4, &j5].iter().all(|r| r.len() == n));
+        for i in 0..n {
+            let (a, b, x, y) = (gx[i], gy[i], xs[i], ys[i]);
+            j0[i] = a;
+            j1[i] = b;
+            j2[i] = a * x;
+            j3[i] = a * y;
+            j4[i] = b * x;
+            j5[i] = b * y;
+        }
+        true
+    }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         // Normal equations of [x y 1] [a b t]^T = u, one per output coordinate.
         let mut ata = Matrix3::zeros();

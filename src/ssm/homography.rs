@@ -53,6 +53,45 @@ impl Ssm for Homography {
             }
         }
     }
+    fn project_at_identity(
+        &self,
+        gx: &[f32],
+        gy: &[f32],
+        xs: &[f32],
+        ys: &[f32],
+        jac: &mut [f32],
+    ) -> bool {
+        // At the identity dw/dp is (x, y, 1, 0, 0, 0, -x^2, -xy) for w_x and (0, 0, 0, x, y, 1,
+        // -xy, -y^2) for w_y; each f32 product here is the f64 product of the stored Jacobian
+        // rounded once, so the same bits.
+        let n = gx.len();
+        assert!(gy.len() == n && xs.len() == n && ys.len() == n && jac.len() >= 8 * n);
+        if n == 0 {
+            return true;
+        }
+        let mut rows = jac[..8 * n].chunks_exact_mut(n);
+        let mut row = || rows.next().expect("eight rows of n");
+        let (j0, j1, j2, j3) = (row(), row(), row(), row());
+        let (j4, j5, j6, j7) = (row(), row(), row(), row());
+        assert!(
+            [&j0, &j1, &j2, &j3, &j4, &j5, &j6, &j7]
+                .iter()
+                .all(|r| r.len() == n)
+        );
+        for i in 0..n {
+            let (a, b, x, y) = (gx[i], gy[i], xs[i], ys[i]);
+            let (xx, xy, yy) = (-(x * x), -(x * y), -(y * y));
+            j0[i] = a * x;
+            j1[i] = a * y;
+            j2[i] = a;
+            j3[i] = b * x;
+            j4[i] = b * y;
+            j5[i] = b;
+            j6[i] = a * xx + b * xy;
+            j7[i] = a * xy + b * yy;
+        }
+        true
+    }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         self.params_from_matrix(&homography_from_points(src, dst)?)
     }

@@ -52,6 +52,21 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     /// `out[2k N + i] = d w_x(x_i, p) / d p_k` and `out[(2k + 1) N + i] = d w_y(x_i, p) / d p_k`
     /// (see [`put`]).
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]);
+    /// The pixel Jacobian at the identity, `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`
+    /// for the points `xs`, `ys`, made from the points without reading a stored `dw/dp` (the
+    /// compositional methods project on it every iteration); bit for bit the projection on
+    /// [`Ssm::jacobian`]'s rows at the identity (rows that are zero left out). `false` if the
+    /// model has no such form, and `jac` is untouched.
+    fn project_at_identity(
+        &self,
+        _gx: &[f32],
+        _gy: &[f32],
+        _xs: &[f32],
+        _ys: &[f32],
+        _jac: &mut [f32],
+    ) -> bool {
+        false
+    }
     /// Least-squares parameters `p` minimising `sum_k |w(src_k, p) - dst_k|^2` (exact for 8 DOF).
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params>;
 

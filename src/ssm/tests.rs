@@ -141,3 +141,49 @@ fn every_model_names_each_of_its_parameters_once() {
         assert_eq!(sorted.len(), names.len(), "{}: {names:?}", ssm.name());
     }
 }
+
+/// Every model's closed-form projection at the identity (where it has one) is the projection of
+/// the gradients on its Jacobian's rows there, for points and gradients of every sign; the
+/// homography, affine and translation models have one.
+#[test]
+fn projections_at_the_identity_are_those_on_the_jacobian() {
+    let mut rng = crate::rng::Rng::new(23);
+    let mut with_form = Vec::new();
+    for e in REGISTRY {
+        let ssm = (e.build)();
+        let dof = ssm.dof();
+        for n in [0usize, 1, 7, 37, 2500] {
+            let xs: Vec<f32> = (0..n).map(|_| rng.range(-0.6, 0.6) as f32).collect();
+            let ys: Vec<f32> = (0..n).map(|_| rng.range(-0.6, 0.6) as f32).collect();
+            let gx: Vec<f32> = (0..n).map(|_| rng.range(-300.0, 300.0) as f32).collect();
+            let gy: Vec<f32> = (0..n).map(|_| rng.range(-300.0, 300.0) as f32).collect();
+            let mut fast = vec![f32::NAN; dof * n];
+            if !ssm.project_at_identity(&gx, &gy, &xs, &ys, &mut fast) {
+                assert!(
+                    fast.iter().all(|v| v.is_nan()),
+                    "{}: jac touched",
+                    ssm.name()
+                );
+                continue;
+            }
+            let mut dwdp = vec![0f32; 2 * dof * n];
+            ssm.jacobian(&ssm.identity(), &xs, &ys, &mut dwdp);
+            let mut dense = vec![0f32; dof * n];
+            crate::sm::Context::project(&gx, &gy, &dwdp, dof, &mut dense);
+            for k in 0..dof * n {
+                assert!(
+                    fast[k] == dense[k],
+                    "{} n {n}: row {} point {}: {} vs {}",
+                    ssm.name(),
+                    k / n,
+                    k % n,
+                    fast[k],
+                    dense[k]
+                );
+            }
+            with_form.push(ssm.name());
+        }
+    }
+    with_form.dedup();
+    assert_eq!(with_form, ["translation", "affine", "homography"]);
+}

@@ -41,6 +41,21 @@ impl Ssm for Translation {
         out[n..3 * n].fill(0.0);
         out[3 * n..4 * n].fill(1.0);
     }
+    fn project_at_identity(
+        &self,
+        gx: &[f32],
+        gy: &[f32],
+        xs: &[f32],
+        _ys: &[f32],
+        jac: &mut [f32],
+    ) -> bool {
+        // dw/dp is (1, 0) for w_x and (0, 1) for w_y.
+        let n = xs.len();
+        assert!(gx.len() == n && gy.len() == n && jac.len() >= 2 * n);
+        jac[..n].copy_from_slice(gx);
+        jac[n..2 * n].copy_from_slice(gy);
+        true
+    }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         let (cs, cd) = (Quad(*src).centroid(), Quad(*dst).centroid());
         let mut p = [0.0; 8];

@@ -109,6 +109,18 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    // The compositional methods' projection: the homography's closed form at the identity.
+    g.bench_function("project, closed form", |b| {
+        b.iter(|| {
+            ctx.ssm.project_at_identity(
+                &ctx.work.gx,
+                &ctx.work.gy,
+                &ctx.grid_x,
+                &ctx.grid_y,
+                black_box(&mut jac),
+            )
+        })
+    });
     let mut h = [0.0; 64];
     g.bench_function("J^T J", |b| {
         b.iter(|| {

@@ -18,26 +18,71 @@ pub fn newton_step(
     g: &[f64; MAX_DOF],
     n: usize,
 ) -> Option<[f64; MAX_DOF]> {
-    let mut a = [0.0f64; MAX_DOF * MAX_DOF];
-    let mut b = [0.0f64; MAX_DOF];
-    for i in 0..n {
-        for j in 0..n {
-            a[i * MAX_DOF + j] = -h[i * n + j];
-        }
-        b[i] = g[i];
-    }
-    // A ridge of RIDGE times the largest curvature: a direction the patch does not constrain
-    // (stripes along it) gets a step of the size of its gradient's noise over that load, not
-    // over a pivot as small as rounding.
-    let top = (0..n).map(|i| a[i * MAX_DOF + i]).fold(0.0f64, f64::max);
-    for i in 0..n {
-        a[i * MAX_DOF + i] += RIDGE * top;
-    }
-    let x = cholesky_solve(&a, &b, n).or_else(|| lu_solve(&a, &b, n))?;
-    x[..n].iter().all(|v| v.is_finite()).then_some(x)
+    NewtonSolver::default().step(h, g, n)
 }
 
-fn cholesky_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
+/// [`newton_step`] that keeps the Cholesky factor of the last Hessian it solved with: a search
+/// method whose Hessian is the same from iteration to iteration (ICLK's, made once per
+/// template) factors it once. The same steps, bit for bit.
+#[derive(Clone, Debug, Default)]
+pub struct NewtonSolver {
+    /// `(n, H, L)`: the last Hessian that had a Cholesky factor, and the factor.
+    last: Option<(usize, [f64; MAX_DOF * MAX_DOF], [f64; MAX_DOF * MAX_DOF])>,
+}
+
+impl NewtonSolver {
+    /// Solves `H x = -g` as [`newton_step`] does.
+    pub fn step(
+        &mut self,
+        h: &[f64; MAX_DOF * MAX_DOF],
+        g: &[f64; MAX_DOF],
+        n: usize,
+    ) -> Option<[f64; MAX_DOF]> {
+        let finite = |x: [f64; MAX_DOF]| x[..n].iter().all(|v| v.is_finite()).then_some(x);
+        let same = |last: &[f64; MAX_DOF * MAX_DOF]| {
+            h[..n * n]
+                .iter()
+                .zip(&last[..n * n])
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if let Some((m, last, l)) = &self.last
+            && *m == n
+            && same(last)
+        {
+            return finite(cholesky_apply(l, g, n));
+        }
+        let mut a = [0.0f64; MAX_DOF * MAX_DOF];
+        let mut b = [0.0f64; MAX_DOF];
+        for i in 0..n {
+            for j in 0..n {
+                a[i * MAX_DOF + j] = -h[i * n + j];
+            }
+            b[i] = g[i];
+        }
+        // A ridge of RIDGE times the largest curvature: a direction the patch does not
+        // constrain (stripes along it) gets a step of the size of its gradient's noise over
+        // that load, not over a pivot as small as rounding.
+        let top = (0..n).map(|i| a[i * MAX_DOF + i]).fold(0.0f64, f64::max);
+        for i in 0..n {
+            a[i * MAX_DOF + i] += RIDGE * top;
+        }
+        match cholesky_factor(&a, n) {
+            Some(l) => {
+                let x = cholesky_apply(&l, &b, n);
+                self.last = Some((n, *h, l));
+                finite(x)
+            }
+            None => {
+                self.last = None;
+                finite(lu_solve(&a, &b, n)?)
+            }
+        }
+    }
+}
+
+/// The Cholesky factor `L` (`A = L L^T`, row-major with stride 8) of the first `n x n` of `a`;
+/// `None` if `a` is not clearly positive definite.
+fn cholesky_factor(a: &[f64; 64], n: usize) -> Option<[f64; 64]> {
     let mut l = [0.0f64; 64];
     let scale = (0..n).map(|i| a[i * 8 + i].abs()).fold(0.0, f64::max);
     if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
@@ -59,6 +104,11 @@ fn cholesky_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
             }
         }
     }
+    Some(l)
+}
+
+/// Solves `L L^T x = b` by the two triangular systems.
+fn cholesky_apply(l: &[f64; 64], b: &[f64; 8], n: usize) -> [f64; 8] {
     let mut y = [0.0f64; 8];
     for i in 0..n {
         let mut s = b[i];
@@ -75,7 +125,7 @@ fn cholesky_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
         }
         x[i] = s / l[i * 8 + i];
     }
-    Some(x)
+    x
 }
 
 fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
@@ -251,6 +301,54 @@ mod tests {
         g[1] = 1e-9;
         let x = newton_step(&h, &g, 2).unwrap();
         assert!(x[1].abs() < 1e-3, "{}", x[1]);
+    }
+
+    /// The solver that keeps the last factor gives, call after call, the steps `newton_step`
+    /// gives: for a Hessian repeated (the factor reused), changed by one entry, of another size,
+    /// indefinite (LU) and singular.
+    #[test]
+    fn a_kept_factor_gives_the_same_steps() {
+        let mut rng = crate::rng::Rng::new(3);
+        let negative_definite = |rng: &mut crate::rng::Rng, n: usize| {
+            let m: Vec<f64> = (0..n * n).map(|_| rng.range(-1.0, 1.0)).collect();
+            let mut h = [0.0; MAX_DOF * MAX_DOF];
+            for i in 0..n {
+                for j in 0..n {
+                    let mtm: f64 = (0..n).map(|k| m[k * n + i] * m[k * n + j]).sum();
+                    h[i * n + j] = -mtm - if i == j { 0.5 } else { 0.0 };
+                }
+            }
+            h
+        };
+        let h8 = negative_definite(&mut rng, 8);
+        let mut h8b = h8;
+        h8b[9] -= 0.25;
+        let h6 = negative_definite(&mut rng, 6);
+        let mut indefinite = h6;
+        indefinite[0] = 3.0;
+        let singular = [0.0; MAX_DOF * MAX_DOF];
+        let systems = [
+            (h8, 8),
+            (h8, 8),
+            (h8b, 8),
+            (h8b, 8),
+            (h8, 6),
+            (h6, 6),
+            (h6, 6),
+            (indefinite, 6),
+            (indefinite, 6),
+            (singular, 6),
+            (h6, 6),
+            (h8, 8),
+        ];
+        let mut solver = NewtonSolver::default();
+        for (k, (h, n)) in systems.into_iter().enumerate() {
+            let g: [f64; MAX_DOF] = std::array::from_fn(|_| rng.range(-2.0, 2.0));
+            let kept = solver.step(&h, &g, n).map(|x| x.map(f64::to_bits));
+            let fresh = newton_step(&h, &g, n).map(|x| x.map(f64::to_bits));
+            assert_eq!(kept, fresh, "system {k}");
+            assert_eq!(kept.is_some(), k != 9, "system {k}");
+        }
     }
 
     #[test]

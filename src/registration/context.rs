@@ -6,7 +6,7 @@
 use crate::am::{Am, HessianKind, Wrt, jt_times};
 use crate::geometry::{Normaliser, Point, Quad};
 use crate::imaging::{ImageView, sample_values, sample_values_gradients};
-use crate::linalg::{MAX_DOF, newton_step};
+use crate::linalg::{MAX_DOF, NewtonSolver};
 use crate::spec::GridLayout;
 use crate::ssm::{Params, Ssm};
 use crate::status::LossReason;
@@ -55,6 +55,8 @@ pub struct Context {
     pub dwdp0_zero: [bool; 2 * MAX_DOF],
     /// Per-iteration buffers.
     pub work: Workspace,
+    /// The Newton systems' solver (it keeps the last Hessian's factor).
+    pub solver: NewtonSolver,
     /// The last step [`Context::apply`] made, and how: the driver's line search shortens it
     /// when the next iteration finds the similarity lower.
     pub last_step: Option<(Params, Update)>,
@@ -97,6 +99,7 @@ impl Context {
             am,
             hessian,
             damping: 0.0,
+            solver: NewtonSolver::default(),
             dof,
             norm: Normaliser {
                 cx: 0.0,
@@ -356,9 +359,9 @@ impl Context {
             for i in 0..self.dof {
                 hd[i * self.dof + i] *= 1.0 + self.damping;
             }
-            newton_step(&hd, &g, self.dof)
+            self.solver.step(&hd, &g, self.dof)
         } else {
-            newton_step(h, &g, self.dof)
+            self.solver.step(h, &g, self.dof)
         }
         .ok_or(LossReason::Singular)?;
         self.apply(&dp, update)

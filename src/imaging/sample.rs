@@ -771,6 +771,37 @@ mod tests {
         )
     }
 
+    /// Both samplers (and the one-point sampler) at `xs`, `ys` against the reference at the
+    /// window's coordinates `((x - 5) / scale, (y - 7) / scale)` of a view at (5, 7) with that
+    /// scale; gradients per frame pixel.
+    fn check_against_reference(view: &ImageView, data: &[f32], xs: &[f32], ys: &[f32], what: &str) {
+        let n = xs.len();
+        let (mut v, mut v2) = (vec![0f32; n], vec![0f32; n]);
+        let (mut gx, mut gy) = (vec![0f32; n], vec![0f32; n]);
+        sample_values(view, xs, ys, &mut v);
+        sample_values_gradients(view, xs, ys, &mut v2, &mut gx, &mut gy);
+        let s = view.scale;
+        for i in 0..n {
+            let (x, y) = ((xs[i] - 5.0) / s, (ys[i] - 7.0) / s);
+            let (rv, rgx, rgy) = reference(data, view.width, view.height, x, y);
+            let at = format!("{what} {i} at ({}, {})", xs[i], ys[i]);
+            assert!((v[i] - rv).abs() < 1e-3, "{at}: value {} vs {rv}", v[i]);
+            assert!(
+                (v2[i] - rv).abs() < 1e-3,
+                "{at}: value+grad {} vs {rv}",
+                v2[i]
+            );
+            assert!(
+                (gx[i] - rgx / s).abs() < 1e-3 && (gy[i] - rgy / s).abs() < 1e-3,
+                "{at}: gradient"
+            );
+            assert!(
+                (sample_value(view, xs[i], ys[i]) - rv).abs() < 1e-3,
+                "{at}: one point"
+            );
+        }
+    }
+
     #[test]
     fn sampling_matches_the_reference_inside_at_the_border_and_outside() {
         let mut rng = Rng::new(17);
@@ -781,75 +812,23 @@ mod tests {
         let n = 1001;
         let xs: Vec<f32> = (0..n).map(|_| rng.range(0.0, 50.0) as f32).collect();
         let ys: Vec<f32> = (0..n).map(|_| rng.range(0.0, 38.0) as f32).collect();
-        let mut v = vec![0f32; n];
-        let (mut gx, mut gy, mut v2) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-        sample_values(&view, &xs, &ys, &mut v);
-        sample_values_gradients(&view, &xs, &ys, &mut v2, &mut gx, &mut gy);
-        for i in 0..n {
-            let (rv, rgx, rgy) = reference(&data, w, h, xs[i] - 5.0, ys[i] - 7.0);
-            assert!(
-                (v[i] - rv).abs() < 1e-3,
-                "value {i} at ({}, {}): {} vs {rv}",
-                xs[i],
-                ys[i],
-                v[i]
-            );
-            assert!(
-                (v2[i] - rv).abs() < 1e-3,
-                "value+grad {i}: {} vs {rv}",
-                v2[i]
-            );
-            assert!(
-                (gx[i] - rgx).abs() < 1e-3 && (gy[i] - rgy).abs() < 1e-3,
-                "gradient {i}"
-            );
-            assert!((sample_value(&view, xs[i], ys[i]) - rv).abs() < 1e-3);
-        }
-        // A pyramid level: window pixel i at frame coordinate 5 + 2 i; gradients per frame pixel.
-        let level = view.with_scale(2.0);
-        sample_values(&level, &xs, &ys, &mut v);
-        sample_values_gradients(&level, &xs, &ys, &mut v2, &mut gx, &mut gy);
-        for i in 0..n {
-            let (rv, rgx, rgy) = reference(&data, w, h, (xs[i] - 5.0) / 2.0, (ys[i] - 7.0) / 2.0);
-            assert!(
-                (v[i] - rv).abs() < 1e-3 && (v2[i] - rv).abs() < 1e-3,
-                "level value {i}"
-            );
-            assert!(
-                (gx[i] - rgx / 2.0).abs() < 1e-3 && (gy[i] - rgy / 2.0).abs() < 1e-3,
-                "level gradient {i}"
-            );
-        }
+        check_against_reference(&view, &data, &xs, &ys, "point");
+        // A pyramid level: window pixel i at frame coordinate 5 + 2 i.
+        check_against_reference(&view.with_scale(2.0), &data, &xs, &ys, "level point");
         // Runs of points mostly inside (the vector paths' case), longer than a run of the
         // vector loops and not a whole number of groups, every fifth group of eight with one
         // point outside.
-        let n = 203;
-        let xs: Vec<f32> = (0..n)
+        let xs: Vec<f32> = (0..203)
             .map(|i| match i % 40 {
                 3 => 2.0,
                 _ => rng.range(6.0, 5.0 + w as f64 - 3.0) as f32,
             })
             .collect();
-        let ys: Vec<f32> = (0..n)
+        let ys: Vec<f32> = (0..203)
             .map(|_| rng.range(8.0, 7.0 + h as f64 - 3.0) as f32)
             .collect();
-        let (mut v, mut v2, mut gx, mut gy) =
-            (vec![0f32; n], vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-        sample_values(&view, &xs, &ys, &mut v);
-        sample_values_gradients(&view, &xs, &ys, &mut v2, &mut gx, &mut gy);
-        for i in 0..n {
-            let (rv, rgx, rgy) = reference(&data, w, h, xs[i] - 5.0, ys[i] - 7.0);
-            assert!((v[i] - rv).abs() < 1e-3, "run value {i}: {} vs {rv}", v[i]);
-            assert!(
-                (v2[i] - rv).abs() < 1e-3,
-                "run value+grad {i}: {} vs {rv}",
-                v2[i]
-            );
-            assert!(
-                (gx[i] - rgx).abs() < 1e-3 && (gy[i] - rgy).abs() < 1e-3,
-                "run gradient {i}"
-            );
-        }
+        check_against_reference(&view, &data, &xs, &ys, "run point");
+        let mut v = vec![0f32; 9];
         // NaN coordinates read finite values; a zero border reads 0 far outside.
         let nan = [f32::NAN; 9];
         sample_values(&view, &nan, &nan, &mut v[..9]);

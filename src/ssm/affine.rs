@@ -1,7 +1,7 @@
 //! Affine: 6 DOF, `w(x) = [[1+a11, a12], [a21, 1+a22]] x + t`, parameters
 //! `(tx, ty, a11, a12, a21, a22)`.
 
-use super::{Params, Ssm, SsmBuilder, normalise_h33, put};
+use super::{Params, Ssm, SsmBuilder, normalise_h33, projection_rows, put};
 use crate::geometry::Point;
 use crate::registry::Entry;
 use nalgebra::{Matrix3, Vector3};
@@ -70,16 +70,11 @@ impl Ssm for Affine {
         jac: &mut [f32],
     ) -> bool {
         // dw/dp is (1, 0, x, y, 0, 0) for w_x and (0, 1, 0, 0, x, y) for w_y.
-        let n = gx.len();
-        assert!(gy.len() == n && xs.len() == n && ys.len() == n && jac.len() >= 6 * n);
-        if n == 0 {
-            return true;
-        }
-        let mut rows = jac[..6 * n].chunks_exact_mut(n);
-        let mut row = || rows.next().expect("six rows of n");
-        let (j0, j1, j2, j3, j4, j5) = (row(), row(), row(), row(), row(), row());
-        assert!([&j0, &j1, &j2, &j3, &j4, &j5].iter().all(|r| r.len() == n));
-        for i in 0..n {
+        let rows: [_; 6] = projection_rows(jac, (gx, gy, xs, ys));
+        // Every row as long as the inputs, where the loop's bounds checks can see it.
+        assert!(rows.iter().all(|r| r.len() == gx.len()));
+        let [j0, j1, j2, j3, j4, j5] = rows;
+        for i in 0..gx.len() {
             let (a, b, x, y) = (gx[i], gy[i], xs[i], ys[i]);
             j0[i] = a;
             j1[i] = b;

@@ -1,7 +1,10 @@
 //! Homography with the matrix entries as parameters: 8 DOF,
 //! `H = [[1+p0, p1, p2], [p3, 1+p4, p5], [p6, p7, 1]]`.
 
-use super::{Params, Ssm, SsmBuilder, entries, homography_point_jacobian, normalise_h33, put};
+use super::{
+    Params, Ssm, SsmBuilder, entries, homography_point_jacobian, normalise_h33, projection_rows,
+    put,
+};
 use crate::geometry::{Point, homography_from_points};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -64,21 +67,11 @@ impl Ssm for Homography {
         // At the identity dw/dp is (x, y, 1, 0, 0, 0, -x^2, -xy) for w_x and (0, 0, 0, x, y, 1,
         // -xy, -y^2) for w_y; each f32 product here is the f64 product of the stored Jacobian
         // rounded once, so the same bits.
-        let n = gx.len();
-        assert!(gy.len() == n && xs.len() == n && ys.len() == n && jac.len() >= 8 * n);
-        if n == 0 {
-            return true;
-        }
-        let mut rows = jac[..8 * n].chunks_exact_mut(n);
-        let mut row = || rows.next().expect("eight rows of n");
-        let (j0, j1, j2, j3) = (row(), row(), row(), row());
-        let (j4, j5, j6, j7) = (row(), row(), row(), row());
-        assert!(
-            [&j0, &j1, &j2, &j3, &j4, &j5, &j6, &j7]
-                .iter()
-                .all(|r| r.len() == n)
-        );
-        for i in 0..n {
+        let rows: [_; 8] = projection_rows(jac, (gx, gy, xs, ys));
+        // Every row as long as the inputs, where the loop's bounds checks can see it.
+        assert!(rows.iter().all(|r| r.len() == gx.len()));
+        let [j0, j1, j2, j3, j4, j5, j6, j7] = rows;
+        for i in 0..gx.len() {
             let (a, b, x, y) = (gx[i], gy[i], xs[i], ys[i]);
             let (xx, xy, yy) = (-(x * x), -(x * y), -(y * y));
             j0[i] = a * x;

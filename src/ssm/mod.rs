@@ -103,6 +103,22 @@ pub fn put(out: &mut [f32], n: usize, i: usize, k: usize, dx: f32, dy: f32) {
     out[(2 * k + 1) * n + i] = dy;
 }
 
+/// The `K` rows (`n` values each, `n` the gradients' and points' common length, checked) of
+/// a pixel Jacobian stored by parameter: what [`Ssm::project_at_identity`] writes.
+#[inline(always)]
+pub(crate) fn projection_rows<'a, const K: usize>(
+    jac: &'a mut [f32],
+    (gx, gy, xs, ys): (&[f32], &[f32], &[f32], &[f32]),
+) -> [&'a mut [f32]; K] {
+    let n = gx.len();
+    assert!(gy.len() == n && xs.len() == n && ys.len() == n && jac.len() >= K * n);
+    if n == 0 {
+        return std::array::from_fn(|_| Default::default());
+    }
+    let mut rows = jac[..K * n].chunks_exact_mut(n);
+    std::array::from_fn(|_| rows.next().expect("K rows of n values"))
+}
+
 /// Builds an SSM.
 pub type SsmBuilder = fn() -> Box<dyn Ssm>;
 

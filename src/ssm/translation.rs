@@ -1,6 +1,6 @@
 //! Translation: 2 DOF, `w(x) = x + t`.
 
-use super::{Params, Ssm, SsmBuilder, normalise_h33};
+use super::{Params, Ssm, SsmBuilder, normalise_h33, projection_rows};
 use crate::geometry::{Point, Quad};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -46,14 +46,13 @@ impl Ssm for Translation {
         gx: &[f32],
         gy: &[f32],
         xs: &[f32],
-        _ys: &[f32],
+        ys: &[f32],
         jac: &mut [f32],
     ) -> bool {
         // dw/dp is (1, 0) for w_x and (0, 1) for w_y.
-        let n = xs.len();
-        assert!(gx.len() == n && gy.len() == n && jac.len() >= 2 * n);
-        jac[..n].copy_from_slice(gx);
-        jac[n..2 * n].copy_from_slice(gy);
+        let [j0, j1] = projection_rows(jac, (gx, gy, xs, ys));
+        j0.copy_from_slice(gx);
+        j1.copy_from_slice(gy);
         true
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {

@@ -828,7 +828,7 @@ mod tests {
             .map(|_| rng.range(8.0, 7.0 + h as f64 - 3.0) as f32)
             .collect();
         check_against_reference(&view, &data, &xs, &ys, "run point");
-        let mut v = vec![0f32; 9];
+        let mut v = [0f32; 9];
         // NaN coordinates read finite values; a zero border reads 0 far outside.
         let nan = [f32::NAN; 9];
         sample_values(&view, &nan, &nan, &mut v[..9]);

@@ -485,8 +485,9 @@ mod avx2 {
             return 0;
         }
         // SAFETY: AVX2 is enabled at compile time (cfg above); the loads and stores stay within
-        // `xs`, `ys` and `out` (i + 8 <= n); the loads read `data` at the clamped indices
-        // bounded as explained above.
+        // `xs`, `ys` and `out` (i + 8 <= n) and the run's arrays (k + 8 <= len <= RUN, n and so
+        // len a multiple of 8); the loads read `data` at the clamped indices bounded as
+        // explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
             let inv = _mm256_set1_ps(1.0 / img.scale);
@@ -594,8 +595,9 @@ mod avx2 {
             return 0;
         }
         // SAFETY: AVX2 is enabled at compile time; loads and stores stay within the slices
-        // (i + 8 <= n); a group is read only when all its points are inside, so every
-        // index read is within `data` as explained above.
+        // (i + 8 <= n) and the run's arrays (k + 8 <= len <= RUN, n and so len a multiple of
+        // 8); a group is read only when all its points are inside, so every index read is
+        // within `data` as explained above.
         unsafe {
             let (ox, oy) = (_mm256_set1_ps(img.x0 as f32), _mm256_set1_ps(img.y0 as f32));
             let inv = _mm256_set1_ps(1.0 / img.scale);

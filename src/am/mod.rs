@@ -312,8 +312,10 @@ pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     total
 }
 
-/// Columns [`BlockCorrelation`]'s moments are summed at a time (four sums each, on the stack).
-const MOMENT_COLUMNS: usize = 64;
+/// Columns [`BlockCorrelation`]'s moments are summed at a time (four sums each, in registers:
+/// two AVX registers a sum).
+const MOMENT_COLUMNS: usize = 8;
+const _: () = assert!(MOMENT_COLUMNS == 8, "the AVX moments sum eight columns");
 
 /// The most blocks per side of [`block_correlation`].
 pub const MAX_BLOCKS: usize = 8;
@@ -414,9 +416,9 @@ impl BlockCorrelation {
 
     /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` over its samples (`x`, `y` the
     /// block-local coordinates), `p` and `q` being `res x res` patches. Per row of blocks, the
-    /// columns' sums of `p`, `p y`, `p p` and `q p` over the block row's rows (whole rows at a
-    /// time, vectorised, [`MOMENT_COLUMNS`] columns at a time), then each column's into its block
-    /// (`p x` from the column's `p`).
+    /// columns' sums of `p`, `p y`, `p p` and `q p` over the block row's rows
+    /// ([`MOMENT_COLUMNS`] columns at a time, kept in registers down the rows), then each
+    /// column's into its block, column after column (`p x` from the column's `p`).
     fn moments(&self, p: &[f32], q: &[f32]) -> [[f64; 5]; MAX_BLOCKS * MAX_BLOCKS] {
         let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
         let Some((res, cells)) = self.geometry else {
@@ -428,39 +430,47 @@ impl BlockCorrelation {
         for br in 0..cells {
             let rows = start(br)..start(br + 1).min(res);
             let origin = (br * res / cells) as f64;
-            for c0 in (0..res).step_by(MOMENT_COLUMNS) {
-                let w = MOMENT_COLUMNS.min(res - c0);
-                let mut sp = [0.0f64; MOMENT_COLUMNS];
-                let mut spy = [0.0f64; MOMENT_COLUMNS];
-                let mut spp = [0.0f64; MOMENT_COLUMNS];
-                let mut sqp = [0.0f64; MOMENT_COLUMNS];
-                for r in rows.clone() {
-                    let y = r as f64 - origin;
-                    let (pr, qr) = (&p[r * res + c0..][..w], &q[r * res + c0..][..w]);
-                    let sums = sp[..w]
-                        .iter_mut()
-                        .zip(&mut spy[..w])
-                        .zip(spp[..w].iter_mut().zip(&mut sqp[..w]));
-                    for (((a, b), (c, d)), (&v, &t)) in sums.zip(pr.iter().zip(qr)) {
-                        let (v, t) = (v as f64, t as f64);
-                        *a += v;
-                        *b += v * y;
-                        *c += v * v;
-                        *d += t * v;
+            // Each column's sums into its block, in the order of the columns: `c` the next
+            // column, `bc` its block, `next` the next block's first column, `x0` the origin of
+            // the block-local x (no division per column); the block's sums are kept in `a` until
+            // the next block begins.
+            let row_acc = &mut acc[br * cells..(br + 1) * cells];
+            let (mut c, mut bc, mut next, mut x0) = (0, 0, start(1), 0);
+            let mut a = [0.0f64; 5];
+            while c < res {
+                // Eight columns' sums, of which those from `skip` on are the next to add.
+                let (sums, skip) = if c + MOMENT_COLUMNS <= res {
+                    (column_sums8(p, q, res, c, rows.clone(), origin), 0)
+                } else if res >= MOMENT_COLUMNS {
+                    // The last columns: the last eight summed (each column's sums are its own).
+                    let first = res - MOMENT_COLUMNS;
+                    (
+                        column_sums8(p, q, res, first, rows.clone(), origin),
+                        c - first,
+                    )
+                } else {
+                    let mut one = [[0.0; 4]; MOMENT_COLUMNS];
+                    one[MOMENT_COLUMNS - 1] =
+                        portable::column_sums::<1>(p, q, res, c, rows.clone(), origin)[0];
+                    (one, MOMENT_COLUMNS - 1)
+                };
+                for s in &sums[skip..] {
+                    while c >= next {
+                        row_acc[bc] = std::mem::take(&mut a);
+                        bc += 1;
+                        next = start(bc + 1);
+                        x0 = bc * res / cells;
                     }
-                }
-                for k in 0..w {
-                    let c = c0 + k;
-                    let bc = c * cells / res;
-                    let x = (c - bc * res / cells) as f64;
-                    let a = &mut acc[br * cells + bc];
-                    a[0] += sp[k];
-                    a[1] += sp[k] * x;
-                    a[2] += spy[k];
-                    a[3] += spp[k];
-                    a[4] += sqp[k];
+                    let x = (c - x0) as f64;
+                    a[0] += s[0];
+                    a[1] += s[0] * x;
+                    a[2] += s[1];
+                    a[3] += s[2];
+                    a[4] += s[3];
+                    c += 1;
                 }
             }
+            row_acc[bc] = a;
         }
         acc
     }
@@ -588,6 +598,54 @@ mod simd {
         }
         out
     }
+
+    /// [`super::portable::column_sums`] of eight columns: the column sums in eight AVX
+    /// registers down the rows (the same products and sums in the same order, so the same bits).
+    pub(super) fn column_sums(
+        p: &[f32],
+        q: &[f32],
+        res: usize,
+        c0: usize,
+        rows: std::ops::Range<usize>,
+        origin: f64,
+    ) -> [[f64; 4]; 8] {
+        use std::arch::x86_64::*;
+        if let Some(last) = rows.clone().last() {
+            let end = last * res + c0 + 8;
+            assert!(
+                end <= p.len() && end <= q.len(),
+                "moments beyond the patches"
+            );
+        }
+        let mut s = [[0f64; 4]; 8];
+        // SAFETY: AVX2 is enabled at compile time (cfg); every load reads 8 values from
+        // r res + c0 with r <= the last row, so up to the end asserted above.
+        unsafe {
+            let z = _mm256_setzero_pd();
+            let (mut sp, mut spy, mut spp, mut sqp) = ([z; 2], [z; 2], [z; 2], [z; 2]);
+            for r in rows {
+                let y = _mm256_set1_pd(r as f64 - origin);
+                let (pr, qr) = (p.as_ptr().add(r * res + c0), q.as_ptr().add(r * res + c0));
+                for h in 0..2 {
+                    let v = _mm256_cvtps_pd(_mm_loadu_ps(pr.add(4 * h)));
+                    let t = _mm256_cvtps_pd(_mm_loadu_ps(qr.add(4 * h)));
+                    sp[h] = _mm256_add_pd(sp[h], v);
+                    spy[h] = _mm256_add_pd(spy[h], _mm256_mul_pd(v, y));
+                    spp[h] = _mm256_add_pd(spp[h], _mm256_mul_pd(v, v));
+                    sqp[h] = _mm256_add_pd(sqp[h], _mm256_mul_pd(t, v));
+                }
+            }
+            let mut lanes = [[0f64; 8]; 4];
+            for (l, acc) in lanes.iter_mut().zip([sp, spy, spp, sqp]) {
+                _mm256_storeu_pd(l.as_mut_ptr(), acc[0]);
+                _mm256_storeu_pd(l.as_mut_ptr().add(4), acc[1]);
+            }
+            for (k, sk) in s.iter_mut().enumerate() {
+                *sk = [lanes[0][k], lanes[1][k], lanes[2][k], lanes[3][k]];
+            }
+        }
+        s
+    }
 }
 
 /// The same kernels in plain Rust: the build for other CPUs, and compared with [`simd`] by a
@@ -646,6 +704,35 @@ mod portable {
         }
         s
     }
+
+    /// The sums of `p`, `p y`, `p p` and `q p` down `W` neighbouring columns of `res x res`
+    /// patches from `c0`, over `rows` (`y = r - origin`): the columns side by side in registers,
+    /// row after row.
+    #[inline(always)]
+    pub(super) fn column_sums<const W: usize>(
+        p: &[f32],
+        q: &[f32],
+        res: usize,
+        c0: usize,
+        rows: std::ops::Range<usize>,
+        origin: f64,
+    ) -> [[f64; 4]; W] {
+        let (mut sp, mut spy, mut spp, mut sqp) =
+            ([0.0f64; W], [0.0f64; W], [0.0f64; W], [0.0f64; W]);
+        for r in rows {
+            let y = r as f64 - origin;
+            let pr: &[f32; W] = p[r * res + c0..][..W].try_into().expect("W values");
+            let qr: &[f32; W] = q[r * res + c0..][..W].try_into().expect("W values");
+            for k in 0..W {
+                let (v, t) = (pr[k] as f64, qr[k] as f64);
+                sp[k] += v;
+                spy[k] += v * y;
+                spp[k] += v * v;
+                sqp[k] += t * v;
+            }
+        }
+        std::array::from_fn(|k| [sp[k], spy[k], spp[k], sqp[k]])
+    }
 }
 
 #[cfg(not(all(
@@ -654,6 +741,27 @@ mod portable {
     target_feature = "fma"
 )))]
 use portable::{columns_times, tile_2x4};
+#[cfg(not(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+)))]
+fn column_sums8(
+    p: &[f32],
+    q: &[f32],
+    res: usize,
+    c0: usize,
+    rows: std::ops::Range<usize>,
+    origin: f64,
+) -> [[f64; 4]; MOMENT_COLUMNS] {
+    portable::column_sums::<MOMENT_COLUMNS>(p, q, res, c0, rows, origin)
+}
+#[cfg(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+))]
+use simd::column_sums as column_sums8;
 #[cfg(all(
     target_arch = "x86_64",
     target_feature = "avx2",

@@ -356,6 +356,16 @@ fn block_moments_are_sums_over_each_blocks_samples() {
             .collect();
         let bc = super::BlockCorrelation::new(&q, res, cells);
         let got = bc.moments(&p, &q);
+        // The eight-column kernel (AVX where built for it): the plain sums, bit for bit.
+        if res >= 8 {
+            for (c0, rows) in [(0, 0..res), (res - 8, 1..res.min(5)), (res / 3, 2..2)] {
+                assert_eq!(
+                    super::column_sums8(&p, &q, res, c0, rows.clone(), 1.5),
+                    super::portable::column_sums::<8>(&p, &q, res, c0, rows, 1.5),
+                    "{res} from column {c0}"
+                );
+            }
+        }
         let mut want = [[0.0f64; 5]; super::MAX_BLOCKS * super::MAX_BLOCKS];
         for r in 0..res {
             for c in 0..res {

@@ -245,8 +245,11 @@ impl RegistrationTracker {
 
     /// Pre-processes the region the trackers read (and its pyramid levels).
     fn prepare(&mut self, input: FrameInput<'_>, region: (f64, f64, f64, f64)) {
-        // Another frame or region: the last sampled patch is not this view's.
+        // Another frame or region: no context's last sampled patch is this view's.
         self.ctx.work.sampled_at = None;
+        for stage in self.coarse.iter_mut().chain(&mut self.lower) {
+            stage.ctx.work.sampled_at = None;
+        }
         let (x0, y0, x1, y1) = region;
         let levels = self.coarse.len();
         let pre = match input {
@@ -392,8 +395,11 @@ impl RegistrationTracker {
         let coarse_moved = !self.coarse.is_empty() && p != start;
         if coarse_moved {
             let (ctx, conf) = (&mut self.ctx, &self.confidence);
-            let at_coarse = Self::confidence_at(ctx, conf, &view, &p);
+            // The start first: the patch at the coarse estimate, where the search goes on, is
+            // then the one in the context's buffer (a method that samples with `patch_at` does
+            // not sample it again).
             let at_start = Self::confidence_at(ctx, conf, &view, &start);
+            let at_coarse = Self::confidence_at(ctx, conf, &view, &p);
             // Also when either is NaN: the start is the safe side.
             if !at_least(at_coarse, at_start) {
                 p = start;
@@ -1169,5 +1175,45 @@ impl VisualTracker for RegistrationTracker {
             template: &self.ctx.template,
             patch: &self.ctx.work.values,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::imaging::GrayF32;
+    use crate::spec::RegistrationSpec;
+
+    /// A search method may reuse the patch in its context's buffer when it was sampled at the
+    /// same parameters (`Context::patch_at`); so every context, each pyramid level's and each
+    /// stage of the SSM hierarchy too, forgets its patch when another frame is prepared (the
+    /// same parameters on another frame are another patch).
+    #[test]
+    fn a_new_frame_leaves_no_context_with_a_sampled_patch() {
+        let mut spec = RegistrationSpec {
+            sm: "iclk".into(),
+            am: "ssd".into(),
+            ssm: "homography".into(),
+            params: TrackerParams::default(),
+            method: Default::default(),
+        };
+        spec.params.ssm_hierarchy = true;
+        let mut t = RegistrationTracker::new(&spec).unwrap();
+        assert!(!t.coarse.is_empty() && !t.lower.is_empty());
+        let frame = GrayF32 {
+            width: 64,
+            height: 48,
+            data: (0..64 * 48).map(|i| ((i * 37) % 251) as f32).collect(),
+        };
+        let p = t.ctx.params;
+        for stage in t.coarse.iter_mut().chain(&mut t.lower) {
+            stage.ctx.work.sampled_at = Some(p);
+        }
+        t.ctx.work.sampled_at = Some(p);
+        t.prepare(FrameInput::Gray32(&frame), (4.0, 4.0, 40.0, 30.0));
+        assert_eq!(t.ctx.work.sampled_at, None);
+        for stage in t.coarse.iter().chain(&t.lower) {
+            assert_eq!(stage.ctx.work.sampled_at, None);
+        }
     }
 }

@@ -88,7 +88,8 @@ impl SearchMethod for Iclk {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
-        ctx.sample_at(img, &p);
+        // Often sampled there already (the driver's checks between the pyramid levels).
+        ctx.patch_at(img, &p);
         let f = ctx
             .am
             .gradient(Wrt::Template, &ctx.work.values, &mut ctx.work.grad);

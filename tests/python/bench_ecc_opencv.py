@@ -10,8 +10,12 @@ mean corner distance to the ground truth.
 
 regtrack's figure is `regtrack bench`'s live path (8-bit frame to corners, the region's
 conversion and smoothing included) of ESM-SSD-homography, run just before and just after
-OpenCV, the mean of the two reported. OpenCV is not a dependency of regtrack: install it for
-this script only (`pip install opencv-python-headless numpy`).
+OpenCV, the mean of the two reported, in two settings: regtrack's defaults (three pyramid
+levels, the line search, the polish and the loss checks' confidences, none of which ECC has)
+and the classic single-level method as ECC runs (`--pyramid_levels 1 --line_search off
+--polish off`, the paper's settings). Each setting's accuracy is scored like ECC's, from
+`regtrack track`'s corners. OpenCV is not a dependency of regtrack: install it for this script
+only (`pip install opencv-python-headless numpy`).
 
     python3 tests/python/bench_ecc_opencv.py --seq data/seq.txt [--frames 200]
 
@@ -96,10 +100,44 @@ def run_ecc(images, quads, iterations, eps):
     return len(times) / sum(times), errors, lost
 
 
-def regtrack_live_fps(binary, seq, frames, repeats):
+# regtrack's settings compared: its defaults, and the classic single-level method (ECC's).
+SETTINGS = {
+    "defaults": [],
+    "single level": ["--pyramid_levels", "1", "--line_search", "off", "--polish", "off"],
+}
+
+
+def regtrack_errors(binary, seq, frames, settings, quads):
+    """Per frame after the first, the mean corner distance of `regtrack track`'s ESM-SSD."""
+    import tempfile
+
+    import numpy as np
+
+    with tempfile.TemporaryDirectory() as d:
+        out = os.path.join(d, "tracks.txt")
+        cmd = [binary, "track", "--seq", seq, "--sm", "esm", "--am", "ssd", "--out", out]
+        subprocess.run(cmd + settings, check=True, capture_output=True, text=True)
+        with open(out) as f:
+            rows = [line.split() for line in f.read().splitlines()[1:] if line.strip()]
+    errors = []
+    for row, q in zip(rows[1 : len(quads)], quads[1:]):
+        c = np.array([float(v) for v in row[1:9]]).reshape(4, 2)
+        errors.append(float(np.mean(np.linalg.norm(c - q, axis=1))))
+    return errors
+
+
+def summary(errors):
+    """Mean and median of the errors (px)."""
+    e = sorted(errors)
+    if not e:
+        return "no frame"
+    return f"mean error {sum(e) / len(e):.2f} px, median {e[len(e) // 2]:.2f} px"
+
+
+def regtrack_live_fps(binary, seq, frames, repeats, settings):
     """`regtrack bench`'s live FPS and its frames tracked for ESM-SSD-homography."""
     cmd = [binary, "bench", "--seq", seq, "--sm", "esm", "--am", "ssd", "--ssm", "homography",
-           "--repeats", str(repeats)]
+           "--repeats", str(repeats)] + settings
     if frames:
         cmd += ["--frames", str(frames)]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
@@ -119,24 +157,26 @@ def main():
     ap.add_argument("--regtrack", default=os.environ.get("REGTRACK_BIN", "target/release/regtrack"))
     a = ap.parse_args()
     images, quads = read_sequence(a.seq, a.frames)
-    before, tracked, row = regtrack_live_fps(a.regtrack, a.seq, a.frames, a.repeats)
+    before = {k: regtrack_live_fps(a.regtrack, a.seq, a.frames, a.repeats, v)
+              for k, v in SETTINGS.items()}
     runs = [run_ecc(images, quads, 30, 1e-3) for _ in range(a.repeats)]
-    after, _, row2 = regtrack_live_fps(a.regtrack, a.seq, a.frames, a.repeats)
+    after = {k: regtrack_live_fps(a.regtrack, a.seq, a.frames, a.repeats, v)
+             for k, v in SETTINGS.items()}
     ecc_fps = sorted(r[0] for r in runs)[len(runs) // 2]
     _, errors, lost = runs[0]
-    reg_fps = (before + after) / 2
-    errors.sort()
     print(f"{len(images)} frames of {a.seq}, one thread, {a.repeats} repeats (medians)")
-    print(f"regtrack bench rows:\n  {row}\n  {row2}")
-    print(f"regtrack ESM-SSD live path: {reg_fps:,.0f} FPS ({tracked} frames tracked)")
     print(
-        f"OpenCV findTransformECC, homography, cropped: {ecc_fps:,.0f} FPS, "
-        f"mean error {sum(errors) / max(1, len(errors)):.2f} px, "
-        f"median {errors[len(errors) // 2] if errors else float('nan'):.2f} px"
+        f"OpenCV findTransformECC, homography, cropped: {ecc_fps:,.0f} FPS, {summary(errors)}"
         + (f", failed at frame {lost}" if lost else "")
     )
-    print(f"ratio: {reg_fps / ecc_fps:.1f}x")
-
+    for name, settings in SETTINGS.items():
+        (b, tracked, row), (c, _, row2) = before[name], after[name]
+        reg_fps = (b + c) / 2
+        errs = regtrack_errors(a.regtrack, a.seq, a.frames, settings, quads)
+        print(f"regtrack ESM-SSD, {name} {' '.join(settings)}".rstrip())
+        print(f"  bench rows:\n    {row}\n    {row2}")
+        print(f"  live path: {reg_fps:,.0f} FPS ({tracked} frames tracked), {summary(errs)}")
+        print(f"  ratio ({name}): {reg_fps / ecc_fps:.1f}x")
 
 if __name__ == "__main__":
     main()

@@ -174,6 +174,10 @@ fn bench(c: &mut Criterion) {
     c.bench_function("preprocess 150x150 region (5x5 Gaussian)", |b| {
         b.iter(|| pre.process(black_box(&img), 225.0, 125.0, 375.0, 275.0))
     });
+    // The coarse pyramid levels the gradient methods search first (two by default).
+    c.bench_function("pyramid levels 1-2 of a 150x150 region", |b| {
+        b.iter(|| pre.build_levels(black_box(2)))
+    });
 
     // Nearest-neighbour search: index build (initialisation) and one query-and-step.
     for sm in ["nn1k", "nn10k"] {

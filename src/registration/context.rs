@@ -217,18 +217,39 @@ impl Context {
     /// `I_t(pixel(w(x, p)))` with respect to the normalised template point `x` (chain rule
     /// through the warp's point Jacobian), in place in `gx`, `gy`.
     pub fn warped_gradient(&mut self, p: &Params) {
+        self.warped_gradient_with::<false>(p);
+    }
+
+    /// [`Context::warped_gradient`], then (in the same pass) its mean with the template's
+    /// gradient, `(g + g*) / 2`: ESM's gradient.
+    pub fn warped_gradient_mean(&mut self, p: &Params) {
+        self.warped_gradient_with::<true>(p);
+    }
+
+    fn warped_gradient_with<const MEAN: bool>(&mut self, p: &Params) {
         let m = self.pixel_matrix(p).cast::<f32>();
-        for i in 0..self.grid_x.len() {
-            let (x, y) = (self.grid_x[i], self.grid_y[i]);
+        let n = self.grid_x.len();
+        let (xs, ys) = (&self.grid_x[..n], &self.grid_y[..n]);
+        let (px, py) = (&self.work.px[..n], &self.work.py[..n]);
+        let (gxs, gys) = (&mut self.work.gx[..n], &mut self.work.gy[..n]);
+        let (tgx, tgy) = (&self.template_gx[..n], &self.template_gy[..n]);
+        for i in 0..n {
+            let (x, y) = (xs[i], ys[i]);
             let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
-            let (u, v) = (self.work.px[i], self.work.py[i]);
+            let (u, v) = (px[i], py[i]);
             let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
             let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
             let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
             let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
-            let (gx, gy) = (self.work.gx[i], self.work.gy[i]);
-            self.work.gx[i] = gx * a00 + gy * a10;
-            self.work.gy[i] = gx * a01 + gy * a11;
+            let (gx, gy) = (gxs[i], gys[i]);
+            let (wx, wy) = (gx * a00 + gy * a10, gx * a01 + gy * a11);
+            if MEAN {
+                gxs[i] = 0.5 * (wx + tgx[i]);
+                gys[i] = 0.5 * (wy + tgy[i]);
+            } else {
+                gxs[i] = wx;
+                gys[i] = wy;
+            }
         }
     }
 

@@ -93,7 +93,9 @@ impl SearchMethod for Esm {
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         let p = ctx.params;
         ctx.sample_gradients_at(img, &p);
-        ctx.warped_gradient(&p);
+        // The warped gradient's mean with the template's (ESM's Jacobian), in one pass; an
+        // iteration that ends below (its similarity having fallen) leaves it unused.
+        ctx.warped_gradient_mean(&p);
         let f = ctx
             .am
             .gradient(Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
@@ -111,12 +113,6 @@ impl SearchMethod for Esm {
         {
             ctx.params = bp;
             return Ok(Step::done(bf));
-        }
-        for (g, &t) in ctx.work.gx.iter_mut().zip(&ctx.template_gx) {
-            *g = 0.5 * (*g + t);
-        }
-        for (g, &t) in ctx.work.gy.iter_mut().zip(&ctx.template_gy) {
-            *g = 0.5 * (*g + t);
         }
         ctx.project_gradients(None);
         ctx.forward_step_from_gradient(Update::Compose)?;

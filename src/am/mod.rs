@@ -151,6 +151,13 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     );
+    /// Whether [`Am::hessian`] with respect to the current pixels is `-J^T J` for every kind and
+    /// [`Am::gradient`] the plain residual, whatever the patch (the least-squares models): the
+    /// forward methods may then form their Newton system from the gradient's moments on the
+    /// grid, without `J` ([`crate::registration::moments`]).
+    fn hessian_is_minus_jtj(&self) -> bool {
+        false
+    }
     /// Whether the similarity is built from per-pixel terms only (a sum, or a ratio of sums
     /// such as a correlation), so that an even sub-grid of the patch ranks patches as the whole
     /// grid does, less precisely: a particle filter may then weigh its particles on one (`pf`'s

@@ -23,6 +23,9 @@ impl Am for Ssd {
     fn pixelwise(&self) -> bool {
         true
     }
+    fn hessian_is_minus_jtj(&self) -> bool {
+        true
+    }
     fn set_template(&mut self, template: &[f32]) {
         self.template.clear();
         self.template.extend_from_slice(template);

@@ -12,6 +12,8 @@ use crate::ssm::{Params, Ssm};
 use crate::status::LossReason;
 use nalgebra::Matrix3;
 
+use super::moments::GridMoments;
+
 /// How a step `dp` changes the parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Update {
@@ -53,6 +55,18 @@ pub struct Context {
     /// Which rows of `dwdp0` (`2 k` for `dw_x/dp_k`, `2 k + 1` for `dw_y/dp_k`) are zero on the
     /// whole grid (half of them for the affine and projective warps): the projection skips them.
     pub dwdp0_zero: [bool; 2 * MAX_DOF],
+    /// The grid in the unit square's coordinates, where it is regular, and the homography `G`
+    /// from them to the normalised ones (`grid = G(grid_u, grid_v)`).
+    pub grid_u: Vec<f32>,
+    pub grid_v: Vec<f32>,
+    pub unit: Matrix3<f64>,
+    /// The template's gradient with respect to the unit square's coordinates (kept only with
+    /// `moments`).
+    pub template_gu: Vec<f32>,
+    pub template_gv: Vec<f32>,
+    /// The forward steps' Newton system from the gradient's moments, for the AMs whose Hessian
+    /// is `-J^T J` on the SSMs of six or more parameters ([`super::moments`]).
+    pub moments: Option<GridMoments>,
     /// Per-iteration buffers.
     pub work: Workspace,
     /// The Newton systems' solver (it keeps the last Hessian's factor).
@@ -115,6 +129,12 @@ impl Context {
             template_gy: z(n),
             dwdp0: z(2 * n * dof),
             dwdp0_zero: [false; 2 * MAX_DOF],
+            grid_u: z(n),
+            grid_v: z(n),
+            unit: Matrix3::identity(),
+            template_gu: Vec::new(),
+            template_gv: Vec::new(),
+            moments: None,
             work: Workspace {
                 dwdp: z(2 * n * dof),
                 px: z(n),
@@ -330,9 +350,86 @@ impl Context {
     /// The forward-compositional (FCLK) step from `p`, once the frame's values and gradients
     /// have been sampled there ([`Context::sample_gradients_at`]); returns the similarity at `p`.
     pub fn forward_compositional_step(&mut self, p: &Params) -> Result<f64, LossReason> {
+        if self.moments_step() {
+            self.unit_gradient(p);
+            let f = self
+                .am
+                .gradient(Wrt::Current, &self.work.values, &mut self.work.grad);
+            return self.moments_newton_step(Update::Compose).map(|_| f);
+        }
         self.warped_gradient(p);
         self.project_gradients(None);
         self.forward_step(Update::Compose)
+    }
+
+    /// Whether the forward steps at the identity form their Newton system from the gradient's
+    /// moments ([`super::moments`]): then [`Context::unit_gradient`] (or its mean with the
+    /// template's) and [`Context::moments_newton_step`] stand for the warped gradient, the
+    /// projection and [`Context::forward_step_from_gradient`].
+    pub fn moments_step(&self) -> bool {
+        self.moments.is_some() && self.am.hessian_is_minus_jtj()
+    }
+
+    /// The pixel matrix times the grid's homography: the unit square's coordinates to pixels.
+    fn unit_matrix(&self, p: &Params) -> Matrix3<f32> {
+        (self.pixel_matrix(p) * self.unit).cast::<f32>()
+    }
+
+    /// Like [`Context::warped_gradient`], with respect to the unit square's coordinates
+    /// (`grid_u`, `grid_v`) instead of the normalised ones.
+    pub fn unit_gradient(&mut self, p: &Params) {
+        let m = self.unit_matrix(p);
+        let n = self.grid_u.len();
+        let (mut gx, mut gy) = (
+            std::mem::take(&mut self.work.gx),
+            std::mem::take(&mut self.work.gy),
+        );
+        unit_gradient_in_place(
+            &m,
+            (&self.grid_u[..n], &self.grid_v[..n]),
+            (&self.work.px[..n], &self.work.py[..n]),
+            (&mut gx[..n], &mut gy[..n]),
+            None,
+        );
+        (self.work.gx, self.work.gy) = (gx, gy);
+    }
+
+    /// [`Context::unit_gradient`], then its mean with the template's (ESM's gradient), in one
+    /// pass.
+    pub fn unit_gradient_mean(&mut self, p: &Params) {
+        let m = self.unit_matrix(p);
+        let n = self.grid_u.len();
+        let (mut gx, mut gy) = (
+            std::mem::take(&mut self.work.gx),
+            std::mem::take(&mut self.work.gy),
+        );
+        unit_gradient_in_place(
+            &m,
+            (&self.grid_u[..n], &self.grid_v[..n]),
+            (&self.work.px[..n], &self.work.py[..n]),
+            (&mut gx[..n], &mut gy[..n]),
+            Some((&self.template_gu[..n], &self.template_gv[..n])),
+        );
+        (self.work.gx, self.work.gy) = (gx, gy);
+    }
+
+    /// The Newton step from the gradient with respect to the unit square's coordinates (in
+    /// `gx`, `gy`) and the AM's gradient (in `grad`), through the moments; needs
+    /// [`Context::moments_step`].
+    pub fn moments_newton_step(&mut self, update: Update) -> Result<(), LossReason> {
+        let mut h = [0.0; MAX_DOF * MAX_DOF];
+        let mut g = [0.0; MAX_DOF];
+        let Some(moments) = self.moments.as_mut() else {
+            return Err(LossReason::Singular);
+        };
+        moments.minus_jtj_and_jtr(
+            &self.work.gx,
+            &self.work.gy,
+            &self.work.grad,
+            &mut h,
+            &mut g,
+        );
+        self.solve_step(&g, &h, update)
     }
 
     /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
@@ -373,6 +470,16 @@ impl Context {
     ) -> Result<(), LossReason> {
         let mut g = [0.0f64; MAX_DOF];
         jt_times(jac, &self.work.grad, self.dof, &mut g);
+        self.solve_step(&g, h, update)
+    }
+
+    /// Solves the Newton system `H dp = -g` (damped with `lm:`) and applies the step.
+    pub fn solve_step(
+        &mut self,
+        g: &[f64; MAX_DOF],
+        h: &[f64; MAX_DOF * MAX_DOF],
+        update: Update,
+    ) -> Result<(), LossReason> {
         let dp = if self.damping > 0.0 {
             // Levenberg-Marquardt: the diagonal scaled by 1 + lambda (a shorter, more
             // gradient-like step).
@@ -380,9 +487,9 @@ impl Context {
             for i in 0..self.dof {
                 hd[i * self.dof + i] *= 1.0 + self.damping;
             }
-            self.solver.step(&hd, &g, self.dof)
+            self.solver.step(&hd, g, self.dof)
         } else {
-            self.solver.step(h, &g, self.dof)
+            self.solver.step(h, g, self.dof)
         }
         .ok_or(LossReason::Singular)?;
         self.apply(&dp, update)
@@ -431,8 +538,11 @@ impl Context {
                 let p = crate::geometry::apply_homography(&h, u);
                 self.grid_x[r * res + c] = p.x as f32;
                 self.grid_y[r * res + c] = p.y as f32;
+                self.grid_u[r * res + c] = u.x as f32;
+                self.grid_v[r * res + c] = u.y as f32;
             }
         }
+        self.unit = h;
         self.template_corners = nq;
         self.params = self.ssm.identity();
         let (gx, gy) = (self.grid_x.clone(), self.grid_y.clone());
@@ -441,6 +551,14 @@ impl Context {
         for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
             *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
         }
+        self.moments = if self.am.hessian_is_minus_jtj() {
+            GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
+        } else {
+            None
+        };
+        let kept = if self.moments.is_some() { n } else { 0 };
+        self.template_gu.resize(kept, 0.0);
+        self.template_gv.resize(kept, 0.0);
         Ok(())
     }
 
@@ -449,11 +567,86 @@ impl Context {
     pub fn sample_template(&mut self, img: &ImageView) {
         let p = self.params;
         self.sample_gradients_at(img, &p);
+        if self.moments.is_some() {
+            let m = self.unit_matrix(&p);
+            unit_gradient_into(
+                &m,
+                (&self.grid_u, &self.grid_v),
+                (&self.work.px, &self.work.py),
+                (&self.work.gx, &self.work.gy),
+                (&mut self.template_gu, &mut self.template_gv),
+            );
+        }
         self.warped_gradient(&p);
         self.template.copy_from_slice(&self.work.values);
         self.template_gx.copy_from_slice(&self.work.gx);
         self.template_gy.copy_from_slice(&self.work.gy);
         self.am.set_template(&self.template);
+    }
+}
+
+/// The gradient `(gx, gy)` sampled in pixels at `(px, py)`, the points `(us, vs)` under the
+/// homography `m`, turned into the gradient with respect to `(u, v)` (chain rule through the
+/// homography's point Jacobian), into `out`.
+fn unit_gradient_into(
+    m: &Matrix3<f32>,
+    (us, vs): (&[f32], &[f32]),
+    (px, py): (&[f32], &[f32]),
+    (gx, gy): (&[f32], &[f32]),
+    (ox, oy): (&mut [f32], &mut [f32]),
+) {
+    ox.copy_from_slice(gx);
+    oy.copy_from_slice(gy);
+    unit_gradient_in_place(m, (us, vs), (px, py), (ox, oy), None);
+}
+
+/// [`unit_gradient_into`] in place, then, with `mean`, the mean with that gradient `(tx, ty)`.
+fn unit_gradient_in_place(
+    m: &Matrix3<f32>,
+    (us, vs): (&[f32], &[f32]),
+    (px, py): (&[f32], &[f32]),
+    (gx, gy): (&mut [f32], &mut [f32]),
+    mean: Option<(&[f32], &[f32])>,
+) {
+    match mean {
+        None => chain_unit::<false>(m, (us, vs), (px, py), (gx, gy), (&[], &[])),
+        Some(t) => chain_unit::<true>(m, (us, vs), (px, py), (gx, gy), t),
+    }
+}
+
+/// [`unit_gradient_in_place`]'s loop, with or without the mean.
+fn chain_unit<const MEAN: bool>(
+    m: &Matrix3<f32>,
+    (us, vs): (&[f32], &[f32]),
+    (px, py): (&[f32], &[f32]),
+    (gx, gy): (&mut [f32], &mut [f32]),
+    (tx, ty): (&[f32], &[f32]),
+) {
+    let n = gx.len();
+    let (us, vs, px, py, gy) = (&us[..n], &vs[..n], &px[..n], &py[..n], &mut gy[..n]);
+    let (tx, ty) = if MEAN {
+        (&tx[..n], &ty[..n])
+    } else {
+        (&[][..], &[][..])
+    };
+    let (m00, m01, m10, m11) = (m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]);
+    let (m20, m21, m22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+    for i in 0..n {
+        let iw = 1.0 / (m20 * us[i] + m21 * vs[i] + m22);
+        let (x, y) = (px[i], py[i]);
+        let a00 = (m00 - x * m20) * iw;
+        let a01 = (m01 - x * m21) * iw;
+        let a10 = (m10 - y * m20) * iw;
+        let a11 = (m11 - y * m21) * iw;
+        let (g, h) = (gx[i], gy[i]);
+        let (a, b) = (g * a00 + h * a10, g * a01 + h * a11);
+        if MEAN {
+            gx[i] = 0.5 * (a + tx[i]);
+            gy[i] = 0.5 * (b + ty[i]);
+        } else {
+            gx[i] = a;
+            gy[i] = b;
+        }
     }
 }
 

@@ -11,6 +11,7 @@ mod confidence;
 mod context;
 mod driver;
 mod method;
+pub mod moments;
 mod sweep;
 
 pub use confidence::{Judged, LossCheck};

@@ -94,8 +94,14 @@ impl SearchMethod for Esm {
         let p = ctx.params;
         ctx.sample_gradients_at(img, &p);
         // The warped gradient's mean with the template's (ESM's Jacobian), in one pass; an
-        // iteration that ends below (its similarity having fallen) leaves it unused.
-        ctx.warped_gradient_mean(&p);
+        // iteration that ends below (its similarity having fallen) leaves it unused. With the
+        // moments, the gradient with respect to the grid's unit square instead.
+        let moments = ctx.moments_step();
+        if moments {
+            ctx.unit_gradient_mean(&p);
+        } else {
+            ctx.warped_gradient_mean(&p);
+        }
         let f = ctx
             .am
             .gradient(Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
@@ -114,8 +120,12 @@ impl SearchMethod for Esm {
             ctx.params = bp;
             return Ok(Step::done(bf));
         }
-        ctx.project_gradients(None);
-        ctx.forward_step_from_gradient(Update::Compose)?;
+        if moments {
+            ctx.moments_newton_step(Update::Compose)?;
+        } else {
+            ctx.project_gradients(None);
+            ctx.forward_step_from_gradient(Update::Compose)?;
+        }
         Ok(Step::auto(f))
     }
 }

@@ -1,0 +1,699 @@
+//! The Newton system of the least-squares AMs from the gradient's moments on the grid: the
+//! forward methods' step without the pixel Jacobian.
+//!
+//! With an AM whose Hessian is `-J^T J` ([`crate::am::Am::hessian_is_minus_jtj`], SSD), a
+//! forward-compositional step needs `J^T J` and `J^T r`, where row `i` of `J` is the warped
+//! gradient `g_i` times the SSM's `dw/dp` at the identity, `D(x_i)`, in the normalised
+//! coordinates `x`. The grid is regular in the coordinates `u = (u, v)` of the unit square, which
+//! the initial quad's homography `G` maps to `x = G(u)`. Every SSM here is a family of
+//! homographies, and conjugating by `G` maps an infinitesimal homography to an infinitesimal
+//! homography, so `D(G(u)) = dG(u) D_u(u) L`, with `D_u` the full homography's
+//! (`(u, v, 1, 0, 0, 0, -u^2, -u v)` for `w_x`, `(0, 0, 0, u, v, 1, -u v, -v^2)` for `w_y`) and
+//! `L` a constant `8 x dof` matrix (fitted once per region, by least squares over the grid, and
+//! checked). With `g_u = g dG` the gradient with respect to `u` (the warped gradient taken with
+//! the pixel matrix times `G`, the same work per sample), `J = J_u L`, so
+//! `J^T J = L^T (J_u^T J_u) L` and `J^T r = L^T (J_u^T r)`: the same Newton step.
+//!
+//! The entries of `J_u^T J_u` are sums over the grid of `a^2, a b, b^2` (`g_u = (a, b)`) times
+//! monomials `u^i v^j`, `i + j <= 4`, those of `J_u^T r` sums of `r a, r b` times monomials of
+//! degree two at most. On the regular grid each sum separates: down every column, weighted by
+//! powers of the row's `v` (21 multiply-adds per sample, eight columns at a time in registers),
+//! then across the columns, weighted by powers of the column's `u`. The projection (12
+//! operations per sample for the homography), `J^T J` (36) and `J^T r` (8) are not needed.
+
+use crate::linalg::MAX_DOF;
+use crate::spec::GridLayout;
+use nalgebra::{Matrix3, SMatrix};
+
+/// Eight f32 lanes (eight neighbouring columns).
+type Lanes = [f32; 8];
+
+/// Powers `0..=4` of the row coordinate.
+const POWERS: usize = 5;
+/// Column sums per block of eight columns: `a^2, a b, b^2` times `v^0..=4` (15), `r a, r b` times
+/// `v^0..=2` (6).
+const SUMS: usize = 3 * POWERS + 2 * 3;
+
+/// How far `D(G(u))` may be from `dG(u) D_u(u) L` (relative to the largest entry of `D`) for the
+/// fit to be used: the SSM is then a family of homographies (f32 rounding is about 1e-7).
+const FIT_TOLERANCE: f64 = 1e-5;
+
+/// The Newton system from the gradient's moments on one region's grid (see the module's
+/// documentation).
+#[derive(Clone, Debug)]
+pub struct GridMoments {
+    res: usize,
+    dof: usize,
+    /// `L`, row-major `8 x dof` (stride [`MAX_DOF`]).
+    l: [f64; 8 * MAX_DOF],
+    /// The unit square's coordinates of the grid's columns and rows.
+    u: Vec<f32>,
+    /// `v^j` of each row.
+    vpow: Vec<[f32; POWERS]>,
+    /// `u^i` of each column, `i = 0..=4`, in the lanes of the column blocks (a multiple of eight
+    /// long: the last block holds the last eight columns).
+    upow: [Vec<f32>; POWERS],
+    /// The column sums ([`SUMS`] rows of the padded column count).
+    sums: Vec<f32>,
+}
+
+impl GridMoments {
+    /// The moments of a `res x res` grid of `layout` whose normalised points are `G(u)`, for an
+    /// SSM whose `dw/dp` at the identity on the grid is `dwdp0` (layout of
+    /// [`crate::ssm::Ssm::jacobian`]); `None` when that is not a family of homographies (the
+    /// fit misses) or the system would not be cheaper (fewer than six parameters).
+    pub fn new(
+        g: &Matrix3<f64>,
+        res: usize,
+        layout: GridLayout,
+        dwdp0: &[f32],
+        dof: usize,
+    ) -> Option<Self> {
+        let n = res * res;
+        if !(6..=MAX_DOF).contains(&dof) || res < 8 || dwdp0.len() < 2 * dof * n {
+            return None;
+        }
+        let coords = unit_coordinates(res, layout);
+        let l = fit_l(g, &coords, dwdp0, dof)?;
+        // Block b's lanes are columns 8 b.. but the last block's, which are the last eight.
+        let blocks = res.div_ceil(8);
+        let padded = blocks * 8;
+        let upow = std::array::from_fn(|i| {
+            let mut v = vec![0f32; padded];
+            for (slot, o) in v.iter_mut().enumerate() {
+                let (block, lane) = (slot / 8, slot % 8);
+                let column = (8 * block).min(res - 8) + lane;
+                *o = (coords[column] as f32).powi(i as i32);
+            }
+            v
+        });
+        let vpow = coords
+            .iter()
+            .map(|&v| std::array::from_fn(|j| (v as f32).powi(j as i32)))
+            .collect();
+        Some(GridMoments {
+            res,
+            dof,
+            l,
+            u: coords.iter().map(|&u| u as f32).collect(),
+            vpow,
+            upow,
+            sums: vec![0.0; SUMS * padded],
+        })
+    }
+
+    /// The unit square's coordinate of each column (and row) of the grid.
+    pub fn coordinates(&self) -> &[f32] {
+        &self.u
+    }
+
+    /// `h = -J^T J` (row-major `dof x dof`) and `g = J^T r` for the gradient `(a, b)` with
+    /// respect to the unit square's coordinates and the AM's gradient `r`, all on the grid.
+    pub fn minus_jtj_and_jtr(
+        &mut self,
+        a: &[f32],
+        b: &[f32],
+        r: &[f32],
+        h: &mut [f64; MAX_DOF * MAX_DOF],
+        g: &mut [f64; MAX_DOF],
+    ) {
+        let (hu, gu) = self.unit_system(a, b, r);
+        let (dof, l) = (self.dof, &self.l);
+        // H = L^T Hu L, g = L^T gu.
+        let mut hl = [[0.0f64; MAX_DOF]; 8];
+        for (k, row) in hl.iter_mut().enumerate() {
+            for (m, o) in row.iter_mut().enumerate().take(dof) {
+                *o = (0..8).map(|q| hu[k][q] * l[q * MAX_DOF + m]).sum();
+            }
+        }
+        for i in 0..dof {
+            for j in i..dof {
+                let v: f64 = (0..8).map(|k| l[k * MAX_DOF + i] * hl[k][j]).sum();
+                h[i * dof + j] = -v;
+                h[j * dof + i] = -v;
+            }
+            g[i] = (0..8).map(|k| l[k * MAX_DOF + i] * gu[k]).sum();
+        }
+    }
+
+    /// `J_u^T J_u` and `J_u^T r` of the full homography in the unit square's coordinates.
+    fn unit_system(&mut self, a: &[f32], b: &[f32], r: &[f32]) -> ([[f64; 8]; 8], [f64; 8]) {
+        let res = self.res;
+        let n = res * res;
+        let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
+        let padded = self.upow[0].len();
+        // Down the columns, eight at a time: the sums weighted by the row's powers of v. The
+        // last block is the last eight columns, those of the block before it masked out.
+        let blocks = res.div_ceil(8);
+        for block in 0..blocks {
+            let c0 = (8 * block).min(res - 8);
+            let skip = 8 * block - c0;
+            let sums = column_block(a, b, r, res, c0, skip, &self.vpow);
+            for (s, lanes) in sums.iter().enumerate() {
+                self.sums[s * padded + 8 * block..][..8].copy_from_slice(lanes);
+            }
+        }
+        // Across the columns: M[s][i] = sum_c u_c^i S[s][c] for the sums' row s (weight and power
+        // of v) and the powers of u that the system needs (total degree four, two for r a, r b),
+        // each once, eight columns in lanes.
+        let mut mom = [[0.0f64; POWERS]; SUMS];
+        for (s, ms) in mom.iter_mut().enumerate() {
+            let (weight, j) = if s < 3 * POWERS {
+                (s / POWERS, s % POWERS)
+            } else {
+                (3, (s - 3 * POWERS) % 3)
+            };
+            let degree = if weight < 3 { 4 } else { 2 };
+            let sums = &self.sums[s * padded..][..padded];
+            for (i, o) in ms.iter_mut().enumerate().take(degree + 1 - j) {
+                let mut lanes: Lanes = [0.0; 8];
+                for (cs, cu) in sums.chunks_exact(8).zip(self.upow[i].chunks_exact(8)) {
+                    for k in 0..8 {
+                        lanes[k] = cs[k].mul_add(cu[k], lanes[k]);
+                    }
+                }
+                *o = lanes.iter().map(|&v| v as f64).sum();
+            }
+        }
+        // The sums' rows: weight w (0: a^2, 1: a b, 2: b^2) at power j is row w * 5 + j; r a at
+        // power j is row 15 + j, r b row 18 + j.
+        let ma = |i: usize, j: usize| mom[j][i];
+        let mb = |i: usize, j: usize| mom[POWERS + j][i];
+        let mc = |i: usize, j: usize| mom[2 * POWERS + j][i];
+        let ra = |i: usize, j: usize| mom[3 * POWERS + j][i];
+        let rb = |i: usize, j: usize| mom[3 * POWERS + 3 + j][i];
+        // J_u = (a u, a v, a, b u, b v, b, -u s, -v s), s = a u + b v.
+        let mut h = [[0.0f64; 8]; 8];
+        let mut set = |i: usize, j: usize, v: f64| {
+            h[i][j] = v;
+            h[j][i] = v;
+        };
+        set(0, 0, ma(2, 0));
+        set(0, 1, ma(1, 1));
+        set(0, 2, ma(1, 0));
+        set(0, 3, mb(2, 0));
+        set(0, 4, mb(1, 1));
+        set(0, 5, mb(1, 0));
+        set(0, 6, -(ma(3, 0) + mb(2, 1)));
+        set(0, 7, -(ma(2, 1) + mb(1, 2)));
+        set(1, 1, ma(0, 2));
+        set(1, 2, ma(0, 1));
+        set(1, 3, mb(1, 1));
+        set(1, 4, mb(0, 2));
+        set(1, 5, mb(0, 1));
+        set(1, 6, -(ma(2, 1) + mb(1, 2)));
+        set(1, 7, -(ma(1, 2) + mb(0, 3)));
+        set(2, 2, ma(0, 0));
+        set(2, 3, mb(1, 0));
+        set(2, 4, mb(0, 1));
+        set(2, 5, mb(0, 0));
+        set(2, 6, -(ma(2, 0) + mb(1, 1)));
+        set(2, 7, -(ma(1, 1) + mb(0, 2)));
+        set(3, 3, mc(2, 0));
+        set(3, 4, mc(1, 1));
+        set(3, 5, mc(1, 0));
+        set(3, 6, -(mb(3, 0) + mc(2, 1)));
+        set(3, 7, -(mb(2, 1) + mc(1, 2)));
+        set(4, 4, mc(0, 2));
+        set(4, 5, mc(0, 1));
+        set(4, 6, -(mb(2, 1) + mc(1, 2)));
+        set(4, 7, -(mb(1, 2) + mc(0, 3)));
+        set(5, 5, mc(0, 0));
+        set(5, 6, -(mb(2, 0) + mc(1, 1)));
+        set(5, 7, -(mb(1, 1) + mc(0, 2)));
+        set(6, 6, ma(4, 0) + 2.0 * mb(3, 1) + mc(2, 2));
+        set(6, 7, ma(3, 1) + 2.0 * mb(2, 2) + mc(1, 3));
+        set(7, 7, ma(2, 2) + 2.0 * mb(1, 3) + mc(0, 4));
+        let g = [
+            ra(1, 0),
+            ra(0, 1),
+            ra(0, 0),
+            rb(1, 0),
+            rb(0, 1),
+            rb(0, 0),
+            -(ra(2, 0) + rb(1, 1)),
+            -(ra(1, 1) + rb(0, 2)),
+        ];
+        (h, g)
+    }
+}
+
+/// The column sums of the eight columns from `c0` down every row of a `res`-wide grid (`c0 + 8
+/// <= res`), the first `skip` lanes left out: rows `0..5` `a^2 v^j`, `5..10` `a b v^j`, `10..15`
+/// `b^2 v^j`, `15..18` `r a v^j`, `18..21` `r b v^j`.
+fn column_block(
+    a: &[f32],
+    b: &[f32],
+    r: &[f32],
+    res: usize,
+    c0: usize,
+    skip: usize,
+    vpow: &[[f32; POWERS]],
+) -> [Lanes; SUMS] {
+    let rows = vpow.len();
+    let end = (rows.max(1) - 1) * res + c0 + 8;
+    assert!(c0 + 8 <= res && end <= a.len() && end <= b.len() && end <= r.len() && skip < 8);
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    {
+        simd::column_block(a, b, r, res, c0, skip, vpow)
+    }
+    #[cfg(not(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )))]
+    {
+        column_block_portable(a, b, r, res, c0, skip, vpow)
+    }
+}
+
+/// [`column_block`] without vector instructions: the same products and sums, lane by lane, in
+/// the same order (so the same bits).
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn column_block_portable(
+    a: &[f32],
+    b: &[f32],
+    r: &[f32],
+    res: usize,
+    c0: usize,
+    skip: usize,
+    vpow: &[[f32; POWERS]],
+) -> [Lanes; SUMS] {
+    let mut acc = [[0f32; 8]; SUMS];
+    for (row, vp) in vpow.iter().enumerate() {
+        for k in skip..8 {
+            let i = row * res + c0 + k;
+            let w = [
+                a[i] * a[i],
+                a[i] * b[i],
+                b[i] * b[i],
+                r[i] * a[i],
+                r[i] * b[i],
+            ];
+            for j in 0..POWERS {
+                for (t, &wt) in w.iter().enumerate().take(3) {
+                    acc[t * POWERS + j][k] = wt.mul_add(vp[j], acc[t * POWERS + j][k]);
+                }
+            }
+            for j in 0..3 {
+                acc[3 * POWERS + j][k] = w[3].mul_add(vp[j], acc[3 * POWERS + j][k]);
+                acc[3 * POWERS + 3 + j][k] = w[4].mul_add(vp[j], acc[3 * POWERS + 3 + j][k]);
+            }
+        }
+    }
+    acc
+}
+
+#[cfg(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma"
+))]
+mod simd {
+    use super::{Lanes, POWERS, SUMS};
+    use std::arch::x86_64::*;
+
+    /// [`super::column_block`] in AVX registers: two passes down the rows (ten sums, then
+    /// eleven), so that every sum stays in a register.
+    pub(super) fn column_block(
+        a: &[f32],
+        b: &[f32],
+        r: &[f32],
+        res: usize,
+        c0: usize,
+        skip: usize,
+        vpow: &[[f32; POWERS]],
+    ) -> [Lanes; SUMS] {
+        let mut out = [[0f32; 8]; SUMS];
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads eight values
+        // from row * res + c0 for a row below vpow.len(), within the slices (the caller asserts
+        // it); the stores write the local array.
+        unsafe {
+            // Lanes below `skip` are zero (their columns belong to the block before).
+            let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let keep =
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(lane, _mm256_set1_epi32(skip as i32 - 1)));
+            let load = |x: &[f32], row: usize| {
+                _mm256_and_ps(_mm256_loadu_ps(x.as_ptr().add(row * res + c0)), keep)
+            };
+            let z = _mm256_setzero_ps();
+            let (mut saa, mut sab) = ([z; POWERS], [z; POWERS]);
+            for (row, vp) in vpow.iter().enumerate() {
+                let (la, lb) = (load(a, row), load(b, row));
+                let (aa, ab) = (_mm256_mul_ps(la, la), _mm256_mul_ps(la, lb));
+                for j in 0..POWERS {
+                    let v = _mm256_set1_ps(vp[j]);
+                    saa[j] = _mm256_fmadd_ps(aa, v, saa[j]);
+                    sab[j] = _mm256_fmadd_ps(ab, v, sab[j]);
+                }
+            }
+            let (mut sbb, mut sra, mut srb) = ([z; POWERS], [z; 3], [z; 3]);
+            for (row, vp) in vpow.iter().enumerate() {
+                let (la, lb, lr) = (load(a, row), load(b, row), load(r, row));
+                let (bb, ra, rb) = (
+                    _mm256_mul_ps(lb, lb),
+                    _mm256_mul_ps(lr, la),
+                    _mm256_mul_ps(lr, lb),
+                );
+                for j in 0..POWERS {
+                    let v = _mm256_set1_ps(vp[j]);
+                    sbb[j] = _mm256_fmadd_ps(bb, v, sbb[j]);
+                    if j < 3 {
+                        sra[j] = _mm256_fmadd_ps(ra, v, sra[j]);
+                        srb[j] = _mm256_fmadd_ps(rb, v, srb[j]);
+                    }
+                }
+            }
+            let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
+            for (o, v) in out.iter_mut().zip(all) {
+                _mm256_storeu_ps(o.as_mut_ptr(), *v);
+            }
+        }
+        out
+    }
+}
+
+/// The unit square's coordinates of a grid's columns (the same for its rows), as
+/// [`crate::registration::Context::set_region`] lays them out.
+pub fn unit_coordinates(res: usize, layout: GridLayout) -> Vec<f64> {
+    let (step, offset) = match layout {
+        GridLayout::Border if res > 1 => (1.0 / (res - 1) as f64, 0.0),
+        _ => (1.0 / res as f64, 0.5),
+    };
+    (0..res)
+        .map(|k| -0.5 + (k as f64 + offset) * step)
+        .collect()
+}
+
+/// The full homography's `dw/dp` at the identity at `(u, v)`: `(dw_x/dp, dw_y/dp)`.
+fn unit_dwdp(u: f64, v: f64) -> ([f64; 8], [f64; 8]) {
+    (
+        [u, v, 1.0, 0.0, 0.0, 0.0, -u * u, -u * v],
+        [0.0, 0.0, 0.0, u, v, 1.0, -u * v, -v * v],
+    )
+}
+
+/// The Jacobian of the homography `g` at `(u, v)`: `[[dX/du, dX/dv], [dY/du, dY/dv]]`.
+pub fn homography_jacobian(g: &Matrix3<f64>, u: f64, v: f64) -> [[f64; 2]; 2] {
+    let w = g[(2, 0)] * u + g[(2, 1)] * v + g[(2, 2)];
+    let x = (g[(0, 0)] * u + g[(0, 1)] * v + g[(0, 2)]) / w;
+    let y = (g[(1, 0)] * u + g[(1, 1)] * v + g[(1, 2)]) / w;
+    [
+        [
+            (g[(0, 0)] - x * g[(2, 0)]) / w,
+            (g[(0, 1)] - x * g[(2, 1)]) / w,
+        ],
+        [
+            (g[(1, 0)] - y * g[(2, 0)]) / w,
+            (g[(1, 1)] - y * g[(2, 1)]) / w,
+        ],
+    ]
+}
+
+/// `L` with `D(G(u)) = dG(u) D_u(u) L` on the grid (least squares, checked), row-major
+/// `8 x dof` with stride [`MAX_DOF`].
+fn fit_l(
+    g: &Matrix3<f64>,
+    coords: &[f64],
+    dwdp0: &[f32],
+    dof: usize,
+) -> Option<[f64; 8 * MAX_DOF]> {
+    let res = coords.len();
+    let n = res * res;
+    // The rows of E = dG D_u (two per point) and of D, for the normal equations.
+    let mut ete = SMatrix::<f64, 8, 8>::zeros();
+    let mut etd = SMatrix::<f64, 8, MAX_DOF>::zeros();
+    let rows = |i: usize| -> ([[f64; 8]; 2], [[f64; MAX_DOF]; 2]) {
+        let (u, v) = (coords[i % res], coords[i / res]);
+        let j = homography_jacobian(g, u, v);
+        let (dx, dy) = unit_dwdp(u, v);
+        let e = [
+            std::array::from_fn(|k| j[0][0] * dx[k] + j[0][1] * dy[k]),
+            std::array::from_fn(|k| j[1][0] * dx[k] + j[1][1] * dy[k]),
+        ];
+        let d = [
+            std::array::from_fn(|k| {
+                if k < dof {
+                    dwdp0[2 * k * n + i] as f64
+                } else {
+                    0.0
+                }
+            }),
+            std::array::from_fn(|k| {
+                if k < dof {
+                    dwdp0[(2 * k + 1) * n + i] as f64
+                } else {
+                    0.0
+                }
+            }),
+        ];
+        (e, d)
+    };
+    // The normal equations from about 256 of the points (the fit is exact); the check below
+    // takes them all.
+    let mut largest = 0.0f64;
+    for i in (0..n).step_by((n / 256).max(1)) {
+        let (e, d) = rows(i);
+        for t in 0..2 {
+            for p in 0..8 {
+                for q in 0..8 {
+                    ete[(p, q)] += e[t][p] * e[t][q];
+                }
+                for m in 0..dof {
+                    etd[(p, m)] += e[t][p] * d[t][m];
+                }
+            }
+            largest = d[t].iter().fold(largest, |acc, v| acc.max(v.abs()));
+        }
+    }
+    let l = ete.cholesky()?.solve(&etd);
+    if !l.iter().all(|v| v.is_finite()) || largest == 0.0 {
+        return None;
+    }
+
+    // The fit must be exact (to rounding) at every point: the SSM is a family of homographies.
+    for i in 0..n {
+        let (e, d) = rows(i);
+        for t in 0..2 {
+            for m in 0..dof {
+                let fitted: f64 = (0..8).map(|k| e[t][k] * l[(k, m)]).sum();
+                if (fitted - d[t][m]).abs() > FIT_TOLERANCE * largest {
+                    return None;
+                }
+            }
+        }
+    }
+    let mut out = [0.0; 8 * MAX_DOF];
+    for k in 0..8 {
+        for m in 0..dof {
+            out[k * MAX_DOF + m] = l[(k, m)];
+        }
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::am::{self, HessianKind, jt_times, minus_jtj};
+    use crate::geometry::{Point, Quad};
+    use crate::registration::Context;
+    use crate::rng::Rng;
+    use crate::ssm;
+
+    fn skewed() -> Quad {
+        Quad([
+            Point::new(100.0, 80.0),
+            Point::new(190.0, 95.0),
+            Point::new(175.0, 170.0),
+            Point::new(92.0, 150.0),
+        ])
+    }
+
+    /// `h2`, `g2` against `h1`, `g1` (row-major `dof x dof`), each entry within `2e-6` of its own
+    /// scale: `sqrt(|H_ii H_jj|)` for `H_ij` (the bound of Cauchy-Schwarz), `sqrt(|H_ii|) |r|`
+    /// for `g_i`.
+    fn close(h: (&[f64], &[f64]), g: (&[f64], &[f64]), dof: usize, r: &[f32], what: &str) {
+        let d = |i: usize| h.0[i * dof + i].abs();
+        let rn = r
+            .iter()
+            .map(|&v| (v as f64) * (v as f64))
+            .sum::<f64>()
+            .sqrt();
+        for i in 0..dof {
+            for j in 0..dof {
+                let (x, y) = (h.0[i * dof + j], h.1[i * dof + j]);
+                let scale = (d(i) * d(j)).sqrt();
+                assert!(
+                    (x - y).abs() <= 2e-6 * scale,
+                    "{what}: H[{i}][{j}] {x} by the Jacobian, {y} by the moments"
+                );
+            }
+            let (x, y) = (g.0[i], g.1[i]);
+            assert!(
+                (x - y).abs() <= 2e-6 * d(i).sqrt() * rn,
+                "{what}: g[{i}] {x} by the Jacobian, {y} by the moments"
+            );
+        }
+    }
+
+    /// The moments' Newton system is the one of the warped gradient through `dw/dp`: every SSM
+    /// of six or more parameters, both grid layouts, sizes of one column block, of a last block
+    /// that overlaps the one before, and the default 50, a skewed quad, a warp
+    /// away from the identity, random pixel gradients and residuals, alone and in their mean
+    /// with the template's gradient (ESM's).
+    #[test]
+    fn the_moments_give_the_jacobians_newton_system() {
+        let mut rng = Rng::new(11);
+        let mut checked = 0;
+        for entry in ssm::REGISTRY {
+            let dof = ssm::build(entry.name).unwrap().dof();
+            for layout in [GridLayout::Centres, GridLayout::Border] {
+                for res in [8, 13, 50] {
+                    let model = ssm::build(entry.name).unwrap();
+                    let mut ctx =
+                        Context::new(model, am::build("ssd").unwrap(), HessianKind::Default, res);
+                    ctx.set_region(&skewed(), res, layout).unwrap();
+                    if dof < 6 {
+                        assert!(ctx.moments.is_none(), "{}: {dof} parameters", entry.name);
+                        continue;
+                    }
+                    assert!(ctx.moments_step(), "{} has no moments", entry.name);
+                    let n = res * res;
+                    let mut dp = [0.0; MAX_DOF];
+                    for v in dp.iter_mut().take(dof) {
+                        *v = 0.03 * rng.normal();
+                    }
+                    let p = ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap();
+                    ctx.warp_grid(&p);
+                    let mut draw = |scale: f64| -> Vec<f32> {
+                        (0..n).map(|_| (scale * rng.normal()) as f32).collect()
+                    };
+                    let (gx, gy, r) = (draw(20.0), draw(20.0), draw(10.0));
+                    // The template's gradient in both coordinates: the same field.
+                    let (tx, ty) = (draw(0.3), draw(0.3));
+                    ctx.template_gx.copy_from_slice(&tx);
+                    ctx.template_gy.copy_from_slice(&ty);
+                    for i in 0..n {
+                        let j = homography_jacobian(
+                            &ctx.unit,
+                            ctx.grid_u[i] as f64,
+                            ctx.grid_v[i] as f64,
+                        );
+                        let (a, b) = (tx[i] as f64, ty[i] as f64);
+                        ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
+                        ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
+                    }
+                    for mean in [false, true] {
+                        ctx.work.gx.copy_from_slice(&gx);
+                        ctx.work.gy.copy_from_slice(&gy);
+                        ctx.work.grad.copy_from_slice(&r);
+                        if mean {
+                            ctx.warped_gradient_mean(&p);
+                        } else {
+                            ctx.warped_gradient(&p);
+                        }
+                        ctx.project_gradients(None);
+                        let (mut h1, mut g1) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
+                        minus_jtj(&ctx.work.jac, dof, &mut h1);
+                        jt_times(&ctx.work.jac, &r, dof, &mut g1);
+
+                        ctx.work.gx.copy_from_slice(&gx);
+                        ctx.work.gy.copy_from_slice(&gy);
+                        if mean {
+                            ctx.unit_gradient_mean(&p);
+                        } else {
+                            ctx.unit_gradient(&p);
+                        }
+                        let (mut h2, mut g2) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
+                        let (a, b) = (ctx.work.gx.clone(), ctx.work.gy.clone());
+                        ctx.moments
+                            .as_mut()
+                            .unwrap()
+                            .minus_jtj_and_jtr(&a, &b, &r, &mut h2, &mut g2);
+                        let what = format!("{} {layout:?} {res}x{res} mean {mean}", entry.name);
+                        close((&h1, &h2), (&g1, &g2), dof, &r, &what);
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked >= 4 * 2 * 3 * 2, "{checked} systems checked");
+    }
+
+    /// The vector kernel of the column sums is the plain one, bit for bit, masked lanes included.
+    #[test]
+    fn the_column_kernel_is_the_plain_one() {
+        let mut rng = Rng::new(3);
+        let res = 13;
+        let n = res * res;
+        let mut draw = || -> Vec<f32> { (0..n).map(|_| (10.0 * rng.normal()) as f32).collect() };
+        let (a, b, r) = (draw(), draw(), draw());
+        let vpow: Vec<[f32; POWERS]> = unit_coordinates(res, GridLayout::Centres)
+            .iter()
+            .map(|&v| std::array::from_fn(|j| (v as f32).powi(j as i32)))
+            .collect();
+        for (c0, skip) in [(0, 0), (5, 3), (5, 0)] {
+            let fast = column_block(&a, &b, &r, res, c0, skip, &vpow);
+            let plain = column_block_portable(&a, &b, &r, res, c0, skip, &vpow);
+            for (f, p) in fast.iter().zip(&plain) {
+                for (x, y) in f.iter().zip(p) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "block at {c0}, {skip} skipped");
+                }
+            }
+            assert!(fast.iter().all(|l| l[..skip].iter().all(|&v| v == 0.0)));
+        }
+    }
+
+    /// Only the models whose Hessian is `-J^T J` take the moments, on grids of eight columns or
+    /// more, and a `dw/dp` that is not a family of homographies is refused (the fit is checked,
+    /// not trusted).
+    #[test]
+    fn the_moments_are_refused_where_they_do_not_hold() {
+        let mut small = Context::new(
+            ssm::build("homography").unwrap(),
+            am::build("ssd").unwrap(),
+            HessianKind::Default,
+            7,
+        );
+        small.set_region(&skewed(), 7, GridLayout::Centres).unwrap();
+        assert!(small.moments.is_none());
+        let res = 9;
+        let mut ctx = Context::new(
+            ssm::build("homography").unwrap(),
+            am::build("zncc").unwrap(),
+            HessianKind::Default,
+            res,
+        );
+        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
+        assert!(ctx.moments.is_none() && !ctx.moments_step());
+        let mut ctx = Context::new(
+            ssm::build("homography").unwrap(),
+            am::build("ssd").unwrap(),
+            HessianKind::Default,
+            res,
+        );
+        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
+        let fits = |dwdp: &[f32]| GridMoments::new(&ctx.unit, res, GridLayout::Centres, dwdp, 8);
+        assert!(fits(&ctx.dwdp0).is_some());
+        // dw_x/dp_0 = x^2 y: no homography moves points so.
+        let n = res * res;
+        let mut bent = ctx.dwdp0.clone();
+        for i in 0..n {
+            let (x, y) = (ctx.grid_x[i], ctx.grid_y[i]);
+            bent[i] = x * x * y;
+        }
+        assert!(fits(&bent).is_none());
+    }
+}

@@ -161,6 +161,19 @@ fn bench(c: &mut Criterion) {
     g.bench_function("J^T g", |b| {
         b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.work.grad, 8, &mut jg))
     });
+    // What the forward SSD methods run instead of the projection, `J^T J` and `J^T g`: the
+    // Newton system from the gradient's moments on the grid.
+    {
+        let (ga, gb, grad) = (
+            ctx.work.gx.clone(),
+            ctx.work.gy.clone(),
+            ctx.work.grad.clone(),
+        );
+        let moments = ctx.moments.as_mut().expect("SSD on the homography has the moments");
+        g.bench_function("J^T J and J^T g from the moments", |b| {
+            b.iter(|| moments.minus_jtj_and_jtr(black_box(&ga), &gb, &grad, &mut h, &mut jg))
+        });
+    }
     // The loss checks' confidence (4 x 4 blocks of the 50 x 50 patch), twice a frame at least.
     let (t0, t1): (Vec<f32>, Vec<f32>) = (
         smoothed.data[..2500].to_vec(),

@@ -439,31 +439,55 @@ mod avx2 {
     use super::ImageView;
     use std::arch::x86_64::*;
 
-    /// Two pixels at `a` and two at `b`: `[a[0], a[1], b[0], b[1]]`.
+    /// Two neighbouring pixels of four points, one point per 64-bit lane: `[a, b, c, d]`. Each
+    /// pair is a broadcast load (no shuffle on most CPUs) and the lanes are blended in.
     ///
     /// # Safety
-    /// `a` and `b` must each point to two readable `f32`.
+    /// `a`, `b`, `c` and `d` must each point to two readable `f32`.
     #[inline(always)]
-    unsafe fn pairs(a: *const f32, b: *const f32) -> __m128 {
-        // SAFETY: the caller's contract; unaligned 8-byte loads.
+    unsafe fn pairs4(a: *const f32, b: *const f32, c: *const f32, d: *const f32) -> __m256d {
+        // SAFETY: the caller's contract; unaligned 8-byte reads.
         unsafe {
-            let lo = _mm_load_sd(a as *const f64);
-            _mm_castpd_ps(_mm_loadh_pd(lo, b as *const f64))
+            let bc = |p: *const f32| _mm256_set1_pd(std::ptr::read_unaligned(p as *const f64));
+            _mm256_blend_pd::<0b1100>(
+                _mm256_blend_pd::<0b0010>(bc(a), bc(b)),
+                _mm256_blend_pd::<0b1000>(bc(c), bc(d)),
+            )
         }
     }
 
-    /// Eight points' four values each (`q[k]`: point `k`) as four vectors of eight points (one
-    /// per value).
+    /// The pairs `(p[0], p[1])` of eight points `p` as two vectors of eight points: the first
+    /// pixels and the second ones.
+    ///
+    /// # Safety
+    /// Each `p[k]` must point to two readable `f32`.
     #[inline(always)]
-    fn transpose8x4(q: [__m128; 8]) -> [__m256; 4] {
-        // SAFETY: AVX is enabled at compile time (the module's cfg); no memory is touched.
+    unsafe fn pairs8(p: [*const f32; 8]) -> (__m256, __m256) {
+        // SAFETY: the caller's contract.
         unsafe {
-            let r0 = _mm256_set_m128(q[4], q[0]);
-            let r1 = _mm256_set_m128(q[5], q[1]);
-            let r2 = _mm256_set_m128(q[6], q[2]);
-            let r3 = _mm256_set_m128(q[7], q[3]);
-            let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
-            let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+            // [a0 b0 a1 b1 | a4 b4 a5 b5] and [a2 b2 a3 b3 | a6 b6 a7 b7].
+            let x = _mm256_castpd_ps(pairs4(p[0], p[1], p[4], p[5]));
+            let y = _mm256_castpd_ps(pairs4(p[2], p[3], p[6], p[7]));
+            (
+                _mm256_shuffle_ps::<0b10_00_10_00>(x, y),
+                _mm256_shuffle_ps::<0b11_01_11_01>(x, y),
+            )
+        }
+    }
+
+    /// Four neighbouring pixels of eight points `p` as four vectors of eight points (one per
+    /// pixel): points `k` and `k + 4` share a 256-bit load, then an in-lane transpose.
+    ///
+    /// # Safety
+    /// Each `p[k]` must point to four readable `f32`.
+    #[inline(always)]
+    unsafe fn quads8(p: [*const f32; 8]) -> [__m256; 4] {
+        // SAFETY: the caller's contract; unaligned 16-byte loads.
+        unsafe {
+            let q = |k: usize| _mm256_loadu2_m128(p[k + 4], p[k]);
+            let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
+            let (t0, t1) = (_mm256_unpacklo_ps(q0, q1), _mm256_unpackhi_ps(q0, q1));
+            let (t2, t3) = (_mm256_unpacklo_ps(q2, q3), _mm256_unpackhi_ps(q2, q3));
             let pd = _mm256_castps_pd;
             [
                 _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2))),
@@ -501,7 +525,12 @@ mod avx2 {
                 _mm256_set1_ps((h - 2) as f32),
             );
             let vw = _mm256_set1_epi32(w as i32);
+            let wf = _mm256_set1_ps(w as f32);
+            // The index as `fy w + fx` in f32 is exact below 2^24.
+            let exact = w * h <= 1 << 24;
             let base = img.data.as_ptr();
+            // The row below (`w` is at least 2 and `data` holds `w h` pixels).
+            let below = base.add(w);
             // A run of points at a time: their indices and fractions in one pass (vector
             // arithmetic), then their pixels in a second, each index a plain scalar load (an
             // index taken from a vector register costs more than its load).
@@ -540,10 +569,14 @@ mod avx2 {
                     let fy = _mm256_min_ps(_mm256_floor_ps(y), hm2);
                     _mm256_storeu_ps(fx_run.as_mut_ptr().add(k), _mm256_sub_ps(x, fx));
                     _mm256_storeu_ps(fy_run.as_mut_ptr().add(k), _mm256_sub_ps(y, fy));
-                    let idx = _mm256_add_epi32(
-                        _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), vw),
-                        _mm256_cvttps_epi32(fx),
-                    );
+                    let idx = if exact {
+                        _mm256_cvttps_epi32(_mm256_fmadd_ps(fy, wf, fx))
+                    } else {
+                        _mm256_add_epi32(
+                            _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), vw),
+                            _mm256_cvttps_epi32(fx),
+                        )
+                    };
                     _mm256_storeu_si256(at.as_mut_ptr().add(k) as *mut __m256i, idx);
                     k += 8;
                 }
@@ -551,11 +584,9 @@ mod avx2 {
                 while k < len {
                     // Each point's two pixel pairs, (p00, p10) and (p01, p11), are two 8-byte
                     // loads (cheaper than four gathers, which microcode mitigations make
-                    // slow), transposed into one vector per corner.
-                    let [p00, p10, p01, p11] = transpose8x4(std::array::from_fn(|l| {
-                        let p = base.add(at[k + l] as usize);
-                        pairs(p, p.add(w))
-                    }));
+                    // slow), blended and shuffled into one vector per corner.
+                    let (p00, p10) = pairs8(std::array::from_fn(|l| base.add(at[k + l] as usize)));
+                    let (p01, p11) = pairs8(std::array::from_fn(|l| below.add(at[k + l] as usize)));
                     let ax = _mm256_loadu_ps(fx_run.as_ptr().add(k));
                     let ay = _mm256_loadu_ps(fy_run.as_ptr().add(k));
                     let top = _mm256_fmadd_ps(ax, _mm256_sub_ps(p10, p00), p00);
@@ -608,7 +639,17 @@ mod avx2 {
                 _mm256_set1_ps(h as f32 - 2.0),
             );
             let vw = _mm256_set1_epi32(w as i32);
+            let wf = _mm256_set1_ps(w as f32);
+            // As in `values`; indices of points outside may be negative, and are not read.
+            let exact = w * h <= 1 << 24;
             let base = img.data.as_ptr();
+            // Where the neighbourhood's rows are read, from its corner (inside `data`: h >= 4).
+            let (row0, row1, row2, row3) = (
+                base.add(1),
+                base.add(w),
+                base.add(2 * w),
+                base.add(3 * w + 1),
+            );
             // A run of points at a time: their indices, fractions and whether each group of
             // eight is inside in one pass, their pixels in a second (as in `values`).
             const RUN: usize = 64;
@@ -642,10 +683,15 @@ mod avx2 {
                     _mm256_storeu_ps(ay_run.as_mut_ptr().add(k), _mm256_sub_ps(y, fy));
                     // Indices of points outside are not read (their group takes the general
                     // path).
-                    let idx = _mm256_add_epi32(
-                        _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_sub_ps(fy, one)), vw),
-                        _mm256_cvttps_epi32(_mm256_sub_ps(fx, one)),
-                    );
+                    let (fy1, fx1) = (_mm256_sub_ps(fy, one), _mm256_sub_ps(fx, one));
+                    let idx = if exact {
+                        _mm256_cvttps_epi32(_mm256_fmadd_ps(fy1, wf, fx1))
+                    } else {
+                        _mm256_add_epi32(
+                            _mm256_mullo_epi32(_mm256_cvttps_epi32(fy1), vw),
+                            _mm256_cvttps_epi32(fx1),
+                        )
+                    };
                     _mm256_storeu_si256(at.as_mut_ptr().add(k) as *mut __m256i, idx);
                     k += 8;
                 }
@@ -663,15 +709,17 @@ mod avx2 {
                         _mm256_loadu_ps(ax_run.as_ptr().add(k)),
                         _mm256_loadu_ps(ay_run.as_ptr().add(k)),
                     );
-                    let p = |l: usize| base.add(at[k + l] as usize);
+                    let at = |row: *const f32| -> [*const f32; 8] {
+                        std::array::from_fn(|l| row.add(at[k + l] as usize))
+                    };
                     // Rows 1 and 2 of each point's 4x4 neighbourhood, columns 0 to 3, and rows 0
                     // and 3, columns 1 and 2: loads of neighbouring pixels, transposed into one
                     // vector per pixel of the cross.
-                    let r1 = transpose8x4(std::array::from_fn(|k| _mm_loadu_ps(p(k).add(w))));
-                    let r2 = transpose8x4(std::array::from_fn(|k| _mm_loadu_ps(p(k).add(2 * w))));
-                    let r03 = transpose8x4(std::array::from_fn(|k| {
-                        pairs(p(k).add(1), p(k).add(3 * w + 1))
-                    }));
+                    let r1 = quads8(at(row1));
+                    let r2 = quads8(at(row2));
+                    let (r00, r01) = pairs8(at(row0));
+                    let (r30, r31) = pairs8(at(row3));
+                    let r03 = [r00, r01, r30, r31];
                     let lerp = |a: __m256, b: __m256, t: __m256| {
                         _mm256_fmadd_ps(t, _mm256_sub_ps(b, a), a)
                     };

@@ -136,6 +136,56 @@ impl GridMoments {
         }
     }
 
+    /// `g = J^T r` alone, for the gradient `(a, b)` with respect to the unit square's
+    /// coordinates and the AM's gradient `r`: ICLK's right-hand side, whose Jacobian is the
+    /// template's (its Hessian is kept). Six multiply-adds per sample, and neither `J` (eight
+    /// values a sample) nor the AM's kind matter.
+    pub fn jtr(&mut self, a: &[f32], b: &[f32], r: &[f32], g: &mut [f64; MAX_DOF]) {
+        let res = self.res;
+        let n = res * res;
+        let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
+        let padded = self.upow[0].len();
+        for block in 0..res.div_ceil(8) {
+            let c0 = (8 * block).min(res - 8);
+            let skip = 8 * block - c0;
+            let sums = column_block_r(a, b, r, res, c0, skip, &self.vpow);
+            for (s, lanes) in sums.iter().enumerate() {
+                self.sums[(3 * POWERS + s) * padded + 8 * block..][..8].copy_from_slice(lanes);
+            }
+        }
+        let mut mom = [[0.0f64; POWERS]; SUMS];
+        self.across(3 * POWERS..SUMS, &mut mom);
+        let gu = unit_gradient_sums(&mom);
+        for (i, o) in g.iter_mut().enumerate().take(self.dof) {
+            *o = (0..8).map(|k| self.l[k * MAX_DOF + i] * gu[k]).sum();
+        }
+    }
+
+    /// Across the columns: `mom[s][i] = sum_c u_c^i S[s][c]` for the column sums' rows `rows`
+    /// (weight and power of v) and the powers of u that the system needs (total degree four,
+    /// two for `r a`, `r b`), each once, eight columns in lanes.
+    fn across(&self, rows: std::ops::Range<usize>, mom: &mut [[f64; POWERS]; SUMS]) {
+        let padded = self.upow[0].len();
+        for s in rows {
+            let (weight, j) = if s < 3 * POWERS {
+                (s / POWERS, s % POWERS)
+            } else {
+                (3, (s - 3 * POWERS) % 3)
+            };
+            let degree = if weight < 3 { 4 } else { 2 };
+            let sums = &self.sums[s * padded..][..padded];
+            for (i, o) in mom[s].iter_mut().enumerate().take(degree + 1 - j) {
+                let mut lanes: Lanes = [0.0; 8];
+                for (cs, cu) in sums.chunks_exact(8).zip(self.upow[i].chunks_exact(8)) {
+                    for k in 0..8 {
+                        lanes[k] = cs[k].mul_add(cu[k], lanes[k]);
+                    }
+                }
+                *o = lanes.iter().map(|&v| v as f64).sum();
+            }
+        }
+    }
+
     /// `J_u^T J_u` and `J_u^T r` of the full homography in the unit square's coordinates.
     fn unit_system(&mut self, a: &[f32], b: &[f32], r: &[f32]) -> ([[f64; 8]; 8], [f64; 8]) {
         let res = self.res;
@@ -153,35 +203,13 @@ impl GridMoments {
                 self.sums[s * padded + 8 * block..][..8].copy_from_slice(lanes);
             }
         }
-        // Across the columns: M[s][i] = sum_c u_c^i S[s][c] for the sums' row s (weight and power
-        // of v) and the powers of u that the system needs (total degree four, two for r a, r b),
-        // each once, eight columns in lanes.
         let mut mom = [[0.0f64; POWERS]; SUMS];
-        for (s, ms) in mom.iter_mut().enumerate() {
-            let (weight, j) = if s < 3 * POWERS {
-                (s / POWERS, s % POWERS)
-            } else {
-                (3, (s - 3 * POWERS) % 3)
-            };
-            let degree = if weight < 3 { 4 } else { 2 };
-            let sums = &self.sums[s * padded..][..padded];
-            for (i, o) in ms.iter_mut().enumerate().take(degree + 1 - j) {
-                let mut lanes: Lanes = [0.0; 8];
-                for (cs, cu) in sums.chunks_exact(8).zip(self.upow[i].chunks_exact(8)) {
-                    for k in 0..8 {
-                        lanes[k] = cs[k].mul_add(cu[k], lanes[k]);
-                    }
-                }
-                *o = lanes.iter().map(|&v| v as f64).sum();
-            }
-        }
+        self.across(0..SUMS, &mut mom);
         // The sums' rows: weight w (0: a^2, 1: a b, 2: b^2) at power j is row w * 5 + j; r a at
         // power j is row 15 + j, r b row 18 + j.
         let ma = |i: usize, j: usize| mom[j][i];
         let mb = |i: usize, j: usize| mom[POWERS + j][i];
         let mc = |i: usize, j: usize| mom[2 * POWERS + j][i];
-        let ra = |i: usize, j: usize| mom[3 * POWERS + j][i];
-        let rb = |i: usize, j: usize| mom[3 * POWERS + 3 + j][i];
         // J_u = (a u, a v, a, b u, b v, b, -u s, -v s), s = a u + b v.
         let mut h = [[0.0f64; 8]; 8];
         let mut set = |i: usize, j: usize, v: f64| {
@@ -224,18 +252,26 @@ impl GridMoments {
         set(6, 6, ma(4, 0) + 2.0 * mb(3, 1) + mc(2, 2));
         set(6, 7, ma(3, 1) + 2.0 * mb(2, 2) + mc(1, 3));
         set(7, 7, ma(2, 2) + 2.0 * mb(1, 3) + mc(0, 4));
-        let g = [
-            ra(1, 0),
-            ra(0, 1),
-            ra(0, 0),
-            rb(1, 0),
-            rb(0, 1),
-            rb(0, 0),
-            -(ra(2, 0) + rb(1, 1)),
-            -(ra(1, 1) + rb(0, 2)),
-        ];
+        let g = unit_gradient_sums(&mom);
         (h, g)
     }
+}
+
+/// `J_u^T r` from the moments of `r a` and `r b` (rows `15..21` of `mom`, see
+/// [`GridMoments::unit_system`]): `J_u = (a u, a v, a, b u, b v, b, -u s, -v s)`, `s = a u + b v`.
+fn unit_gradient_sums(mom: &[[f64; POWERS]; SUMS]) -> [f64; 8] {
+    let ra = |i: usize, j: usize| mom[3 * POWERS + j][i];
+    let rb = |i: usize, j: usize| mom[3 * POWERS + 3 + j][i];
+    [
+        ra(1, 0),
+        ra(0, 1),
+        ra(0, 0),
+        rb(1, 0),
+        rb(0, 1),
+        rb(0, 0),
+        -(ra(2, 0) + rb(1, 1)),
+        -(ra(1, 1) + rb(0, 2)),
+    ]
 }
 
 /// The column sums of the eight columns from `c0` down every row of a `res`-wide grid (`c0 + 8
@@ -269,6 +305,70 @@ fn column_block(
     {
         column_block_portable(a, b, r, res, c0, skip, vpow)
     }
+}
+
+/// The six sums of [`column_block`] that `J^T r` needs (its rows `15..21`: `r a v^j`, `r b v^j`,
+/// `j = 0..=2`).
+fn column_block_r(
+    a: &[f32],
+    b: &[f32],
+    r: &[f32],
+    res: usize,
+    c0: usize,
+    skip: usize,
+    vpow: &[[f32; POWERS]],
+) -> [Lanes; 6] {
+    let rows = vpow.len();
+    let end = (rows.max(1) - 1) * res + c0 + 8;
+    assert!(c0 + 8 <= res && end <= a.len() && end <= b.len() && end <= r.len() && skip < 8);
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    {
+        simd::column_block_r(a, b, r, res, c0, skip, vpow)
+    }
+    #[cfg(not(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )))]
+    {
+        column_block_r_portable(a, b, r, res, c0, skip, vpow)
+    }
+}
+
+/// [`column_block_r`] without vector instructions (the same bits).
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn column_block_r_portable(
+    a: &[f32],
+    b: &[f32],
+    r: &[f32],
+    res: usize,
+    c0: usize,
+    skip: usize,
+    vpow: &[[f32; POWERS]],
+) -> [Lanes; 6] {
+    let mut acc = [[0f32; 8]; 6];
+    for (row, vp) in vpow.iter().enumerate() {
+        for k in skip..8 {
+            let i = row * res + c0 + k;
+            let (ra, rb) = (r[i] * a[i], r[i] * b[i]);
+            for j in 0..3 {
+                acc[j][k] = ra.mul_add(vp[j], acc[j][k]);
+                acc[3 + j][k] = rb.mul_add(vp[j], acc[3 + j][k]);
+            }
+        }
+    }
+    acc
 }
 
 /// [`column_block`] without vector instructions: the same products and sums, lane by lane, in
@@ -377,6 +477,44 @@ mod simd {
             }
             let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
             for (o, v) in out.iter_mut().zip(all) {
+                _mm256_storeu_ps(o.as_mut_ptr(), *v);
+            }
+        }
+        out
+    }
+
+    /// [`super::column_block_r`] in AVX registers.
+    pub(super) fn column_block_r(
+        a: &[f32],
+        b: &[f32],
+        r: &[f32],
+        res: usize,
+        c0: usize,
+        skip: usize,
+        vpow: &[[f32; POWERS]],
+    ) -> [Lanes; 6] {
+        let mut out = [[0f32; 8]; 6];
+        // SAFETY: as in `column_block`.
+        unsafe {
+            let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let keep =
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(lane, _mm256_set1_epi32(skip as i32 - 1)));
+            let load = |x: &[f32], row: usize| _mm256_loadu_ps(x.as_ptr().add(row * res + c0));
+            let z = _mm256_setzero_ps();
+            let (mut sra, mut srb) = ([z; 3], [z; 3]);
+            for (row, vp) in vpow.iter().enumerate() {
+                let lr = _mm256_and_ps(load(r, row), keep);
+                let (ra, rb) = (
+                    _mm256_mul_ps(lr, load(a, row)),
+                    _mm256_mul_ps(lr, load(b, row)),
+                );
+                for j in 0..3 {
+                    let v = _mm256_set1_ps(vp[j]);
+                    sra[j] = _mm256_fmadd_ps(ra, v, sra[j]);
+                    srb[j] = _mm256_fmadd_ps(rb, v, srb[j]);
+                }
+            }
+            for (o, v) in out.iter_mut().zip(sra.iter().chain(&srb)) {
                 _mm256_storeu_ps(o.as_mut_ptr(), *v);
             }
         }
@@ -552,7 +690,7 @@ mod tests {
     /// of six or more parameters, both grid layouts, sizes of one column block, of a last block
     /// that overlaps the one before, and the default 50, a skewed quad, a warp
     /// away from the identity, random pixel gradients and residuals, alone and in their mean
-    /// with the template's gradient (ESM's).
+    /// with the template's gradient (ESM's); and ICLK's `J^T r` through the template's Jacobian.
     #[test]
     fn the_moments_give_the_jacobians_newton_system() {
         let mut rng = Rng::new(11);
@@ -595,6 +733,17 @@ mod tests {
                         ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
                         ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
                     }
+                    // ICLK's right-hand side: the template's Jacobian at the identity.
+                    let mut jt = vec![0.0; n * dof];
+                    Context::project(&tx, &ty, &ctx.dwdp0, dof, &mut jt);
+                    let (mut g1, mut g2) = ([0.0; MAX_DOF], [0.0; MAX_DOF]);
+                    jt_times(&jt, &r, dof, &mut g1);
+                    let (ta, tb) = (ctx.template_gu.clone(), ctx.template_gv.clone());
+                    ctx.moments.as_mut().unwrap().jtr(&ta, &tb, &r, &mut g2);
+                    let mut h1 = [0.0; MAX_DOF * MAX_DOF];
+                    minus_jtj(&jt, dof, &mut h1);
+                    let what = format!("{} {layout:?} {res}x{res} template", entry.name);
+                    close((&h1, &h1), (&g1, &g2), dof, &r, &what);
                     for mean in [false, true] {
                         ctx.work.gx.copy_from_slice(&gx);
                         ctx.work.gy.copy_from_slice(&gy);
@@ -652,6 +801,17 @@ mod tests {
                     assert_eq!(x.to_bits(), y.to_bits(), "block at {c0}, {skip} skipped");
                 }
             }
+            assert!(fast.iter().all(|l| l[..skip].iter().all(|&v| v == 0.0)));
+            let fast = column_block_r(&a, &b, &r, res, c0, skip, &vpow);
+            let plain = column_block_r_portable(&a, &b, &r, res, c0, skip, &vpow);
+            for (f, p) in fast.iter().zip(&plain) {
+                for (x, y) in f.iter().zip(p) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "r block at {c0}, {skip} skipped");
+                }
+            }
+            // The gradient's sums are the full kernel's (its rows 15..21).
+            let full = column_block(&a, &b, &r, res, c0, skip, &vpow);
+            assert_eq!(fast[..], full[3 * POWERS..]);
             assert!(fast.iter().all(|l| l[..skip].iter().all(|&v| v == 0.0)));
         }
     }

@@ -11,7 +11,7 @@
 //! from far starts (docs/speed.md, "Eighth pass"), so it is not used.
 
 use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
-use crate::am::{HessianKind, Wrt};
+use crate::am::{HessianKind, Wrt, jt_times};
 use crate::imaging::ImageView;
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
@@ -111,7 +111,14 @@ impl SearchMethod for Iclk {
                 &mut self.hessian,
             );
         }
-        ctx.step(&self.jac, &self.hessian, Update::ComposeInverse)?;
+        // J^T g: from the moments of the gradient times the template's gradient on the grid
+        // where the region has them (six or more parameters, SSD), else through the Jacobian.
+        let mut g = [0.0; MAX_DOF];
+        match ctx.moments.as_mut() {
+            Some(m) => m.jtr(&ctx.template_gu, &ctx.template_gv, &ctx.work.grad, &mut g),
+            None => jt_times(&self.jac, &ctx.work.grad, ctx.dof, &mut g),
+        }
+        ctx.solve_step(&g, &self.hessian, Update::ComposeInverse)?;
         Ok(Step::auto(f))
     }
 }

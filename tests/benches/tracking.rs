@@ -169,7 +169,10 @@ fn bench(c: &mut Criterion) {
             ctx.work.gy.clone(),
             ctx.work.grad.clone(),
         );
-        let moments = ctx.moments.as_mut().expect("SSD on the homography has the moments");
+        let moments = ctx
+            .moments
+            .as_mut()
+            .expect("SSD on the homography has the moments");
         g.bench_function("J^T J and J^T g from the moments", |b| {
             b.iter(|| moments.minus_jtj_and_jtr(black_box(&ga), &gb, &grad, &mut h, &mut jg))
         });

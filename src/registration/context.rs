@@ -378,37 +378,30 @@ impl Context {
     /// Like [`Context::warped_gradient`], with respect to the unit square's coordinates
     /// (`grid_u`, `grid_v`) instead of the normalised ones.
     pub fn unit_gradient(&mut self, p: &Params) {
-        let m = self.unit_matrix(p);
-        let n = self.grid_u.len();
-        let (mut gx, mut gy) = (
-            std::mem::take(&mut self.work.gx),
-            std::mem::take(&mut self.work.gy),
-        );
-        unit_gradient_in_place(
-            &m,
-            (&self.grid_u[..n], &self.grid_v[..n]),
-            (&self.work.px[..n], &self.work.py[..n]),
-            (&mut gx[..n], &mut gy[..n]),
-            None,
-        );
-        (self.work.gx, self.work.gy) = (gx, gy);
+        self.unit_gradient_with(p, false);
     }
 
     /// [`Context::unit_gradient`], then its mean with the template's (ESM's gradient), in one
     /// pass.
     pub fn unit_gradient_mean(&mut self, p: &Params) {
+        self.unit_gradient_with(p, true);
+    }
+
+    /// [`Context::unit_gradient`], with or without the mean.
+    fn unit_gradient_with(&mut self, p: &Params, mean: bool) {
         let m = self.unit_matrix(p);
         let n = self.grid_u.len();
         let (mut gx, mut gy) = (
             std::mem::take(&mut self.work.gx),
             std::mem::take(&mut self.work.gy),
         );
+        let template = mean.then(|| (&self.template_gu[..n], &self.template_gv[..n]));
         unit_gradient_in_place(
             &m,
             (&self.grid_u[..n], &self.grid_v[..n]),
             (&self.work.px[..n], &self.work.py[..n]),
             (&mut gx[..n], &mut gy[..n]),
-            Some((&self.template_gu[..n], &self.template_gv[..n])),
+            template,
         );
         (self.work.gx, self.work.gy) = (gx, gy);
     }

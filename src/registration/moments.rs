@@ -274,6 +274,34 @@ fn unit_gradient_sums(mom: &[[f64; POWERS]; SUMS]) -> [f64; 8] {
     ]
 }
 
+/// A column kernel's call: its bounds checked (the kernels read eight values from `row * res +
+/// c0` for every row), then the AVX version where the build has AVX2 and FMA, the plain one
+/// elsewhere.
+macro_rules! kernel {
+    ($simd:path, $plain:path, ($a:expr, $b:expr, $r:expr, $res:expr, $c0:expr, $skip:expr, $vpow:expr)) => {{
+        let end = ($vpow.len().max(1) - 1) * $res + $c0 + 8;
+        assert!(
+            $c0 + 8 <= $res && end <= $a.len() && end <= $b.len() && end <= $r.len() && $skip < 8
+        );
+        #[cfg(all(
+            target_arch = "x86_64",
+            target_feature = "avx2",
+            target_feature = "fma"
+        ))]
+        {
+            $simd($a, $b, $r, $res, $c0, $skip, $vpow)
+        }
+        #[cfg(not(all(
+            target_arch = "x86_64",
+            target_feature = "avx2",
+            target_feature = "fma"
+        )))]
+        {
+            $plain($a, $b, $r, $res, $c0, $skip, $vpow)
+        }
+    }};
+}
+
 /// The column sums of the eight columns from `c0` down every row of a `res`-wide grid (`c0 + 8
 /// <= res`), the first `skip` lanes left out: rows `0..5` `a^2 v^j`, `5..10` `a b v^j`, `10..15`
 /// `b^2 v^j`, `15..18` `r a v^j`, `18..21` `r b v^j`.
@@ -286,25 +314,11 @@ fn column_block(
     skip: usize,
     vpow: &[[f32; POWERS]],
 ) -> [Lanes; SUMS] {
-    let rows = vpow.len();
-    let end = (rows.max(1) - 1) * res + c0 + 8;
-    assert!(c0 + 8 <= res && end <= a.len() && end <= b.len() && end <= r.len() && skip < 8);
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
-    {
-        simd::column_block(a, b, r, res, c0, skip, vpow)
-    }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
-    {
-        column_block_portable(a, b, r, res, c0, skip, vpow)
-    }
+    kernel!(
+        simd::column_block,
+        column_block_portable,
+        (a, b, r, res, c0, skip, vpow)
+    )
 }
 
 /// The six sums of [`column_block`] that `J^T r` needs (its rows `15..21`: `r a v^j`, `r b v^j`,
@@ -318,25 +332,11 @@ fn column_block_r(
     skip: usize,
     vpow: &[[f32; POWERS]],
 ) -> [Lanes; 6] {
-    let rows = vpow.len();
-    let end = (rows.max(1) - 1) * res + c0 + 8;
-    assert!(c0 + 8 <= res && end <= a.len() && end <= b.len() && end <= r.len() && skip < 8);
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
-    {
-        simd::column_block_r(a, b, r, res, c0, skip, vpow)
-    }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
-    {
-        column_block_r_portable(a, b, r, res, c0, skip, vpow)
-    }
+    kernel!(
+        simd::column_block_r,
+        column_block_r_portable,
+        (a, b, r, res, c0, skip, vpow)
+    )
 }
 
 /// [`column_block_r`] without vector instructions (the same bits).

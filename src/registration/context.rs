@@ -246,31 +246,19 @@ impl Context {
         self.warped_gradient_with::<true>(p);
     }
 
+    /// [`Context::warped_gradient`], with or without the mean: the chain rule of
+    /// [`unit_gradient_in_place`] through the pixel matrix from the normalised points.
     fn warped_gradient_with<const MEAN: bool>(&mut self, p: &Params) {
         let m = self.pixel_matrix(p).cast::<f32>();
         let n = self.grid_x.len();
-        let (xs, ys) = (&self.grid_x[..n], &self.grid_y[..n]);
-        let (px, py) = (&self.work.px[..n], &self.work.py[..n]);
-        let (gxs, gys) = (&mut self.work.gx[..n], &mut self.work.gy[..n]);
-        let (tgx, tgy) = (&self.template_gx[..n], &self.template_gy[..n]);
-        for i in 0..n {
-            let (x, y) = (xs[i], ys[i]);
-            let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
-            let (u, v) = (px[i], py[i]);
-            let a00 = (m[(0, 0)] - u * m[(2, 0)]) * iw;
-            let a01 = (m[(0, 1)] - u * m[(2, 1)]) * iw;
-            let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
-            let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
-            let (gx, gy) = (gxs[i], gys[i]);
-            let (wx, wy) = (gx * a00 + gy * a10, gx * a01 + gy * a11);
-            if MEAN {
-                gxs[i] = 0.5 * (wx + tgx[i]);
-                gys[i] = 0.5 * (wy + tgy[i]);
-            } else {
-                gxs[i] = wx;
-                gys[i] = wy;
-            }
-        }
+        let template = MEAN.then(|| (&self.template_gx[..n], &self.template_gy[..n]));
+        unit_gradient_in_place(
+            &m,
+            (&self.grid_x[..n], &self.grid_y[..n]),
+            (&self.work.px[..n], &self.work.py[..n]),
+            (&mut self.work.gx[..n], &mut self.work.gy[..n]),
+            template,
+        );
     }
 
     /// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
@@ -391,19 +379,14 @@ impl Context {
     fn unit_gradient_with(&mut self, p: &Params, mean: bool) {
         let m = self.unit_matrix(p);
         let n = self.grid_u.len();
-        let (mut gx, mut gy) = (
-            std::mem::take(&mut self.work.gx),
-            std::mem::take(&mut self.work.gy),
-        );
         let template = mean.then(|| (&self.template_gu[..n], &self.template_gv[..n]));
         unit_gradient_in_place(
             &m,
             (&self.grid_u[..n], &self.grid_v[..n]),
             (&self.work.px[..n], &self.work.py[..n]),
-            (&mut gx[..n], &mut gy[..n]),
+            (&mut self.work.gx[..n], &mut self.work.gy[..n]),
             template,
         );
-        (self.work.gx, self.work.gy) = (gx, gy);
     }
 
     /// The Newton step from the gradient with respect to the unit square's coordinates (in
@@ -593,7 +576,9 @@ fn unit_gradient_into(
     unit_gradient_in_place(m, (us, vs), (px, py), (ox, oy), None);
 }
 
-/// [`unit_gradient_into`] in place, then, with `mean`, the mean with that gradient `(tx, ty)`.
+/// [`unit_gradient_into`] in place (for any points `(us, vs)` that `m` takes to the pixels
+/// `(px, py)`: the unit square's, or the normalised ones with the pixel matrix), then, with
+/// `mean`, the mean with that gradient `(tx, ty)`.
 fn unit_gradient_in_place(
     m: &Matrix3<f32>,
     (us, vs): (&[f32], &[f32]),

@@ -132,8 +132,8 @@ impl GridMoments {
                 h[i * dof + j] = -v;
                 h[j * dof + i] = -v;
             }
-            g[i] = (0..8).map(|k| l[k * MAX_DOF + i] * gu[k]).sum();
         }
+        self.l_transposed(&gu, g);
     }
 
     /// `g = J^T r` alone, for the gradient `(a, b)` with respect to the unit square's
@@ -141,21 +141,19 @@ impl GridMoments {
     /// template's (its Hessian is kept). Six multiply-adds per sample, and neither `J` (eight
     /// values a sample) nor the AM's kind matter.
     pub fn jtr(&mut self, a: &[f32], b: &[f32], r: &[f32], g: &mut [f64; MAX_DOF]) {
-        let res = self.res;
-        let n = res * res;
+        let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
-        let padded = self.upow[0].len();
-        for block in 0..res.div_ceil(8) {
-            let c0 = (8 * block).min(res - 8);
-            let skip = 8 * block - c0;
-            let sums = column_block_r(a, b, r, res, c0, skip, &self.vpow);
-            for (s, lanes) in sums.iter().enumerate() {
-                self.sums[(3 * POWERS + s) * padded + 8 * block..][..8].copy_from_slice(lanes);
-            }
-        }
+        let vpow = &self.vpow;
+        down_columns(&mut self.sums, res, 3 * POWERS, |c0, skip| {
+            column_block_r(a, b, r, res, c0, skip, vpow)
+        });
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(3 * POWERS..SUMS, &mut mom);
-        let gu = unit_gradient_sums(&mom);
+        self.l_transposed(&unit_gradient_sums(&mom), g);
+    }
+
+    /// `g = L^T gu`: the unit square's gradient sums to the SSM's parameters.
+    fn l_transposed(&self, gu: &[f64; 8], g: &mut [f64; MAX_DOF]) {
         for (i, o) in g.iter_mut().enumerate().take(self.dof) {
             *o = (0..8).map(|k| self.l[k * MAX_DOF + i] * gu[k]).sum();
         }
@@ -188,21 +186,12 @@ impl GridMoments {
 
     /// `J_u^T J_u` and `J_u^T r` of the full homography in the unit square's coordinates.
     fn unit_system(&mut self, a: &[f32], b: &[f32], r: &[f32]) -> ([[f64; 8]; 8], [f64; 8]) {
-        let res = self.res;
-        let n = res * res;
+        let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
-        let padded = self.upow[0].len();
-        // Down the columns, eight at a time: the sums weighted by the row's powers of v. The
-        // last block is the last eight columns, those of the block before it masked out.
-        let blocks = res.div_ceil(8);
-        for block in 0..blocks {
-            let c0 = (8 * block).min(res - 8);
-            let skip = 8 * block - c0;
-            let sums = column_block(a, b, r, res, c0, skip, &self.vpow);
-            for (s, lanes) in sums.iter().enumerate() {
-                self.sums[s * padded + 8 * block..][..8].copy_from_slice(lanes);
-            }
-        }
+        let vpow = &self.vpow;
+        down_columns(&mut self.sums, res, 0, |c0, skip| {
+            column_block(a, b, r, res, c0, skip, vpow)
+        });
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(0..SUMS, &mut mom);
         // The sums' rows: weight w (0: a^2, 1: a b, 2: b^2) at power j is row w * 5 + j; r a at
@@ -254,6 +243,25 @@ impl GridMoments {
         set(7, 7, ma(2, 2) + 2.0 * mb(1, 3) + mc(0, 4));
         let g = unit_gradient_sums(&mom);
         (h, g)
+    }
+}
+
+/// Down the columns of a `res`-wide grid, eight at a time: `kernel(c0, skip)` gives a block's
+/// sums (weighted by the rows' powers of v), stored in `sums` (rows of the padded column count)
+/// from row `first` on. The last block is the last eight columns, those of the block before it
+/// masked out (`skip`).
+fn down_columns<const K: usize>(
+    sums: &mut [f32],
+    res: usize,
+    first: usize,
+    kernel: impl Fn(usize, usize) -> [Lanes; K],
+) {
+    let padded = res.div_ceil(8) * 8;
+    for block in 0..res.div_ceil(8) {
+        let c0 = (8 * block).min(res - 8);
+        for (s, lanes) in kernel(c0, 8 * block - c0).iter().enumerate() {
+            sums[(first + s) * padded + 8 * block..][..8].copy_from_slice(lanes);
+        }
     }
 }
 

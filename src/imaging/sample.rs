@@ -499,6 +499,25 @@ mod avx2 {
         }
     }
 
+    /// The row-major indices `fy w + fx` of whole coordinates: one f32 multiply-add where
+    /// `exact` (an image of at most 2^24 pixels, where every product and sum is exact), else in
+    /// integers.
+    #[inline(always)]
+    fn index(fx: __m256, fy: __m256, w: usize, exact: bool) -> __m256i {
+        // SAFETY: AVX2 is enabled at compile time (the module's cfg), FMA with it as for the
+        // module's interpolation; no memory is touched.
+        unsafe {
+            if exact {
+                _mm256_cvttps_epi32(_mm256_fmadd_ps(fy, _mm256_set1_ps(w as f32), fx))
+            } else {
+                _mm256_add_epi32(
+                    _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), _mm256_set1_epi32(w as i32)),
+                    _mm256_cvttps_epi32(fx),
+                )
+            }
+        }
+    }
+
     /// Bilinear values (border replicated) of the first `8 * (len / 8)` points; returns how many
     /// were done. The view is at least 2x2 and uses [`super::Border::Replicate`].
     pub(super) fn values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) -> usize {
@@ -525,9 +544,6 @@ mod avx2 {
                 _mm256_set1_ps((w - 2) as f32),
                 _mm256_set1_ps((h - 2) as f32),
             );
-            let vw = _mm256_set1_epi32(w as i32);
-            let wf = _mm256_set1_ps(w as f32);
-            // The index as `fy w + fx` in f32 is exact below 2^24.
             let exact = w * h <= 1 << 24;
             let base = img.data.as_ptr();
             // The row below (`w` is at least 2 and `data` holds `w h` pixels).
@@ -570,14 +586,7 @@ mod avx2 {
                     let fy = _mm256_min_ps(_mm256_floor_ps(y), hm2);
                     _mm256_storeu_ps(fx_run.as_mut_ptr().add(k), _mm256_sub_ps(x, fx));
                     _mm256_storeu_ps(fy_run.as_mut_ptr().add(k), _mm256_sub_ps(y, fy));
-                    let idx = if exact {
-                        _mm256_cvttps_epi32(_mm256_fmadd_ps(fy, wf, fx))
-                    } else {
-                        _mm256_add_epi32(
-                            _mm256_mullo_epi32(_mm256_cvttps_epi32(fy), vw),
-                            _mm256_cvttps_epi32(fx),
-                        )
-                    };
+                    let idx = index(fx, fy, w, exact);
                     _mm256_storeu_si256(at.as_mut_ptr().add(k) as *mut __m256i, idx);
                     k += 8;
                 }
@@ -639,9 +648,7 @@ mod avx2 {
                 _mm256_set1_ps(w as f32 - 2.0),
                 _mm256_set1_ps(h as f32 - 2.0),
             );
-            let vw = _mm256_set1_epi32(w as i32);
-            let wf = _mm256_set1_ps(w as f32);
-            // As in `values`; indices of points outside may be negative, and are not read.
+            // Indices of points outside may be negative, and are not read.
             let exact = w * h <= 1 << 24;
             let base = img.data.as_ptr();
             // Where the neighbourhood's rows are read, from its corner (inside `data`: h >= 4).
@@ -685,14 +692,7 @@ mod avx2 {
                     // Indices of points outside are not read (their group takes the general
                     // path).
                     let (fy1, fx1) = (_mm256_sub_ps(fy, one), _mm256_sub_ps(fx, one));
-                    let idx = if exact {
-                        _mm256_cvttps_epi32(_mm256_fmadd_ps(fy1, wf, fx1))
-                    } else {
-                        _mm256_add_epi32(
-                            _mm256_mullo_epi32(_mm256_cvttps_epi32(fy1), vw),
-                            _mm256_cvttps_epi32(fx1),
-                        )
-                    };
+                    let idx = index(fx1, fy1, w, exact);
                     _mm256_storeu_si256(at.as_mut_ptr().add(k) as *mut __m256i, idx);
                     k += 8;
                 }
@@ -851,6 +851,31 @@ mod tests {
                 "{at}: one point"
             );
         }
+    }
+
+    /// Beyond 2^24 pixels an index is not exact in f32: the vector paths then compute it in
+    /// integers, and the last rows of such an image read the right pixels.
+    #[test]
+    fn sampling_a_frame_of_more_than_2_24_pixels_reads_the_right_pixels() {
+        let (w, h) = (4100usize, 4097usize);
+        assert!(w * h > 1 << 24);
+        // Neighbouring pixels differ (a hash of the index), so a wrong index shows.
+        let data: Vec<f32> = (0..w * h)
+            .map(|i| ((i as u64).wrapping_mul(2_654_435_761) >> 13) as f32 % 251.0)
+            .collect();
+        let view = ImageView::new(&data, w, h, 5, 7);
+        let mut rng = Rng::new(23);
+        // Rows 4093 and 4094, whose indices are past 2^24 (odd ones have no f32), and the
+        // first rows.
+        let n = 203;
+        let xs: Vec<f32> = (0..n).map(|_| rng.range(6.0, 4000.0) as f32).collect();
+        let ys: Vec<f32> = (0..n)
+            .map(|i| match i % 4 {
+                0 => rng.range(8.0, 20.0) as f32,
+                _ => rng.range(7.0 + 4093.0, 7.0 + 4094.0) as f32,
+            })
+            .collect();
+        check_against_reference(&view, &data, &xs, &ys, "large frame point");
     }
 
     #[test]

@@ -144,7 +144,7 @@ def regtrack_live_fps(binary, seq, frames, repeats, settings):
     for line in out.splitlines():
         if line.startswith("esm_ssd_homography"):
             cols = re.split(r"\s+", line.strip())
-            # tracker frames it/frame us/iter other tracker-FPS live-FPS init ...
+            # tracker frames it/frame us/iter other tracker-FPS live-FPS live-us/iter init ...
             return float(cols[6]), int(cols[1]), line
     sys.exit(f"no ESM row in:\n{out}")
 

@@ -694,7 +694,7 @@ fn run_bench(
     };
     let loaded = bench::load_frames(&seq, frames)?;
     println!(
-        "{} frames of {}, {} repeats (medians); us/iter = an iteration's own time, other = the rest of a frame (pyramid, loss checks); tracker-only = search on pre-smoothed frames, live = from 8-bit frames",
+        "{} frames of {}, {} repeats (medians); us/iter = an iteration's own time, other = the rest of a frame (pyramid, loss checks); tracker-only = search on pre-smoothed frames (read from memory), live = from 8-bit frames (the region the tracker smooths is in the cache when it searches)",
         loaded.gray.len(),
         seq.name,
         repeats

@@ -198,6 +198,81 @@ impl Correlation {
         dof: usize,
         out: &mut [f64; MAX_DOF * MAX_DOF],
     ) {
+        let centered = self.centered;
+        self.hessian_with(
+            wrt,
+            kind,
+            current,
+            dof,
+            out,
+            |ones, other, var, jtj, uvw| {
+                accumulate_jtj(jac, dof, jtj);
+                // u = J^T other, v = J^T var and, centred, w = J^T 1 (the sums of J's columns), in
+                // one pass over J.
+                if centered {
+                    jt_times_many(jac, [other, var, ones], dof, uvw);
+                } else {
+                    let mut uv = [[0.0; MAX_DOF]; 2];
+                    jt_times_many(jac, [other, var], dof, &mut uv);
+                    uvw[..2].copy_from_slice(&uv);
+                }
+            },
+        );
+    }
+
+    /// [`Correlation::hessian`] with respect to the current pixels from `J^T J` and the products
+    /// `J^T x` that `project` makes (see [`crate::am::Am::hessian_from_projections`]): only
+    /// those the Hessian of `kind` uses are asked for (`J^T` of the other patch's unit vector
+    /// only for Newton's).
+    pub fn hessian_from_projections(
+        &mut self,
+        kind: HessianKind,
+        current: &[f32],
+        jtj: &[f64; MAX_DOF * MAX_DOF],
+        project: super::Projections<'_>,
+        dof: usize,
+        out: &mut [f64; MAX_DOF * MAX_DOF],
+    ) {
+        let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);
+        let centered = self.centered;
+        self.hessian_with(
+            Wrt::Current,
+            kind,
+            current,
+            dof,
+            out,
+            |ones, other, var, into, uvw| {
+                into.copy_from_slice(jtj);
+                let mut got = [[0.0; MAX_DOF]; 3];
+                match (newton, centered) {
+                    (true, true) => project(&[other, var, ones], &mut got),
+                    (true, false) => project(&[other, var], &mut got[..2]),
+                    (false, true) => project(&[var, ones], &mut got[1..]),
+                    (false, false) => project(&[var], &mut got[1..2]),
+                }
+                *uvw = got;
+            },
+        );
+    }
+
+    /// The Hessian of `kind` from the patch's statistics and what `products` writes: `J^T J`
+    /// (stride [`MAX_DOF`]) and `J^T other`, `J^T var`, `J^T 1`, given the ones, the other
+    /// patch's unit vector and the variable patch's.
+    fn hessian_with(
+        &mut self,
+        wrt: Wrt,
+        kind: HessianKind,
+        current: &[f32],
+        dof: usize,
+        out: &mut [f64; MAX_DOF * MAX_DOF],
+        products: impl FnOnce(
+            &[f32],
+            &[f32],
+            &[f32],
+            &mut [f64; MAX_DOF * MAX_DOF],
+            &mut [[f64; MAX_DOF]; 3],
+        ),
+    ) {
         let beta = self.beta();
         let npx = self.template.len() as f64;
         let after = kind == HessianKind::AfterConvergence;
@@ -221,18 +296,9 @@ impl Correlation {
             return;
         }
         let mut jtj = [0.0f64; MAX_DOF * MAX_DOF];
-        accumulate_jtj(jac, dof, &mut jtj);
-        // u = J^T other, v = J^T var and, centred, w = J^T 1 (the sums of J's columns), in one
-        // pass over J.
-        let (u, v, w) = if self.centered {
-            let mut uvw = [[0.0; MAX_DOF]; 3];
-            jt_times_many(jac, [other, var, &self.ones], dof, &mut uvw);
-            (uvw[0], uvw[1], uvw[2])
-        } else {
-            let mut uv = [[0.0; MAX_DOF]; 2];
-            jt_times_many(jac, [other, var], dof, &mut uv);
-            (uv[0], uv[1], [0.0; MAX_DOF])
-        };
+        let mut uvw = [[0.0; MAX_DOF]; 3];
+        products(&self.ones, other, var, &mut jtj, &mut uvw);
+        let [u, v, w] = uvw;
         let s = beta / (n * n);
         let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);
         for i in 0..dof {

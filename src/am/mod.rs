@@ -103,6 +103,10 @@ impl Capabilities {
     }
 }
 
+/// What computes `J^T x` for per-pixel vectors `x` (one row of the output for each), for
+/// [`Am::hessian_from_projections`].
+pub type Projections<'a> = &'a mut dyn FnMut(&[&[f32]], &mut [[f64; MAX_DOF]]);
+
 /// An appearance model.
 ///
 /// Per iteration a search method calls [`Am::gradient`] (or [`Am::similarity`]) once, then
@@ -156,6 +160,29 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     /// forward methods may then form their Newton system from the gradient's moments on the
     /// grid, without `J` ([`crate::registration::moments`]).
     fn hessian_is_minus_jtj(&self) -> bool {
+        false
+    }
+    /// Whether [`Am::hessian_from_projections`] gives the Hessian with respect to the current
+    /// pixels (the correlations): the forward methods may then form their Newton system from
+    /// the gradient's moments on the grid as for the least-squares models.
+    fn hessian_from_jtj(&self) -> bool {
+        false
+    }
+    /// [`Am::hessian`] with respect to the current pixels, from `J^T J` (`jtj`, row-major with
+    /// stride [`MAX_DOF`]) and the products `J^T x` of per-pixel vectors `x`, which `project`
+    /// writes (one row of `out` for each `x` given), instead of from `J`: for the models whose
+    /// Hessian is built from those alone ([`Am::hessian_from_jtj`]). Called after
+    /// [`Am::gradient`] on the same patch, as [`Am::hessian`]. Returns `false`, writing nothing,
+    /// for the others.
+    fn hessian_from_projections(
+        &mut self,
+        _kind: HessianKind,
+        _current: &[f32],
+        _jtj: &[f64; MAX_DOF * MAX_DOF],
+        _project: Projections<'_>,
+        _dof: usize,
+        _out: &mut [f64; MAX_DOF * MAX_DOF],
+    ) -> bool {
         false
     }
     /// Whether the similarity is built from per-pixel terms only (a sum, or a ratio of sums
@@ -227,6 +254,30 @@ macro_rules! forward_to_engine {
     };
 }
 use forward_to_engine;
+
+/// Implements [`Am::hessian_from_jtj`] and [`Am::hessian_from_projections`] for a newtype model
+/// whose engine is a [`correlation::Correlation`].
+macro_rules! forward_projections {
+    () => {
+        fn hessian_from_jtj(&self) -> bool {
+            true
+        }
+        fn hessian_from_projections(
+            &mut self,
+            kind: HessianKind,
+            current: &[f32],
+            jtj: &[f64; MAX_DOF * MAX_DOF],
+            project: $crate::am::Projections<'_>,
+            dof: usize,
+            out: &mut [f64; MAX_DOF * MAX_DOF],
+        ) -> bool {
+            self.0
+                .hessian_from_projections(kind, current, jtj, project, dof, out);
+            true
+        }
+    };
+}
+use forward_projections;
 
 /// How to build an AM: its parameters (most have none) and its constructor, which gets them
 /// validated, unset ones at their defaults.

@@ -28,6 +28,7 @@ impl Am for Ncc {
         HessianKind::AfterConvergence
     }
     super::forward_to_engine!();
+    super::forward_projections!();
     fn embed(&self, patch: &[f32], out: &mut [f32]) {
         self.0.embed(patch, out)
     }

@@ -351,11 +351,11 @@ impl Context {
     }
 
     /// Whether the forward steps at the identity form their Newton system from the gradient's
-    /// moments ([`super::moments`]): then [`Context::unit_gradient`] (or its mean with the
+    /// moments ([`super::moments`]; SSD, ZNCC, NCC with SSMs of six or more parameters): then [`Context::unit_gradient`] (or its mean with the
     /// template's) and [`Context::moments_newton_step`] stand for the warped gradient, the
     /// projection and [`Context::forward_step_from_gradient`].
     pub fn moments_step(&self) -> bool {
-        self.moments.is_some() && self.am.hessian_is_minus_jtj()
+        self.moments.is_some() && (self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj())
     }
 
     /// The pixel matrix times the grid's homography: the unit square's coordinates to pixels.
@@ -393,6 +393,17 @@ impl Context {
     /// `gx`, `gy`) and the AM's gradient (in `grad`), through the moments; needs
     /// [`Context::moments_step`].
     pub fn moments_newton_step(&mut self, update: Update) -> Result<(), LossReason> {
+        let (h, g) = self.moments_system()?;
+        self.solve_step(&g, &h, update)
+    }
+
+    /// The Newton system of [`Context::moments_newton_step`]: the AM's Hessian (row-major `dof x
+    /// dof`) and `J^T g`, from the moments: `-J^T J` for the least-squares models, and for the
+    /// correlations their Hessian from `J^T J` and the moments' `J^T x`
+    /// ([`crate::am::Am::hessian_from_projections`]).
+    pub fn moments_system(
+        &mut self,
+    ) -> Result<([f64; MAX_DOF * MAX_DOF], [f64; MAX_DOF]), LossReason> {
         let mut h = [0.0; MAX_DOF * MAX_DOF];
         let mut g = [0.0; MAX_DOF];
         let Some(moments) = self.moments.as_mut() else {
@@ -405,7 +416,35 @@ impl Context {
             &mut h,
             &mut g,
         );
-        self.solve_step(&g, &h, update)
+        if self.am.hessian_is_minus_jtj() {
+            return Ok((h, g));
+        }
+        let dof = self.dof;
+        let mut jtj = [0.0; MAX_DOF * MAX_DOF];
+        for i in 0..dof {
+            for j in 0..dof {
+                jtj[i * MAX_DOF + j] = -h[i * dof + j];
+            }
+        }
+        let (gx, gy) = (&self.work.gx, &self.work.gy);
+        let mut project = |xs: &[&[f32]], out: &mut [[f64; MAX_DOF]]| {
+            for (x, o) in xs.iter().zip(out.iter_mut()) {
+                moments.jtr(gx, gy, x, o);
+            }
+        };
+        let kind = self.hessian;
+        if self.am.hessian_from_projections(
+            kind,
+            &self.work.values,
+            &jtj,
+            &mut project,
+            dof,
+            &mut h,
+        ) {
+            Ok((h, g))
+        } else {
+            Err(LossReason::Singular)
+        }
     }
 
     /// The Newton step of the forward methods: the AM's gradient and Hessian with respect to the
@@ -527,7 +566,7 @@ impl Context {
         for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
             *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
         }
-        self.moments = if self.am.hessian_is_minus_jtj() {
+        self.moments = if self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj() {
             GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
         } else {
             None

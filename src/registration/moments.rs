@@ -1,6 +1,12 @@
 //! The Newton system of the least-squares AMs from the gradient's moments on the grid: the
 //! forward methods' step without the pixel Jacobian.
 //!
+//! The correlations (ZNCC, NCC) take it too: their Hessian is `J^T J` less outer products of
+//! `J^T x` for a few per-pixel vectors `x` (the patch's unit vector, the ones, the template's
+//! unit vector for Newton's), and each `J^T x` is a sum of the same kind as `J^T r`
+//! ([`GridMoments::jtr`]); the AM assembles it ([`crate::am::Am::hessian_from_projections`],
+//! [`crate::registration::Context::moments_system`]).
+//!
 //! With an AM whose Hessian is `-J^T J` ([`crate::am::Am::hessian_is_minus_jtj`], SSD), a
 //! forward-compositional step needs `J^T J` and `J^T r`, where row `i` of `J` is the warped
 //! gradient `g_i` times the SSM's `dw/dp` at the identity, `D(x_i)`, in the normalised
@@ -671,7 +677,22 @@ mod tests {
     /// scale: `sqrt(|H_ii H_jj|)` for `H_ij` (the bound of Cauchy-Schwarz), `sqrt(|H_ii|) |r|`
     /// for `g_i`.
     fn close(h: (&[f64], &[f64]), g: (&[f64], &[f64]), dof: usize, r: &[f32], what: &str) {
-        let d = |i: usize| h.0[i * dof + i].abs();
+        close_to_scale(h, g, (h.0, 1.0), 2e-6, dof, r, what);
+    }
+
+    /// [`close`] with the scales taken from `s` times the diagonal of `jtj` (`J^T J` or its
+    /// negative: a Hessian `s J^T A J` with `|A| <= 1` has `|H_ij| <= |s| sqrt(jtj_ii jtj_jj)`,
+    /// and `|(J^T r)_i| <= sqrt(jtj_ii) |r|`), within `tol`.
+    fn close_to_scale(
+        h: (&[f64], &[f64]),
+        g: (&[f64], &[f64]),
+        (jtj, s): (&[f64], f64),
+        tol: f64,
+        dof: usize,
+        r: &[f32],
+        what: &str,
+    ) {
+        let d = |i: usize| jtj[i * dof + i].abs();
         let rn = r
             .iter()
             .map(|&v| (v as f64) * (v as f64))
@@ -680,15 +701,15 @@ mod tests {
         for i in 0..dof {
             for j in 0..dof {
                 let (x, y) = (h.0[i * dof + j], h.1[i * dof + j]);
-                let scale = (d(i) * d(j)).sqrt();
+                let scale = s.abs() * (d(i) * d(j)).sqrt();
                 assert!(
-                    (x - y).abs() <= 2e-6 * scale,
+                    (x - y).abs() <= tol * scale,
                     "{what}: H[{i}][{j}] {x} by the Jacobian, {y} by the moments"
                 );
             }
             let (x, y) = (g.0[i], g.1[i]);
             assert!(
-                (x - y).abs() <= 2e-6 * d(i).sqrt() * rn,
+                (x - y).abs() <= tol * d(i).sqrt() * rn,
                 "{what}: g[{i}] {x} by the Jacobian, {y} by the moments"
             );
         }
@@ -789,6 +810,116 @@ mod tests {
         assert!(checked >= 4 * 2 * 3 * 2, "{checked} systems checked");
     }
 
+    /// The correlations' Newton system from the moments (`J^T J`, `J^T g` and the `J^T x` their
+    /// Hessian needs) is the one through the Jacobian: ZNCC and NCC, each Hessian kind, the
+    /// homography and the affine warp, 13 x 13 and 50 x 50, a warp away from the identity,
+    /// random patches and gradients, alone and in ESM's mean with the template's gradient.
+    #[test]
+    fn the_correlations_newton_system_from_the_moments_is_the_jacobians() {
+        let mut rng = Rng::new(17);
+        let mut checked = 0;
+        for am_name in ["zncc", "ncc"] {
+            for ssm_name in ["homography", "affine"] {
+                for res in [13, 50] {
+                    for kind in [
+                        HessianKind::GaussNewton,
+                        HessianKind::Newton,
+                        HessianKind::AfterConvergence,
+                    ] {
+                        let model = ssm::build(ssm_name).unwrap();
+                        let dof = model.dof();
+                        let mut ctx = Context::new(model, am::build(am_name).unwrap(), kind, res);
+                        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
+                        assert!(ctx.moments_step(), "{am_name} {ssm_name} has no moments");
+                        let n = res * res;
+                        let mut draw = |mean: f64, scale: f64| -> Vec<f32> {
+                            (0..n)
+                                .map(|_| (mean + scale * rng.normal()) as f32)
+                                .collect()
+                        };
+                        let (template, current) = (draw(120.0, 30.0), draw(110.0, 25.0));
+                        let (gx, gy) = (draw(0.0, 20.0), draw(0.0, 20.0));
+                        let (tx, ty) = (draw(0.0, 0.3), draw(0.0, 0.3));
+                        ctx.am.set_template(&template);
+                        ctx.template_gx.copy_from_slice(&tx);
+                        ctx.template_gy.copy_from_slice(&ty);
+                        for i in 0..n {
+                            let j = homography_jacobian(
+                                &ctx.unit,
+                                ctx.grid_u[i] as f64,
+                                ctx.grid_v[i] as f64,
+                            );
+                            let (a, b) = (tx[i] as f64, ty[i] as f64);
+                            ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
+                            ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
+                        }
+                        let mut dp = [0.0; MAX_DOF];
+                        for v in dp.iter_mut().take(dof) {
+                            *v = 0.03 * rng.normal();
+                        }
+                        let p = ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap();
+                        ctx.warp_grid(&p);
+                        ctx.work.values.copy_from_slice(&current);
+                        for mean in [false, true] {
+                            // Through the Jacobian.
+                            ctx.work.gx.copy_from_slice(&gx);
+                            ctx.work.gy.copy_from_slice(&gy);
+                            if mean {
+                                ctx.warped_gradient_mean(&p);
+                            } else {
+                                ctx.warped_gradient(&p);
+                            }
+                            ctx.project_gradients(None);
+                            let values = ctx.work.values.clone();
+                            ctx.am
+                                .gradient(am::Wrt::Current, &values, &mut ctx.work.grad);
+                            let (mut h1, mut g1) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
+                            let jac = ctx.work.jac.clone();
+                            ctx.am
+                                .hessian(am::Wrt::Current, kind, &values, &jac, dof, &mut h1);
+                            jt_times(&jac, &ctx.work.grad, dof, &mut g1);
+                            // The scale: J^T J and the correlation's factor beta / |P x|^2.
+                            let mut jtj = [0.0; MAX_DOF * MAX_DOF];
+                            minus_jtj(&jac, dof, &mut jtj);
+                            let centred = am_name == "zncc";
+                            let x = if kind == HessianKind::AfterConvergence {
+                                &template
+                            } else {
+                                &current
+                            };
+                            let m = if centred {
+                                x.iter().map(|&v| v as f64).sum::<f64>() / n as f64
+                            } else {
+                                0.0
+                            };
+                            let norm2: f64 = x.iter().map(|&v| (v as f64 - m).powi(2)).sum();
+                            let beta = if centred { n as f64 } else { 1.0 };
+                            // Through the moments, on the context's own buffers as the forward
+                            // methods call it.
+                            ctx.work.gx.copy_from_slice(&gx);
+                            ctx.work.gy.copy_from_slice(&gy);
+                            if mean {
+                                ctx.unit_gradient_mean(&p);
+                            } else {
+                                ctx.unit_gradient(&p);
+                            }
+                            ctx.am
+                                .gradient(am::Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
+                            let (h2, g2) = ctx.moments_system().unwrap();
+                            let what = format!("{am_name} {ssm_name} {res} {kind:?} mean {mean}");
+                            assert!(h1[..dof * dof].iter().any(|&v| v != 0.0), "{what}");
+                            let r = ctx.work.grad.clone();
+                            let scale = (&jtj[..], beta / norm2);
+                            close_to_scale((&h1, &h2), (&g1, &g2), scale, 2e-6, dof, &r, &what);
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(checked, 2 * 2 * 2 * 3 * 2);
+    }
+
     /// The vector kernel of the column sums is the plain one, bit for bit, masked lanes included.
     #[test]
     fn the_column_kernel_is_the_plain_one() {
@@ -824,9 +955,9 @@ mod tests {
         }
     }
 
-    /// Only the models whose Hessian is `-J^T J` take the moments, on grids of eight columns or
-    /// more, and a `dw/dp` that is not a family of homographies is refused (the fit is checked,
-    /// not trusted).
+    /// Only the models whose Hessian is `-J^T J` or made from `J^T J` and projections (the
+    /// correlations) take the moments, on grids of eight columns or more, and a `dw/dp` that is
+    /// not a family of homographies is refused (the fit is checked, not trusted).
     #[test]
     fn the_moments_are_refused_where_they_do_not_hold() {
         let mut small = Context::new(
@@ -840,12 +971,20 @@ mod tests {
         let res = 9;
         let mut ctx = Context::new(
             ssm::build("homography").unwrap(),
-            am::build("zncc").unwrap(),
+            am::build("mi").unwrap(),
             HessianKind::Default,
             res,
         );
         ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
         assert!(ctx.moments.is_none() && !ctx.moments_step());
+        let mut ctx = Context::new(
+            ssm::build("homography").unwrap(),
+            am::build("zncc").unwrap(),
+            HessianKind::Default,
+            res,
+        );
+        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
+        assert!(ctx.moments_step());
         let mut ctx = Context::new(
             ssm::build("homography").unwrap(),
             am::build("ssd").unwrap(),

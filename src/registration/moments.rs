@@ -662,7 +662,7 @@ mod tests {
     use crate::geometry::{Point, Quad};
     use crate::registration::Context;
     use crate::rng::Rng;
-    use crate::ssm;
+    use crate::ssm::{self, Params};
 
     fn skewed() -> Quad {
         Quad([
@@ -715,6 +715,53 @@ mod tests {
         }
     }
 
+    /// The template's gradient `(tx, ty)` in both coordinates: the normalised ones and the unit
+    /// square's (the same field).
+    fn set_template_gradient(ctx: &mut Context, tx: &[f32], ty: &[f32]) {
+        ctx.template_gx.copy_from_slice(tx);
+        ctx.template_gy.copy_from_slice(ty);
+        for i in 0..tx.len() {
+            let j = homography_jacobian(&ctx.unit, ctx.grid_u[i] as f64, ctx.grid_v[i] as f64);
+            let (a, b) = (tx[i] as f64, ty[i] as f64);
+            ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
+            ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
+        }
+    }
+
+    /// The pixel gradient `(gx, gy)` as the warped gradient (or its mean with the template's),
+    /// projected on `dw/dp` into the context's Jacobian.
+    fn through_the_jacobian(ctx: &mut Context, (gx, gy): (&[f32], &[f32]), p: &Params, mean: bool) {
+        ctx.work.gx.copy_from_slice(gx);
+        ctx.work.gy.copy_from_slice(gy);
+        if mean {
+            ctx.warped_gradient_mean(p);
+        } else {
+            ctx.warped_gradient(p);
+        }
+        ctx.project_gradients(None);
+    }
+
+    /// The pixel gradient `(gx, gy)` as the gradient with respect to the unit square's
+    /// coordinates (or its mean with the template's), in the context's `gx`, `gy`.
+    fn in_the_unit_square(ctx: &mut Context, (gx, gy): (&[f32], &[f32]), p: &Params, mean: bool) {
+        ctx.work.gx.copy_from_slice(gx);
+        ctx.work.gy.copy_from_slice(gy);
+        if mean {
+            ctx.unit_gradient_mean(p);
+        } else {
+            ctx.unit_gradient(p);
+        }
+    }
+
+    /// A warp a random step away from the identity.
+    fn warp_near_identity(ctx: &Context, rng: &mut Rng) -> Params {
+        let mut dp = [0.0; MAX_DOF];
+        for v in dp.iter_mut().take(ctx.dof) {
+            *v = 0.03 * rng.normal();
+        }
+        ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap()
+    }
+
     /// The moments' Newton system is the one of the warped gradient through `dw/dp`: every SSM
     /// of six or more parameters, both grid layouts, sizes of one column block, of a last block
     /// that overlaps the one before, and the default 50, a skewed quad, a warp
@@ -738,11 +785,7 @@ mod tests {
                     }
                     assert!(ctx.moments_step(), "{} has no moments", entry.name);
                     let n = res * res;
-                    let mut dp = [0.0; MAX_DOF];
-                    for v in dp.iter_mut().take(dof) {
-                        *v = 0.03 * rng.normal();
-                    }
-                    let p = ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap();
+                    let p = warp_near_identity(&ctx, &mut rng);
                     ctx.warp_grid(&p);
                     let mut draw = |scale: f64| -> Vec<f32> {
                         (0..n).map(|_| (scale * rng.normal()) as f32).collect()
@@ -750,18 +793,7 @@ mod tests {
                     let (gx, gy, r) = (draw(20.0), draw(20.0), draw(10.0));
                     // The template's gradient in both coordinates: the same field.
                     let (tx, ty) = (draw(0.3), draw(0.3));
-                    ctx.template_gx.copy_from_slice(&tx);
-                    ctx.template_gy.copy_from_slice(&ty);
-                    for i in 0..n {
-                        let j = homography_jacobian(
-                            &ctx.unit,
-                            ctx.grid_u[i] as f64,
-                            ctx.grid_v[i] as f64,
-                        );
-                        let (a, b) = (tx[i] as f64, ty[i] as f64);
-                        ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
-                        ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
-                    }
+                    set_template_gradient(&mut ctx, &tx, &ty);
                     // ICLK's right-hand side: the template's Jacobian at the identity.
                     let mut jt = vec![0.0; n * dof];
                     Context::project(&tx, &ty, &ctx.dwdp0, dof, &mut jt);
@@ -774,26 +806,13 @@ mod tests {
                     let what = format!("{} {layout:?} {res}x{res} template", entry.name);
                     close((&h1, &h1), (&g1, &g2), dof, &r, &what);
                     for mean in [false, true] {
-                        ctx.work.gx.copy_from_slice(&gx);
-                        ctx.work.gy.copy_from_slice(&gy);
                         ctx.work.grad.copy_from_slice(&r);
-                        if mean {
-                            ctx.warped_gradient_mean(&p);
-                        } else {
-                            ctx.warped_gradient(&p);
-                        }
-                        ctx.project_gradients(None);
+                        through_the_jacobian(&mut ctx, (&gx, &gy), &p, mean);
                         let (mut h1, mut g1) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
                         minus_jtj(&ctx.work.jac, dof, &mut h1);
                         jt_times(&ctx.work.jac, &r, dof, &mut g1);
 
-                        ctx.work.gx.copy_from_slice(&gx);
-                        ctx.work.gy.copy_from_slice(&gy);
-                        if mean {
-                            ctx.unit_gradient_mean(&p);
-                        } else {
-                            ctx.unit_gradient(&p);
-                        }
+                        in_the_unit_square(&mut ctx, (&gx, &gy), &p, mean);
                         let (mut h2, mut g2) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
                         let (a, b) = (ctx.work.gx.clone(), ctx.work.gy.clone());
                         ctx.moments
@@ -841,35 +860,13 @@ mod tests {
                         let (gx, gy) = (draw(0.0, 20.0), draw(0.0, 20.0));
                         let (tx, ty) = (draw(0.0, 0.3), draw(0.0, 0.3));
                         ctx.am.set_template(&template);
-                        ctx.template_gx.copy_from_slice(&tx);
-                        ctx.template_gy.copy_from_slice(&ty);
-                        for i in 0..n {
-                            let j = homography_jacobian(
-                                &ctx.unit,
-                                ctx.grid_u[i] as f64,
-                                ctx.grid_v[i] as f64,
-                            );
-                            let (a, b) = (tx[i] as f64, ty[i] as f64);
-                            ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
-                            ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
-                        }
-                        let mut dp = [0.0; MAX_DOF];
-                        for v in dp.iter_mut().take(dof) {
-                            *v = 0.03 * rng.normal();
-                        }
-                        let p = ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap();
+                        set_template_gradient(&mut ctx, &tx, &ty);
+                        let p = warp_near_identity(&ctx, &mut rng);
                         ctx.warp_grid(&p);
                         ctx.work.values.copy_from_slice(&current);
                         for mean in [false, true] {
                             // Through the Jacobian.
-                            ctx.work.gx.copy_from_slice(&gx);
-                            ctx.work.gy.copy_from_slice(&gy);
-                            if mean {
-                                ctx.warped_gradient_mean(&p);
-                            } else {
-                                ctx.warped_gradient(&p);
-                            }
-                            ctx.project_gradients(None);
+                            through_the_jacobian(&mut ctx, (&gx, &gy), &p, mean);
                             let values = ctx.work.values.clone();
                             ctx.am
                                 .gradient(am::Wrt::Current, &values, &mut ctx.work.grad);
@@ -896,13 +893,7 @@ mod tests {
                             let beta = if centred { n as f64 } else { 1.0 };
                             // Through the moments, on the context's own buffers as the forward
                             // methods call it.
-                            ctx.work.gx.copy_from_slice(&gx);
-                            ctx.work.gy.copy_from_slice(&gy);
-                            if mean {
-                                ctx.unit_gradient_mean(&p);
-                            } else {
-                                ctx.unit_gradient(&p);
-                            }
+                            in_the_unit_square(&mut ctx, (&gx, &gy), &p, mean);
                             ctx.am
                                 .gradient(am::Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
                             let (h2, g2) = ctx.moments_system().unwrap();

@@ -104,6 +104,11 @@ impl Am for Scv {
     fn name(&self) -> &'static str {
         self.name
     }
+    // With respect to the current pixels: the residual against the mapped template and `-Id`
+    // (see the module's documentation), so the forward methods take the moments' system.
+    fn hessian_is_minus_jtj(&self) -> bool {
+        true
+    }
     fn set_template(&mut self, template: &[f32]) {
         let n = template.len();
         self.template.clear();

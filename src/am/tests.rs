@@ -527,3 +527,81 @@ fn the_block_correlation_is_its_definition() {
         assert!((got - want).abs() < 1e-9, "{res} {cells}: {got} vs {want}");
     }
 }
+
+/// The models that say their Hessian with respect to the current pixels is `-J^T J` have it for
+/// every kind, with the plain residual as gradient (`g(c + d) = g(c) - d`), also after their
+/// model learnt a patch (SCV's maps); those that build it from `J^T J` and projections build
+/// the same Hessian from them as from `J`, for every kind.
+#[test]
+fn the_moments_capabilities_hold_for_the_models_that_claim_them() {
+    let mut rng = Rng::new(23);
+    let (n, s) = (64, 6);
+    let mut claimed = Vec::new();
+    for (name, mut am, _) in models() {
+        let t = patch(&mut rng, n);
+        let lit: Vec<f32> = t.iter().map(|&v| 0.7 * v + 20.0).collect();
+        let c: Vec<f32> = lit
+            .iter()
+            .map(|&v| v + rng.range(-9.0, 9.0) as f32)
+            .collect();
+        let jac: Vec<f32> = (0..n * s).map(|_| rng.range(-2.0, 2.0) as f32).collect();
+        am.set_template(&t);
+        if am.updates_model() {
+            am.update_model(&lit);
+        }
+        for kind in [
+            HessianKind::GaussNewton,
+            HessianKind::Newton,
+            HessianKind::AfterConvergence,
+        ] {
+            let mut g = vec![0f32; n];
+            am.gradient(Wrt::Current, &c, &mut g);
+            let mut h = [0.0; MAX_DOF * MAX_DOF];
+            am.hessian(Wrt::Current, kind, &c, &jac, s, &mut h);
+            if am.hessian_is_minus_jtj() {
+                let mut m = [0.0; MAX_DOF * MAX_DOF];
+                minus_jtj(&jac, s, &mut m);
+                for (a, b) in h[..s * s].iter().zip(&m) {
+                    assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{name} {kind:?}");
+                }
+                let d: Vec<f32> = (0..n).map(|_| rng.range(-3.0, 3.0) as f32).collect();
+                let moved: Vec<f32> = c.iter().zip(&d).map(|(a, b)| a + b).collect();
+                let mut g2 = vec![0f32; n];
+                am.gradient(Wrt::Current, &moved, &mut g2);
+                for i in 0..n {
+                    assert!(
+                        (g2[i] - (g[i] - d[i])).abs() < 1e-3,
+                        "{name}: not the residual"
+                    );
+                }
+                claimed.push(name.clone());
+            }
+            if am.hessian_from_jtj() {
+                am.gradient(Wrt::Current, &c, &mut g);
+                let mut jtj = [0.0; MAX_DOF * MAX_DOF];
+                let mut m = [0.0; MAX_DOF * MAX_DOF];
+                minus_jtj(&jac, s, &mut m);
+                for i in 0..s {
+                    for j in 0..s {
+                        jtj[i * MAX_DOF + j] = -m[i * s + j];
+                    }
+                }
+                let mut project = |xs: &[&[f32]], out: &mut [[f64; MAX_DOF]]| {
+                    for (x, o) in xs.iter().zip(out.iter_mut()) {
+                        jt_times(&jac, x, s, o);
+                    }
+                };
+                let mut h2 = [0.0; MAX_DOF * MAX_DOF];
+                assert!(am.hessian_from_projections(kind, &c, &jtj, &mut project, s, &mut h2));
+                let scale = h[..s * s].iter().fold(0f64, |a, v| a.max(v.abs()));
+                for (a, b) in h[..s * s].iter().zip(&h2) {
+                    assert!((a - b).abs() <= 1e-9 * scale, "{name} {kind:?}: {a} vs {b}");
+                }
+                claimed.push(name.clone());
+            }
+        }
+    }
+    claimed.sort();
+    claimed.dedup();
+    assert_eq!(claimed, ["lscv", "ncc", "scv", "ssd", "zncc"]);
+}

@@ -351,9 +351,10 @@ impl Context {
     }
 
     /// Whether the forward steps at the identity form their Newton system from the gradient's
-    /// moments ([`super::moments`]; SSD, ZNCC, NCC with SSMs of six or more parameters): then [`Context::unit_gradient`] (or its mean with the
-    /// template's) and [`Context::moments_newton_step`] stand for the warped gradient, the
-    /// projection and [`Context::forward_step_from_gradient`].
+    /// moments ([`super::moments`]; SSD, SCV, LSCV, ZNCC and NCC, with SSMs of six or more
+    /// parameters): then [`Context::unit_gradient`] (or its mean with the template's) and
+    /// [`Context::moments_newton_step`] stand for the warped gradient, the projection and
+    /// [`Context::forward_step_from_gradient`].
     pub fn moments_step(&self) -> bool {
         self.moments.is_some() && (self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj())
     }

@@ -7,7 +7,7 @@
 //! ([`GridMoments::jtr`]); the AM assembles it ([`crate::am::Am::hessian_from_projections`],
 //! [`crate::registration::Context::moments_system`]).
 //!
-//! With an AM whose Hessian is `-J^T J` ([`crate::am::Am::hessian_is_minus_jtj`], SSD), a
+//! With an AM whose Hessian is `-J^T J` ([`crate::am::Am::hessian_is_minus_jtj`]: SSD, SCV, LSCV), a
 //! forward-compositional step needs `J^T J` and `J^T r`, where row `i` of `J` is the warped
 //! gradient `g_i` times the SSM's `dw/dp` at the identity, `D(x_i)`, in the normalised
 //! coordinates `x`. The grid is regular in the coordinates `u = (u, v)` of the unit square, which

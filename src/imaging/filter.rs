@@ -177,63 +177,42 @@ fn padded_row<T: Pixel>(
 /// [`convolve_column`] make it. The last strip overlaps the one before when `w` is not a
 /// multiple of eight (its columns are written twice, with the same values).
 fn blur_strips(k: &[f32; TAPS], padded: &[f32], (w, h): (usize, usize), out: &mut [f32]) {
-    const K: usize = TAPS;
-    let pw = w + K - 1;
-    let padded = &padded[..(h + K - 1) * pw];
+    let pw = w + TAPS - 1;
+    let padded = &padded[..(h + TAPS - 1) * pw];
     let out = &mut out[..h * w];
     let mut x = 0;
     while x < w {
         let xs = x.min(w - STRIP);
-        let mut win = [[0f32; STRIP]; K];
-        // The first K - 1 rows fill the window; each row after them makes an output row.
-        let (head, tail) = padded.split_at((K - 1) * pw);
-        for row in head.chunks_exact(pw) {
-            let acc = row_sums(
-                k,
-                row[xs..].first_chunk().unwrap_or(&[0.0; STRIP + TAPS - 1]),
-            );
-            for t in 0..K - 1 {
+        // The window of the last rows' horizontal sums, the newest last: the first TAPS - 1
+        // rows fill it; each row after them makes an output row.
+        let mut win = [[0f32; STRIP]; TAPS];
+        for (j, row) in padded.chunks_exact(pw).enumerate() {
+            let px = row[xs..].first_chunk().unwrap_or(&[0.0; STRIP + TAPS - 1]);
+            for t in 0..TAPS - 1 {
                 win[t] = win[t + 1];
             }
-            win[K - 1] = acc;
-        }
-        for (row, o) in tail.chunks_exact(pw).zip(out.chunks_exact_mut(w)) {
-            let acc = row_sums(
-                k,
-                row[xs..].first_chunk().unwrap_or(&[0.0; STRIP + TAPS - 1]),
-            );
-            for t in 0..K - 1 {
-                win[t] = win[t + 1];
-            }
-            win[K - 1] = acc;
-            let mut v = [0f32; STRIP];
-            for l in 0..STRIP {
-                v[l] = k[0] * win[0][l];
-            }
-            for t in 1..K {
-                for l in 0..STRIP {
-                    v[l] = k[t].mul_add(win[t][l], v[l]);
-                }
-            }
-            if let Some(dst) = o[xs..].first_chunk_mut::<STRIP>() {
-                *dst = v;
+            win[TAPS - 1] = taps(k, |t, l| px[l + t]);
+            if let Some(y) = (j + 1).checked_sub(TAPS)
+                && let Some(dst) = out[y * w + xs..].first_chunk_mut::<STRIP>()
+            {
+                *dst = taps(k, |t, l| win[t][l]);
             }
         }
         x += STRIP;
     }
 }
 
-/// The horizontal sums of [`convolve_row`] at eight columns, from the twelve pixels from the
-/// first's.
+/// `sum_t k[t] at(t, l)` for the eight lanes `l`, in the order of [`convolve_row`] and
+/// [`convolve_column`] (a product, then multiply-adds).
 #[inline(always)]
-fn row_sums(k: &[f32; TAPS], row: &[f32; STRIP + TAPS - 1]) -> [f32; STRIP] {
+fn taps(k: &[f32; TAPS], at: impl Fn(usize, usize) -> f32) -> [f32; STRIP] {
     let mut acc = [0f32; STRIP];
-    for l in 0..STRIP {
-        acc[l] = k[0] * row[l];
+    for (l, a) in acc.iter_mut().enumerate() {
+        *a = k[0] * at(0, l);
     }
     for t in 1..TAPS {
-        for l in 0..STRIP {
-            acc[l] = k[t].mul_add(row[l + t], acc[l]);
+        for (l, a) in acc.iter_mut().enumerate() {
+            *a = k[t].mul_add(at(t, l), *a);
         }
     }
     acc

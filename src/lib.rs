@@ -44,6 +44,7 @@ pub mod app;
 pub mod bench;
 pub mod catalogue;
 pub mod converge;
+pub mod cpu;
 pub mod crew;
 pub mod dataset;
 pub mod error;

@@ -61,6 +61,9 @@ pub struct GridMoments {
     upow: [Vec<f32>; POWERS],
     /// The column sums ([`SUMS`] rows of the padded column count).
     sums: Vec<f32>,
+    /// Whether pairs of column blocks are summed at once in 512-bit registers
+    /// ([`crate::cpu::avx512`]; the same bits).
+    wide: bool,
 }
 
 impl GridMoments {
@@ -105,6 +108,7 @@ impl GridMoments {
             vpow,
             upow,
             sums: vec![0.0; SUMS * padded],
+            wide: crate::cpu::avx512(),
         })
     }
 
@@ -195,9 +199,14 @@ impl GridMoments {
         let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
         let vpow = &self.vpow;
-        down_columns(&mut self.sums, res, 0, |c0, skip| {
-            column_block(a, b, r, res, c0, skip, vpow)
-        });
+        let kernel = |c0, skip| column_block(a, b, r, res, c0, skip, vpow);
+        if self.wide {
+            down_columns_wide(&mut self.sums, res, 0, kernel, |c0| {
+                column_block16(a, b, r, res, c0, vpow)
+            });
+        } else {
+            down_columns(&mut self.sums, res, 0, kernel);
+        }
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(0..SUMS, &mut mom);
         // The sums' rows: weight w (0: a^2, 1: a b, 2: b^2) at power j is row w * 5 + j; r a at
@@ -271,6 +280,37 @@ fn down_columns<const K: usize>(
     }
 }
 
+/// [`down_columns`] with a kernel that sums two neighbouring blocks at once (`wide(c0)`, the
+/// sixteen columns from `c0`) wherever both are whole (not the last, overlapping block): each
+/// block's sums are those `kernel` gives it, when `wide` makes the same sums lane by lane.
+fn down_columns_wide<const K: usize>(
+    sums: &mut [f32],
+    res: usize,
+    first: usize,
+    kernel: impl Fn(usize, usize) -> [Lanes; K],
+    wide: impl Fn(usize) -> Option<[[f32; 16]; K]>,
+) {
+    let padded = res.div_ceil(8) * 8;
+    let mut block = 0;
+    while block < res.div_ceil(8) {
+        let c0 = 8 * block;
+        if c0 + 16 <= res
+            && let Some(pair) = wide(c0)
+        {
+            for (s, lanes) in pair.iter().enumerate() {
+                sums[(first + s) * padded + c0..][..16].copy_from_slice(lanes);
+            }
+            block += 2;
+            continue;
+        }
+        let c0 = c0.min(res - 8);
+        for (s, lanes) in kernel(c0, 8 * block - c0).iter().enumerate() {
+            sums[(first + s) * padded + 8 * block..][..8].copy_from_slice(lanes);
+        }
+        block += 1;
+    }
+}
+
 /// `J_u^T r` from the moments of `r a` and `r b` (rows `15..21` of `mom`, see
 /// [`GridMoments::unit_system`]): `J_u = (a u, a v, a, b u, b v, b, -u s, -v s)`, `s = a u + b v`.
 fn unit_gradient_sums(mom: &[[f64; POWERS]; SUMS]) -> [f64; 8] {
@@ -333,6 +373,33 @@ fn column_block(
         column_block_portable,
         (a, b, r, res, c0, skip, vpow)
     )
+}
+
+/// [`column_block`] of the sixteen columns from `c0` (`c0 + 16 <= res`, no lane skipped) in
+/// 512-bit registers, the same products and sums lane by lane; `None` where the build or the
+/// processor has no AVX-512 ([`crate::cpu::avx512`]).
+#[allow(unused_variables)]
+fn column_block16(
+    a: &[f32],
+    b: &[f32],
+    r: &[f32],
+    res: usize,
+    c0: usize,
+    vpow: &[[f32; POWERS]],
+) -> Option<[[f32; 16]; SUMS]> {
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    if crate::cpu::avx512() {
+        let end = (vpow.len().max(1) - 1) * res + c0 + 16;
+        assert!(c0 + 16 <= res && end <= a.len() && end <= b.len() && end <= r.len());
+        // SAFETY: the processor has AVX-512F (checked above); the kernel reads sixteen values
+        // from row * res + c0 for every row below vpow.len(), within the slices (asserted).
+        return Some(unsafe { simd::column_block16(a, b, r, res, c0, vpow) });
+    }
+    None
 }
 
 /// The six sums of [`column_block`] that `J^T r` needs (its rows `15..21`: `r a v^j`, `r b v^j`,
@@ -492,6 +559,56 @@ mod simd {
             let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
             for (o, v) in out.iter_mut().zip(all) {
                 _mm256_storeu_ps(o.as_mut_ptr(), *v);
+            }
+        }
+        out
+    }
+
+    /// [`super::column_block`] of sixteen columns in 512-bit registers, in one pass down the
+    /// rows (32 registers hold the 21 sums): in each lane the same products and multiply-adds,
+    /// in the same order, as the AVX2 kernel's.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F, and every slice must hold sixteen values from
+    /// `row * res + c0` for each row below `vpow.len()`.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn column_block16(
+        a: &[f32],
+        b: &[f32],
+        r: &[f32],
+        res: usize,
+        c0: usize,
+        vpow: &[[f32; POWERS]],
+    ) -> [[f32; 16]; SUMS] {
+        let mut out = [[0f32; 16]; SUMS];
+        // SAFETY: the caller's contract; the stores write the local array.
+        unsafe {
+            let load = |x: &[f32], row: usize| _mm512_loadu_ps(x.as_ptr().add(row * res + c0));
+            let z = _mm512_setzero_ps();
+            let (mut saa, mut sab, mut sbb) = ([z; POWERS], [z; POWERS], [z; POWERS]);
+            let (mut sra, mut srb) = ([z; 3], [z; 3]);
+            for (row, vp) in vpow.iter().enumerate() {
+                let (la, lb, lr) = (load(a, row), load(b, row), load(r, row));
+                let (aa, ab, bb) = (
+                    _mm512_mul_ps(la, la),
+                    _mm512_mul_ps(la, lb),
+                    _mm512_mul_ps(lb, lb),
+                );
+                let (ra, rb) = (_mm512_mul_ps(lr, la), _mm512_mul_ps(lr, lb));
+                for j in 0..POWERS {
+                    let v = _mm512_set1_ps(vp[j]);
+                    saa[j] = _mm512_fmadd_ps(aa, v, saa[j]);
+                    sab[j] = _mm512_fmadd_ps(ab, v, sab[j]);
+                    sbb[j] = _mm512_fmadd_ps(bb, v, sbb[j]);
+                    if j < 3 {
+                        sra[j] = _mm512_fmadd_ps(ra, v, sra[j]);
+                        srb[j] = _mm512_fmadd_ps(rb, v, srb[j]);
+                    }
+                }
+            }
+            let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
+            for (o, v) in out.iter_mut().zip(all) {
+                _mm512_storeu_ps(o.as_mut_ptr(), *v);
             }
         }
         out
@@ -943,6 +1060,52 @@ mod tests {
             let full = column_block(&a, &b, &r, res, c0, skip, &vpow);
             assert_eq!(fast[..], full[3 * POWERS..]);
             assert!(fast.iter().all(|l| l[..skip].iter().all(|&v| v == 0.0)));
+        }
+    }
+
+    /// Summing pairs of column blocks at once gives every block the sums the one-block kernel
+    /// gives it, bit for bit: the pairing (two blocks from the kernel's own sums, on any
+    /// processor) and the 512-bit kernel (where the processor has AVX-512), at widths where
+    /// the last block overlaps and where it does not.
+    #[test]
+    fn the_wide_column_sums_are_the_narrow_ones() {
+        let mut rng = Rng::new(11);
+        for res in [8, 13, 16, 17, 24, 31, 50, 64] {
+            let n = res * res;
+            let mut draw =
+                || -> Vec<f32> { (0..n).map(|_| (10.0 * rng.normal()) as f32).collect() };
+            let (a, b, r) = (draw(), draw(), draw());
+            let vpow: Vec<[f32; POWERS]> = unit_coordinates(res, GridLayout::Centres)
+                .iter()
+                .map(|&v| std::array::from_fn(|j| (v as f32).powi(j as i32)))
+                .collect();
+            let kernel = |c0, skip| column_block(&a, &b, &r, res, c0, skip, &vpow);
+            let padded = res.div_ceil(8) * 8;
+            let mut narrow = vec![f32::NAN; SUMS * padded];
+            down_columns(&mut narrow, res, 0, kernel);
+            let paired = |c0: usize| -> Option<[[f32; 16]; SUMS]> {
+                let (lo, hi) = (kernel(c0, 0), kernel(c0 + 8, 0));
+                Some(std::array::from_fn(|s| {
+                    std::array::from_fn(|k| if k < 8 { lo[s][k] } else { hi[s][k - 8] })
+                }))
+            };
+            let wide = |c0| column_block16(&a, &b, &r, res, c0, &vpow);
+            for (what, sums) in [
+                ("paired", {
+                    let mut o = vec![f32::NAN; SUMS * padded];
+                    down_columns_wide(&mut o, res, 0, kernel, paired);
+                    o
+                }),
+                ("512-bit", {
+                    let mut o = vec![f32::NAN; SUMS * padded];
+                    down_columns_wide(&mut o, res, 0, kernel, wide);
+                    o
+                }),
+            ] {
+                for (i, (x, y)) in sums.iter().zip(&narrow).enumerate() {
+                    assert_eq!(x.to_bits(), y.to_bits(), "{what}, res {res}, sum {i}");
+                }
+            }
         }
     }
 

@@ -1,0 +1,36 @@
+//! What the processor offers beyond the build's baseline (x86-64-v3: AVX2 and FMA), detected
+//! once at run time: AVX-512, whose 512-bit registers double the multiply-adds a cycle of the
+//! kernels bound by them (the grid's moments, the region's smoothing).
+//!
+//! Every kernel with an AVX-512 version makes the same products and sums, in the same order, in
+//! each lane as its AVX2 version, so both give the same bits; the tests compare them where the
+//! processor has AVX-512. `REGTRACK_SIMD=avx2` in the environment keeps the AVX2 kernels (to
+//! compare speeds on one machine).
+
+use std::sync::OnceLock;
+
+/// Whether the AVX-512 kernels run: the processor (and the operating system) has AVX-512F, BW,
+/// DQ and VL, and `REGTRACK_SIMD` does not say `avx2`. Detected once.
+pub fn avx512() -> bool {
+    static ON: OnceLock<bool> = OnceLock::new();
+    *ON.get_or_init(|| {
+        let off = std::env::var("REGTRACK_SIMD").is_ok_and(|v| v.eq_ignore_ascii_case("avx2"));
+        !off && avx512_present()
+    })
+}
+
+/// Whether the processor has the AVX-512 subsets the kernels use (whatever `REGTRACK_SIMD`
+/// says).
+pub fn avx512_present() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}

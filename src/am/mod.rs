@@ -423,12 +423,42 @@ impl BlockCorrelation {
     /// [`BlockCorrelation::new`] in place: once its buffers have grown to `res x res`, it does
     /// not allocate (the tracker makes one of every frame's patch).
     pub fn set_template(&mut self, template: &[f32], res: usize, cells: usize) {
+        if self.set_geometry(template, res, cells) {
+            // The template's part: per block, sums of t, tx, ty, tt.
+            let template = &template[..res * res];
+            let sums = self.moments(template, [template]);
+            self.set_template_sums(template, &sums);
+        }
+    }
+
+    /// [`BlockCorrelation::set_template`] with the template's sums already made: `sums` are
+    /// those of `template` on this grid (from [`BlockCorrelation::of_pair`] on a correlation of
+    /// the same `res` and `cells`), which are then not summed again. The same result.
+    pub fn set_template_from(
+        &mut self,
+        template: &[f32],
+        res: usize,
+        cells: usize,
+        sums: &PatchSums,
+    ) {
+        let clamped = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
+        if sums.geometry != Some((res, clamped)) {
+            return self.set_template(template, res, cells);
+        }
+        if self.set_geometry(template, res, cells) {
+            self.set_template_sums(&template[..res * res], &sums.blocks);
+        }
+    }
+
+    /// The template-independent part of [`BlockCorrelation::set_template`]: clears the template
+    /// and sets the grid; false (the correlation then gives 0) when `template` is too short.
+    fn set_geometry(&mut self, template: &[f32], res: usize, cells: usize) -> bool {
         let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
         self.template.clear();
         self.blocks.clear();
         if res == 0 || template.len() < res * res {
             self.geometry = None;
-            return;
+            return false;
         }
         // The grid's part, once per (res, cells): per block the sums of 1, x, y, xx, xy, yy of
         // the samples' block-local coordinates.
@@ -450,13 +480,16 @@ impl BlockCorrelation {
             }
             self.geometry = Some((res, cells));
         }
-        // The template's part: per block, sums of t, tx, ty, tt.
-        let template = &template[..res * res];
-        let sums = self.moments(template, template);
+        true
+    }
+
+    /// Each block's plane fit and the template's moments from its sums `t, tx, ty, tt` (the
+    /// first four of each block's in `sums`).
+    fn set_template_sums(&mut self, template: &[f32], sums: &BlockSums) {
         let acc = self
             .geometry_sums
             .iter()
-            .zip(&sums)
+            .zip(sums)
             .map(|(g, t)| [g[0], g[1], g[2], g[3], g[4], g[5], t[0], t[1], t[2], t[3]]);
         self.blocks.extend(acc.map(|b| {
             let n = b[0];
@@ -472,13 +505,14 @@ impl BlockCorrelation {
         self.template.extend_from_slice(template);
     }
 
-    /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` over its samples (`x`, `y` the
-    /// block-local coordinates), `p` and `q` being `res x res` patches. Per row of blocks, the
-    /// columns' sums of `p`, `p y`, `p p` and `q p` over the block row's rows
-    /// ([`MOMENT_COLUMNS`] columns at a time, kept in registers down the rows), then each
-    /// column's into its block, column after column (`p x` from the column's `p`).
-    fn moments(&self, p: &[f32], q: &[f32]) -> [[f64; 5]; MAX_BLOCKS * MAX_BLOCKS] {
-        let mut acc = [[0.0f64; 5]; MAX_BLOCKS * MAX_BLOCKS];
+    /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` for each `q` of `qs` (one or
+    /// two; the last sum zero with one) over its samples (`x`, `y` the block-local coordinates),
+    /// `p` and each `q` being `res x res` patches. Per row of blocks, the columns' sums of `p`,
+    /// `p y`, `p p` and each `q p` over the block row's rows ([`MOMENT_COLUMNS`] columns at a
+    /// time, kept in registers down the rows), then each column's into its block, column after
+    /// column (`p x` from the column's `p`). Each sum is made the same way whatever `qs` holds.
+    fn moments<const Q: usize>(&self, p: &[f32], qs: [&[f32]; Q]) -> BlockSums {
+        let mut acc = [[0.0f64; 6]; MAX_BLOCKS * MAX_BLOCKS];
         let Some((res, cells)) = self.geometry else {
             return acc;
         };
@@ -494,22 +528,22 @@ impl BlockCorrelation {
             // the next block begins.
             let row_acc = &mut acc[br * cells..(br + 1) * cells];
             let (mut c, mut bc, mut next, mut x0) = (0, 0, start(1), 0);
-            let mut a = [0.0f64; 5];
+            let mut a = [0.0f64; 6];
             while c < res {
                 // Eight columns' sums, of which those from `skip` on are the next to add.
                 let (sums, skip) = if c + MOMENT_COLUMNS <= res {
-                    (column_sums8(p, q, res, c, rows.clone(), origin), 0)
+                    (column_sums8(p, qs, res, c, rows.clone(), origin), 0)
                 } else if res >= MOMENT_COLUMNS {
                     // The last columns: the last eight summed (each column's sums are its own).
                     let first = res - MOMENT_COLUMNS;
                     (
-                        column_sums8(p, q, res, first, rows.clone(), origin),
+                        column_sums8(p, qs, res, first, rows.clone(), origin),
                         c - first,
                     )
                 } else {
-                    let mut one = [[0.0; 4]; MOMENT_COLUMNS];
+                    let mut one = [[0.0; 5]; MOMENT_COLUMNS];
                     one[MOMENT_COLUMNS - 1] =
-                        portable::column_sums::<1>(p, q, res, c, rows.clone(), origin)[0];
+                        portable::column_sums::<1, Q>(p, qs, res, c, rows.clone(), origin)[0];
                     (one, MOMENT_COLUMNS - 1)
                 };
                 for s in &sums[skip..] {
@@ -525,6 +559,7 @@ impl BlockCorrelation {
                     a[2] += s[1];
                     a[3] += s[2];
                     a[4] += s[3];
+                    a[5] += s[4];
                     c += 1;
                 }
             }
@@ -540,16 +575,44 @@ impl BlockCorrelation {
             return 0.0;
         }
         // Per block, sums of: c, cx, cy, cc, tc.
-        let acc = self.moments(&current[..n], &self.template);
+        let acc = self.moments(&current[..n], [&self.template]);
+        self.of_sums(&acc, 4)
+    }
+
+    /// [`BlockCorrelation::of`] for this correlation and `other` (the same `res` and cells,
+    /// another template), from one pass over `current`, and the patch's sums (for
+    /// [`BlockCorrelation::set_template_from`]): the same two values as two calls of `of`.
+    pub fn of_pair(
+        &self,
+        other: &BlockCorrelation,
+        current: &[f32],
+        sums: &mut PatchSums,
+    ) -> (f64, f64) {
+        let n = self.geometry.map_or(0, |(res, _)| res * res);
+        sums.geometry = None;
+        if other.geometry != self.geometry || n == 0 || current.len() < n {
+            return (self.of(current), other.of(current));
+        }
+        sums.blocks = self.moments(&current[..n], [&self.template, &other.template]);
+        sums.geometry = self.geometry;
+        (
+            self.of_sums(&sums.blocks, 4),
+            other.of_sums(&sums.blocks, 5),
+        )
+    }
+
+    /// The confidence from a patch's block sums, the products with this template being the
+    /// `cross`-th of each block's.
+    fn of_sums(&self, acc: &BlockSums, cross: usize) -> f64 {
         let (mut num, mut den) = (0.0, 0.0);
-        for (block, a) in self.blocks.iter().zip(&acc) {
+        for (block, a) in self.blocks.iter().zip(acc) {
             let Some((inv, ut, vt, n)) = block else {
                 continue;
             };
             let uc = nalgebra::Vector3::new(a[0], a[1], a[2]);
             // Inner products of the residuals after the planes are removed.
             let vc = a[3] - uc.dot(&(inv * uc));
-            let cov = a[4] - ut.dot(&(inv * uc));
+            let cov = a[cross] - ut.dot(&(inv * uc));
             if !(vc.is_finite() && cov.is_finite()) {
                 continue;
             }
@@ -562,6 +625,29 @@ impl BlockCorrelation {
             den += vt;
         }
         if den > 0.0 { num / den } else { 0.0 }
+    }
+}
+
+/// Per block (at most [`MAX_BLOCKS`] per side), sums over a patch `c`: `c, c x, c y, c c`, then
+/// `t c` for one or two templates `t`.
+type BlockSums = [[f64; 6]; MAX_BLOCKS * MAX_BLOCKS];
+
+/// A patch's block sums made by [`BlockCorrelation::of_pair`], kept to make it the template of
+/// another correlation of the same grid ([`BlockCorrelation::set_template_from`]) without
+/// summing it again.
+#[derive(Clone, Debug)]
+pub struct PatchSums {
+    /// `(res, cells)` of the grid the sums are on (`None`: none made).
+    geometry: Option<(usize, usize)>,
+    blocks: BlockSums,
+}
+
+impl Default for PatchSums {
+    fn default() -> Self {
+        PatchSums {
+            geometry: None,
+            blocks: [[0.0; 6]; MAX_BLOCKS * MAX_BLOCKS],
+        }
     }
 }
 
@@ -659,47 +745,51 @@ mod simd {
 
     /// [`super::portable::column_sums`] of eight columns: the column sums in eight AVX
     /// registers down the rows (the same products and sums in the same order, so the same bits).
-    pub(super) fn column_sums(
+    pub(super) fn column_sums<const Q: usize>(
         p: &[f32],
-        q: &[f32],
+        qs: [&[f32]; Q],
         res: usize,
         c0: usize,
         rows: std::ops::Range<usize>,
         origin: f64,
-    ) -> [[f64; 4]; 8] {
+    ) -> [[f64; 5]; 8] {
         use std::arch::x86_64::*;
+        assert!((1..=2).contains(&Q), "one or two cross products");
         if let Some(last) = rows.clone().last() {
             let end = last * res + c0 + 8;
             assert!(
-                end <= p.len() && end <= q.len(),
+                end <= p.len() && qs.iter().all(|q| end <= q.len()),
                 "moments beyond the patches"
             );
         }
-        let mut s = [[0f64; 4]; 8];
+        let mut s = [[0f64; 5]; 8];
         // SAFETY: AVX2 is enabled at compile time (cfg); every load reads 8 values from
         // r res + c0 with r <= the last row, so up to the end asserted above.
         unsafe {
             let z = _mm256_setzero_pd();
-            let (mut sp, mut spy, mut spp, mut sqp) = ([z; 2], [z; 2], [z; 2], [z; 2]);
+            let (mut sp, mut spy, mut spp) = ([z; 2], [z; 2], [z; 2]);
+            let mut sqp = [[z; 2]; Q];
             for r in rows {
                 let y = _mm256_set1_pd(r as f64 - origin);
-                let (pr, qr) = (p.as_ptr().add(r * res + c0), q.as_ptr().add(r * res + c0));
+                let pr = p.as_ptr().add(r * res + c0);
                 for h in 0..2 {
                     let v = _mm256_cvtps_pd(_mm_loadu_ps(pr.add(4 * h)));
-                    let t = _mm256_cvtps_pd(_mm_loadu_ps(qr.add(4 * h)));
                     sp[h] = _mm256_add_pd(sp[h], v);
                     spy[h] = _mm256_add_pd(spy[h], _mm256_mul_pd(v, y));
                     spp[h] = _mm256_add_pd(spp[h], _mm256_mul_pd(v, v));
-                    sqp[h] = _mm256_add_pd(sqp[h], _mm256_mul_pd(t, v));
+                    for (acc, q) in sqp.iter_mut().zip(qs) {
+                        let t = _mm256_cvtps_pd(_mm_loadu_ps(q.as_ptr().add(r * res + c0 + 4 * h)));
+                        acc[h] = _mm256_add_pd(acc[h], _mm256_mul_pd(t, v));
+                    }
                 }
             }
-            let mut lanes = [[0f64; 8]; 4];
-            for (l, acc) in lanes.iter_mut().zip([sp, spy, spp, sqp]) {
+            let mut lanes = [[0f64; 8]; 5];
+            for (l, acc) in lanes.iter_mut().zip([sp, spy, spp].iter().chain(&sqp)) {
                 _mm256_storeu_pd(l.as_mut_ptr(), acc[0]);
                 _mm256_storeu_pd(l.as_mut_ptr().add(4), acc[1]);
             }
             for (k, sk) in s.iter_mut().enumerate() {
-                *sk = [lanes[0][k], lanes[1][k], lanes[2][k], lanes[3][k]];
+                *sk = std::array::from_fn(|i| lanes[i][k]);
             }
         }
         s
@@ -763,33 +853,40 @@ mod portable {
         s
     }
 
-    /// The sums of `p`, `p y`, `p p` and `q p` down `W` neighbouring columns of `res x res`
-    /// patches from `c0`, over `rows` (`y = r - origin`): the columns side by side in registers,
-    /// row after row.
+    /// The sums of `p`, `p y`, `p p` and `q p` for each `q` of `qs` (one or two, the rest of
+    /// the five sums zero) down `W` neighbouring columns of `res x res` patches from `c0`, over
+    /// `rows` (`y = r - origin`): the columns side by side in registers, row after row.
     #[inline(always)]
-    pub(super) fn column_sums<const W: usize>(
+    pub(super) fn column_sums<const W: usize, const Q: usize>(
         p: &[f32],
-        q: &[f32],
+        qs: [&[f32]; Q],
         res: usize,
         c0: usize,
         rows: std::ops::Range<usize>,
         origin: f64,
-    ) -> [[f64; 4]; W] {
-        let (mut sp, mut spy, mut spp, mut sqp) =
-            ([0.0f64; W], [0.0f64; W], [0.0f64; W], [0.0f64; W]);
+    ) -> [[f64; 5]; W] {
+        let (mut sp, mut spy, mut spp) = ([0.0f64; W], [0.0f64; W], [0.0f64; W]);
+        let mut sqp = [[0.0f64; W]; Q];
         for r in rows {
             let y = r as f64 - origin;
             let pr: &[f32; W] = p[r * res + c0..][..W].try_into().expect("W values");
-            let qr: &[f32; W] = q[r * res + c0..][..W].try_into().expect("W values");
             for k in 0..W {
-                let (v, t) = (pr[k] as f64, qr[k] as f64);
+                let v = pr[k] as f64;
                 sp[k] += v;
                 spy[k] += v * y;
                 spp[k] += v * v;
-                sqp[k] += t * v;
+                for (acc, q) in sqp.iter_mut().zip(qs) {
+                    acc[k] += q[r * res + c0 + k] as f64 * v;
+                }
             }
         }
-        std::array::from_fn(|k| [sp[k], spy[k], spp[k], sqp[k]])
+        std::array::from_fn(|k| {
+            let mut out = [sp[k], spy[k], spp[k], 0.0, 0.0];
+            for (o, acc) in out[3..].iter_mut().zip(&sqp) {
+                *o = acc[k];
+            }
+            out
+        })
     }
 }
 
@@ -804,15 +901,15 @@ use portable::{columns_times, tile_2x4};
     target_feature = "avx2",
     target_feature = "fma"
 )))]
-fn column_sums8(
+fn column_sums8<const Q: usize>(
     p: &[f32],
-    q: &[f32],
+    qs: [&[f32]; Q],
     res: usize,
     c0: usize,
     rows: std::ops::Range<usize>,
     origin: f64,
-) -> [[f64; 4]; MOMENT_COLUMNS] {
-    portable::column_sums::<MOMENT_COLUMNS>(p, q, res, c0, rows, origin)
+) -> [[f64; 5]; MOMENT_COLUMNS] {
+    portable::column_sums::<MOMENT_COLUMNS, Q>(p, qs, res, c0, rows, origin)
 }
 #[cfg(all(
     target_arch = "x86_64",

@@ -354,32 +354,47 @@ fn block_moments_are_sums_over_each_blocks_samples() {
         let q: Vec<f32> = (0..res * res)
             .map(|_| rng.range(0.0, 255.0) as f32)
             .collect();
+        let q2: Vec<f32> = (0..res * res)
+            .map(|_| rng.range(0.0, 255.0) as f32)
+            .collect();
         let bc = super::BlockCorrelation::new(&q, res, cells);
-        let got = bc.moments(&p, &q);
+        let got = bc.moments(&p, [&q]);
+        // With a second cross product, every other sum is the same, bit for bit.
+        let both = bc.moments(&p, [&q, &q2]);
+        for (g, b) in got.iter().zip(&both) {
+            assert_eq!(g[..5], b[..5], "{res} {cells}");
+            assert_eq!(g[5], 0.0);
+        }
         // The eight-column kernel (AVX where built for it): the plain sums, bit for bit.
         if res >= 8 {
             for (c0, rows) in [(0, 0..res), (res - 8, 1..res.min(5)), (res / 3, 2..2)] {
                 assert_eq!(
-                    super::column_sums8(&p, &q, res, c0, rows.clone(), 1.5),
-                    super::portable::column_sums::<8>(&p, &q, res, c0, rows, 1.5),
+                    super::column_sums8(&p, [&q], res, c0, rows.clone(), 1.5),
+                    super::portable::column_sums::<8, 1>(&p, [&q], res, c0, rows.clone(), 1.5),
                     "{res} from column {c0}"
+                );
+                assert_eq!(
+                    super::column_sums8(&p, [&q, &q2], res, c0, rows.clone(), 1.5),
+                    super::portable::column_sums::<8, 2>(&p, [&q, &q2], res, c0, rows, 1.5),
+                    "{res} from column {c0}, two templates"
                 );
             }
         }
-        let mut want = [[0.0f64; 5]; super::MAX_BLOCKS * super::MAX_BLOCKS];
+        let mut want = [[0.0f64; 6]; super::MAX_BLOCKS * super::MAX_BLOCKS];
         for r in 0..res {
             for c in 0..res {
                 let (br, bcol) = (r * cells / res, c * cells / res);
                 let y = (r - br * res / cells) as f64;
                 let x = (c - bcol * res / cells) as f64;
                 let (v, t) = (p[r * res + c] as f64, q[r * res + c] as f64);
+                let t2 = q2[r * res + c] as f64;
                 let a = &mut want[br * cells + bcol];
-                for (s, term) in a.iter_mut().zip([v, v * x, v * y, v * v, t * v]) {
+                for (s, term) in a.iter_mut().zip([v, v * x, v * y, v * v, t * v, t2 * v]) {
                     *s += term;
                 }
             }
         }
-        for (g, w) in got.iter().zip(&want) {
+        for (g, w) in both.iter().zip(&want) {
             for (a, b) in g.iter().zip(w) {
                 assert!(
                     (a - b).abs() <= 1e-9 * b.abs().max(1.0),
@@ -388,6 +403,51 @@ fn block_moments_are_sums_over_each_blocks_samples() {
             }
         }
     }
+}
+
+/// One pass for two correlations of the same grid gives what each gives alone, bit for bit,
+/// and its sums make the patch another's template as `set_template` makes it; correlations of
+/// other grids, or without a template, fall back to a pass each.
+#[test]
+fn a_pair_of_confidences_in_one_pass_is_each_alone() {
+    let mut rng = crate::rng::Rng::new(5);
+    let mut draw = |n: usize| -> Vec<f32> {
+        (0..n * n)
+            .map(|i| ((i % n) as f32 * 0.3).sin() * 40.0 + rng.normal() as f32 * 5.0 + 100.0)
+            .collect()
+    };
+    for (res, cells) in [(50, 4), (13, 3), (24, 8), (12, 3)] {
+        let (t, prev, cur) = (draw(res), draw(res), draw(res));
+        let a = super::BlockCorrelation::new(&t, res, cells);
+        let b = super::BlockCorrelation::new(&prev, res, cells);
+        let mut sums = super::PatchSums::default();
+        let (ca, cb) = a.of_pair(&b, &cur, &mut sums);
+        assert_eq!(ca.to_bits(), a.of(&cur).to_bits(), "{res} {cells}");
+        assert_eq!(cb.to_bits(), b.of(&cur).to_bits(), "{res} {cells}");
+        assert!(ca.abs() > 0.0 && ca != cb, "{res} {cells}: {ca} {cb}");
+        // The patch as the next template, from its sums and summed again.
+        let mut from = b.clone();
+        from.set_template_from(&cur, res, cells, &sums);
+        let mut again = b.clone();
+        again.set_template(&cur, res, cells);
+        let next = draw(res);
+        assert_eq!(from.of(&next).to_bits(), again.of(&next).to_bits());
+        assert_eq!(from.of(&cur), again.of(&cur));
+        // Sums of another grid are not used.
+        let mut other = super::BlockCorrelation::default();
+        other.set_template_from(&cur[..res * res - res], res - 1, cells, &sums);
+        let fresh = super::BlockCorrelation::new(&cur[..(res - 1) * (res - 1)], res - 1, cells);
+        let probe = &next[..(res - 1) * (res - 1)];
+        assert_eq!(other.of(probe).to_bits(), fresh.of(probe).to_bits());
+    }
+    // Another grid, or no template: each alone.
+    let (t, cur) = (draw(20), draw(20));
+    let a = super::BlockCorrelation::new(&t, 20, 4);
+    let b = super::BlockCorrelation::new(&t, 20, 5);
+    let mut sums = super::PatchSums::default();
+    assert_eq!(a.of_pair(&b, &cur, &mut sums), (a.of(&cur), b.of(&cur)));
+    let empty = super::BlockCorrelation::default();
+    assert_eq!(a.of_pair(&empty, &cur, &mut sums), (a.of(&cur), 0.0));
 }
 
 /// A [`super::BlockCorrelation`] set again to other templates (as the tracker does every frame,

@@ -99,6 +99,9 @@ pub struct Workspace {
     /// cleared by [`Context::sample`] and by whoever changes the frame or region being read
     /// (the driver, when it pre-processes). [`Context::patch_at`] then skips sampling again.
     pub sampled_at: Option<Params>,
+    /// How many times [`Context::sample`] has written `values` (what was made of a patch is
+    /// that patch's while this has not changed).
+    pub samples: u64,
 }
 
 impl Context {
@@ -145,6 +148,7 @@ impl Context {
                 grad: z(n),
                 jac: z(n * dof),
                 sampled_at: None,
+                samples: 0,
             },
             last_step: None,
         }
@@ -219,6 +223,7 @@ impl Context {
     /// Samples the frame at the warped grid: values, and gradients (frame pixels) if asked.
     pub fn sample(&mut self, img: &ImageView, gradients: bool) {
         self.work.sampled_at = None;
+        self.work.samples = self.work.samples.wrapping_add(1);
         if gradients {
             sample_values_gradients(
                 img,

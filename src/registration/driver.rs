@@ -4,7 +4,7 @@
 //! search method makes one iteration at a time ([`SearchMethod::iterate`]).
 
 use super::{Context, Control, SearchMethod, sweep};
-use crate::am::BlockCorrelation;
+use crate::am::{BlockCorrelation, PatchSums};
 use crate::error::{Error, Result};
 use crate::geometry::{Quad, apply_homography};
 use crate::imaging::{ImageView, Preprocessor, gaussian_kernel};
@@ -73,6 +73,15 @@ struct Searched {
     frame_confidence: Option<f64>,
 }
 
+/// What the end of a search is judged by: the confidence against the template, and against
+/// the last tracked frame's patch when there is one, whose sums (made in the same pass) are kept
+/// in `sums` with the context's sampling they are of.
+struct Judges<'a> {
+    template: &'a BlockCorrelation,
+    previous: Option<&'a BlockCorrelation>,
+    sums: &'a mut (Option<u64>, PatchSums),
+}
+
 /// Where [`RegistrationTracker::polish`] ended: the confidence there, the similarity of its
 /// last accepted step's start, and its iterations.
 #[derive(Clone, Copy, Debug)]
@@ -120,6 +129,10 @@ pub struct RegistrationTracker {
     /// after an initialisation, a move by hand or a loss).
     previous: BlockCorrelation,
     has_previous: bool,
+    /// The block sums of the last patch both confidences were made of in one pass, and which
+    /// sampling of the context's (`Workspace::samples`) that patch was: if the frame keeps it,
+    /// it becomes `previous` without being summed again.
+    patch_sums: (Option<u64>, PatchSums),
 }
 
 /// The grid samples `on_loss=redetect` ranks its candidates on (every other one per axis, a
@@ -214,6 +227,7 @@ impl RegistrationTracker {
             detector: Detector::default(),
             previous: BlockCorrelation::default(),
             has_previous: false,
+            patch_sums: (None, PatchSums::default()),
         })
     }
 
@@ -408,7 +422,11 @@ impl RegistrationTracker {
         let mut result = Self::finish(
             &mut self.ctx,
             &mut *self.sm,
-            &self.confidence,
+            &mut Judges {
+                template: &self.confidence,
+                previous: self.has_previous.then_some(&self.previous),
+                sums: &mut self.patch_sums,
+            },
             params,
             (self.frame, done),
             &view,
@@ -430,7 +448,11 @@ impl RegistrationTracker {
             let again = Self::finish(
                 &mut self.ctx,
                 &mut *self.sm,
-                &self.confidence,
+                &mut Judges {
+                    template: &self.confidence,
+                    previous: self.has_previous.then_some(&self.previous),
+                    sums: &mut self.patch_sums,
+                },
                 params,
                 (self.frame, first.iterations),
                 &view,
@@ -450,9 +472,11 @@ impl RegistrationTracker {
                 self.ctx.params = out.params;
             }
         }
-        // The correlation with the last tracked frame's patch.
+        // The correlation with the last tracked frame's patch (unless the search made it with
+        // the confidence).
         if let Ok(out) = &mut result
             && self.has_previous
+            && out.frame_confidence.is_none()
         {
             let q = out.params;
             // Usually just sampled there, for the confidence.
@@ -514,7 +538,7 @@ impl RegistrationTracker {
     fn finish(
         ctx: &mut Context,
         sm: &mut dyn SearchMethod,
-        confidence: &BlockCorrelation,
+        judges: &mut Judges<'_>,
         params: &TrackerParams,
         (frame, done): (usize, usize),
         view: &ImageView,
@@ -522,6 +546,7 @@ impl RegistrationTracker {
         started: Instant,
         from: Params,
     ) -> std::result::Result<Searched, LossReason> {
+        let confidence = judges.template;
         ctx.params = from;
         let (mut corners, mut iters, converged, mut similarity) =
             Self::search(ctx, sm, params, frame, 0, done, view, observer, started)?;
@@ -540,10 +565,17 @@ impl RegistrationTracker {
                 corners = ctx.corners(&ctx.params);
                 similarity = polished.similarity;
             }
-            polished.confidence
+            (polished.confidence, None)
+        } else if let Some(previous) = judges.previous {
+            // Both confidences from one pass over the patch, its sums kept.
+            let p = ctx.params;
+            ctx.sample_at(view, &p);
+            let (c, f) = confidence.of_pair(previous, &ctx.work.values, &mut judges.sums.1);
+            judges.sums.0 = Some(ctx.work.samples);
+            (c, Some(f))
         } else {
             let p = ctx.params;
-            Self::confidence_at(ctx, confidence, view, &p)
+            (Self::confidence_at(ctx, confidence, view, &p), None)
         };
         Ok(Searched {
             params: ctx.params,
@@ -551,8 +583,8 @@ impl RegistrationTracker {
             iterations: iters + done,
             converged,
             similarity,
-            confidence: conf,
-            frame_confidence: None,
+            confidence: conf.0,
+            frame_confidence: conf.1,
         })
     }
 
@@ -928,13 +960,21 @@ impl RegistrationTracker {
         }
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
         self.ctx.patch_at(&view, &out.params);
-        self.previous
-            .set_template(&self.ctx.work.values, self.params.res, CONFIDENCE_BLOCKS);
+        let (res, values) = (self.params.res, &self.ctx.work.values);
+        match &self.patch_sums {
+            // The patch both confidences were just made of: its sums are there.
+            (Some(made), sums) if *made == self.ctx.work.samples => self
+                .previous
+                .set_template_from(values, res, CONFIDENCE_BLOCKS, sums),
+            _ => self.previous.set_template(values, res, CONFIDENCE_BLOCKS),
+        }
+        self.patch_sums.0 = None;
         self.has_previous = true;
     }
 
     fn forget_previous(&mut self) {
         self.has_previous = false;
+        self.patch_sums.0 = None;
     }
 
     /// The loss-of-track checks on a frame's final quad.
@@ -1074,6 +1114,8 @@ impl VisualTracker for RegistrationTracker {
             return FrameOutcome::idle(self.frame, self.status, self.corners);
         }
         self.frame += 1;
+        // Sums are used only in the frame they were made in.
+        self.patch_sums.0 = None;
         let mut timing = FrameTiming::default();
         let start_params = self.ctx.params;
         let start_corners = self.corners;

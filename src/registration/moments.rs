@@ -154,14 +154,9 @@ impl GridMoments {
         let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
         let vpow = &self.vpow;
-        let kernel = |c0, skip| column_block_r(a, b, r, res, c0, skip, vpow);
-        if self.wide {
-            down_columns_wide(&mut self.sums, res, 3 * POWERS, kernel, |c0| {
-                column_block_r16(a, b, r, res, c0, vpow)
-            });
-        } else {
-            down_columns(&mut self.sums, res, 3 * POWERS, kernel);
-        }
+        down_columns(&mut self.sums, res, 3 * POWERS, |c0, skip| {
+            column_block_r(a, b, r, res, c0, skip, vpow)
+        });
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(3 * POWERS..SUMS, &mut mom);
         self.l_transposed(&unit_gradient_sums(&mom), g);
@@ -407,32 +402,6 @@ fn column_block16(
     None
 }
 
-/// [`column_block_r`] of the sixteen columns from `c0` in 512-bit registers, as
-/// [`column_block16`] is [`column_block`]'s.
-#[allow(unused_variables)]
-fn column_block_r16(
-    a: &[f32],
-    b: &[f32],
-    r: &[f32],
-    res: usize,
-    c0: usize,
-    vpow: &[[f32; POWERS]],
-) -> Option<[[f32; 16]; 6]> {
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
-    if crate::cpu::avx512() {
-        let end = (vpow.len().max(1) - 1) * res + c0 + 16;
-        assert!(c0 + 16 <= res && end <= a.len() && end <= b.len() && end <= r.len());
-        // SAFETY: the processor has AVX-512F (checked above); the kernel reads sixteen values
-        // from row * res + c0 for every row below vpow.len(), within the slices (asserted).
-        return Some(unsafe { simd::column_block_r16(a, b, r, res, c0, vpow) });
-    }
-    None
-}
-
 /// The six sums of [`column_block`] that `J^T r` needs (its rows `15..21`: `r a v^j`, `r b v^j`,
 /// `j = 0..=2`).
 fn column_block_r(
@@ -639,45 +608,6 @@ mod simd {
             }
             let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
             for (o, v) in out.iter_mut().zip(all) {
-                _mm512_storeu_ps(o.as_mut_ptr(), *v);
-            }
-        }
-        out
-    }
-
-    /// [`super::column_block_r`] of sixteen columns in 512-bit registers (in each lane the same
-    /// operations as the AVX2 kernel's).
-    ///
-    /// # Safety
-    /// As [`column_block16`].
-    #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn column_block_r16(
-        a: &[f32],
-        b: &[f32],
-        r: &[f32],
-        res: usize,
-        c0: usize,
-        vpow: &[[f32; POWERS]],
-    ) -> [[f32; 16]; 6] {
-        let mut out = [[0f32; 16]; 6];
-        // SAFETY: the caller's contract; the stores write the local array.
-        unsafe {
-            let load = |x: &[f32], row: usize| _mm512_loadu_ps(x.as_ptr().add(row * res + c0));
-            let z = _mm512_setzero_ps();
-            let (mut sra, mut srb) = ([z; 3], [z; 3]);
-            for (row, vp) in vpow.iter().enumerate() {
-                let lr = load(r, row);
-                let (ra, rb) = (
-                    _mm512_mul_ps(lr, load(a, row)),
-                    _mm512_mul_ps(lr, load(b, row)),
-                );
-                for j in 0..3 {
-                    let v = _mm512_set1_ps(vp[j]);
-                    sra[j] = _mm512_fmadd_ps(ra, v, sra[j]);
-                    srb[j] = _mm512_fmadd_ps(rb, v, srb[j]);
-                }
-            }
-            for (o, v) in out.iter_mut().zip(sra.iter().chain(&srb)) {
                 _mm512_storeu_ps(o.as_mut_ptr(), *v);
             }
         }
@@ -1175,17 +1105,6 @@ mod tests {
                 for (i, (x, y)) in sums.iter().zip(&narrow).enumerate() {
                     assert_eq!(x.to_bits(), y.to_bits(), "{what}, res {res}, sum {i}");
                 }
-            }
-            // The gradient's six sums alone (`J^T r`).
-            let kernel_r = |c0, skip| column_block_r(&a, &b, &r, res, c0, skip, &vpow);
-            let mut narrow = vec![f32::NAN; 6 * padded];
-            down_columns(&mut narrow, res, 0, kernel_r);
-            let mut wide = vec![f32::NAN; 6 * padded];
-            down_columns_wide(&mut wide, res, 0, kernel_r, |c0| {
-                column_block_r16(&a, &b, &r, res, c0, &vpow)
-            });
-            for (i, (x, y)) in wide.iter().zip(&narrow).enumerate() {
-                assert_eq!(x.to_bits(), y.to_bits(), "r, res {res}, sum {i}");
             }
         }
     }

@@ -1,6 +1,6 @@
 //! What the processor offers beyond the build's baseline (x86-64-v3: AVX2 and FMA), detected
 //! once at run time: AVX-512, whose 512-bit registers double the multiply-adds a cycle of the
-//! kernels bound by them (the grid's moments, the region's smoothing).
+//! kernels bound by them (the grid's moments).
 //!
 //! Every kernel with an AVX-512 version makes the same products and sums, in the same order, in
 //! each lane as its AVX2 version, so both give the same bits; the tests compare them where the

@@ -441,8 +441,7 @@ impl BlockCorrelation {
         cells: usize,
         sums: &PatchSums,
     ) {
-        let clamped = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
-        if sums.geometry != Some((res, clamped)) {
+        if sums.geometry != Some((res, blocks_per_side(res, cells))) {
             return self.set_template(template, res, cells);
         }
         if self.set_geometry(template, res, cells) {
@@ -453,7 +452,7 @@ impl BlockCorrelation {
     /// The template-independent part of [`BlockCorrelation::set_template`]: clears the template
     /// and sets the grid; false (the correlation then gives 0) when `template` is too short.
     fn set_geometry(&mut self, template: &[f32], res: usize, cells: usize) -> bool {
-        let cells = cells.clamp(1, MAX_BLOCKS).min(res.max(1));
+        let cells = blocks_per_side(res, cells);
         self.template.clear();
         self.blocks.clear();
         if res == 0 || template.len() < res * res {
@@ -626,6 +625,12 @@ impl BlockCorrelation {
         }
         if den > 0.0 { num / den } else { 0.0 }
     }
+}
+
+/// The blocks per side of a [`BlockCorrelation`] asked for `cells` on a `res x res` grid: at
+/// least one, at most [`MAX_BLOCKS`] and `res`.
+fn blocks_per_side(res: usize, cells: usize) -> usize {
+    cells.clamp(1, MAX_BLOCKS).min(res.max(1))
 }
 
 /// Per block (at most [`MAX_BLOCKS`] per side), sums over a patch `c`: `c, c x, c y, c c`, then

@@ -968,13 +968,11 @@ impl RegistrationTracker {
                 .set_template_from(values, res, CONFIDENCE_BLOCKS, sums),
             _ => self.previous.set_template(values, res, CONFIDENCE_BLOCKS),
         }
-        self.patch_sums.0 = None;
         self.has_previous = true;
     }
 
     fn forget_previous(&mut self) {
         self.has_previous = false;
-        self.patch_sums.0 = None;
     }
 
     /// The loss-of-track checks on a frame's final quad.
@@ -1114,7 +1112,8 @@ impl VisualTracker for RegistrationTracker {
             return FrameOutcome::idle(self.frame, self.status, self.corners);
         }
         self.frame += 1;
-        // Sums are used only in the frame they were made in.
+        // Sums are used only in the frame they were made in (a context made again by an
+        // initialisation counts its samplings from zero).
         self.patch_sums.0 = None;
         let mut timing = FrameTiming::default();
         let start_params = self.ctx.params;

@@ -61,9 +61,6 @@ pub struct GridMoments {
     upow: [Vec<f32>; POWERS],
     /// The column sums ([`SUMS`] rows of the padded column count).
     sums: Vec<f32>,
-    /// Whether pairs of column blocks are summed at once in 512-bit registers
-    /// ([`crate::cpu::avx512`]; the same bits).
-    wide: bool,
 }
 
 impl GridMoments {
@@ -108,7 +105,6 @@ impl GridMoments {
             vpow,
             upow,
             sums: vec![0.0; SUMS * padded],
-            wide: crate::cpu::avx512(),
         })
     }
 
@@ -199,14 +195,14 @@ impl GridMoments {
         let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
         let vpow = &self.vpow;
-        let kernel = |c0, skip| column_block(a, b, r, res, c0, skip, vpow);
-        if self.wide {
-            down_columns_wide(&mut self.sums, res, 0, kernel, |c0| {
-                column_block16(a, b, r, res, c0, vpow)
-            });
-        } else {
-            down_columns(&mut self.sums, res, 0, kernel);
-        }
+        // Pairs of blocks in 512-bit registers where the processor has them (the same bits).
+        down_columns_wide(
+            &mut self.sums,
+            res,
+            0,
+            |c0, skip| column_block(a, b, r, res, c0, skip, vpow),
+            |c0| column_block16(a, b, r, res, c0, vpow),
+        );
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(0..SUMS, &mut mom);
         // The sums' rows: weight w (0: a^2, 1: a b, 2: b^2) at power j is row w * 5 + j; r a at

@@ -201,24 +201,31 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         }
         return;
     }
-    let w = img.width;
-    let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
-    let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
-    let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
     // Whole groups of eight points with AVX2, the rest below.
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     let done = avx2::values(img, xs, ys, out);
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
     let done = 0;
     let (xs, ys, out) = (&xs[done..], &ys[done..], &mut out[done..]);
-    let mut idx = [0u32; BLOCK];
-    let mut ax = [0f32; BLOCK];
-    let mut ay = [0f32; BLOCK];
-    for ((xb, yb), ob) in xs
-        .chunks(BLOCK)
-        .zip(ys.chunks(BLOCK))
-        .zip(out.chunks_mut(BLOCK))
-    {
+    // The vector path leaves fewer than eight: scratch arrays that short need no zeroing of a
+    // whole block's (which took 4 % of a tracked frame).
+    if xs.len() <= 8 {
+        values_rest::<8>(img, xs, ys, out);
+    } else {
+        values_rest::<BLOCK>(img, xs, ys, out);
+    }
+}
+
+/// [`sample_values`]'s scalar loop over `xs`, blocks of `B` points at a time.
+fn values_rest<const B: usize>(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
+    let w = img.width;
+    let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
+    let (wm, hm) = ((img.width - 1) as f32, (img.height - 1) as f32);
+    let (wm2, hm2) = ((img.width - 2) as f32, (img.height - 2) as f32);
+    let mut idx = [0u32; B];
+    let mut ax = [0f32; B];
+    let mut ay = [0f32; B];
+    for ((xb, yb), ob) in xs.chunks(B).zip(ys.chunks(B)).zip(out.chunks_mut(B)) {
         let n = xb.len();
         for i in 0..n {
             // Clamped into the window (NaN goes to 0): replicate border, every read in bounds.
@@ -384,18 +391,33 @@ pub fn sample_values_gradients(
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
     let done = 0;
     let (xs, ys) = (&xs[done..], &ys[done..]);
-    let (values, gx, gy) = (&mut values[done..], &mut gx[done..], &mut gy[done..]);
+    let out = (&mut values[done..], &mut gx[done..], &mut gy[done..]);
+    // As in `sample_values`: short scratch arrays for the vector path's few left.
+    if xs.len() <= 8 {
+        values_gradients_rest::<8>(img, xs, ys, out);
+    } else {
+        values_gradients_rest::<BLOCK>(img, xs, ys, out);
+    }
+}
+
+/// [`sample_values_gradients`]'s scalar loop over `xs`, blocks of `B` points at a time.
+fn values_gradients_rest<const B: usize>(
+    img: &ImageView,
+    xs: &[f32],
+    ys: &[f32],
+    (values, gx, gy): (&mut [f32], &mut [f32], &mut [f32]),
+) {
     let w = img.width;
     let (ox, oy, inv) = (img.x0 as f32, img.y0 as f32, 1.0 / img.scale);
     // The fast path needs the 4x4 neighbourhood inside: 1 <= x < w - 2, 1 <= y < h - 2.
     let (xmax, ymax) = (img.width as f32 - 2.0, img.height as f32 - 2.0);
-    let mut idx = [0u32; BLOCK];
-    let mut ax = [0f32; BLOCK];
-    let mut ay = [0f32; BLOCK];
-    let mut inside = [false; BLOCK];
+    let mut idx = [0u32; B];
+    let mut ax = [0f32; B];
+    let mut ay = [0f32; B];
+    let mut inside = [false; B];
     let mut start = 0;
     while start < xs.len() {
-        let n = (xs.len() - start).min(BLOCK);
+        let n = (xs.len() - start).min(B);
         for i in 0..n {
             let (x, y) = ((xs[start + i] - ox) * inv, (ys[start + i] - oy) * inv);
             inside[i] = x >= 1.0 && y >= 1.0 && x < xmax && y < ymax;

@@ -48,8 +48,9 @@ fn blur_region<T: Pixel>(
     tmp: &mut Vec<f32>,
     line: &mut Vec<f32>,
 ) {
-    out.resize((region.2 - region.0) * (region.3 - region.1), 0.0);
-    blur_region_into::<_, true>(src, kernel, region, out, tmp, line);
+    let w = region.2 - region.0;
+    out.resize(w * (region.3 - region.1), 0.0);
+    blur_region_into::<_, true>(src, kernel, region, (out, w), tmp, line);
 }
 
 /// [`gaussian_blur_into`] for the rows `rows` of the result only, into `out` (`rows.len()` rows
@@ -65,33 +66,37 @@ pub fn gaussian_blur_rows_into<'a, T: Pixel>(
 ) {
     let src = src.into();
     let region = (0, rows.start, src.width, rows.end.min(src.height));
-    blur_region_into::<_, true>(src, kernel, region, out, tmp, line);
+    blur_region_into::<_, true>(src, kernel, region, (out, src.width), tmp, line);
 }
 
-/// [`blur_region`] into `out`, which holds at least the region's pixels: with a 5-tap kernel
-/// and `STRIPS`, both passes strip by strip ([`blur_strips`]), else row by row then down the
-/// columns (the same bits).
+/// [`blur_region`] into `out`, rows `stride` apart (at least the region's width), which holds
+/// the region's pixels: with a 5-tap kernel and `STRIPS`, both passes strip by strip
+/// ([`blur_strips`]), else row by row then down the columns (the same bits). A pixel's value
+/// depends only on the image around it, not on the region it is smoothed with.
 #[allow(clippy::too_many_arguments)]
 fn blur_region_into<T: Pixel, const STRIPS: bool>(
     src: ImageRef<'_, T>,
     kernel: &GaussianKernel,
     (x0, y0, x1, y1): (usize, usize, usize, usize),
-    out: &mut [f32],
+    (out, stride): (&mut [f32], usize),
     tmp: &mut Vec<f32>,
     line: &mut Vec<f32>,
 ) {
     let w = x1.saturating_sub(x0);
     let h = y1.saturating_sub(y0);
-    assert!(out.len() >= w * h, "the output holds the region");
     if w == 0 || h == 0 {
         return;
     }
+    assert!(
+        stride >= w && out.len() >= (h - 1) * stride + w,
+        "the output holds the region"
+    );
     let k = kernel.weights();
     let r = kernel.radius();
     if r == 0 {
         for y in 0..h {
             let row = &src.row(y0 + y)[x0..x1];
-            for (o, &v) in out[y * w..(y + 1) * w].iter_mut().zip(row) {
+            for (o, &v) in out[y * stride..y * stride + w].iter_mut().zip(row) {
                 *o = v.to_f32();
             }
         }
@@ -111,7 +116,7 @@ fn blur_region_into<T: Pixel, const STRIPS: bool>(
         for j in 0..rows {
             padded_row(src, (x0, y0, x1), r, j, &mut tmp[j * pw..(j + 1) * pw]);
         }
-        blur_strips(k5, tmp, (w, h), out);
+        blur_strips(k5, tmp, (w, h), (out, stride));
         return;
     }
     tmp.resize(rows * w, 0.0);
@@ -126,7 +131,7 @@ fn blur_region_into<T: Pixel, const STRIPS: bool>(
             k,
             &tmp[y * w..(y + k.len()) * w],
             w,
-            &mut out[y * w..(y + 1) * w],
+            &mut out[y * stride..y * stride + w],
         );
     }
 }
@@ -176,10 +181,15 @@ fn padded_row<T: Pixel>(
 /// the columns): each output is the same sum in the same order as [`convolve_row`] then
 /// [`convolve_column`] make it. The last strip overlaps the one before when `w` is not a
 /// multiple of eight (its columns are written twice, with the same values).
-fn blur_strips(k: &[f32; TAPS], padded: &[f32], (w, h): (usize, usize), out: &mut [f32]) {
+fn blur_strips(
+    k: &[f32; TAPS],
+    padded: &[f32],
+    (w, h): (usize, usize),
+    (out, stride): (&mut [f32], usize),
+) {
     let pw = w + TAPS - 1;
     let padded = &padded[..(h + TAPS - 1) * pw];
-    let out = &mut out[..h * w];
+    let out = &mut out[..(h - 1) * stride + w];
     let mut x = 0;
     while x < w {
         let xs = x.min(w - STRIP);
@@ -193,7 +203,7 @@ fn blur_strips(k: &[f32; TAPS], padded: &[f32], (w, h): (usize, usize), out: &mu
             }
             win[TAPS - 1] = taps(k, |t, l| px[l + t]);
             if let Some(y) = (j + 1).checked_sub(TAPS)
-                && let Some(dst) = out[y * w + xs..].first_chunk_mut::<STRIP>()
+                && let Some(dst) = out[y * stride + xs..].first_chunk_mut::<STRIP>()
             {
                 *dst = taps(k, |t, l| win[t][l]);
             }
@@ -458,6 +468,26 @@ pub fn pyramid(src: &GrayF32, levels: usize) -> Vec<GrayF32> {
     out
 }
 
+/// `[x0, x1) x [y0, y1)` rounded outwards to whole pixels and clipped to `within` (NaN to its
+/// start), never reversed.
+fn clip_rect(
+    (x0, y0, x1, y1): (f64, f64, f64, f64),
+    (wx0, wy0, wx1, wy1): (usize, usize, usize, usize),
+) -> (usize, usize, usize, usize) {
+    let clip = |v: f64, lo: usize, hi: usize| -> usize {
+        if v.is_nan() {
+            lo
+        } else {
+            v.clamp(lo as f64, hi as f64) as usize
+        }
+    };
+    let cx0 = clip(x0.floor(), wx0, wx1);
+    let cy0 = clip(y0.floor(), wy0, wy1);
+    let cx1 = clip(x1.ceil(), wx0, wx1).max(cx0);
+    let cy1 = clip(y1.ceil(), wy0, wy1).max(cy0);
+    (cx0, cy0, cx1, cy1)
+}
+
 /// Pre-processes only the region a tracker reads: converts it to float and smooths it (border
 /// replicated at the image edges), into buffers it keeps between frames, so the hot path does
 /// not allocate once they have grown to the region's size.
@@ -468,6 +498,8 @@ pub struct Preprocessor {
     tmp: Vec<f32>,
     line: Vec<f32>,
     region: (usize, usize, usize, usize),
+    /// The part of the region smoothed so far (all of it but after [`Preprocessor::process_part`]).
+    smoothed: (usize, usize, usize, usize),
     /// Coarser levels of the region (level 1, 2, ...), each half the previous.
     levels: Vec<GrayF32>,
     scratch: Vec<f32>,
@@ -482,6 +514,7 @@ impl Preprocessor {
             tmp: Vec::new(),
             line: Vec::new(),
             region: (0, 0, 0, 0),
+            smoothed: (0, 0, 0, 0),
             levels: Vec::new(),
             scratch: Vec::new(),
         }
@@ -503,23 +536,95 @@ impl Preprocessor {
         y1: f64,
     ) {
         let src = src.into();
-        let clip = |v: f64, hi: usize| -> usize {
-            if v.is_nan() {
-                0
-            } else {
-                v.clamp(0.0, hi as f64) as usize
-            }
-        };
-        let rx0 = clip(x0.floor(), src.width);
-        let ry0 = clip(y0.floor(), src.height);
-        let rx1 = clip(x1.ceil(), src.width).max(rx0);
-        let ry1 = clip(y1.ceil(), src.height).max(ry0);
-        self.region = (rx0, ry0, rx1, ry1);
+        self.region = clip_rect((x0, y0, x1, y1), (0, 0, src.width, src.height));
+        self.smoothed = self.region;
         blur_region(
             src,
             &self.kernel,
             self.region,
             &mut self.out,
+            &mut self.tmp,
+            &mut self.line,
+        );
+    }
+
+    /// Like [`Preprocessor::process`] for the region `[x0, x1) x [y0, y1)`, whose view it
+    /// gives, but smooths only the part of it within `part` (real coordinates, rounded
+    /// outwards); [`Preprocessor::holds`] says whether a rectangle is in that part,
+    /// [`Preprocessor::complete`] smooths the rest. Each pixel is smoothed as `process` smooths
+    /// it (the same bits). Until completed, the view's other pixels are left from earlier
+    /// frames (NaN in builds with debug assertions, so that a read of one shows).
+    pub fn process_part<'a, T: Pixel>(
+        &mut self,
+        src: impl Into<ImageRef<'a, T>>,
+        (x0, y0, x1, y1): (f64, f64, f64, f64),
+        part: (f64, f64, f64, f64),
+    ) {
+        let src = src.into();
+        self.region = clip_rect((x0, y0, x1, y1), (0, 0, src.width, src.height));
+        let (rx0, ry0, rx1, ry1) = self.region;
+        let rw = rx1 - rx0;
+        self.out.resize(rw * (ry1 - ry0), 0.0);
+        if cfg!(debug_assertions) {
+            self.out.fill(f32::NAN);
+        }
+        self.smoothed = clip_rect(part, self.region);
+        self.smooth(src, self.smoothed);
+    }
+
+    /// Whether the pixels of the rectangle `[x0, x1) x [y0, y1)` (frame coordinates) are
+    /// smoothed: inside the region and its smoothed part.
+    pub fn holds(&self, (x0, y0, x1, y1): (f64, f64, f64, f64)) -> bool {
+        let (sx0, sy0, sx1, sy1) = self.smoothed;
+        x0 >= sx0 as f64 && y0 >= sy0 as f64 && x1 <= sx1 as f64 && y1 <= sy1 as f64
+    }
+
+    /// Whether the whole region is smoothed (not after a [`Preprocessor::process_part`] until
+    /// [`Preprocessor::complete`]).
+    pub fn is_whole(&self) -> bool {
+        self.smoothed == self.region
+    }
+
+    /// Smooths what [`Preprocessor::process_part`] left of the region (`src` is the image it
+    /// was given): the bands above, below, left and right of the smoothed part.
+    pub fn complete<'a, T: Pixel>(&mut self, src: impl Into<ImageRef<'a, T>>) {
+        let src = src.into();
+        let (rx0, ry0, rx1, ry1) = self.region;
+        let (sx0, sy0, sx1, sy1) = self.smoothed;
+        if self.smoothed == self.region {
+            return;
+        }
+        // An empty part (a target outside the region) leaves the whole region.
+        let (sx0, sy0, sx1, sy1) = if sx0 >= sx1 || sy0 >= sy1 {
+            (rx0, ry0, rx0, ry0)
+        } else {
+            (sx0, sy0, sx1, sy1)
+        };
+        for band in [
+            (rx0, ry0, rx1, sy0),
+            (rx0, sy1.max(sy0), rx1, ry1),
+            (rx0, sy0, sx0, sy1),
+            (sx1, sy0, rx1, sy1),
+        ] {
+            self.smooth(src, band);
+        }
+        self.smoothed = self.region;
+    }
+
+    /// Smooths `rect` (within the region) into its place in the region's buffer.
+    fn smooth<T: Pixel>(&mut self, src: ImageRef<'_, T>, rect: (usize, usize, usize, usize)) {
+        let (rx0, ry0, rx1, _) = self.region;
+        let (x0, y0, x1, y1) = rect;
+        if x0 >= x1 || y0 >= y1 {
+            return;
+        }
+        let rw = rx1 - rx0;
+        let at = (y0 - ry0) * rw + (x0 - rx0);
+        blur_region_into::<_, true>(
+            src,
+            &self.kernel,
+            rect,
+            (&mut self.out[at..], rw),
             &mut self.tmp,
             &mut self.line,
         );
@@ -539,6 +644,10 @@ impl Preprocessor {
     /// Builds `count` coarser levels of the region last processed (binomial smoothing and
     /// decimation by two each), in buffers kept between frames.
     pub fn build_levels(&mut self, count: usize) {
+        debug_assert!(
+            count == 0 || self.is_whole(),
+            "levels of a region smoothed in part"
+        );
         self.levels.truncate(count);
         while self.levels.len() < count {
             self.levels.push(Image::default());
@@ -614,6 +723,57 @@ mod tests {
         }
     }
 
+    /// A region smoothed in part, then completed, is the region smoothed at once, bit for bit;
+    /// the part holds what it covers only. Regions at the image's borders and inside, parts
+    /// inside them, across their edges and outside.
+    #[test]
+    fn a_region_smoothed_in_parts_is_the_region_smoothed_at_once() {
+        let mut rng = crate::rng::Rng::new(5);
+        let (w, h) = (61usize, 47usize);
+        let data = (0..w * h).map(|_| (rng.uniform() * 255.99) as u8).collect();
+        let src = crate::imaging::GrayU8::from_vec(w, h, data);
+        let src = src.unwrap();
+        let mut whole = Preprocessor::new(gaussian_kernel(5, 0.9));
+        let mut parts = whole.clone();
+        let bits = |p: &Preprocessor| -> Vec<u32> { p.out.iter().map(|v| v.to_bits()).collect() };
+        for region in [
+            (-3.0, -2.0, 70.0, 50.0),
+            (5.2, 7.9, 40.1, 33.0),
+            (20.0, 0.0, 61.0, 12.0),
+        ] {
+            whole.process(&src, region.0, region.1, region.2, region.3);
+            for part in [
+                (12.5, 10.0, 30.0, 25.0),
+                (-10.0, 9.0, 18.0, 60.0),
+                (3.0, 3.0, 3.5, 4.0),
+                (100.0, 100.0, 120.0, 130.0),
+            ] {
+                parts.process_part(&src, region, part);
+                assert_eq!(parts.region(), whole.region());
+                let (rx0, ry0, rx1, ry1) = parts.region();
+                let (sx0, sy0, sx1, sy1) = parts.smoothed;
+                // The part's pixels are already the whole's.
+                let rw = rx1 - rx0;
+                for y in sy0..sy1 {
+                    for x in sx0..sx1 {
+                        let i = (y - ry0) * rw + (x - rx0);
+                        assert_eq!(parts.out[i].to_bits(), whole.out[i].to_bits());
+                    }
+                }
+                let inside = (sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64);
+                assert!(parts.holds(inside));
+                let beyond = (sx0 as f64 - 1.0, sy0 as f64, sx1 as f64, sy1 as f64);
+                assert!(!parts.holds(beyond));
+                parts.complete(&src);
+                assert!(
+                    parts.is_whole()
+                        && parts.holds((rx0 as f64, ry0 as f64, rx1 as f64, ry1 as f64))
+                );
+                assert_eq!(bits(&parts), bits(&whole), "{region:?} {part:?}");
+            }
+        }
+    }
+
     #[test]
     fn padding_replicates_the_edges() {
         let src = GrayF32::from_vec(3, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
@@ -677,8 +837,10 @@ mod tests {
             let n = (x1 - x0) * (y1 - y0);
             let (mut a, mut b) = (vec![f32::NAN; n], vec![f32::NAN; n]);
             let (mut tmp, mut line) = (vec![1.0; 9999], vec![2.0; 99]);
-            blur_region_into::<_, true>(src.into(), k, region, &mut a, &mut tmp, &mut line);
-            blur_region_into::<_, false>(src.into(), k, region, &mut b, &mut tmp, &mut line);
+            let rw = x1 - x0;
+            let (sa, sb) = ((&mut a[..], rw), (&mut b[..], rw));
+            blur_region_into::<_, true>(src.into(), k, region, sa, &mut tmp, &mut line);
+            blur_region_into::<_, false>(src.into(), k, region, sb, &mut tmp, &mut line);
             (a, b)
         }
         let same = |(a, b): (Vec<f32>, Vec<f32>)| {

@@ -133,6 +133,79 @@ pub struct RegistrationTracker {
     /// sampling of the context's (`Workspace::samples`) that patch was: if the frame keeps it,
     /// it becomes `previous` without being summed again.
     patch_sums: (Option<u64>, PatchSums),
+    /// Whether a frame's region may be smoothed only where the search reads it (see
+    /// [`Source`]); off only to compare with the whole region's results.
+    partial: bool,
+    /// The largest move of a corner in the last tracked frame (pixels): how far beyond its
+    /// start the first part of the next frame's region is smoothed.
+    motion: f64,
+}
+
+/// Pixels around a patch's corners its sampling reads: the 4 x 4 neighbourhood of a point
+/// (one before, two after) and a pixel for rounding.
+const READ_PX: f64 = 4.0;
+
+/// Pixels beyond the start's reads, on top of twice the last frame's motion, that a frame's
+/// region is smoothed first when it is smoothed in parts.
+const FIRST_PART_PX: f64 = 4.0;
+
+/// The pixels the patch whose corners are `q` reads, grown by `more`: the bounding box of a
+/// convex quad (which holds its grid's points); everything for any other.
+fn reads(q: &Quad, more: f64) -> (f64, f64, f64, f64) {
+    if !(q.is_finite() && q.is_convex()) {
+        return (
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+        );
+    }
+    let (x0, y0, x1, y1) = q.bbox();
+    let m = READ_PX + more;
+    (x0 - m, y0 - m, x1 + m, y1 + m)
+}
+
+/// The finest level a frame's search reads. Either a view that holds every pixel it may read
+/// (the pre-processed region, a pre-smoothed frame, a pyramid level) or, for a method whose
+/// patches are all at the parameters the driver sees ([`SearchMethod::local`]), the region
+/// smoothed only where the patches so far read: [`Source::cover`] smooths the rest of it
+/// before a patch reads beyond (the region's whole smoothing was a seventh of a frame's work
+/// for a target that stays within a few pixels of where it started). The values read are the
+/// same bits either way.
+enum Source<'a> {
+    Whole(ImageView<'a>),
+    Part {
+        pre: &'a mut Preprocessor,
+        input: FrameInput<'a>,
+    },
+}
+
+impl Source<'_> {
+    fn view(&self) -> ImageView<'_> {
+        match self {
+            Source::Whole(v) => *v,
+            Source::Part { pre, .. } => pre.view(),
+        }
+    }
+
+    /// Makes sure that the patch with corners `q` reads smoothed pixels only.
+    fn cover(&mut self, q: &Quad) {
+        if let Source::Part { pre, input } = self
+            && !pre.holds(reads(q, 0.0))
+        {
+            complete(pre, *input);
+        }
+    }
+}
+
+/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part.
+fn complete(pre: &mut Preprocessor, input: FrameInput<'_>) {
+    match input {
+        FrameInput::Gray8(img) => pre.complete(img),
+        FrameInput::Gray32(img) => pre.complete(img),
+        FrameInput::View8(img) => pre.complete(img),
+        FrameInput::Smoothed(_) => {}
+    }
 }
 
 /// The grid samples `on_loss=redetect` ranks its candidates on (every other one per axis, a
@@ -228,6 +301,8 @@ impl RegistrationTracker {
             previous: BlockCorrelation::default(),
             has_previous: false,
             patch_sums: (None, PatchSums::default()),
+            partial: true,
+            motion: 0.0,
         })
     }
 
@@ -290,6 +365,23 @@ impl RegistrationTracker {
         pre.build_levels(levels);
     }
 
+    /// [`RegistrationTracker::prepare`] of the finest level alone, smoothing only the part of
+    /// the region within `part` (see [`Source`]).
+    fn prepare_part(
+        &mut self,
+        input: FrameInput<'_>,
+        region: (f64, f64, f64, f64),
+        part: (f64, f64, f64, f64),
+    ) {
+        self.ctx.work.sampled_at = None;
+        match input {
+            FrameInput::Gray8(img) => self.pre.process_part(img, region, part),
+            FrameInput::Gray32(img) => self.pre.process_part(img, region, part),
+            FrameInput::View8(img) => self.pre.process_part(img, region, part),
+            FrameInput::Smoothed(_) => {}
+        }
+    }
+
     /// The view of pyramid level `level` prepared by [`RegistrationTracker::prepare`].
     fn view<'a>(
         pre: &'a Preprocessor,
@@ -342,7 +434,20 @@ impl RegistrationTracker {
         timing: &mut FrameTiming,
     ) -> std::result::Result<Searched, LossReason> {
         let t0 = Instant::now();
-        self.prepare(input, region);
+        // One level, one SSM and a method whose patches the driver sees: the region is smoothed
+        // around where the frame starts first, and further only if the search goes there.
+        let partial = self.partial
+            && self.coarse.is_empty()
+            && self.lower.is_empty()
+            && self.sm.local()
+            && !matches!(input, FrameInput::Smoothed(_));
+        if partial {
+            let start = self.ctx.corners(&self.ctx.params);
+            let part = reads(&start, FIRST_PART_PX + 2.0 * self.motion);
+            self.prepare_part(input, region, part);
+        } else {
+            self.prepare(input, region);
+        }
         let t1 = Instant::now();
         timing.preprocess += t1 - t0;
         let params = &self.params;
@@ -360,7 +465,15 @@ impl RegistrationTracker {
                     .fit(&ctx.template_corners.0, &corners.0)
                     .ok_or(LossReason::Singular)?;
                 let (_, iters, _, _) = Self::search(
-                    ctx, &mut **sm, params, self.frame, 0, done, &view, observer, started,
+                    ctx,
+                    &mut **sm,
+                    params,
+                    self.frame,
+                    0,
+                    done,
+                    &mut Source::Whole(view),
+                    observer,
+                    started,
                 )?;
                 done += iters;
                 let m = ctx.ssm.matrix(&ctx.params);
@@ -393,7 +506,7 @@ impl RegistrationTracker {
                 self.frame,
                 l + 1,
                 done,
-                &view,
+                &mut Source::Whole(view),
                 observer,
                 started,
             )?;
@@ -419,6 +532,14 @@ impl RegistrationTracker {
                 p = start;
             }
         }
+        let mut src = if partial {
+            Source::Part {
+                pre: &mut self.pre,
+                input,
+            }
+        } else {
+            Source::Whole(view)
+        };
         let mut result = Self::finish(
             &mut self.ctx,
             &mut *self.sm,
@@ -429,7 +550,7 @@ impl RegistrationTracker {
             },
             params,
             (self.frame, done),
-            &view,
+            &mut src,
             observer,
             started,
             p,
@@ -455,7 +576,7 @@ impl RegistrationTracker {
                 },
                 params,
                 (self.frame, first.iterations),
-                &view,
+                &mut src,
                 observer,
                 started,
                 start,
@@ -480,7 +601,7 @@ impl RegistrationTracker {
         {
             let q = out.params;
             // Usually just sampled there, for the confidence.
-            self.ctx.patch_at(&view, &q);
+            self.ctx.patch_at(&src.view(), &q);
             out.frame_confidence = Some(self.previous.of(&self.ctx.work.values));
         }
         timing.search += t1.elapsed();
@@ -541,7 +662,7 @@ impl RegistrationTracker {
         judges: &mut Judges<'_>,
         params: &TrackerParams,
         (frame, done): (usize, usize),
-        view: &ImageView,
+        src: &mut Source<'_>,
         observer: &mut dyn Observer,
         started: Instant,
         from: Params,
@@ -549,14 +670,14 @@ impl RegistrationTracker {
         let confidence = judges.template;
         ctx.params = from;
         let (mut corners, mut iters, converged, mut similarity) =
-            Self::search(ctx, sm, params, frame, 0, done, view, observer, started)?;
+            Self::search(ctx, sm, params, frame, 0, done, src, observer, started)?;
         let conf = if params.polish && sm.template_linearised() {
             let polished = Self::polish(
                 ctx,
                 confidence,
                 params,
                 (frame, done + iters),
-                view,
+                src,
                 observer,
                 started,
             );
@@ -569,13 +690,13 @@ impl RegistrationTracker {
         } else if let Some(previous) = judges.previous {
             // Both confidences from one pass over the patch, its sums kept.
             let p = ctx.params;
-            ctx.sample_at(view, &p);
+            ctx.sample_at(&src.view(), &p);
             let (c, f) = confidence.of_pair(previous, &ctx.work.values, &mut judges.sums.1);
             judges.sums.0 = Some(ctx.work.samples);
             (c, Some(f))
         } else {
             let p = ctx.params;
-            (Self::confidence_at(ctx, confidence, view, &p), None)
+            (Self::confidence_at(ctx, confidence, &src.view(), &p), None)
         };
         Ok(Searched {
             params: ctx.params,
@@ -599,7 +720,7 @@ impl RegistrationTracker {
         confidence: &BlockCorrelation,
         params: &TrackerParams,
         (frame, first): (usize, usize),
-        view: &ImageView,
+        src: &mut Source<'_>,
         observer: &mut dyn Observer,
         started: Instant,
     ) -> Polished {
@@ -610,7 +731,7 @@ impl RegistrationTracker {
         for it in 0..params.max_iters {
             let iteration_started = Instant::now();
             let p = ctx.params;
-            ctx.sample_gradients_at(view, &p);
+            ctx.sample_gradients_at(&src.view(), &p);
             let c = confidence.of(&ctx.work.values);
             if let Some((bp, bc, bf)) = best
                 && c.partial_cmp(&bc) != Some(Ordering::Greater)
@@ -640,12 +761,13 @@ impl RegistrationTracker {
                     iterations,
                 };
             }
+            src.cover(&corners);
             iterations = it + 1;
             let step = corners.change_norm(&prev);
             prev = corners;
             Self::report_iteration(
                 ctx,
-                view,
+                &src.view(),
                 observer,
                 (frame, 0, first + it),
                 (corners, f, step),
@@ -657,7 +779,7 @@ impl RegistrationTracker {
         }
         // Settled or out of iterations: the last step's end is kept if it is the most confident.
         let q = ctx.params;
-        let c = Self::confidence_at(ctx, confidence, view, &q);
+        let c = Self::confidence_at(ctx, confidence, &src.view(), &q);
         match best {
             Some((bp, bc, bf)) if !at_least(c, bc) => {
                 ctx.params = bp;
@@ -819,11 +941,12 @@ impl RegistrationTracker {
         frame: usize,
         level: usize,
         first: usize,
-        view: &ImageView,
+        src: &mut Source<'_>,
         observer: &mut dyn Observer,
         started: Instant,
     ) -> std::result::Result<(Quad, usize, bool, f64), LossReason> {
         let mut prev = ctx.corners(&ctx.params);
+        src.cover(&prev);
         let (mut converged, mut iterations, mut similarity) = (false, 0, f64::NAN);
         sm.start_frame(ctx);
         let budget = sm.max_iterations(params.max_iters);
@@ -837,7 +960,7 @@ impl RegistrationTracker {
             let iteration_started = Instant::now();
             let from = ctx.params;
             ctx.last_step = None;
-            let s = sm.iterate(ctx, view)?;
+            let s = sm.iterate(ctx, &src.view())?;
             let mut f = s.similarity;
             let mut exhausted = false;
             if line_search && s.control == Control::Auto {
@@ -866,13 +989,15 @@ impl RegistrationTracker {
             if !corners.is_finite() || f.is_nan() {
                 return Err(LossReason::NonFinite);
             }
+            // Where the next patches are sampled (the observer's, the next iteration's).
+            src.cover(&corners);
             let step = corners.change_norm(&prev);
             prev = corners;
             iterations = it + 1;
             similarity = f;
             Self::report_iteration(
                 ctx,
-                view,
+                &src.view(),
                 observer,
                 (frame, level, first + it),
                 (corners, f, step),
@@ -901,7 +1026,7 @@ impl RegistrationTracker {
                     // compare.
                     best = None;
                     halvings = 0;
-                    Self::learn_model(ctx, sm, view);
+                    Self::learn_model(ctx, sm, &src.view());
                     continue;
                 }
                 converged = true;
@@ -957,6 +1082,9 @@ impl RegistrationTracker {
         if !inside && !matches!(input, FrameInput::Smoothed(_)) {
             let region = self.region_around(&out.corners);
             self.prepare(input, region);
+        } else if !self.pre.holds(reads(&out.corners, 0.0)) {
+            // A region smoothed in part, by another search than the accepted one's.
+            complete(&mut self.pre, input);
         }
         let view = Self::view(&self.pre, &self.pre_copy, input, 0);
         self.ctx.patch_at(&view, &out.params);
@@ -1166,6 +1294,9 @@ impl VisualTracker for RegistrationTracker {
         };
         let outcome = match checked {
             Ok(out) => {
+                self.motion = (0..4)
+                    .map(|i| out.corners.0[i].dist(start_corners.0[i]))
+                    .fold(0.0, f64::max);
                 self.ctx.params = out.params;
                 self.corners = out.corners;
                 self.status = TrackStatus::Tracking;
@@ -1256,5 +1387,77 @@ mod tests {
         for stage in t.coarse.iter().chain(&t.lower) {
             assert_eq!(stage.ctx.work.sampled_at, None);
         }
+    }
+
+    /// A frame's region smoothed in parts ([`Source`]) gives the same tracks, bit for bit, as
+    /// the whole region smoothed at once, for every method that allows it (with the line
+    /// search and the polish and without), on a sequence fast enough that some frames' searches
+    /// leave the first part. With debug assertions, the part not smoothed is NaN: a read of it
+    /// would show as a lost frame or other corners.
+    #[test]
+    fn a_region_smoothed_in_parts_tracks_as_the_whole_region() {
+        use crate::dataset::demo::demo_config;
+        use crate::dataset::synth::{SynthConfig, render_frames};
+        use crate::observe::NoObserver;
+        let (gray, quads) = render_frames(&SynthConfig {
+            max_frames: Some(30),
+            step: 6,
+            ..demo_config()
+        })
+        .unwrap();
+        let (mut partial_frames, mut completed_frames) = (0, 0);
+        let (mut tracked, mut frames) = (0, 0);
+        for sm in ["iclk", "fclk", "esm", "falk", "ialk"] {
+            for (am, ssm, classic) in [
+                ("ssd", "homography", true),
+                ("zncc", "affine", false),
+                ("ssd", "similitude", false),
+            ] {
+                let mut spec = RegistrationSpec {
+                    sm: sm.into(),
+                    am: am.into(),
+                    ssm: ssm.into(),
+                    params: TrackerParams::default(),
+                    method: Default::default(),
+                };
+                spec.params.pyramid_levels = 1;
+                spec.params.line_search = !classic;
+                spec.params.polish = !classic;
+                let mut run = |partial: bool| {
+                    let mut t = RegistrationTracker::new(&spec).unwrap();
+                    t.partial = partial;
+                    t.initialize(FrameInput::Gray8(&gray[0]), &quads[0])
+                        .unwrap();
+                    let mut track = Vec::new();
+                    for g in &gray[1..] {
+                        let out = t.update(FrameInput::Gray8(g), &mut NoObserver);
+                        track.push((out.status, out.corners.to_array().map(f64::to_bits)));
+                        match (partial, t.pre.is_whole()) {
+                            (true, true) => completed_frames += 1,
+                            (true, false) => partial_frames += 1,
+                            _ => {}
+                        }
+                    }
+                    track
+                };
+                let (parts, whole) = (run(true), run(false));
+                assert_eq!(parts, whole, "{sm} {am} {ssm}");
+                tracked += parts
+                    .iter()
+                    .filter(|(s, _)| *s == TrackStatus::Tracking)
+                    .count();
+                frames += parts.len();
+            }
+        }
+        // Both ways of a frame: searches that stayed in the first part, searches that left it.
+        assert!(
+            partial_frames > 0 && completed_frames > 0,
+            "{partial_frames} {completed_frames}"
+        );
+        // Tracks, not losses, compared.
+        assert!(
+            5 * tracked >= 4 * frames,
+            "{tracked} of {frames} frames tracked"
+        );
     }
 }

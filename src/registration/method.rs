@@ -75,6 +75,13 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     fn template_linearised(&self) -> bool {
         false
     }
+    /// Whether every patch the method samples in a frame is at `ctx.params` as the driver sees
+    /// it, before or after an iteration (or at parameters it had before in the frame): the
+    /// driver then smooths the frame only around them (see the driver's `Source`). Not for
+    /// methods that sample candidates elsewhere (NN's samples, PF's particles).
+    fn local(&self) -> bool {
+        false
+    }
     /// A new frame starts from `ctx.params`.
     fn start_frame(&mut self, _ctx: &mut Context) {}
     /// The AM's model was just updated ([`crate::am::Am::update_model`]): refresh what was computed from it

@@ -78,6 +78,9 @@ impl SearchMethod for Esm {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn local(&self) -> bool {
+        true
+    }
     fn template_linearised(&self) -> bool {
         true
     }

@@ -22,6 +22,9 @@ impl SearchMethod for Fclk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn local(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }

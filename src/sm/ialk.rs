@@ -24,6 +24,9 @@ impl SearchMethod for Ialk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn local(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }

@@ -71,6 +71,9 @@ impl SearchMethod for Iclk {
     fn name(&self) -> &str {
         ENTRY.name
     }
+    fn local(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }

@@ -201,7 +201,7 @@ impl GridMoments {
             res,
             0,
             |c0, skip| column_block(a, b, r, res, c0, skip, vpow),
-            |c0| column_block16(a, b, r, res, c0, vpow),
+            |c0, out, stride| column_block16(a, b, r, res, c0, vpow, (out, stride)),
         );
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(0..SUMS, &mut mom);
@@ -276,26 +276,23 @@ fn down_columns<const K: usize>(
     }
 }
 
-/// [`down_columns`] with a kernel that sums two neighbouring blocks at once (`wide(c0)`, the
-/// sixteen columns from `c0`) wherever both are whole (not the last, overlapping block): each
-/// block's sums are those `kernel` gives it, when `wide` makes the same sums lane by lane.
+/// [`down_columns`] with a kernel that sums two neighbouring blocks at once wherever both are
+/// whole (not the last, overlapping block): `wide(c0, out, stride)` writes the sixteen columns
+/// from `c0` of each of the `K` sums, sum `s` at `out[s * stride + c0..]`, or returns `false`
+/// (no such kernel here). Each block's sums are those `kernel` gives it, when `wide` makes the
+/// same sums lane by lane.
 fn down_columns_wide<const K: usize>(
     sums: &mut [f32],
     res: usize,
     first: usize,
     kernel: impl Fn(usize, usize) -> [Lanes; K],
-    wide: impl Fn(usize) -> Option<[[f32; 16]; K]>,
+    wide: impl Fn(usize, &mut [f32], usize) -> bool,
 ) {
     let padded = res.div_ceil(8) * 8;
     let mut block = 0;
     while block < res.div_ceil(8) {
         let c0 = 8 * block;
-        if c0 + 16 <= res
-            && let Some(pair) = wide(c0)
-        {
-            for (s, lanes) in pair.iter().enumerate() {
-                sums[(first + s) * padded + c0..][..16].copy_from_slice(lanes);
-            }
+        if c0 + 16 <= res && wide(c0, &mut sums[first * padded..], padded) {
             block += 2;
             continue;
         }
@@ -372,8 +369,9 @@ fn column_block(
 }
 
 /// [`column_block`] of the sixteen columns from `c0` (`c0 + 16 <= res`, no lane skipped) in
-/// 512-bit registers, the same products and sums lane by lane; `None` where the build or the
-/// processor has no AVX-512 ([`crate::cpu::avx512`]).
+/// 512-bit registers, the same products and sums lane by lane, sum `s` written to
+/// `out[s * stride + c0..][..16]`; `false` (nothing written) where the build or the processor
+/// has no AVX-512 ([`crate::cpu::avx512`]).
 #[allow(unused_variables)]
 fn column_block16(
     a: &[f32],
@@ -382,7 +380,8 @@ fn column_block16(
     res: usize,
     c0: usize,
     vpow: &[[f32; POWERS]],
-) -> Option<[[f32; 16]; SUMS]> {
+    (out, stride): (&mut [f32], usize),
+) -> bool {
     #[cfg(all(
         target_arch = "x86_64",
         target_feature = "avx2",
@@ -391,11 +390,14 @@ fn column_block16(
     if crate::cpu::avx512() {
         let end = (vpow.len().max(1) - 1) * res + c0 + 16;
         assert!(c0 + 16 <= res && end <= a.len() && end <= b.len() && end <= r.len());
+        assert!(stride >= c0 + 16 && out.len() >= (SUMS - 1) * stride + c0 + 16);
         // SAFETY: the processor has AVX-512F (checked above); the kernel reads sixteen values
-        // from row * res + c0 for every row below vpow.len(), within the slices (asserted).
-        return Some(unsafe { simd::column_block16(a, b, r, res, c0, vpow) });
+        // from row * res + c0 for every row below vpow.len(), within the slices, and writes
+        // sixteen from s * stride + c0 for each sum s, within `out` (both asserted).
+        unsafe { simd::column_block16(a, b, r, res, c0, vpow, (out, stride)) };
+        return true;
     }
-    None
+    false
 }
 
 /// The six sums of [`column_block`] that `J^T r` needs (its rows `15..21`: `r a v^j`, `r b v^j`,
@@ -565,8 +567,9 @@ mod simd {
     /// in the same order, as the AVX2 kernel's.
     ///
     /// # Safety
-    /// The processor must have AVX-512F, and every slice must hold sixteen values from
-    /// `row * res + c0` for each row below `vpow.len()`.
+    /// The processor must have AVX-512F, every input slice must hold sixteen values from
+    /// `row * res + c0` for each row below `vpow.len()`, and `out` sixteen from
+    /// `s * stride + c0` for each sum `s`.
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn column_block16(
         a: &[f32],
@@ -575,9 +578,9 @@ mod simd {
         res: usize,
         c0: usize,
         vpow: &[[f32; POWERS]],
-    ) -> [[f32; 16]; SUMS] {
-        let mut out = [[0f32; 16]; SUMS];
-        // SAFETY: the caller's contract; the stores write the local array.
+        (out, stride): (&mut [f32], usize),
+    ) {
+        // SAFETY: the caller's contract.
         unsafe {
             let load = |x: &[f32], row: usize| _mm512_loadu_ps(x.as_ptr().add(row * res + c0));
             let z = _mm512_setzero_ps();
@@ -603,11 +606,10 @@ mod simd {
                 }
             }
             let all = saa.iter().chain(&sab).chain(&sbb).chain(&sra).chain(&srb);
-            for (o, v) in out.iter_mut().zip(all) {
-                _mm512_storeu_ps(o.as_mut_ptr(), *v);
+            for (s, v) in all.enumerate() {
+                _mm512_storeu_ps(out.as_mut_ptr().add(s * stride + c0), *v);
             }
         }
-        out
     }
 
     /// [`super::column_block_r`] in AVX registers.
@@ -1079,13 +1081,17 @@ mod tests {
             let padded = res.div_ceil(8) * 8;
             let mut narrow = vec![f32::NAN; SUMS * padded];
             down_columns(&mut narrow, res, 0, kernel);
-            let paired = |c0: usize| -> Option<[[f32; 16]; SUMS]> {
+            let paired = |c0: usize, out: &mut [f32], stride: usize| {
                 let (lo, hi) = (kernel(c0, 0), kernel(c0 + 8, 0));
-                Some(std::array::from_fn(|s| {
-                    std::array::from_fn(|k| if k < 8 { lo[s][k] } else { hi[s][k - 8] })
-                }))
+                for s in 0..SUMS {
+                    out[s * stride + c0..][..8].copy_from_slice(&lo[s]);
+                    out[s * stride + c0 + 8..][..8].copy_from_slice(&hi[s]);
+                }
+                true
             };
-            let wide = |c0| column_block16(&a, &b, &r, res, c0, &vpow);
+            let wide = |c0, out: &mut [f32], stride| {
+                column_block16(&a, &b, &r, res, c0, &vpow, (out, stride))
+            };
             for (what, sums) in [
                 ("paired", {
                     let mut o = vec![f32::NAN; SUMS * padded];

@@ -147,7 +147,7 @@ const READ_PX: f64 = 4.0;
 
 /// Pixels beyond the start's reads, on top of twice the last frame's motion, that a frame's
 /// region is smoothed first when it is smoothed in parts.
-const FIRST_PART_PX: f64 = 4.0;
+const FIRST_PART_PX: f64 = 2.0;
 
 /// The pixels the patch whose corners are `q` reads, grown by `more`: the bounding box of a
 /// convex quad (which holds its grid's points); everything for any other.

@@ -1193,6 +1193,7 @@ impl VisualTracker for RegistrationTracker {
         }
         self.status = TrackStatus::Tracking;
         self.frame = 0;
+        self.motion = 0.0;
         self.corners = self.ctx.corners(&self.ctx.params);
         self.initial_area = quad.signed_area().abs();
         self.confidence =

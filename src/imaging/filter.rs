@@ -535,17 +535,8 @@ impl Preprocessor {
         x1: f64,
         y1: f64,
     ) {
-        let src = src.into();
-        self.region = clip_rect((x0, y0, x1, y1), (0, 0, src.width, src.height));
-        self.smoothed = self.region;
-        blur_region(
-            src,
-            &self.kernel,
-            self.region,
-            &mut self.out,
-            &mut self.tmp,
-            &mut self.line,
-        );
+        let region = (x0, y0, x1, y1);
+        self.process_part(src, region, region);
     }
 
     /// Like [`Preprocessor::process`] for the region `[x0, x1) x [y0, y1)`, whose view it
@@ -553,7 +544,8 @@ impl Preprocessor {
     /// outwards); [`Preprocessor::holds`] says whether a rectangle is in that part,
     /// [`Preprocessor::complete`] smooths the rest. Each pixel is smoothed as `process` smooths
     /// it (the same bits). Until completed, the view's other pixels are left from earlier
-    /// frames (NaN in builds with debug assertions, so that a read of one shows).
+    /// frames (NaN in builds with debug assertions, so that a read of one shows). With `part`
+    /// the region itself, [`Preprocessor::process`].
     pub fn process_part<'a, T: Pixel>(
         &mut self,
         src: impl Into<ImageRef<'a, T>>,
@@ -565,10 +557,10 @@ impl Preprocessor {
         let (rx0, ry0, rx1, ry1) = self.region;
         let rw = rx1 - rx0;
         self.out.resize(rw * (ry1 - ry0), 0.0);
-        if cfg!(debug_assertions) {
+        self.smoothed = clip_rect(part, self.region);
+        if cfg!(debug_assertions) && !self.is_whole() {
             self.out.fill(f32::NAN);
         }
-        self.smoothed = clip_rect(part, self.region);
         self.smooth(src, self.smoothed);
     }
 
@@ -602,7 +594,7 @@ impl Preprocessor {
         };
         for band in [
             (rx0, ry0, rx1, sy0),
-            (rx0, sy1.max(sy0), rx1, ry1),
+            (rx0, sy1, rx1, ry1),
             (rx0, sy0, sx0, sy1),
             (sx1, sy0, rx1, sy1),
         ] {

@@ -334,52 +334,46 @@ impl RegistrationTracker {
 
     /// Pre-processes the region the trackers read (and its pyramid levels).
     fn prepare(&mut self, input: FrameInput<'_>, region: (f64, f64, f64, f64)) {
-        // Another frame or region: no context's last sampled patch is this view's.
-        self.ctx.work.sampled_at = None;
-        for stage in self.coarse.iter_mut().chain(&mut self.lower) {
-            stage.ctx.work.sampled_at = None;
-        }
-        let (x0, y0, x1, y1) = region;
-        let levels = self.coarse.len();
-        let pre = match input {
-            FrameInput::Gray8(img) => {
-                self.pre.process(img, x0, y0, x1, y1);
-                &mut self.pre
-            }
-            FrameInput::Gray32(img) => {
-                self.pre.process(img, x0, y0, x1, y1);
-                &mut self.pre
-            }
-            FrameInput::View8(img) => {
-                self.pre.process(img, x0, y0, x1, y1);
-                &mut self.pre
-            }
-            FrameInput::Smoothed(img) => {
-                if levels == 0 {
-                    return;
-                }
-                self.pre_copy.process(img, x0, y0, x1, y1);
-                &mut self.pre_copy
-            }
-        };
-        pre.build_levels(levels);
+        self.prepare_part(input, region, region);
     }
 
-    /// [`RegistrationTracker::prepare`] of the finest level alone, smoothing only the part of
-    /// the region within `part` (see [`Source`]).
+    /// [`RegistrationTracker::prepare`], smoothing the finest level only within `part` of the
+    /// region (see [`Source`]; the pyramid's levels need the whole region).
     fn prepare_part(
         &mut self,
         input: FrameInput<'_>,
         region: (f64, f64, f64, f64),
         part: (f64, f64, f64, f64),
     ) {
+        // Another frame or region: no context's last sampled patch is this view's.
         self.ctx.work.sampled_at = None;
-        match input {
-            FrameInput::Gray8(img) => self.pre.process_part(img, region, part),
-            FrameInput::Gray32(img) => self.pre.process_part(img, region, part),
-            FrameInput::View8(img) => self.pre.process_part(img, region, part),
-            FrameInput::Smoothed(_) => {}
+        for stage in self.coarse.iter_mut().chain(&mut self.lower) {
+            stage.ctx.work.sampled_at = None;
         }
+        let levels = self.coarse.len();
+        let pre = match input {
+            FrameInput::Gray8(img) => {
+                self.pre.process_part(img, region, part);
+                &mut self.pre
+            }
+            FrameInput::Gray32(img) => {
+                self.pre.process_part(img, region, part);
+                &mut self.pre
+            }
+            FrameInput::View8(img) => {
+                self.pre.process_part(img, region, part);
+                &mut self.pre
+            }
+            FrameInput::Smoothed(img) => {
+                if levels == 0 {
+                    return;
+                }
+                let (x0, y0, x1, y1) = region;
+                self.pre_copy.process(img, x0, y0, x1, y1);
+                &mut self.pre_copy
+            }
+        };
+        pre.build_levels(levels);
     }
 
     /// The view of pyramid level `level` prepared by [`RegistrationTracker::prepare`].

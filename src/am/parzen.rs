@@ -475,6 +475,172 @@ fn flush_lanes(acc: &mut [f64], b: &mut Lanes) {
     }
 }
 
+/// Polynomial terms of the product of a weight and a weight's derivative (degree 3 + 2).
+const MOMENTS: usize = 6;
+/// At most this many pixels are summed in f32 before their sum is added in f64 (as `V`'s
+/// blocks).
+const RUN: usize = 256;
+
+/// The degree-5 Bernstein basis at `f` in `0..1`: six non-negative terms summing to 1.
+fn bernstein5(f: f64) -> [f64; MOMENTS] {
+    let g = 1.0 - f;
+    let (f2, g2) = (f * f, g * g);
+    [
+        g2 * g2 * g,
+        5.0 * f * g2 * g2,
+        10.0 * f2 * g2 * g,
+        10.0 * f2 * f * g2,
+        5.0 * f2 * f2 * g,
+        f2 * f2 * f,
+    ]
+}
+
+/// `x_u(f) y_w(f)` in the degree-5 Bernstein basis, for the 4 x 4 cells of a pixel whose two
+/// intensities fall in the same bin at the same fraction `f` (the template against itself):
+/// `derivative_right`: `x` the weights and `y` their derivatives (with respect to the current
+/// pixels), else the reverse (the template's).
+fn same_bin_products(derivative_right: bool) -> [[[f64; MOMENTS]; 4]; 4] {
+    // w_u = A + B f + C f^2 + D f^3, dw_u/df = B + 2 C f + 3 D f^2.
+    let w = |u: usize| [A[u], B[u], C[u], D[u]];
+    let d = |u: usize| [B[u], 2.0 * C[u], 3.0 * D[u], 0.0];
+    let choose = |n: usize, k: usize| -> f64 {
+        (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
+    };
+    let mut out = [[[0.0; MOMENTS]; 4]; 4];
+    for (u, row) in out.iter_mut().enumerate() {
+        for (v, cell) in row.iter_mut().enumerate() {
+            let (x, y) = if derivative_right {
+                (w(u), d(v))
+            } else {
+                (d(u), w(v))
+            };
+            // Monomial coefficients of the product (one factor is at most quadratic).
+            let mut a = [0.0; MOMENTS];
+            for (i, &xi) in x.iter().enumerate() {
+                for (j, &yj) in y.iter().enumerate() {
+                    if i + j < MOMENTS {
+                        a[i + j] += xi * yj;
+                    }
+                }
+            }
+            // f^k = sum_{m >= k} C(m, k) / C(5, k) b_m(f).
+            for (m, c) in cell.iter_mut().enumerate() {
+                *c = (0..=m)
+                    .map(|k| choose(m, k) / choose(MOMENTS - 1, k) * a[k])
+                    .sum();
+            }
+        }
+    }
+    out
+}
+
+/// The template's pixels grouped by their first bin, for the Hessians after convergence.
+///
+/// There both weights of a pixel are the template's: its 16 products `x_u y_w` are polynomials
+/// of degree 5 in the one fraction `f`, so a bin's 16 cells of `V` are fixed combinations of
+/// six sums `M_m = sum_j b_m(f_j) J_j` over the pixels `j` of that bin (`b_m` the Bernstein
+/// basis: non-negative weights, no cancellation in the sums). With the pixels grouped by bin
+/// once per template, the sums run in registers along each group: six multiply-adds of a
+/// Jacobian row per pixel instead of sixteen read-modify-writes of histogram cells.
+#[derive(Clone, Debug, Default)]
+struct SameBin {
+    /// Pixel indices grouped by first bin (clamped pixels, whose derivatives are zero, left
+    /// out).
+    order: Vec<u32>,
+    /// Each pixel's Bernstein basis (times `inside`), in `order`.
+    basis: Vec<[f32; MOMENTS]>,
+    /// Runs of at most [`RUN`] pixels of one bin: (first bin, end in `order`).
+    runs: Vec<(u32, u32)>,
+    /// The bins in use, ascending.
+    bins: Vec<u32>,
+    /// [`same_bin_products`] with respect to the current pixels and to the template's.
+    products: [[[[f64; MOMENTS]; 4]; 4]; 2],
+    valid: bool,
+}
+
+impl SameBin {
+    /// Groups the pixels of the template's weights `tw` (histogram side `side`).
+    fn build(&mut self, tw: &Weights, side: usize) {
+        let n = tw.base.len();
+        let mut count = vec![0u32; side + 1];
+        let kept = |j: usize| tw.inside[j] > 0.0;
+        for j in (0..n).filter(|&j| kept(j)) {
+            count[tw.base[j] as usize + 1] += 1;
+        }
+        for b in 0..side {
+            count[b + 1] += count[b];
+        }
+        let total = count[side] as usize;
+        self.order.clear();
+        self.order.resize(total, 0);
+        let mut next = count.clone();
+        for j in (0..n).filter(|&j| kept(j)) {
+            let b = tw.base[j] as usize;
+            self.order[next[b] as usize] = j as u32;
+            next[b] += 1;
+        }
+        self.basis.clear();
+        self.basis.extend(
+            self.order
+                .iter()
+                .map(|&j| bernstein5(tw.fr[j as usize]).map(|b| b as f32)),
+        );
+        self.runs.clear();
+        self.bins.clear();
+        for b in 0..side {
+            let (start, end) = (count[b] as usize, count[b + 1] as usize);
+            if start == end {
+                continue;
+            }
+            self.bins.push(b as u32);
+            for s in (start..end).step_by(RUN) {
+                self.runs.push((b as u32, (s + RUN).min(end) as u32));
+            }
+        }
+        self.products = [same_bin_products(true), same_bin_products(false)];
+        self.valid = true;
+    }
+}
+
+/// `sum_i basis[i][m] rows[order[i]]` for each `m`, in f32 (in registers along the run).
+#[inline(always)]
+fn run_sums(rows: &[Lanes], order: &[u32], basis: &[[f32; MOMENTS]]) -> [[f32; MAX_DOF]; MOMENTS] {
+    let mut acc = [[0f32; MAX_DOF]; MOMENTS];
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a row is eight f32 on a
+        // 32-byte boundary (`Lanes`, MAX_DOF == 8), read through a bounds-checked index; each
+        // store writes the eight lanes of one `acc[m]`.
+        unsafe {
+            use std::arch::x86_64::*;
+            let mut s = [_mm256_setzero_ps(); MOMENTS];
+            for (&j, b) in order.iter().zip(basis) {
+                let r = _mm256_load_ps(rows[j as usize].0.as_ptr());
+                for (sm, &bm) in s.iter_mut().zip(b) {
+                    *sm = _mm256_fmadd_ps(_mm256_set1_ps(bm), r, *sm);
+                }
+            }
+            for (am, sm) in acc.iter_mut().zip(s) {
+                _mm256_storeu_ps(am.as_mut_ptr(), sm);
+            }
+        }
+        return acc;
+    }
+    for (&j, b) in order.iter().zip(basis) {
+        let r = &rows[j as usize].0;
+        for (am, &bm) in acc.iter_mut().zip(b) {
+            for (e, &q) in am.iter_mut().zip(r) {
+                *e = bm.mul_add(q, *e);
+            }
+        }
+    }
+    acc
+}
+
 /// The Jacobian's rows of the pixels `block` (the Jacobian is stored by parameter, `n` pixels a
 /// parameter) into `rows[0..]`, eight lanes a pixel, the lanes past `dof` zero.
 fn jacobian_rows(
@@ -620,22 +786,32 @@ impl Weights {
         self.fill_with(x, &Bins::default());
     }
 
+    /// The weights of `x` and their derivatives, in one pass.
     pub fn fill_with(&mut self, x: &[f32], bins: &Bins) {
-        self.fill_values(x, bins);
-        self.fill_derivatives();
+        self.fill_pass::<true>(x, bins);
     }
 
     /// The first bins and weights of `x`, without their derivatives (an ICLK iteration reads
     /// only the weights of the current patch; [`Weights::fill_derivatives`] makes them).
     pub fn fill_values(&mut self, x: &[f32], bins: &Bins) {
+        self.fill_pass::<false>(x, bins);
+    }
+
+    /// The first bins and weights of `x`, and with `DERIVATIVES` their derivatives (the same
+    /// polynomials of the same fraction, stored instead of dropped).
+    fn fill_pass<const DERIVATIVES: bool>(&mut self, x: &[f32], bins: &Bins) {
         let n = x.len();
         self.base.resize(n, 0);
         self.w.resize(n, [0.0; 4]);
         self.fr.resize(n, 0.0);
         self.inside.resize(n, 0.0);
-        self.derivatives = false;
+        if DERIVATIVES {
+            self.d.resize(n, [0.0; 4]);
+            self.d2.resize(n, [0.0; 4]);
+        }
+        self.derivatives = DERIVATIVES;
         let (mut lo, mut hi) = (bins.side, 0);
-        // The derivatives go to these locals and are dropped: only `w` is kept.
+        // Without DERIVATIVES the derivatives go to these locals and are dropped.
         let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
         // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
         // then each pixel's weights.
@@ -657,7 +833,12 @@ impl Weights {
                     let b = first[k] as usize;
                     lo = lo.min(b);
                     hi = hi.max(b + 4);
-                    spline(fr[k], inside[k], &mut w[k], &mut d, &mut d2);
+                    if DERIVATIVES {
+                        let i = done + k;
+                        spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut self.d2[i]);
+                    } else {
+                        spline(fr[k], inside[k], &mut w[k], &mut d, &mut d2);
+                    }
                 }
                 done += 4;
             }
@@ -668,7 +849,11 @@ impl Weights {
             (self.fr[i], self.inside[i]) = (f, inside);
             lo = lo.min(b);
             hi = hi.max(b + 4);
-            spline(f, inside, &mut self.w[i], &mut d, &mut d2);
+            if DERIVATIVES {
+                spline(f, inside, &mut self.w[i], &mut self.d[i], &mut self.d2[i]);
+            } else {
+                spline(f, inside, &mut self.w[i], &mut d, &mut d2);
+            }
         }
         if lo >= hi {
             (lo, hi) = (0, 0);
@@ -844,12 +1029,11 @@ pub(crate) struct Parzen {
     /// Statistics of the template against itself (after convergence).
     self_stats: Stats,
     self_valid: bool,
-    /// Scratch: `V` (`side x side x MAX_DOF`), per-pixel diagonal terms, a product buffer.
+    /// The template's pixels grouped by bin (after convergence).
+    same: SameBin,
+    /// Scratch: `V` (`side x side x MAX_DOF`).
     v: Vec<f64>,
-    /// Scratch: `V` over one block of pixels, in f32 (one AVX register a cell).
-    v_block: Vec<Lanes>,
-    /// Scratch: one `dof`-vector per histogram row or column.
-    lines: Vec<[f64; MAX_DOF]>,
+    scratch: Scratch,
     /// The Newton Hessian's per-pixel diagonal terms, and which Hessian they are of.
     diag: Vec<f32>,
     diag_of: DiagOf,
@@ -886,8 +1070,13 @@ impl Parzen {
             self_stats: Stats::new(bins.side),
             self_valid: false,
             v: vec![0.0; bins.side * bins.side * MAX_DOF],
-            v_block: vec![Lanes::default(); bins.side * bins.side],
-            lines: vec![[0.0; MAX_DOF]; bins.side],
+            same: SameBin::default(),
+            scratch: Scratch {
+                v_block: vec![Lanes::default(); bins.side * bins.side],
+                rows: Vec::new(),
+                moments: vec![[0.0; MAX_DOF]; bins.side * MOMENTS],
+                lines: vec![[0.0; MAX_DOF]; bins.side],
+            },
             diag: Vec::new(),
             diag_of: DiagOf::Stale,
             want_diag: false,
@@ -905,6 +1094,7 @@ impl Parzen {
         self.tw.fill_with(template, &self.bins);
         self.valid = false;
         self.self_valid = false;
+        self.same.valid = false;
         self.diag_of = DiagOf::Stale;
         self.diag.resize(template.len(), 0.0);
     }
@@ -913,12 +1103,19 @@ impl Parzen {
         &self.template
     }
 
-    /// Makes `stats` those of `current`.
-    fn observe(&mut self, current: &[f32]) {
+    /// Makes `stats` those of `current`, and with `derivatives` its weights' derivatives too.
+    fn observe(&mut self, current: &[f32], derivatives: bool) {
         if self.valid && self.last.as_slice() == current {
+            if derivatives {
+                self.cw.fill_derivatives();
+            }
             return;
         }
-        self.cw.fill_values(current, &self.bins);
+        if derivatives {
+            self.cw.fill_with(current, &self.bins);
+        } else {
+            self.cw.fill_values(current, &self.bins);
+        }
         self.stats.compute(self.measure, &self.tw, &self.cw);
         if self.diag_of == DiagOf::Current {
             self.diag_of = DiagOf::Stale;
@@ -929,15 +1126,12 @@ impl Parzen {
     }
 
     pub fn similarity(&mut self, current: &[f32]) -> f64 {
-        self.observe(current);
+        self.observe(current, false);
         self.stats.value
     }
 
     pub fn gradient(&mut self, wrt: super::Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
-        self.observe(current);
-        if wrt == super::Wrt::Current {
-            self.cw.fill_derivatives();
-        }
+        self.observe(current, wrt == super::Wrt::Current);
         self.diag.resize(current.len(), 0.0);
         let g = &self.stats.g;
         let side = self.bins.side;
@@ -987,11 +1181,11 @@ impl Parzen {
                 self.self_stats.compute(self.measure, &self.tw, &self.tw);
                 self.self_valid = true;
             }
-        } else {
-            self.observe(current);
-            if wrt == super::Wrt::Current {
-                self.cw.fill_derivatives();
+            if !self.same.valid {
+                self.same.build(&self.tw, self.bins.side);
             }
+        } else {
+            self.observe(current, wrt == super::Wrt::Current);
         }
         let (stats, cw) = if after {
             (&self.self_stats, &self.tw)
@@ -1015,9 +1209,9 @@ impl Parzen {
             wrt == super::Wrt::Current,
             jac,
             dof,
+            after.then_some(&self.same),
             &mut self.v,
-            &mut self.v_block,
-            &mut self.lines,
+            &mut self.scratch,
             (&mut self.diag, reuse),
             out,
         );
@@ -1025,6 +1219,77 @@ impl Parzen {
         self.want_diag = needed == DiagOf::Current;
         if kind == HessianKind::GaussNewton {
             negative_part(out, dof);
+        }
+    }
+}
+
+/// Scratch of the Newton Hessian.
+#[derive(Clone, Debug)]
+struct Scratch {
+    /// `V` over one block of pixels, in f32 (one AVX register a cell).
+    v_block: Vec<Lanes>,
+    /// The Jacobian's rows (a block's, or every pixel's after convergence).
+    rows: Vec<Lanes>,
+    /// After convergence: each bin's six sums (`side x MOMENTS`).
+    moments: Vec<[f64; MAX_DOF]>,
+    /// One `dof`-vector per histogram row or column.
+    lines: Vec<[f64; MAX_DOF]>,
+}
+
+/// Adds `V` after convergence into `v` (see [`SameBin`]): the Jacobian's rows, each bin's six
+/// sums along its runs, then the bin's 16 cells from them.
+#[allow(clippy::too_many_arguments)]
+fn same_bin_v(
+    same: &SameBin,
+    current: bool,
+    side: usize,
+    jac: &[f32],
+    n: usize,
+    dof: usize,
+    scratch: &mut Scratch,
+    v: &mut [f64],
+) {
+    scratch.rows.resize(n, Lanes::default());
+    jacobian_rows(jac, n, dof, 0..n, &mut scratch.rows);
+    let moments = &mut scratch.moments;
+    for &b in &same.bins {
+        let b = b as usize;
+        moments[b * MOMENTS..(b + 1) * MOMENTS].fill([0.0; MAX_DOF]);
+    }
+    let mut start = 0;
+    for &(b, end) in &same.runs {
+        let (b, end) = (b as usize, end as usize);
+        let sums = run_sums(
+            &scratch.rows,
+            &same.order[start..end],
+            &same.basis[start..end],
+        );
+        for (acc, s) in moments[b * MOMENTS..(b + 1) * MOMENTS]
+            .iter_mut()
+            .zip(&sums)
+        {
+            for (e, &q) in acc.iter_mut().zip(s) {
+                *e += q as f64;
+            }
+        }
+        start = end;
+    }
+    let products = &same.products[if current { 0 } else { 1 }];
+    for &b in &same.bins {
+        let b = b as usize;
+        let m = &moments[b * MOMENTS..(b + 1) * MOMENTS];
+        for (u, row) in products.iter().enumerate() {
+            for (w, coefficients) in row.iter().enumerate() {
+                let at = ((b + u) * side + b + w) * MAX_DOF;
+                let cell: &mut [f64; MAX_DOF] = (&mut v[at..at + MAX_DOF])
+                    .try_into()
+                    .expect("a cell is MAX_DOF lanes");
+                for (mm, &c) in m.iter().zip(coefficients) {
+                    for (e, &q) in cell.iter_mut().zip(mm) {
+                        *e = c.mul_add(q, *e);
+                    }
+                }
+            }
         }
     }
 }
@@ -1041,12 +1306,13 @@ fn newton(
     current: bool,
     jac: &[f32],
     dof: usize,
+    same: Option<&SameBin>,
     v: &mut [f64],
-    v_block: &mut [Lanes],
-    lines: &mut [[f64; MAX_DOF]],
+    scratch: &mut Scratch,
     (diag, diag_ready): (&mut [f32], bool),
     out: &mut [f64; MAX_DOF * MAX_DOF],
 ) {
+    const BLOCK: usize = 256;
     let n = tw.base.len();
     let (side, scale) = (bins.side, bins.scale);
     let inv_n = 1.0 / n.max(1) as f64;
@@ -1058,52 +1324,71 @@ fn newton(
     // blocks, as `jt_times` does.
     for a in r0..r1 {
         v[(a * side + c0) * MAX_DOF..(a * side + c1) * MAX_DOF].fill(0.0);
-        v_block[a * side + c0..a * side + c1].fill(Lanes::default());
     }
     let g = &st.g;
-    const BLOCK: usize = 256;
-    // The block's Jacobian rows (eight lanes a pixel; those past `dof` zero), read column by
-    // column (the Jacobian is stored by parameter).
-    let mut rows = [Lanes::default(); BLOCK];
-    for start in (0..n).step_by(BLOCK) {
-        let end = (start + BLOCK).min(n);
-        jacobian_rows(jac, n, dof, start..end, &mut rows);
-        // The template's and the current patch's weights of the block: `x` and `y` for `V`,
-        // `x2` and `y2` for the diagonal.
-        let block = start..end;
-        let (ta, cb) = (&tw.base[block.clone()], &cw.base[block.clone()]);
-        let (x, y, x2, y2) = if current {
-            (
-                &tw.w[block.clone()],
-                &cw.d[block.clone()],
-                &tw.w[block.clone()],
-                &cw.d2[block.clone()],
-            )
-        } else {
-            (
-                &tw.d[block.clone()],
-                &cw.w[block.clone()],
-                &tw.d2[block.clone()],
-                &cw.w[block.clone()],
-            )
-        };
-        // The diagonal in a pass of its own, four pixels at a time (unless made already).
-        if !diag_ready {
-            bilinear_forms(g, side, ta, cb, x2, [y2], [1.0], [&mut diag[block]]);
+    match same {
+        Some(same) => {
+            // After convergence: V from each bin's six sums (see `SameBin`).
+            if !diag_ready {
+                let (x2, y2) = if current {
+                    (&tw.w, &cw.d2)
+                } else {
+                    (&tw.d2, &cw.w)
+                };
+                bilinear_forms(g, side, &tw.base, &cw.base, x2, [y2], [1.0], [diag]);
+            }
+            same_bin_v(same, current, side, jac, n, dof, scratch, v);
         }
-        // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
-        for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {
-            let at = ta as usize * side + cb as usize;
-            add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, &jj.0);
-        }
-        for a in r0..r1 {
-            let cells = a * side + c0..a * side + c1;
-            let sums = &mut v[cells.start * MAX_DOF..cells.end * MAX_DOF];
-            for (acc, vb) in sums.chunks_exact_mut(MAX_DOF).zip(&mut v_block[cells]) {
-                flush_lanes(acc, vb);
+        None => {
+            let (v_block, rows) = (&mut scratch.v_block, &mut scratch.rows);
+            rows.resize(BLOCK, Lanes::default());
+            for a in r0..r1 {
+                v_block[a * side + c0..a * side + c1].fill(Lanes::default());
+            }
+            for start in (0..n).step_by(BLOCK) {
+                let end = (start + BLOCK).min(n);
+                // The block's Jacobian rows (eight lanes a pixel; those past `dof` zero), read
+                // column by column (the Jacobian is stored by parameter).
+                jacobian_rows(jac, n, dof, start..end, rows);
+                // The template's and the current patch's weights of the block: `x` and `y` for
+                // `V`, `x2` and `y2` for the diagonal.
+                let block = start..end;
+                let (ta, cb) = (&tw.base[block.clone()], &cw.base[block.clone()]);
+                let (x, y, x2, y2) = if current {
+                    (
+                        &tw.w[block.clone()],
+                        &cw.d[block.clone()],
+                        &tw.w[block.clone()],
+                        &cw.d2[block.clone()],
+                    )
+                } else {
+                    (
+                        &tw.d[block.clone()],
+                        &cw.w[block.clone()],
+                        &tw.d2[block.clone()],
+                        &cw.w[block.clone()],
+                    )
+                };
+                // The diagonal in a pass of its own, four pixels at a time (unless made already).
+                if !diag_ready {
+                    bilinear_forms(g, side, ta, cb, x2, [y2], [1.0], [&mut diag[block]]);
+                }
+                // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
+                for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {
+                    let at = ta as usize * side + cb as usize;
+                    add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, &jj.0);
+                }
+                for a in r0..r1 {
+                    let cells = a * side + c0..a * side + c1;
+                    let sums = &mut v[cells.start * MAX_DOF..cells.end * MAX_DOF];
+                    for (acc, vb) in sums.chunks_exact_mut(MAX_DOF).zip(&mut v_block[cells]) {
+                        flush_lanes(acc, vb);
+                    }
+                }
             }
         }
     }
+    let lines = &mut scratch.lines[..];
     let kn = scale * inv_n;
     // Diagonal part: k^2/N sum_j D_j J_j J_j^T.
     super::intensity_map::jt_diag_j(jac, diag, dof, out);
@@ -1516,6 +1801,71 @@ mod tests {
                     h2.map(f64::to_bits),
                     "{measure:?} call {i}: Hessian"
                 );
+            }
+        }
+    }
+
+    /// After convergence, `V` made from each bin's six Bernstein sums along the pixels grouped
+    /// by bin gives the Hessian summed cell by cell (16 products a pixel), for both measures,
+    /// sides, bins and fewer parameters than lanes, with pixels clamped or not finite, and long
+    /// runs of one bin (a ramp) as well as short ones.
+    #[test]
+    fn hessians_after_convergence_from_bin_sums_are_those_summed_cell_by_cell() {
+        let mut rng = crate::rng::Rng::new(13);
+        let n = 911;
+        let mut t: Vec<f32> = (0..n).map(|_| rng.range(0.0, 255.0) as f32).collect();
+        for (i, v) in t[300..900].iter_mut().enumerate() {
+            *v = 40.0 + i as f32 * 0.05;
+        }
+        (t[3], t[10], t[20], t[21]) = (-400.0, 900.0, f32::NAN, 255.0);
+        for dof in [8, 4] {
+            let jac: Vec<f32> = (0..dof * n).map(|_| rng.range(-3.0, 3.0) as f32).collect();
+            for measure in [Measure::Mi, Measure::Ccre] {
+                for bins in [8, 16] {
+                    let mut m = Parzen::new(measure, bins);
+                    m.set_template(&t);
+                    let mut st = Stats::new(m.bins.side);
+                    st.compute(measure, &m.tw, &m.tw);
+                    let mut same = SameBin::default();
+                    same.build(&m.tw, m.bins.side);
+                    assert!(
+                        same.runs.len() > same.bins.len(),
+                        "runs split at RUN pixels"
+                    );
+                    for current in [true, false] {
+                        let mut h = [[0.0; MAX_DOF * MAX_DOF]; 2];
+                        let mut diag = [vec![0f32; n], vec![0f32; n]];
+                        for (k, (h, diag)) in h.iter_mut().zip(&mut diag).enumerate() {
+                            let by_bin = (k == 0).then_some(&same);
+                            let (tw, v, scratch) = (&m.tw, &mut m.v, &mut m.scratch);
+                            let bins = &m.bins;
+                            newton(
+                                measure,
+                                bins,
+                                &st,
+                                tw,
+                                tw,
+                                current,
+                                &jac,
+                                dof,
+                                by_bin,
+                                v,
+                                scratch,
+                                (diag, false),
+                                h,
+                            );
+                        }
+                        assert_eq!(diag[0], diag[1]);
+                        let scale = h[1].iter().fold(0.0f64, |a, &x| a.max(x.abs()));
+                        assert!(scale > 0.0);
+                        for (a, b) in h[0].iter().zip(&h[1]) {
+                            assert!(
+                                (a - b).abs() <= 1e-5 * scale,
+                                "{measure:?} bins {bins} dof {dof} current {current}: {a} {b}"
+                            );
+                        }
+                    }
+                }
             }
         }
     }

@@ -159,8 +159,9 @@ pub(crate) struct Weights {
     /// the derivatives are made from.
     fr: Vec<f64>,
     inside: Vec<f64>,
-    /// Whether `d` and `d2` are those of the values `w` was filled with.
+    /// Whether `d`, and `d2`, are those of the values `w` was filled with.
     derivatives: bool,
+    second: bool,
 }
 
 /// The cubic B-spline's four weights as polynomials in the fraction `f` of a bin coordinate:
@@ -788,18 +789,26 @@ impl Weights {
 
     /// The weights of `x` and their derivatives, in one pass.
     pub fn fill_with(&mut self, x: &[f32], bins: &Bins) {
-        self.fill_pass::<true>(x, bins);
+        self.fill_pass::<true, true>(x, bins);
+    }
+
+    /// The weights of `x` and their first derivatives, in one pass (the second derivatives are
+    /// made on demand by [`Weights::fill_second`]: a forward step after convergence reads only
+    /// the first, and storing the second costs more than making them).
+    pub fn fill_first(&mut self, x: &[f32], bins: &Bins) {
+        self.fill_pass::<true, false>(x, bins);
     }
 
     /// The first bins and weights of `x`, without their derivatives (an ICLK iteration reads
     /// only the weights of the current patch; [`Weights::fill_derivatives`] makes them).
     pub fn fill_values(&mut self, x: &[f32], bins: &Bins) {
-        self.fill_pass::<false>(x, bins);
+        self.fill_pass::<false, false>(x, bins);
     }
 
-    /// The first bins and weights of `x`, and with `DERIVATIVES` their derivatives (the same
-    /// polynomials of the same fraction, stored instead of dropped).
-    fn fill_pass<const DERIVATIVES: bool>(&mut self, x: &[f32], bins: &Bins) {
+    /// The first bins and weights of `x`, and with `DERIVATIVES` their first derivatives and
+    /// with `SECOND` their second (the same polynomials of the same fraction, stored instead of
+    /// dropped).
+    fn fill_pass<const DERIVATIVES: bool, const SECOND: bool>(&mut self, x: &[f32], bins: &Bins) {
         let n = x.len();
         self.base.resize(n, 0);
         self.w.resize(n, [0.0; 4]);
@@ -807,9 +816,12 @@ impl Weights {
         self.inside.resize(n, 0.0);
         if DERIVATIVES {
             self.d.resize(n, [0.0; 4]);
+        }
+        if SECOND {
             self.d2.resize(n, [0.0; 4]);
         }
         self.derivatives = DERIVATIVES;
+        self.second = DERIVATIVES && SECOND;
         let (mut lo, mut hi) = (bins.side, 0);
         // Without DERIVATIVES the derivatives go to these locals and are dropped.
         let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
@@ -833,9 +845,11 @@ impl Weights {
                     let b = first[k] as usize;
                     lo = lo.min(b);
                     hi = hi.max(b + 4);
-                    if DERIVATIVES {
-                        let i = done + k;
+                    let i = done + k;
+                    if DERIVATIVES && SECOND {
                         spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut self.d2[i]);
+                    } else if DERIVATIVES {
+                        spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut d2);
                     } else {
                         spline(fr[k], inside[k], &mut w[k], &mut d, &mut d2);
                     }
@@ -849,8 +863,10 @@ impl Weights {
             (self.fr[i], self.inside[i]) = (f, inside);
             lo = lo.min(b);
             hi = hi.max(b + 4);
-            if DERIVATIVES {
+            if DERIVATIVES && SECOND {
                 spline(f, inside, &mut self.w[i], &mut self.d[i], &mut self.d2[i]);
+            } else if DERIVATIVES {
+                spline(f, inside, &mut self.w[i], &mut self.d[i], &mut d2);
             } else {
                 spline(f, inside, &mut self.w[i], &mut d, &mut d2);
             }
@@ -865,6 +881,7 @@ impl Weights {
     /// The weights' first and second derivatives (`d`, `d2`) of the values last filled, once.
     pub fn fill_derivatives(&mut self) {
         if self.derivatives {
+            self.fill_second();
             return;
         }
         let n = self.fr.len();
@@ -876,6 +893,27 @@ impl Weights {
             spline(f, inside, &mut w, d, d2);
         }
         self.derivatives = true;
+        self.second = true;
+    }
+
+    /// The weights' second derivatives (`d2`) of the values last filled, once, when the first
+    /// are made already ([`Weights::fill_first`]); else both, as [`Weights::fill_derivatives`].
+    pub fn fill_second(&mut self) {
+        if !self.derivatives {
+            self.fill_derivatives();
+            return;
+        }
+        if self.second {
+            return;
+        }
+        let n = self.fr.len();
+        self.d2.resize(n, [0.0; 4]);
+        let (mut w, mut d) = ([0.0; 4], [0.0; 4]);
+        let coords = self.fr.iter().zip(&self.inside);
+        for ((&f, &inside), d2) in coords.zip(self.d2.iter_mut()) {
+            spline(f, inside, &mut w, &mut d, d2);
+        }
+        self.second = true;
     }
 }
 
@@ -1106,13 +1144,13 @@ impl Parzen {
     /// Makes `stats` those of `current`, and with `derivatives` its weights' derivatives too.
     fn observe(&mut self, current: &[f32], derivatives: bool) {
         if self.valid && self.last.as_slice() == current {
-            if derivatives {
+            if derivatives && !self.cw.derivatives {
                 self.cw.fill_derivatives();
             }
             return;
         }
         if derivatives {
-            self.cw.fill_with(current, &self.bins);
+            self.cw.fill_first(current, &self.bins);
         } else {
             self.cw.fill_values(current, &self.bins);
         }
@@ -1132,13 +1170,17 @@ impl Parzen {
 
     pub fn gradient(&mut self, wrt: super::Wrt, current: &[f32], grad: &mut [f32]) -> f64 {
         self.observe(current, wrt == super::Wrt::Current);
+        let with_diag = self.want_diag && self.diag_of != DiagOf::Current;
+        if wrt == super::Wrt::Current && with_diag {
+            self.cw.fill_second();
+        }
         self.diag.resize(current.len(), 0.0);
         let g = &self.stats.g;
         let side = self.bins.side;
         let k = self.bins.scale / current.len().max(1) as f64;
         let (tw, cw) = (&self.tw, &self.cw);
         match wrt {
-            super::Wrt::Current if self.want_diag && self.diag_of != DiagOf::Current => {
+            super::Wrt::Current if with_diag => {
                 // The Newton diagonal's forms share the gradient's left half (the template's
                 // weights): both in one pass.
                 let (d, d2) = (&cw.d[..], &cw.d2[..]);
@@ -1186,6 +1228,10 @@ impl Parzen {
             }
         } else {
             self.observe(current, wrt == super::Wrt::Current);
+            if wrt == super::Wrt::Current {
+                // The Newton diagonal at the current patch reads their second derivatives.
+                self.cw.fill_second();
+            }
         }
         let (stats, cw) = if after {
             (&self.self_stats, &self.tw)
@@ -1712,8 +1758,9 @@ mod tests {
         }
     }
 
-    /// Weights filled without their derivatives, then the derivatives made on demand, equal
-    /// those filled at once, for new values too (the derivatives of older values are not kept).
+    /// Weights filled without their derivatives (or without the second), then the derivatives
+    /// made on demand, equal those filled at once, for new values too (the derivatives of older
+    /// values are not kept).
     #[test]
     fn derivatives_made_on_demand_are_those_of_the_last_values() {
         let bins = Bins::new(DEFAULT_BINS);
@@ -1734,6 +1781,22 @@ mod tests {
             (lazy.d.clone(), lazy.d2.clone()),
             (whole.d.clone(), whole.d2.clone())
         );
+        // The first derivatives with the values, the second on demand (over another patch's).
+        let mut first = Weights::default();
+        first.fill_with(&a, &bins);
+        first.fill_first(&b, &bins);
+        assert_eq!(
+            (first.base.clone(), first.w.clone(), first.d.clone()),
+            (whole.base.clone(), whole.w.clone(), whole.d.clone())
+        );
+        assert_ne!(first.d2, whole.d2, "the older patch's second derivatives");
+        first.fill_second();
+        assert_eq!(first.d2, whole.d2);
+        // Values only, then the second derivatives: both made.
+        let mut second = Weights::default();
+        second.fill_values(&b, &bins);
+        second.fill_second();
+        assert_eq!((&second.d, &second.d2), (&whole.d, &whole.d2));
     }
 
     /// The Newton diagonal made in the gradient's pass (FCLK's and ESM's order: gradient, then

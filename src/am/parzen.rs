@@ -61,6 +61,10 @@
 //! - Newton: the above at the current patch.
 //! - After convergence: the above with the current patch replaced by the template (its
 //!   statistics and the per-pixel diagonal terms are computed once per template and kept).
+//!   Both weights of a pixel are then the template's, functions of one fraction `f`: a bin's
+//!   16 cells of `V` are fixed combinations of six Bernstein sums `sum_j b_m(f_j) J_j` over the
+//!   template's pixels in that bin, summed in registers along the pixels grouped by bin once
+//!   per template (`SameBin`).
 //! - Gauss-Newton: these models are maximised and their "first-order" term `Q` is positive
 //!   semi-definite (by Cauchy-Schwarz for MI), so the least-squares Gauss-Newton idea does not
 //!   apply. What is used is the negative semi-definite part of the projected Newton Hessian

@@ -350,16 +350,20 @@ fn joint_histogram(p: &mut [f64], blocks: &mut Vec<Block>, side: usize, t: &Weig
         let k = (ta as usize - r0) * cols + (cb as usize - c0);
         add_block(&mut blocks[k], x, y);
     }
-    // Block (a, b)'s row u goes to cells (a + u, b..b + 4). Along a histogram row, the blocks
-    // of every fourth column first (their cells are disjoint), then the next: no update reads
-    // cells that the one just before wrote in part.
-    for u in 0..4 {
-        for a in 0..rows {
-            let row = &mut p[(r0 + a + u) * side..];
-            let line = &blocks[a * cols..(a + 1) * cols];
-            for phase in 0..4 {
-                for b in (phase..cols).step_by(4) {
-                    add_block_row(&mut row[c0 + b..], &line[b].0[4 * u..]);
+    // Block (a, b)'s row u goes to cells (a + u, b..b + 4). Along a row of blocks, every
+    // fourth block first (their cells are disjoint), then the next: no update reads cells that
+    // the one just before wrote in part. Blocks no pixel fell in are skipped: cell (1, 1) of a
+    // pixel's block is `w_1 w_1 >= 1 / 36` (`w_1 = 2/3 - f^2 + f^3 / 2`).
+    for (a, line) in blocks.chunks_exact(cols).enumerate() {
+        for phase in 0..4 {
+            for b in (phase..cols).step_by(4) {
+                let block = &line[b].0;
+                if block[5] == 0.0 {
+                    continue;
+                }
+                for u in 0..4 {
+                    let at = (r0 + a + u) * side + c0 + b;
+                    add_block_row(&mut p[at..at + 4], &block[4 * u..4 * u + 4]);
                 }
             }
         }
@@ -907,6 +911,8 @@ impl Weights {
         let mut done = 0;
         #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
         {
+            // The first bins' range, lane by lane (four minima and maxima in one register each).
+            let (mut lo4, mut hi4) = ([u32::MAX; 4], [0u32; 4]);
             let fours = x.chunks_exact(4).zip(self.base.chunks_exact_mut(4));
             let coords = self
                 .fr
@@ -919,9 +925,10 @@ impl Weights {
                 let inside: &mut [f64; 4] = inside.try_into().expect("four");
                 bin_coordinates4(v.try_into().expect("four"), bins, first, fr, inside);
                 for k in 0..4 {
-                    let b = first[k] as usize;
-                    lo = lo.min(b);
-                    hi = hi.max(b + 4);
+                    lo4[k] = lo4[k].min(first[k]);
+                    hi4[k] = hi4[k].max(first[k]);
+                }
+                for k in 0..4 {
                     let i = done + k;
                     if DERIVATIVES && SECOND {
                         spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut self.d2[i]);
@@ -932,6 +939,10 @@ impl Weights {
                     }
                 }
                 done += 4;
+            }
+            if done > 0 {
+                lo = lo.min(*lo4.iter().min().expect("four") as usize);
+                hi = hi.max(*hi4.iter().max().expect("four") as usize + 4);
             }
         }
         for i in done..n {

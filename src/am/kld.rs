@@ -119,17 +119,22 @@ impl Default for Stats {
     }
 }
 
+/// A pixel's four weights (f32) in f64.
+fn wide(w: &[f32; 4]) -> [f64; 4] {
+    w.map(f64::from)
+}
+
 /// `h[a][b] = 1/N sum_j x_j(a) y_j(b)` over the four cells of each pixel.
-fn histogram(xb: &[u32], x: &[[f64; 4]], yb: &[u32], y: &[[f64; 4]], h: &mut [f64]) {
+fn histogram(xb: &[u32], x: &[[f32; 4]], yb: &[u32], y: &[[f32; 4]], h: &mut [f64]) {
     h.iter_mut().for_each(|v| *v = 0.0);
     let n = xb.len();
     for j in 0..n {
         let (a, b) = (xb[j] as usize, yb[j] as usize);
         for u in 0..4 {
             let row = &mut h[(a + u) * SIDE + b..(a + u) * SIDE + b + 4];
-            let xu = x[j][u];
+            let xu = x[j][u] as f64;
             for v in 0..4 {
-                row[v] += xu * y[j][v];
+                row[v] += xu * y[j][v] as f64;
             }
         }
     }
@@ -241,7 +246,7 @@ impl Am for Kld {
             let mut acc = 0.0;
             match wrt {
                 Wrt::Current => {
-                    let (x, y) = (&tw.w[j], &cw.d[j]);
+                    let (x, y) = (wide(&tw.w[j]), wide(&cw.d[j]));
                     for u in 0..4 {
                         let row = &gp[(ta + u) * SIDE + cb..(ta + u) * SIDE + cb + 4];
                         acc +=
@@ -249,7 +254,7 @@ impl Am for Kld {
                     }
                 }
                 Wrt::Template => {
-                    let (tw0, td, cw0) = (&tw.w[j], &tw.d[j], &cw.w[j]);
+                    let (tw0, td, cw0) = (wide(&tw.w[j]), wide(&tw.d[j]), wide(&cw.w[j]));
                     for u in 0..4 {
                         let row = &gp[(ta + u) * SIDE + cb..(ta + u) * SIDE + cb + 4];
                         acc += td[u]
@@ -313,6 +318,7 @@ impl Am for Kld {
             } else {
                 (&tw.d[j], &cw.w[j], &tw.d2[j], &cw.w[j])
             };
+            let (x, y, x2, y2) = (wide(x), wide(y), wide(x2), wide(y2));
             let mut dj = 0.0;
             for u in 0..4 {
                 let row = (ta + u) * SIDE + cb;
@@ -329,7 +335,7 @@ impl Am for Kld {
                 }
             }
             if !current_side {
-                let (w0, d1, d2) = (&tw.w[j], &tw.d[j], &tw.d2[j]);
+                let (w0, d1, d2) = (wide(&tw.w[j]), wide(&tw.d[j]), wide(&tw.d2[j]));
                 for u in 0..4 {
                     let row = (ta + u) * SIDE + ta;
                     for v in 0..4 {

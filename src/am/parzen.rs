@@ -153,68 +153,100 @@ pub(crate) enum Measure {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Weights {
     pub base: Vec<u32>,
-    pub w: Vec<[f64; 4]>,
-    pub d: Vec<[f64; 4]>,
-    pub d2: Vec<[f64; 4]>,
+    pub w: Vec<[f32; 4]>,
+    pub d: Vec<[f32; 4]>,
+    pub d2: Vec<[f32; 4]>,
     /// Range of histogram indices in use (`lo..hi`).
     pub lo: usize,
     pub hi: usize,
     /// Each pixel's fraction of a bin and whether it is inside the bins' range (1 or 0): what
     /// the derivatives are made from.
-    fr: Vec<f64>,
-    inside: Vec<f64>,
+    fr: Vec<f32>,
+    inside: Vec<f32>,
     /// Whether `d`, and `d2`, are those of the values `w` was filled with.
     derivatives: bool,
     second: bool,
+    /// The template's `w`, `d`, `d2` in f64 ([`Weights::widen`]): the bilinear forms' left
+    /// side, broadcast lane by lane.
+    pub w64: Vec<[f64; 4]>,
+    pub d64: Vec<[f64; 4]>,
+    pub d2_64: Vec<[f64; 4]>,
 }
 
 /// The cubic B-spline's four weights as polynomials in the fraction `f` of a bin coordinate:
 /// `w_k = A_k + B_k f + C_k f^2 + D_k f^3`, so each of `w`, `dw/df` and `d2w/df2` is one
-/// four-lane expression.
-const A: [f64; 4] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0, 0.0];
-const B: [f64; 4] = [-0.5, 0.0, 0.5, 0.0];
-const C: [f64; 4] = [0.5, -1.0, 0.5, 0.0];
-const D: [f64; 4] = [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0];
+/// four-lane expression (in f32: the histogram's blocks and `V` sum f32 products, and the
+/// weights of two pixels fill one 8-lane register).
+const A: [f32; 4] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0, 0.0];
+const B: [f32; 4] = [-0.5, 0.0, 0.5, 0.0];
+const C: [f32; 4] = [0.5, -1.0, 0.5, 0.0];
+const D: [f32; 4] = [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0];
 
 /// The four weights of fraction `f` and their derivatives (times `inside`, 0 or 1).
 #[inline(always)]
-fn spline(f: f64, inside: f64, w: &mut [f64; 4], d: &mut [f64; 4], d2: &mut [f64; 4]) {
+fn spline(f: f32, inside: f32, w: &mut [f32; 4], d: &mut [f32; 4], d2: &mut [f32; 4]) {
+    for k in 0..4 {
+        w[k] = D[k].mul_add(f, C[k]).mul_add(f, B[k]).mul_add(f, A[k]);
+        d[k] = (3.0 * D[k]).mul_add(f, 2.0 * C[k]).mul_add(f, B[k]) * inside;
+        d2[k] = (6.0 * D[k]).mul_add(f, 2.0 * C[k]) * inside;
+    }
+}
+
+/// Pixels `i` and `i + 1` of `v`.
+#[inline(always)]
+fn pair(v: &mut [[f32; 4]], i: usize) -> &mut [[f32; 4]; 2] {
+    (&mut v[i..i + 2]).try_into().expect("two")
+}
+
+/// [`spline`] of two pixels at once (their eight weights in one register; the same bits).
+#[inline(always)]
+fn spline_pair(
+    f: [f32; 2],
+    inside: [f32; 2],
+    w: &mut [[f32; 4]; 2],
+    d: &mut [[f32; 4]; 2],
+    d2: &mut [[f32; 4]; 2],
+) {
     #[cfg(all(
         target_arch = "x86_64",
         target_feature = "avx2",
         target_feature = "fma"
     ))]
-    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each store writes the four
-    // values of a `[f64; 4]`, each load reads one.
+    // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each store writes the eight
+    // values of a `[[f32; 4]; 2]`, each load reads the four of a `[f32; 4]`.
     unsafe {
         use std::arch::x86_64::*;
-        let load = |a: &[f64; 4]| _mm256_loadu_pd(a.as_ptr());
-        let (a, b, c, dd) = (load(&A), load(&B), load(&C), load(&D));
-        let fv = _mm256_set1_pd(f);
-        let m = _mm256_set1_pd(inside);
-        let two = _mm256_set1_pd(2.0);
-        let three = _mm256_set1_pd(3.0);
-        let six = _mm256_set1_pd(6.0);
-        let wv = _mm256_fmadd_pd(_mm256_fmadd_pd(_mm256_fmadd_pd(dd, fv, c), fv, b), fv, a);
-        let c2 = _mm256_mul_pd(two, c);
-        let dv = _mm256_fmadd_pd(_mm256_fmadd_pd(_mm256_mul_pd(three, dd), fv, c2), fv, b);
-        let d2v = _mm256_fmadd_pd(_mm256_mul_pd(six, dd), fv, c2);
-        _mm256_storeu_pd(w.as_mut_ptr(), wv);
-        _mm256_storeu_pd(d.as_mut_ptr(), _mm256_mul_pd(dv, m));
-        _mm256_storeu_pd(d2.as_mut_ptr(), _mm256_mul_pd(d2v, m));
+        let twice = |a: &[f32; 4]| {
+            let q = _mm_loadu_ps(a.as_ptr());
+            _mm256_set_m128(q, q)
+        };
+        let pair = |v: [f32; 2]| _mm256_set_m128(_mm_set1_ps(v[1]), _mm_set1_ps(v[0]));
+        let (a, b, c, dd) = (twice(&A), twice(&B), twice(&C), twice(&D));
+        let (fv, m) = (pair(f), pair(inside));
+        let wv = _mm256_fmadd_ps(_mm256_fmadd_ps(_mm256_fmadd_ps(dd, fv, c), fv, b), fv, a);
+        let c2 = _mm256_mul_ps(_mm256_set1_ps(2.0), c);
+        let d3 = _mm256_mul_ps(_mm256_set1_ps(3.0), dd);
+        let d6 = _mm256_mul_ps(_mm256_set1_ps(6.0), dd);
+        let dv = _mm256_fmadd_ps(_mm256_fmadd_ps(d3, fv, c2), fv, b);
+        let d2v = _mm256_fmadd_ps(d6, fv, c2);
+        _mm256_storeu_ps(w.as_mut_ptr() as *mut f32, wv);
+        _mm256_storeu_ps(d.as_mut_ptr() as *mut f32, _mm256_mul_ps(dv, m));
+        _mm256_storeu_ps(d2.as_mut_ptr() as *mut f32, _mm256_mul_ps(d2v, m));
     }
     #[cfg(not(all(
         target_arch = "x86_64",
         target_feature = "avx2",
         target_feature = "fma"
     )))]
-    spline_portable(f, inside, w, d, d2);
+    for k in 0..2 {
+        spline(f[k], inside[k], &mut w[k], &mut d[k], &mut d2[k]);
+    }
 }
 
 /// A value's first bin, its fraction of a bin and whether it is inside the bins' range (1) or
 /// clamped to it (0; a value that is not finite is bin coordinate 0).
 #[inline(always)]
-fn bin_coordinate(v: f32, bins: &Bins) -> (usize, f64, f64) {
+fn bin_coordinate(v: f32, bins: &Bins) -> (usize, f32, f32) {
     let raw = v as f64 * bins.scale;
     let s = if raw.is_finite() {
         raw.clamp(bins.s_min, bins.s_max)
@@ -224,7 +256,11 @@ fn bin_coordinate(v: f32, bins: &Bins) -> (usize, f64, f64) {
     // Outside the bins' range the derivatives are zero (the value is clamped).
     let inside = if s == raw { 1.0 } else { 0.0 };
     let fl = s.floor();
-    ((fl as i64 - 1 + bins.offset) as usize, s - fl, inside)
+    (
+        (fl as i64 - 1 + bins.offset) as usize,
+        (s - fl) as f32,
+        inside,
+    )
 }
 
 /// [`bin_coordinate`] of four values at once (AVX2).
@@ -234,8 +270,8 @@ fn bin_coordinates4(
     v: &[f32; 4],
     bins: &Bins,
     first: &mut [u32; 4],
-    fr: &mut [f64; 4],
-    inside: &mut [f64; 4],
+    fr: &mut [f32; 4],
+    inside: &mut [f32; 4],
 ) {
     // SAFETY: AVX2 is enabled at compile time (cfg); every load and store reads or writes the
     // four values of a fixed-size array.
@@ -259,8 +295,8 @@ fn bin_coordinates4(
             _mm_set1_epi32((bins.offset - 1) as i32),
         );
         _mm_storeu_si128(first.as_mut_ptr() as *mut __m128i, b);
-        _mm256_storeu_pd(fr.as_mut_ptr(), _mm256_sub_pd(s, fl));
-        _mm256_storeu_pd(inside.as_mut_ptr(), ins);
+        _mm_storeu_ps(fr.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_sub_pd(s, fl)));
+        _mm_storeu_ps(inside.as_mut_ptr(), _mm256_cvtpd_ps(ins));
     }
 }
 
@@ -272,9 +308,9 @@ fn bin_coordinates4(
 #[repr(C, align(64))]
 struct Block([f32; 16]);
 
-/// `block[4 u + v] += x_u y_v` in f32 (each product rounded once, fused).
+/// `block[4 u + v] += x_u y_v` (each product rounded once, fused).
 #[inline(always)]
-fn add_block(block: &mut Block, x: &[f64; 4], y: &[f64; 4]) {
+fn add_block(block: &mut Block, x: &[f32; 4], y: &[f32; 4]) {
     #[cfg(all(
         target_arch = "x86_64",
         target_feature = "avx2",
@@ -284,8 +320,8 @@ fn add_block(block: &mut Block, x: &[f64; 4], y: &[f64; 4]) {
     // of `x` and `y`, the aligned loads and stores the two halves of the 64-byte aligned block.
     unsafe {
         use std::arch::x86_64::*;
-        let xv = _mm256_castps128_ps256(_mm256_cvtpd_ps(_mm256_loadu_pd(x.as_ptr())));
-        let y4 = _mm256_cvtpd_ps(_mm256_loadu_pd(y.as_ptr()));
+        let xv = _mm256_castps128_ps256(_mm_loadu_ps(x.as_ptr()));
+        let y4 = _mm_loadu_ps(y.as_ptr());
         let yv = _mm256_set_m128(y4, y4);
         let q = block.0.as_mut_ptr();
         let first = _mm256_permutevar8x32_ps(xv, _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1));
@@ -372,7 +408,7 @@ fn joint_histogram(p: &mut [f64], blocks: &mut Vec<Block>, side: usize, t: &Weig
 
 /// `sum_uv x_u cells[u side + v] y_v` over the 4 x 4 cells (rows `side` apart) of one pixel.
 #[inline(always)]
-fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 {
+fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f32; 4]) -> f64 {
     assert!(cells.len() >= 3 * side + 4);
     #[cfg(all(
         target_arch = "x86_64",
@@ -391,7 +427,7 @@ fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 
         let mut r = [0.0; 4];
         _mm256_storeu_pd(
             r.as_mut_ptr(),
-            _mm256_mul_pd(rows, _mm256_loadu_pd(y.as_ptr())),
+            _mm256_mul_pd(rows, _mm256_cvtps_pd(_mm_loadu_ps(y.as_ptr()))),
         );
         (r[0] + r[1]) + (r[2] + r[3])
     }
@@ -414,7 +450,7 @@ fn bilinear_forms<const M: usize>(
     ta: &[u32],
     cb: &[u32],
     x: &[[f64; 4]],
-    ys: [&[[f64; 4]]; M],
+    ys: [&[[f32; 4]]; M],
     ks: [f64; M],
     outs: [&mut [f32]; M],
 ) {
@@ -456,7 +492,7 @@ fn bilinear_forms<const M: usize>(
             for m in 0..M {
                 let y = ys[m];
                 let p: [__m256d; 4] = std::array::from_fn(|l| {
-                    _mm256_mul_pd(rows[l], _mm256_loadu_pd(y[done + l].as_ptr()))
+                    _mm256_mul_pd(rows[l], _mm256_cvtps_pd(_mm_loadu_ps(y[done + l].as_ptr())))
                 });
                 // [p0 + p1 of pixels 0, 1, then p2 + p3 of pixels 0, 1] and the same for 2,
                 // 3; the halves' sum is (p0 + p1) + (p2 + p3) of each pixel, as
@@ -492,7 +528,7 @@ pub(crate) struct Lanes(pub [f32; MAX_DOF]);
 /// `cells[u side + v] += x_u (y_v jj)` (eight lanes a cell) for the 4 x 4 cells (rows `side`
 /// apart) of one pixel: its share of the Newton Hessian's `V`.
 #[inline(always)]
-fn add_v(cells: &mut [Lanes], side: usize, x: &[f64; 4], y: &[f64; 4], jj: &[f32; MAX_DOF]) {
+fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32; MAX_DOF]) {
     assert!(cells.len() >= 3 * side + 4);
     #[cfg(all(
         target_arch = "x86_64",
@@ -505,13 +541,9 @@ fn add_v(cells: &mut [Lanes], side: usize, x: &[f64; 4], y: &[f64; 4], jj: &[f32
         unsafe {
             use std::arch::x86_64::*;
             let j = _mm256_loadu_ps(jj.as_ptr());
-            let yv = _mm256_cvtpd_ps(_mm256_loadu_pd(y.as_ptr()));
-            let mut ys = [0f32; 4];
-            _mm_storeu_ps(ys.as_mut_ptr(), yv);
             for (u, &xu) in x.iter().enumerate() {
-                let xu = xu as f32;
                 let p = cells.as_mut_ptr().add(u * side) as *mut f32;
-                for (w, &yw) in ys.iter().enumerate() {
+                for (w, &yw) in y.iter().enumerate() {
                     let c = p.add(w * MAX_DOF);
                     let coef = _mm256_set1_ps(xu * yw);
                     _mm256_storeu_ps(c, _mm256_fmadd_ps(coef, j, _mm256_loadu_ps(c)));
@@ -582,8 +614,9 @@ fn bernstein5(f: f64) -> [f64; MOMENTS] {
 /// pixels), else the reverse (the template's).
 fn same_bin_products(derivative_right: bool) -> [[[f64; MOMENTS]; 4]; 4] {
     // w_u = A + B f + C f^2 + D f^3, dw_u/df = B + 2 C f + 3 D f^2.
-    let w = |u: usize| [A[u], B[u], C[u], D[u]];
-    let d = |u: usize| [B[u], 2.0 * C[u], 3.0 * D[u], 0.0];
+    // The weights' f32 coefficients, as the weights are made.
+    let w = |u: usize| [A[u], B[u], C[u], D[u]].map(f64::from);
+    let d = |u: usize| [B[u], 2.0 * C[u], 3.0 * D[u], 0.0].map(f64::from);
     let choose = |n: usize, k: usize| -> f64 {
         (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
     };
@@ -664,7 +697,7 @@ impl SameBin {
         self.basis.extend(
             self.order
                 .iter()
-                .map(|&j| bernstein5(tw.fr[j as usize]).map(|b| b as f32)),
+                .map(|&j| bernstein5(tw.fr[j as usize] as f64).map(|b| b as f32)),
         );
         self.runs.clear();
         self.bins.clear();
@@ -794,13 +827,13 @@ fn jacobian_rows(
 fn add_v_portable(
     cells: &mut [Lanes],
     side: usize,
-    x: &[f64; 4],
-    y: &[f64; 4],
+    x: &[f32; 4],
+    y: &[f32; 4],
     jj: &[f32; MAX_DOF],
 ) {
     for u in 0..4 {
         for w in 0..4 {
-            let (xu, yw) = (x[u] as f32, y[w] as f32);
+            let (xu, yw) = (x[u], y[w]);
             for (e, &q) in cells[u * side + w].0.iter_mut().zip(jj) {
                 *e = xu.mul_add(yw * q, *e);
             }
@@ -808,7 +841,7 @@ fn add_v_portable(
     }
 }
 
-/// [`add_block`] in plain Rust (the same bits: each product rounded to f32 once, fused).
+/// [`add_block`] in plain Rust (the same bits: each product rounded once, fused).
 #[cfg_attr(
     all(
         target_arch = "x86_64",
@@ -817,11 +850,11 @@ fn add_v_portable(
     ),
     allow(dead_code)
 )]
-fn add_block_portable(block: &mut Block, x: &[f64; 4], y: &[f64; 4]) {
+fn add_block_portable(block: &mut Block, x: &[f32; 4], y: &[f32; 4]) {
     for u in 0..4 {
         for v in 0..4 {
             let cell = &mut block.0[4 * u + v];
-            *cell = (x[u] as f32).mul_add(y[v] as f32, *cell);
+            *cell = x[u].mul_add(y[v], *cell);
         }
     }
 }
@@ -835,31 +868,15 @@ fn add_block_portable(block: &mut Block, x: &[f64; 4], y: &[f64; 4]) {
     ),
     allow(dead_code)
 )]
-fn bilinear_form_portable(cells: &[f64], side: usize, x: &[f64; 4], y: &[f64; 4]) -> f64 {
+fn bilinear_form_portable(cells: &[f64], side: usize, x: &[f64; 4], y: &[f32; 4]) -> f64 {
     let mut rows = [0.0; 4];
     for u in 0..4 {
         for v in 0..4 {
             rows[v] = x[u].mul_add(cells[u * side + v], rows[v]);
         }
     }
+    let y = y.map(f64::from);
     (rows[0] * y[0] + rows[1] * y[1]) + (rows[2] * y[2] + rows[3] * y[3])
-}
-
-/// [`spline`] in plain Rust (the build for other CPUs; compared with it by a test).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
-fn spline_portable(f: f64, inside: f64, w: &mut [f64; 4], d: &mut [f64; 4], d2: &mut [f64; 4]) {
-    for k in 0..4 {
-        w[k] = D[k].mul_add(f, C[k]).mul_add(f, B[k]).mul_add(f, A[k]);
-        d[k] = (3.0 * D[k]).mul_add(f, 2.0 * C[k]).mul_add(f, B[k]) * inside;
-        d2[k] = (6.0 * D[k]).mul_add(f, 2.0 * C[k]) * inside;
-    }
 }
 
 impl Weights {
@@ -906,13 +923,17 @@ impl Weights {
         let (mut lo, mut hi) = (bins.side, 0);
         // Without DERIVATIVES the derivatives go to these locals and are dropped.
         let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        let (mut ds, mut d2s) = ([[0.0; 4]; 2], [[0.0; 4]; 2]);
         // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
         // then each pixel's weights.
         let mut done = 0;
         #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
         {
+            use std::arch::x86_64::*;
             // The first bins' range, lane by lane (four minima and maxima in one register each).
-            let (mut lo4, mut hi4) = ([u32::MAX; 4], [0u32; 4]);
+            // SAFETY: AVX2 is enabled at compile time (cfg).
+            let (mut lo4, mut hi4) = unsafe { (_mm_set1_epi32(-1), _mm_setzero_si128()) };
             let fours = x.chunks_exact(4).zip(self.base.chunks_exact_mut(4));
             let coords = self
                 .fr
@@ -921,28 +942,44 @@ impl Weights {
             for ((v, first), (w, (fr, inside))) in fours.zip(self.w.chunks_exact_mut(4).zip(coords))
             {
                 let first: &mut [u32; 4] = first.try_into().expect("four");
-                let fr: &mut [f64; 4] = fr.try_into().expect("four");
-                let inside: &mut [f64; 4] = inside.try_into().expect("four");
+                let fr: &mut [f32; 4] = fr.try_into().expect("four");
+                let inside: &mut [f32; 4] = inside.try_into().expect("four");
                 bin_coordinates4(v.try_into().expect("four"), bins, first, fr, inside);
-                for k in 0..4 {
-                    lo4[k] = lo4[k].min(first[k]);
-                    hi4[k] = hi4[k].max(first[k]);
+                // SAFETY: AVX2 is enabled at compile time (cfg); the load reads the four u32 of
+                // `first`.
+                unsafe {
+                    let b = _mm_loadu_si128(first.as_ptr() as *const __m128i);
+                    lo4 = _mm_min_epu32(lo4, b);
+                    hi4 = _mm_max_epu32(hi4, b);
                 }
-                for k in 0..4 {
-                    let i = done + k;
+                // Two pixels a register.
+                for (k, w) in w.chunks_exact_mut(2).enumerate() {
+                    let w: &mut [[f32; 4]; 2] = w.try_into().expect("two");
+                    let (f, ins) = (
+                        [fr[2 * k], fr[2 * k + 1]],
+                        [inside[2 * k], inside[2 * k + 1]],
+                    );
+                    let i = done + 2 * k;
                     if DERIVATIVES && SECOND {
-                        spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut self.d2[i]);
+                        spline_pair(f, ins, w, pair(&mut self.d, i), pair(&mut self.d2, i));
                     } else if DERIVATIVES {
-                        spline(fr[k], inside[k], &mut w[k], &mut self.d[i], &mut d2);
+                        spline_pair(f, ins, w, pair(&mut self.d, i), &mut d2s);
                     } else {
-                        spline(fr[k], inside[k], &mut w[k], &mut d, &mut d2);
+                        spline_pair(f, ins, w, &mut ds, &mut d2s);
                     }
                 }
                 done += 4;
             }
             if done > 0 {
-                lo = lo.min(*lo4.iter().min().expect("four") as usize);
-                hi = hi.max(*hi4.iter().max().expect("four") as usize + 4);
+                let (mut l, mut h) = ([0u32; 4], [0u32; 4]);
+                // SAFETY: AVX2 is enabled at compile time (cfg); the stores write the four u32
+                // of `l` and `h`.
+                unsafe {
+                    _mm_storeu_si128(l.as_mut_ptr() as *mut __m128i, lo4);
+                    _mm_storeu_si128(h.as_mut_ptr() as *mut __m128i, hi4);
+                }
+                lo = lo.min(*l.iter().min().expect("four") as usize);
+                hi = hi.max(*h.iter().max().expect("four") as usize + 4);
             }
         }
         for i in done..n {
@@ -966,6 +1003,14 @@ impl Weights {
         self.hi = hi;
     }
 
+    /// `w64`, `d64`, `d2_64` from the weights and both derivatives (made first).
+    pub fn widen(&mut self) {
+        self.fill_derivatives();
+        let wide =
+            |v: &[[f32; 4]]| -> Vec<[f64; 4]> { v.iter().map(|w| w.map(f64::from)).collect() };
+        (self.w64, self.d64, self.d2_64) = (wide(&self.w), wide(&self.d), wide(&self.d2));
+    }
+
     /// The weights' first and second derivatives (`d`, `d2`) of the values last filled, once.
     pub fn fill_derivatives(&mut self) {
         if self.derivatives {
@@ -975,10 +1020,23 @@ impl Weights {
         let n = self.fr.len();
         self.d.resize(n, [0.0; 4]);
         self.d2.resize(n, [0.0; 4]);
-        let mut w = [0.0; 4];
-        let coords = self.fr.iter().zip(&self.inside);
-        for ((&f, &inside), (d, d2)) in coords.zip(self.d.iter_mut().zip(self.d2.iter_mut())) {
-            spline(f, inside, &mut w, d, d2);
+        let mut w = [[0.0; 4]; 2];
+        let pairs = self.fr.chunks_exact(2).zip(self.inside.chunks_exact(2));
+        let outs = self.d.chunks_exact_mut(2).zip(self.d2.chunks_exact_mut(2));
+        for ((f, inside), (d, d2)) in pairs.zip(outs) {
+            let two = |v: &[f32]| [v[0], v[1]];
+            let (d, d2) = (d.try_into().expect("two"), d2.try_into().expect("two"));
+            spline_pair(two(f), two(inside), &mut w, d, d2);
+        }
+        if n % 2 == 1 {
+            let i = n - 1;
+            spline(
+                self.fr[i],
+                self.inside[i],
+                &mut w[0],
+                &mut self.d[i],
+                &mut self.d2[i],
+            );
         }
         self.derivatives = true;
         self.second = true;
@@ -996,10 +1054,27 @@ impl Weights {
         }
         let n = self.fr.len();
         self.d2.resize(n, [0.0; 4]);
-        let (mut w, mut d) = ([0.0; 4], [0.0; 4]);
-        let coords = self.fr.iter().zip(&self.inside);
-        for ((&f, &inside), d2) in coords.zip(self.d2.iter_mut()) {
-            spline(f, inside, &mut w, &mut d, d2);
+        let (mut w, mut d) = ([[0.0; 4]; 2], [[0.0; 4]; 2]);
+        let pairs = self.fr.chunks_exact(2).zip(self.inside.chunks_exact(2));
+        for ((f, inside), d2) in pairs.zip(self.d2.chunks_exact_mut(2)) {
+            let two = |v: &[f32]| [v[0], v[1]];
+            spline_pair(
+                two(f),
+                two(inside),
+                &mut w,
+                &mut d,
+                d2.try_into().expect("two"),
+            );
+        }
+        if n % 2 == 1 {
+            let i = n - 1;
+            spline(
+                self.fr[i],
+                self.inside[i],
+                &mut w[0],
+                &mut d[0],
+                &mut self.d2[i],
+            );
         }
         self.second = true;
     }
@@ -1202,6 +1277,7 @@ impl Parzen {
         self.template.clear();
         self.template.extend_from_slice(template);
         self.tw.fill_with(template, &self.bins);
+        self.tw.widen();
         self.valid = false;
         self.self_valid = false;
         self.same.valid = false;
@@ -1262,7 +1338,7 @@ impl Parzen {
                     side,
                     &tw.base,
                     &cw.base,
-                    &tw.w,
+                    &tw.w64,
                     [d, d2],
                     [k, 1.0],
                     [grad, diag],
@@ -1270,10 +1346,10 @@ impl Parzen {
                 self.diag_of = DiagOf::Current;
             }
             super::Wrt::Current => {
-                bilinear_forms(g, side, &tw.base, &cw.base, &tw.w, [&cw.d], [k], [grad]);
+                bilinear_forms(g, side, &tw.base, &cw.base, &tw.w64, [&cw.d], [k], [grad]);
             }
             super::Wrt::Template => {
-                bilinear_forms(g, side, &tw.base, &cw.base, &tw.d, [&cw.w], [k], [grad]);
+                bilinear_forms(g, side, &tw.base, &cw.base, &tw.d64, [&cw.w], [k], [grad]);
             }
         }
         self.stats.value
@@ -1449,9 +1525,9 @@ fn newton(
             // After convergence: V from each bin's six sums (see `SameBin`).
             if !diag_ready {
                 let (x2, y2) = if current {
-                    (&tw.w, &cw.d2)
+                    (&tw.w64, &cw.d2)
                 } else {
-                    (&tw.d2, &cw.w)
+                    (&tw.d2_64, &cw.w)
                 };
                 bilinear_forms(g, side, &tw.base, &cw.base, x2, [y2], [1.0], [diag]);
             }
@@ -1476,14 +1552,14 @@ fn newton(
                     (
                         &tw.w[block.clone()],
                         &cw.d[block.clone()],
-                        &tw.w[block.clone()],
+                        &tw.w64[block.clone()],
                         &cw.d2[block.clone()],
                     )
                 } else {
                     (
                         &tw.d[block.clone()],
                         &cw.w[block.clone()],
-                        &tw.d2[block.clone()],
+                        &tw.d2_64[block.clone()],
                         &cw.w[block.clone()],
                     )
                 };
@@ -1675,13 +1751,15 @@ mod tests {
         let xs: Vec<f32> = (0..200).map(|i| -30.0 + i as f32 * 1.77).collect();
         w.fill(&xs);
         for i in 0..xs.len() {
-            let s: f64 = w.w[i].iter().sum();
-            let d: f64 = w.d[i].iter().sum();
-            let d2: f64 = w.d2[i].iter().sum();
-            assert!((s - 1.0).abs() < 1e-12 && d.abs() < 1e-12 && d2.abs() < 1e-12);
+            // f32 weights.
+            let s: f64 = w.w[i].iter().map(|&v| v as f64).sum();
+            let d: f64 = w.d[i].iter().map(|&v| v as f64).sum();
+            let d2: f64 = w.d2[i].iter().map(|&v| v as f64).sum();
+            assert!((s - 1.0).abs() < 1e-6 && d.abs() < 1e-6 && d2.abs() < 1e-6);
         }
-        // Derivatives by finite differences in the bin coordinate (away from bin edges).
-        let (x, h) = (100.3f32, 0.01f32);
+        // Derivatives by finite differences in the bin coordinate (away from bin edges; a
+        // step of 0.006 bins, the f32 weights' rounding 1e-5 of the difference).
+        let (x, h) = (100.3f32, 0.1f32);
         let mut p = Weights::default();
         let mut m = Weights::default();
         w.fill(&[x]);
@@ -1689,10 +1767,11 @@ mod tests {
         m.fill(&[x - h]);
         let ds = ((x + h) as f64 - (x - h) as f64) * SCALE;
         for u in 0..4 {
-            let fd = (p.w[0][u] - m.w[0][u]) / ds;
-            assert!((fd - w.d[0][u]).abs() < 1e-4, "{u}: {fd} {}", w.d[0][u]);
-            let fd2 = (p.d[0][u] - m.d[0][u]) / ds;
-            assert!((fd2 - w.d2[0][u]).abs() < 1e-4);
+            let fd = (p.w[0][u] - m.w[0][u]) as f64 / ds;
+            let d = w.d[0][u] as f64;
+            assert!((fd - d).abs() < 1e-4, "{u}: {fd} {d}");
+            let fd2 = (p.d[0][u] - m.d[0][u]) as f64 / ds;
+            assert!((fd2 - w.d2[0][u] as f64).abs() < 1e-4, "{u}: {fd2}");
         }
     }
 
@@ -1739,12 +1818,21 @@ mod tests {
             }
         }
         for _ in 0..200 {
-            let f = rng.uniform();
+            let f = rng.uniform() as f32;
             let inside = if rng.uniform() < 0.8 { 1.0 } else { 0.0 };
             let (mut w, mut d, mut d2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-            let (mut pw, mut pd, mut pd2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
             spline(f, inside, &mut w, &mut d, &mut d2);
-            spline_portable(f, inside, &mut pw, &mut pd, &mut pd2);
+            // Two at a time: the same bits, in both lanes.
+            let (f2, inside2) = (rng.uniform() as f32, 1.0 - inside);
+            let (mut pw, mut pd, mut pd2) = ([[0.0; 4]; 2], [[0.0; 4]; 2], [[0.0; 4]; 2]);
+            spline_pair([f, f2], [inside, inside2], &mut pw, &mut pd, &mut pd2);
+            let (mut w2, mut d_2, mut d2_2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+            spline(f2, inside2, &mut w2, &mut d_2, &mut d2_2);
+            let bits = |v: [[f32; 4]; 2]| v.map(|r| r.map(f32::to_bits));
+            assert_eq!(bits(pw), bits([w, w2]));
+            assert_eq!(bits(pd), bits([d, d_2]));
+            assert_eq!(bits(pd2), bits([d2, d2_2]));
+            let (f, w) = (f as f64, w.map(f64::from));
             let g = 1.0 - f;
             let book = [
                 g * g * g / 6.0,
@@ -1753,16 +1841,16 @@ mod tests {
                 f * f * f / 6.0,
             ];
             for k in 0..4 {
-                assert!((w[k] - book[k]).abs() < 1e-14 && (w[k] - pw[k]).abs() < 1e-14);
-                assert!((d[k] - pd[k]).abs() < 1e-14 && (d2[k] - pd2[k]).abs() < 1e-14);
+                assert!((w[k] - book[k]).abs() < 1e-6, "{f}: {w:?} {book:?}");
             }
             let side = 7;
-            let x: [f64; 4] = std::array::from_fn(|_| rng.uniform());
-            let y: [f64; 4] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
+            let x: [f32; 4] = std::array::from_fn(|_| rng.uniform() as f32);
+            let y: [f32; 4] = std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32);
+            let x64 = x.map(f64::from);
             let cells: Vec<f64> = (0..3 * side + 4).map(|_| rng.range(-2.0, 2.0)).collect();
             let (a, b) = (
-                bilinear_form(&cells, side, &x, &y),
-                bilinear_form_portable(&cells, side, &x, &y),
+                bilinear_form(&cells, side, &x64, &y),
+                bilinear_form_portable(&cells, side, &x64, &y),
             );
             assert!((a - b).abs() < 1e-12, "{a} {b}");
             let start = Block(std::array::from_fn(|_| rng.range(0.0, 3.0) as f32));
@@ -1801,8 +1889,8 @@ mod tests {
             let x: Vec<[f64; 4]> = (0..n)
                 .map(|_| std::array::from_fn(|_| rng.uniform()))
                 .collect();
-            let y: Vec<[f64; 4]> = (0..n)
-                .map(|_| std::array::from_fn(|_| rng.range(-1.0, 1.0)))
+            let y: Vec<[f32; 4]> = (0..n)
+                .map(|_| std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32))
                 .collect();
             let mut out = vec![0f32; n];
             bilinear_forms(&cells, side, &ta, &cb, &x, [&y], [0.37], [&mut out]);
@@ -2027,7 +2115,7 @@ mod tests {
                 for u in 0..4 {
                     for v in 0..4 {
                         let at = (tw.base[j] as usize + u) * side + cw.base[j] as usize + v;
-                        p[at] += tw.w[j][u] * cw.w[j][v] / n as f64;
+                        p[at] += tw.w[j][u] as f64 * cw.w[j][v] as f64 / n as f64;
                     }
                 }
             }

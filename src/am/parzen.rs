@@ -1616,7 +1616,7 @@ fn newton(
                     if p > 0.0 {
                         add(&mut q, &vab, &vab, 1.0 / p);
                     }
-                    for k in 0..dof {
+                    for k in 0..MAX_DOF {
                         row[k] += vab[k];
                         col[b][k] += vab[k];
                     }
@@ -1638,7 +1638,7 @@ fn newton(
                 let (mut u, mut x, mut w) = ([0.0f64; MAX_DOF], [0.0f64; MAX_DOF], [0.0; MAX_DOF]);
                 for a in r0..r1 {
                     let vab = cell(a, b);
-                    for k in 0..dof {
+                    for k in 0..MAX_DOF {
                         u[k] += vab[k];
                         w[k] += vab[k];
                         x[k] += u[k];

@@ -1261,6 +1261,7 @@ impl Parzen {
                 rows: Vec::new(),
                 moments: vec![[0.0; MAX_DOF]; bins.side * MOMENTS],
                 lines: vec![[0.0; MAX_DOF]; bins.side],
+                terms: Vec::new(),
             },
             diag: Vec::new(),
             diag_of: DiagOf::Stale,
@@ -1428,6 +1429,8 @@ struct Scratch {
     moments: Vec<[f64; MAX_DOF]>,
     /// One `dof`-vector per histogram row or column.
     lines: Vec<[f64; MAX_DOF]>,
+    /// The Hessian's weighted outer products, as (weight, vector).
+    terms: Vec<(f64, [f64; MAX_DOF])>,
 }
 
 /// Adds `V` after convergence into `v` (see [`SameBin`]): the Jacobian's rows, each bin's six
@@ -1587,23 +1590,17 @@ fn newton(
     // Diagonal part: k^2/N sum_j D_j J_j J_j^T.
     super::intensity_map::jt_diag_j(jac, diag, dof, out);
     let s_diag = scale * scale * inv_n;
-    let mut q = [0.0f64; MAX_DOF * MAX_DOF];
-    // Every lane (those past `dof` are zero in `V` and so in every sum of its cells): fixed
-    // sizes, so the products run in vector registers.
-    let add = |q: &mut [f64; MAX_DOF * MAX_DOF], x: &[f64; MAX_DOF], y: &[f64; MAX_DOF], w: f64| {
-        for (qi, &xi) in q.chunks_exact_mut(MAX_DOF).zip(x) {
-            let xi = w * xi;
-            for (e, &yj) in qi.iter_mut().zip(y) {
-                *e += xi * yj;
-            }
-        }
-    };
+    // The second-order part, `sum_c w_c t_c t_c^T` over histogram cells, rows and columns:
+    // the terms first, then their weighted Gram matrix. Every lane (those past `dof` are zero
+    // in `V` and so in every sum of its cells).
     let cell = |a: usize, b: usize| -> [f64; MAX_DOF] {
         let at = (a * side + b) * MAX_DOF;
         v[at..at + MAX_DOF]
             .try_into()
             .expect("a cell is MAX_DOF lanes")
     };
+    let terms = &mut scratch.terms;
+    terms.clear();
     match measure {
         Measure::Mi => {
             let col = lines;
@@ -1614,7 +1611,7 @@ fn newton(
                     let vab = cell(a, b);
                     let p = st.p[a * side + b];
                     if p > 0.0 {
-                        add(&mut q, &vab, &vab, 1.0 / p);
+                        terms.push((1.0 / p, vab));
                     }
                     for k in 0..MAX_DOF {
                         row[k] += vab[k];
@@ -1622,12 +1619,12 @@ fn newton(
                     }
                 }
                 if st.pt[a] > 0.0 {
-                    add(&mut q, &row, &row, -1.0 / st.pt[a]);
+                    terms.push((-1.0 / st.pt[a], row));
                 }
             }
             for b in c0..c1 {
                 if st.pc[b] > 0.0 {
-                    add(&mut q, &col[b], &col[b], -1.0 / st.pc[b]);
+                    terms.push((-1.0 / st.pc[b], col[b]));
                 }
             }
         }
@@ -1646,26 +1643,125 @@ fn newton(
                     }
                     let pc = st.cum[a * side + b];
                     if pc > 0.0 {
-                        add(&mut q, &u, &u, 1.0 / pc);
+                        terms.push((1.0 / pc, u));
                     }
                 }
                 let pb = st.pc[b];
                 if pb > 0.0 {
-                    add(&mut q, &x, &w, -1.0 / pb);
-                    add(&mut q, &w, &x, -1.0 / pb);
-                    add(&mut q, &w, &w, st.s[b] / (pb * pb));
+                    // -(x w^T + w x^T) / pb = ((x - w)(x - w)^T - (x + w)(x + w)^T) / (2 pb).
+                    let (sum, diff) = (
+                        std::array::from_fn(|k| x[k] + w[k]),
+                        std::array::from_fn(|k| x[k] - w[k]),
+                    );
+                    terms.push((-0.5 / pb, sum));
+                    terms.push((0.5 / pb, diff));
+                    terms.push((st.s[b] / (pb * pb), w));
                 }
             }
             for a in r0..r1 {
                 if st.cum_t[a] > 0.0 {
-                    add(&mut q, &rows[a], &rows[a], -1.0 / st.cum_t[a]);
+                    terms.push((-1.0 / st.cum_t[a], rows[a]));
                 }
             }
         }
     }
+    let q = weighted_gram(terms);
     for i in 0..dof {
         for j in 0..dof {
             out[i * dof + j] = s_diag * out[i * dof + j] + kn * kn * q[i * MAX_DOF + j];
+        }
+    }
+}
+
+/// `sum_i w_i t_i t_i^T` over `terms` (row-major, `MAX_DOF x MAX_DOF`). With AVX2 and eight
+/// lanes, the upper triangle's 4 x 4 blocks (twelve registers) accumulate along the terms, each
+/// row's factor `w t_i` broadcast from a register; the lower triangle is the upper's mirror.
+fn weighted_gram(terms: &[(f64, [f64; MAX_DOF])]) -> [f64; MAX_DOF * MAX_DOF] {
+    let mut q = [0.0; MAX_DOF * MAX_DOF];
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); the loads read the eight
+        // lanes of a term (MAX_DOF == 8), the stores write the four lanes at 8 i and 8 i + 4 of
+        // row i < 8 of `q`.
+        unsafe {
+            use std::arch::x86_64::*;
+            let z = _mm256_setzero_pd();
+            let (mut l0, mut l1, mut l2, mut l3) = (z, z, z, z);
+            let (mut h0, mut h1, mut h2, mut h3) = (z, z, z, z);
+            let (mut h4, mut h5, mut h6, mut h7) = (z, z, z, z);
+            for (w, t) in terms {
+                let (xl, xh) = (
+                    _mm256_loadu_pd(t.as_ptr()),
+                    _mm256_loadu_pd(t.as_ptr().add(4)),
+                );
+                let wv = _mm256_set1_pd(*w);
+                let (wl, wh) = (_mm256_mul_pd(wv, xl), _mm256_mul_pd(wv, xh));
+                let b = _mm256_permute4x64_pd::<0x00>(wl);
+                (l0, h0) = (_mm256_fmadd_pd(b, xl, l0), _mm256_fmadd_pd(b, xh, h0));
+                let b = _mm256_permute4x64_pd::<0x55>(wl);
+                (l1, h1) = (_mm256_fmadd_pd(b, xl, l1), _mm256_fmadd_pd(b, xh, h1));
+                let b = _mm256_permute4x64_pd::<0xAA>(wl);
+                (l2, h2) = (_mm256_fmadd_pd(b, xl, l2), _mm256_fmadd_pd(b, xh, h2));
+                let b = _mm256_permute4x64_pd::<0xFF>(wl);
+                (l3, h3) = (_mm256_fmadd_pd(b, xl, l3), _mm256_fmadd_pd(b, xh, h3));
+                h4 = _mm256_fmadd_pd(_mm256_permute4x64_pd::<0x00>(wh), xh, h4);
+                h5 = _mm256_fmadd_pd(_mm256_permute4x64_pd::<0x55>(wh), xh, h5);
+                h6 = _mm256_fmadd_pd(_mm256_permute4x64_pd::<0xAA>(wh), xh, h6);
+                h7 = _mm256_fmadd_pd(_mm256_permute4x64_pd::<0xFF>(wh), xh, h7);
+            }
+            let p = q.as_mut_ptr();
+            for (i, (l, h)) in [(l0, h0), (l1, h1), (l2, h2), (l3, h3)]
+                .into_iter()
+                .enumerate()
+            {
+                _mm256_storeu_pd(p.add(8 * i), l);
+                _mm256_storeu_pd(p.add(8 * i + 4), h);
+            }
+            for (i, h) in [h4, h5, h6, h7].into_iter().enumerate() {
+                _mm256_storeu_pd(p.add(8 * (i + 4) + 4), h);
+            }
+        }
+        mirror(&mut q);
+        return q;
+    }
+    weighted_gram_portable(terms, &mut q);
+    q
+}
+
+/// [`weighted_gram`] in plain Rust (the same bits: the upper triangle's blocks made as there,
+/// then mirrored).
+#[cfg_attr(
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ),
+    allow(dead_code)
+)]
+fn weighted_gram_portable(terms: &[(f64, [f64; MAX_DOF])], q: &mut [f64; MAX_DOF * MAX_DOF]) {
+    let half = MAX_DOF / 2;
+    for (w, t) in terms {
+        for i in 0..MAX_DOF {
+            let b = w * t[i];
+            // Rows of the first half: every column; of the second: the second half's.
+            let from = if i < half { 0 } else { half };
+            for j in from..MAX_DOF {
+                q[i * MAX_DOF + j] = b.mul_add(t[j], q[i * MAX_DOF + j]);
+            }
+        }
+    }
+    mirror(q);
+}
+
+/// The lower triangle from the upper (exactly symmetric).
+fn mirror(q: &mut [f64; MAX_DOF * MAX_DOF]) {
+    for i in 1..MAX_DOF {
+        for j in 0..i {
+            q[i * MAX_DOF + j] = q[j * MAX_DOF + i];
         }
     }
 }
@@ -1875,6 +1971,27 @@ mod tests {
                 assert_eq!(acc[k], before[k] + added.0[k] as f64);
             }
             assert_eq!(lanes.0, [0.0; MAX_DOF]);
+        }
+        // The weighted Gram matrix: the portable one's bits, symmetric, and the plain sum.
+        for count in [0usize, 1, 7, 40] {
+            let terms: Vec<(f64, [f64; MAX_DOF])> = (0..count)
+                .map(|_| {
+                    let t = std::array::from_fn(|_| rng.range(-2.0, 2.0));
+                    (rng.range(-3.0, 3.0), t)
+                })
+                .collect();
+            let q = weighted_gram(&terms);
+            let mut p = [0.0; MAX_DOF * MAX_DOF];
+            weighted_gram_portable(&terms, &mut p);
+            assert_eq!(q.map(f64::to_bits), p.map(f64::to_bits), "{count} terms");
+            for i in 0..MAX_DOF {
+                for j in 0..MAX_DOF {
+                    let plain: f64 = terms.iter().map(|(w, t)| w * t[i] * t[j]).sum();
+                    let got = q[i * MAX_DOF + j];
+                    assert!((got - plain).abs() < 1e-10, "({i}, {j}): {got} {plain}");
+                    assert_eq!(got, q[j * MAX_DOF + i]);
+                }
+            }
         }
         // Four pixels' forms at a time: the same values, to the bit, as one at a time.
         let side = 7;

@@ -1474,20 +1474,54 @@ fn same_bin_v(
     let products = &same.products[if current { 0 } else { 1 }];
     for &b in &same.bins {
         let b = b as usize;
-        let m = &moments[b * MOMENTS..(b + 1) * MOMENTS];
+        let m: &[[f64; MAX_DOF]; MOMENTS] = moments[b * MOMENTS..(b + 1) * MOMENTS]
+            .try_into()
+            .expect("MOMENTS sums a bin");
         for (u, row) in products.iter().enumerate() {
             for (w, coefficients) in row.iter().enumerate() {
                 let at = ((b + u) * side + b + w) * MAX_DOF;
                 let cell: &mut [f64; MAX_DOF] = (&mut v[at..at + MAX_DOF])
                     .try_into()
                     .expect("a cell is MAX_DOF lanes");
-                for (mm, &c) in m.iter().zip(coefficients) {
-                    for (e, &q) in cell.iter_mut().zip(mm) {
-                        *e = c.mul_add(q, *e);
-                    }
-                }
+                add_cell(cell, coefficients, m);
             }
         }
+    }
+}
+
+/// `cell += sum_m c[m] moments[m]` (eight lanes), the sum made in registers first.
+#[inline(always)]
+fn add_cell(cell: &mut [f64; MAX_DOF], c: &[f64; MOMENTS], moments: &[[f64; MAX_DOF]; MOMENTS]) {
+    #[cfg(all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    ))]
+    if MAX_DOF == 8 {
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each load or store reads or
+        // writes four of the eight lanes (MAX_DOF == 8) of a cell or of a moment.
+        unsafe {
+            use std::arch::x86_64::*;
+            let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+            for (mm, &cm) in moments.iter().zip(c) {
+                let k = _mm256_set1_pd(cm);
+                lo = _mm256_fmadd_pd(k, _mm256_loadu_pd(mm.as_ptr()), lo);
+                hi = _mm256_fmadd_pd(k, _mm256_loadu_pd(mm.as_ptr().add(4)), hi);
+            }
+            let p = cell.as_mut_ptr();
+            _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), lo));
+            _mm256_storeu_pd(p.add(4), _mm256_add_pd(_mm256_loadu_pd(p.add(4)), hi));
+        }
+        return;
+    }
+    let mut sum = [0.0; MAX_DOF];
+    for (mm, &cm) in moments.iter().zip(c) {
+        for (e, &q) in sum.iter_mut().zip(mm) {
+            *e = cm.mul_add(q, *e);
+        }
+    }
+    for (e, s) in cell.iter_mut().zip(sum) {
+        *e += s;
     }
 }
 

@@ -16,6 +16,13 @@
 //! `p(a, b) = 1/N sum_i beta(a - t_i) beta(b - c_i)`, `p_t(a) = sum_b p(a, b)`,
 //! `p_c(b) = sum_a p(a, b)`.
 //!
+//! The weights are f32 (two pixels' four in one 8-lane register). Each pixel adds its 16
+//! products `beta(a - t_i) beta(b - c_i)` into the f32 block of its pair of first bins (one
+//! cache line, two aligned multiply-adds: neighbouring pixels' rows of cells overlap in part,
+//! and a row read-modify-write then waits for the last one's store), and the blocks are added
+//! into the f64 histogram. The template's weights are also kept in f64 for the bilinear forms
+//! of the gradient and the Newton diagonal, whose histogram-side factors (`G`) are f64.
+//!
 //! ## Derivatives, for any `F(p)`
 //!
 //! Write `x_j` for the pixel the derivative is taken with respect to (`c_j` for the current
@@ -2245,13 +2252,23 @@ mod tests {
         }
     }
 
-    /// The joint histogram (built in two copies, even and odd pixels) is the plain sum of every
-    /// pixel's weight products, and MI is its definition over that histogram.
+    /// The joint histogram (built in f32 blocks of pairs of first bins, then added into the
+    /// cells) is the plain sum of every pixel's weight products, and MI is its definition over
+    /// that histogram: few pixels, random ones, and 2,500 of a smooth patch (long runs of one
+    /// block) with values beyond the bins' range and not finite.
     #[test]
     fn the_joint_histogram_and_mi_are_their_definitions() {
         let mut rng = crate::rng::Rng::new(5);
-        for n in [1usize, 2, 37, 256] {
-            let t: Vec<f32> = (0..n).map(|_| rng.range(0.0, 255.0) as f32).collect();
+        for n in [1usize, 2, 37, 256, 2500] {
+            let t: Vec<f32> = (0..n)
+                .map(|i| match (n, i) {
+                    (2500, 7) => f32::NAN,
+                    (2500, 8) => -400.0,
+                    (2500, 9) => 700.0,
+                    (2500, _) => (128.0 + 100.0 * ((i % 50) as f64 / 9.0).sin()) as f32,
+                    _ => rng.range(0.0, 255.0) as f32,
+                })
+                .collect();
             let c: Vec<f32> = t
                 .iter()
                 .map(|&v| 0.7 * v + 20.0 + rng.range(-10.0, 10.0) as f32)

@@ -16,12 +16,12 @@
 //! `p(a, b) = 1/N sum_i beta(a - t_i) beta(b - c_i)`, `p_t(a) = sum_b p(a, b)`,
 //! `p_c(b) = sum_a p(a, b)`.
 //!
-//! The weights are f32 (two pixels' four in one 8-lane register). Each pixel adds its 16
-//! products `beta(a - t_i) beta(b - c_i)` into the f32 block of its pair of first bins (one
-//! cache line, two aligned multiply-adds: neighbouring pixels' rows of cells overlap in part,
-//! and a row read-modify-write then waits for the last one's store), and the blocks are added
-//! into the f64 histogram. The template's weights are also kept in f64 for the bilinear forms
-//! of the gradient and the Newton diagonal, whose histogram-side factors (`G`) are f64.
+//! The weights are f32 (two pixels' four in one 8-lane register); the template's are also kept
+//! in f64. Each pixel adds its 16 products `beta(a - t_i) beta(b - c_i)` (exact in f64) into the
+//! f64 block of its pair of first bins (four aligned multiply-adds: neighbouring pixels' rows of
+//! cells overlap in part, and a row read-modify-write then waits for the last one's store), and
+//! the blocks are added into the histogram. The sums stay f64: CCRE's optimum with 8 bins is
+//! flat enough for f32 sums to move it.
 //!
 //! ## Derivatives, for any `F(p)`
 //!
@@ -1088,7 +1088,7 @@ impl Weights {
 struct Stats {
     side: usize,
     p: Vec<f64>,
-    /// The joint histogram's f32 blocks while it is built (see [`joint_histogram`]).
+    /// The joint histogram's blocks while it is built (see [`joint_histogram`]).
     blocks: Vec<Block>,
     pt: Vec<f64>,
     pc: Vec<f64>,
@@ -2248,7 +2248,7 @@ mod tests {
         }
     }
 
-    /// The joint histogram (built in f32 blocks of pairs of first bins, then added into the
+    /// The joint histogram (built in blocks of pairs of first bins, then added into the
     /// cells) is the plain sum of every pixel's weight products, and MI is its definition over
     /// that histogram: few pixels, random ones, and 2,500 of a smooth patch (long runs of one
     /// block) with values beyond the bins' range and not finite.

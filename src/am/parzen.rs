@@ -182,8 +182,8 @@ pub(crate) struct Weights {
 
 /// The cubic B-spline's four weights as polynomials in the fraction `f` of a bin coordinate:
 /// `w_k = A_k + B_k f + C_k f^2 + D_k f^3`, so each of `w`, `dw/df` and `d2w/df2` is one
-/// four-lane expression (in f32: the histogram's blocks and `V` sum f32 products, and the
-/// weights of two pixels fill one 8-lane register).
+/// four-lane expression (in f32: two pixels' weights fill one 8-lane register; `V` sums f32
+/// products, the histogram exact f64 products of them).
 const A: [f32; 4] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0, 0.0];
 const B: [f32; 4] = [-0.5, 0.0, 0.5, 0.0];
 const C: [f32; 4] = [0.5, -1.0, 0.5, 0.0];
@@ -227,9 +227,9 @@ fn spline_pair(
             let q = _mm_loadu_ps(a.as_ptr());
             _mm256_set_m128(q, q)
         };
-        let pair = |v: [f32; 2]| _mm256_set_m128(_mm_set1_ps(v[1]), _mm_set1_ps(v[0]));
+        let halves = |v: [f32; 2]| _mm256_set_m128(_mm_set1_ps(v[1]), _mm_set1_ps(v[0]));
         let (a, b, c, dd) = (twice(&A), twice(&B), twice(&C), twice(&D));
-        let (fv, m) = (pair(f), pair(inside));
+        let (fv, m) = (halves(f), halves(inside));
         let wv = _mm256_fmadd_ps(_mm256_fmadd_ps(_mm256_fmadd_ps(dd, fv, c), fv, b), fv, a);
         let c2 = _mm256_mul_ps(_mm256_set1_ps(2.0), c);
         let d3 = _mm256_mul_ps(_mm256_set1_ps(3.0), dd);
@@ -376,7 +376,7 @@ fn joint_histogram(p: &mut [f64], blocks: &mut Vec<Block>, side: usize, t: &Weig
     blocks.clear();
     // As many as any current patch can need (no allocation in a tracker's update once the
     // template is set).
-    blocks.reserve(rows * side.saturating_sub(3).max(cols));
+    blocks.reserve(rows * (side - 3));
     blocks.resize(rows * cols, Block::default());
     let bases = t.base.iter().zip(&c.base);
     for ((&ta, &cb), (x, y)) in bases.zip(t.w64.iter().zip(&c.w)) {
@@ -1016,67 +1016,50 @@ impl Weights {
     pub fn fill_derivatives(&mut self) {
         if self.derivatives {
             self.fill_second();
-            return;
+        } else {
+            self.derivative_pass::<true>();
         }
-        let n = self.fr.len();
-        self.d.resize(n, [0.0; 4]);
-        self.d2.resize(n, [0.0; 4]);
-        let mut w = [[0.0; 4]; 2];
-        let pairs = self.fr.chunks_exact(2).zip(self.inside.chunks_exact(2));
-        let outs = self.d.chunks_exact_mut(2).zip(self.d2.chunks_exact_mut(2));
-        for ((f, inside), (d, d2)) in pairs.zip(outs) {
-            let two = |v: &[f32]| [v[0], v[1]];
-            let (d, d2) = (d.try_into().expect("two"), d2.try_into().expect("two"));
-            spline_pair(two(f), two(inside), &mut w, d, d2);
-        }
-        if n % 2 == 1 {
-            let i = n - 1;
-            spline(
-                self.fr[i],
-                self.inside[i],
-                &mut w[0],
-                &mut self.d[i],
-                &mut self.d2[i],
-            );
-        }
-        self.derivatives = true;
-        self.second = true;
     }
 
     /// The weights' second derivatives (`d2`) of the values last filled, once, when the first
     /// are made already ([`Weights::fill_first`]); else both, as [`Weights::fill_derivatives`].
     pub fn fill_second(&mut self) {
         if !self.derivatives {
-            self.fill_derivatives();
-            return;
+            self.derivative_pass::<true>();
+        } else if !self.second {
+            self.derivative_pass::<false>();
         }
-        if self.second {
-            return;
-        }
+    }
+
+    /// The second derivatives from the kept fractions, and with `FIRST` the first too (else they
+    /// go to a local and are dropped), two pixels a register.
+    fn derivative_pass<const FIRST: bool>(&mut self) {
         let n = self.fr.len();
+        if FIRST {
+            self.d.resize(n, [0.0; 4]);
+        }
         self.d2.resize(n, [0.0; 4]);
-        let (mut w, mut d) = ([[0.0; 4]; 2], [[0.0; 4]; 2]);
-        let pairs = self.fr.chunks_exact(2).zip(self.inside.chunks_exact(2));
-        for ((f, inside), d2) in pairs.zip(self.d2.chunks_exact_mut(2)) {
-            let two = |v: &[f32]| [v[0], v[1]];
-            spline_pair(
-                two(f),
-                two(inside),
-                &mut w,
-                &mut d,
-                d2.try_into().expect("two"),
-            );
+        let (mut w, mut dropped) = ([[0.0; 4]; 2], [[0.0; 4]; 2]);
+        let two = |v: &[f32]| [v[0], v[1]];
+        for i in (0..n - n % 2).step_by(2) {
+            let (f, inside) = (two(&self.fr[i..]), two(&self.inside[i..]));
+            let d = if FIRST {
+                pair(&mut self.d, i)
+            } else {
+                &mut dropped
+            };
+            spline_pair(f, inside, &mut w, d, pair(&mut self.d2, i));
         }
         if n % 2 == 1 {
             let i = n - 1;
-            spline(
-                self.fr[i],
-                self.inside[i],
-                &mut w[0],
-                &mut d[0],
-                &mut self.d2[i],
-            );
+            let d = if FIRST {
+                &mut self.d[i]
+            } else {
+                &mut dropped[0]
+            };
+            spline(self.fr[i], self.inside[i], &mut w[0], d, &mut self.d2[i]);
         }
+        self.derivatives = true;
         self.second = true;
     }
 }

@@ -58,6 +58,7 @@ pub mod linalg;
 pub mod observe;
 pub mod params;
 pub mod patches;
+pub mod plan;
 #[cfg(feature = "python")]
 pub mod python;
 pub mod registration;

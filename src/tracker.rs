@@ -9,11 +9,12 @@
 use crate::am::ilm::Illumination;
 use crate::error::{Error, Result};
 use crate::params::{MethodParams, ParamDef};
-use crate::registration::{Context, SmConfig, Stage};
+use crate::plan::{Plan, Searcher};
+use crate::registration::{Context, SmConfig};
 use crate::registry;
 use crate::{am, sm, ssm, whole};
 
-pub use crate::registration::RegistrationTracker;
+pub use crate::plan::RegistrationTracker;
 pub use crate::spec::{
     GridLayout, LossPolicy, RegistrationSpec, TRACKER_PARAMS, TrackerParams, TrackerSpec, WholeSpec,
 };
@@ -159,15 +160,16 @@ impl RegistrationSpec {
 }
 
 impl RegistrationTracker {
-    /// Builds a registration tracker; fails on unknown names, impossible combinations or bad
-    /// parameters. Every stage (the tracker's, each pyramid level's, each SSM of the hierarchy)
-    /// is built the same way, with the spec's AM and SM parameters.
+    /// Builds a registration tracker and its plan ([`Plan::standard`]); fails on unknown
+    /// names, impossible combinations or bad parameters. Every searcher (the tracker's own,
+    /// each pyramid level's, each SSM of the hierarchy) is built the same way, with the spec's
+    /// AM and SM parameters.
     pub fn new(spec: &RegistrationSpec) -> Result<Self> {
         spec.params.validate()?;
         // The AM takes its own parameters; the search method gets (and checks) the others.
         let am_defs: Vec<&ParamDef> = am::param_defs(&spec.am)?.iter().collect();
         let sm_method = spec.method.split(&am_defs).1;
-        let build = |ssm_name: &str, res: usize| -> Result<Stage> {
+        let build = |ssm_name: &str, res: usize| -> Result<Searcher> {
             let cfg = SmConfig {
                 method: &sm_method,
                 tracker: &spec.params,
@@ -176,14 +178,15 @@ impl RegistrationTracker {
             let sm = sm::build(&spec.sm, &cfg)?;
             check_capabilities(&*sm, &*model)?;
             let ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
-            Ok(Stage { ctx, sm })
+            Ok(Searcher::new(ctx, sm))
         };
         let main = build(&spec.ssm, spec.params.res)?;
         let mut canonical = spec.clone();
-        canonical.sm = main.sm.name().to_string();
-        canonical.am = main.ctx.am.name().to_string();
-        canonical.ssm = main.ctx.ssm.name().to_string();
-        RegistrationTracker::from_stages(canonical, main, &build)
+        canonical.sm = main.method().name().to_string();
+        canonical.am = main.context().am().name().to_string();
+        canonical.ssm = main.context().ssm().name().to_string();
+        let plan = Plan::standard(&spec.params, &canonical.ssm, &main, &build)?;
+        Ok(RegistrationTracker::from_plan(canonical, main, plan))
     }
 }
 

@@ -39,7 +39,7 @@ impl FrameInput<'_> {
 /// ([`Quad::validate`]) at least part of which is in the frame.
 pub fn check_initial_region(quad: &Quad, width: usize, height: usize) -> Result<()> {
     quad.validate()?;
-    let (x0, y0, x1, y1) = quad.bbox();
+    let crate::geometry::Rect { x0, y0, x1, y1 } = quad.bbox();
     if x1 <= 0.0 || y1 <= 0.0 || x0 >= width as f64 || y0 >= height as f64 {
         return Err(crate::Error::InvalidRegion(format!(
             "{quad} lies outside the {width}x{height} frame"
@@ -64,7 +64,7 @@ pub struct Inspection<'a> {
 }
 
 /// Any tracker: initialised on a frame and a quad, then updated frame by frame. Registration
-/// trackers ([`crate::registration::RegistrationTracker`]) and whole trackers
+/// trackers ([`crate::plan::RegistrationTracker`]) and whole trackers
 /// ([`crate::whole::REGISTRY`]) implement it; the evaluation, the benchmarks, the command line
 /// and the inspector use only this (through [`crate::tracker::Tracker`]).
 pub trait VisualTracker: Send + std::fmt::Debug {

@@ -198,8 +198,8 @@ pub fn default_frame_size(quads: &[Quad]) -> (usize, usize) {
     let (mut mx, mut my) = (0.0f64, 0.0f64);
     for q in quads {
         let b = q.bbox();
-        mx = mx.max(b.2);
-        my = my.max(b.3);
+        mx = mx.max(b.x1);
+        my = my.max(b.y1);
     }
     for (w, h) in [
         (640, 480),
@@ -346,7 +346,12 @@ impl Scene {
             );
             for sq in &subquads {
                 let b = sq.bbox();
-                bx = (bx.0.min(b.0), bx.1.min(b.1), bx.2.max(b.2), bx.3.max(b.3));
+                bx = (
+                    bx.0.min(b.x0),
+                    bx.1.min(b.y0),
+                    bx.2.max(b.x1),
+                    bx.3.max(b.y1),
+                );
             }
             let x0 = (bx.0.floor() as i64 - 1).clamp(0, w as i64) as usize;
             let y0 = (bx.1.floor() as i64 - 1).clamp(0, h as i64) as usize;

@@ -83,9 +83,9 @@ pub fn iou(a: &Quad, b: &Quad) -> f64 {
         polygon_area(&clip_convex(&positively_wound(b), &positively_wound(a))).abs()
     } else {
         let (ba, bb) = (a.bbox(), b.bbox());
-        let w = (ba.2.min(bb.2) - ba.0.max(bb.0)).max(0.0);
-        let h = (ba.3.min(bb.3) - ba.1.max(bb.1)).max(0.0);
-        let (aa, ab) = ((ba.2 - ba.0) * (ba.3 - ba.1), (bb.2 - bb.0) * (bb.3 - bb.1));
+        let w = (ba.x1.min(bb.x1) - ba.x0.max(bb.x0)).max(0.0);
+        let h = (ba.y1.min(bb.y1) - ba.y0.max(bb.y0)).max(0.0);
+        let (aa, ab) = (ba.width() * ba.height(), bb.width() * bb.height());
         let i = w * h;
         return if aa + ab - i > 0.0 {
             i / (aa + ab - i)

@@ -28,6 +28,57 @@ impl Point {
     }
 }
 
+/// An axis-aligned rectangle `[x0, x1) x [y0, y1)` in image (or normalised) coordinates: a
+/// region to pre-process, the pixels a patch reads, a bounding box.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Rect {
+    pub x0: f64,
+    pub y0: f64,
+    pub x1: f64,
+    pub y1: f64,
+}
+
+impl Rect {
+    /// The whole plane (what a patch whose reads are not bounded reads).
+    pub const EVERYTHING: Rect = Rect {
+        x0: f64::NEG_INFINITY,
+        y0: f64::NEG_INFINITY,
+        x1: f64::INFINITY,
+        y1: f64::INFINITY,
+    };
+
+    pub const fn new(x0: f64, y0: f64, x1: f64, y1: f64) -> Self {
+        Rect { x0, y0, x1, y1 }
+    }
+    /// The rectangle of a `width x height` image.
+    pub fn of_size(width: usize, height: usize) -> Self {
+        Rect::new(0.0, 0.0, width as f64, height as f64)
+    }
+    pub fn width(&self) -> f64 {
+        self.x1 - self.x0
+    }
+    pub fn height(&self) -> f64 {
+        self.y1 - self.y0
+    }
+    /// The rectangle grown by `m` on every side.
+    pub fn grown(&self, m: f64) -> Self {
+        Rect::new(self.x0 - m, self.y0 - m, self.x1 + m, self.y1 + m)
+    }
+    /// The smallest rectangle holding both.
+    pub fn union(&self, o: &Rect) -> Self {
+        Rect::new(
+            self.x0.min(o.x0),
+            self.y0.min(o.y0),
+            self.x1.max(o.x1),
+            self.y1.max(o.y1),
+        )
+    }
+    /// Whether `o` lies inside this rectangle (edges included).
+    pub fn contains(&self, o: &Rect) -> bool {
+        o.x0 >= self.x0 && o.y0 >= self.y0 && o.x1 <= self.x1 && o.y1 <= self.y1
+    }
+}
+
 /// Four corners in the TMT/MTF order: upper-left, upper-right, lower-right, lower-left (for an
 /// upright target). Any consistent order works for tracking; this is the order files use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -99,16 +150,16 @@ impl Quad {
     pub fn is_finite(&self) -> bool {
         self.0.iter().all(|p| p.is_finite())
     }
-    /// `(min x, min y, max x, max y)`.
-    pub fn bbox(&self) -> (f64, f64, f64, f64) {
+    /// The smallest axis-aligned rectangle holding the corners.
+    pub fn bbox(&self) -> Rect {
         self.0.iter().fold(
-            (
+            Rect::new(
                 f64::INFINITY,
                 f64::INFINITY,
                 f64::NEG_INFINITY,
                 f64::NEG_INFINITY,
             ),
-            |b, p| (b.0.min(p.x), b.1.min(p.y), b.2.max(p.x), b.3.max(p.y)),
+            |b, p| Rect::new(b.x0.min(p.x), b.y0.min(p.y), b.x1.max(p.x), b.y1.max(p.y)),
         )
     }
     /// Mean length of the four sides.

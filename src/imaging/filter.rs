@@ -1,7 +1,8 @@
 //! Separable Gaussian smoothing (of a whole image or only a region), half-size downsampling and
 //! Gaussian pyramids.
 
-use super::{GrayF32, Image, ImageRef, ImageView, Pixel};
+use super::{GrayF32, Image, ImageRef, ImageView, Pixel, STAMP_LEVELS, new_stamp};
+use crate::geometry::Rect;
 
 /// A normalised 1-D Gaussian kernel (odd size). A size of 1 or a zero sigma means no smoothing.
 #[derive(Clone, Debug, PartialEq)]
@@ -471,7 +472,7 @@ pub fn pyramid(src: &GrayF32, levels: usize) -> Vec<GrayF32> {
 /// `[x0, x1) x [y0, y1)` rounded outwards to whole pixels and clipped to `within` (NaN to its
 /// start), never reversed.
 fn clip_rect(
-    (x0, y0, x1, y1): (f64, f64, f64, f64),
+    Rect { x0, y0, x1, y1 }: Rect,
     (wx0, wy0, wx1, wy1): (usize, usize, usize, usize),
 ) -> (usize, usize, usize, usize) {
     let clip = |v: f64, lo: usize, hi: usize| -> usize {
@@ -488,6 +489,11 @@ fn clip_rect(
     (cx0, cy0, cx1, cy1)
 }
 
+/// The stop threshold of a search at a coarse pyramid level, in that level's pixels: a coarse
+/// level only has to bring the search into the finer level's basin (and where it cannot see the
+/// target, a star field, it would wander for all its iterations).
+pub const COARSE_EPS: f64 = 0.05;
+
 /// Pre-processes only the region a tracker reads: converts it to float and smooths it (border
 /// replicated at the image edges), into buffers it keeps between frames, so the hot path does
 /// not allocate once they have grown to the region's size.
@@ -503,6 +509,8 @@ pub struct Preprocessor {
     /// Coarser levels of the region (level 1, 2, ...), each half the previous.
     levels: Vec<GrayF32>,
     scratch: Vec<f32>,
+    /// The stamp of the views of the region last processed ([`ImageView::stamp`]).
+    stamp: u64,
 }
 
 impl Preprocessor {
@@ -517,6 +525,7 @@ impl Preprocessor {
             smoothed: (0, 0, 0, 0),
             levels: Vec::new(),
             scratch: Vec::new(),
+            stamp: 0,
         }
     }
 
@@ -527,15 +536,7 @@ impl Preprocessor {
 
     /// Smooths the region `[x0, x1) x [y0, y1)` (real coordinates, clipped to the image and
     /// rounded outwards) of `src`.
-    pub fn process<'a, T: Pixel>(
-        &mut self,
-        src: impl Into<ImageRef<'a, T>>,
-        x0: f64,
-        y0: f64,
-        x1: f64,
-        y1: f64,
-    ) {
-        let region = (x0, y0, x1, y1);
+    pub fn process<'a, T: Pixel>(&mut self, src: impl Into<ImageRef<'a, T>>, region: Rect) {
         self.process_part(src, region, region);
     }
 
@@ -549,11 +550,12 @@ impl Preprocessor {
     pub fn process_part<'a, T: Pixel>(
         &mut self,
         src: impl Into<ImageRef<'a, T>>,
-        (x0, y0, x1, y1): (f64, f64, f64, f64),
-        part: (f64, f64, f64, f64),
+        region: Rect,
+        part: Rect,
     ) {
         let src = src.into();
-        self.region = clip_rect((x0, y0, x1, y1), (0, 0, src.width, src.height));
+        self.stamp = new_stamp();
+        self.region = clip_rect(region, (0, 0, src.width, src.height));
         let (rx0, ry0, rx1, ry1) = self.region;
         let rw = rx1 - rx0;
         self.out.resize(rw * (ry1 - ry0), 0.0);
@@ -566,9 +568,9 @@ impl Preprocessor {
 
     /// Whether the pixels of the rectangle `[x0, x1) x [y0, y1)` (frame coordinates) are
     /// smoothed: inside the region and its smoothed part.
-    pub fn holds(&self, (x0, y0, x1, y1): (f64, f64, f64, f64)) -> bool {
+    pub fn holds(&self, r: &Rect) -> bool {
         let (sx0, sy0, sx1, sy1) = self.smoothed;
-        x0 >= sx0 as f64 && y0 >= sy0 as f64 && x1 <= sx1 as f64 && y1 <= sy1 as f64
+        Rect::new(sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64).contains(r)
     }
 
     /// Whether the whole region is smoothed (not after a [`Preprocessor::process_part`] until
@@ -622,15 +624,18 @@ impl Preprocessor {
         );
     }
 
-    /// The region last processed, `(x0, y0, x1, y1)` in pixels (end exclusive).
-    pub fn region(&self) -> (usize, usize, usize, usize) {
-        self.region
+    /// The region last processed, in whole pixels (end exclusive).
+    pub fn region(&self) -> Rect {
+        let (x0, y0, x1, y1) = self.region;
+        Rect::new(x0 as f64, y0 as f64, x1 as f64, y1 as f64)
     }
 
-    /// A view of the region last processed, in frame coordinates.
+    /// A view of the region last processed, in frame coordinates (stamped: see
+    /// [`ImageView::stamp`]; completing a region smoothed in part keeps the stamp, since the
+    /// pixels already smoothed do not change).
     pub fn view(&self) -> ImageView<'_> {
         let (x0, y0, x1, y1) = self.region;
-        ImageView::new(&self.out, x1 - x0, y1 - y0, x0 as i64, y0 as i64)
+        ImageView::new(&self.out, x1 - x0, y1 - y0, x0 as i64, y0 as i64).with_stamp(self.stamp)
     }
 
     /// Builds `count` coarser levels of the region last processed (binomial smoothing and
@@ -662,8 +667,10 @@ impl Preprocessor {
         }
         let (x0, y0, _, _) = self.region;
         let img = &self.levels[l - 1];
+        debug_assert!((l as u64) < STAMP_LEVELS);
         ImageView::new(&img.data, img.width, img.height, x0 as i64, y0 as i64)
             .with_scale((1u32 << l) as f32)
+            .with_stamp(self.stamp + l as u64)
     }
 }
 
@@ -729,20 +736,20 @@ mod tests {
         let mut parts = whole.clone();
         let bits = |p: &Preprocessor| -> Vec<u32> { p.out.iter().map(|v| v.to_bits()).collect() };
         for region in [
-            (-3.0, -2.0, 70.0, 50.0),
-            (5.2, 7.9, 40.1, 33.0),
-            (20.0, 0.0, 61.0, 12.0),
+            Rect::new(-3.0, -2.0, 70.0, 50.0),
+            Rect::new(5.2, 7.9, 40.1, 33.0),
+            Rect::new(20.0, 0.0, 61.0, 12.0),
         ] {
-            whole.process(&src, region.0, region.1, region.2, region.3);
+            whole.process(&src, region);
             for part in [
-                (12.5, 10.0, 30.0, 25.0),
-                (-10.0, 9.0, 18.0, 60.0),
-                (3.0, 3.0, 3.5, 4.0),
-                (100.0, 100.0, 120.0, 130.0),
+                Rect::new(12.5, 10.0, 30.0, 25.0),
+                Rect::new(-10.0, 9.0, 18.0, 60.0),
+                Rect::new(3.0, 3.0, 3.5, 4.0),
+                Rect::new(100.0, 100.0, 120.0, 130.0),
             ] {
                 parts.process_part(&src, region, part);
                 assert_eq!(parts.region(), whole.region());
-                let (rx0, ry0, rx1, ry1) = parts.region();
+                let (rx0, ry0, rx1, ry1) = parts.region;
                 let (sx0, sy0, sx1, sy1) = parts.smoothed;
                 // The part's pixels are already the whole's.
                 let rw = rx1 - rx0;
@@ -752,14 +759,14 @@ mod tests {
                         assert_eq!(parts.out[i].to_bits(), whole.out[i].to_bits());
                     }
                 }
-                let inside = (sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64);
-                assert!(parts.holds(inside));
-                let beyond = (sx0 as f64 - 1.0, sy0 as f64, sx1 as f64, sy1 as f64);
-                assert!(!parts.holds(beyond));
+                let inside = Rect::new(sx0 as f64, sy0 as f64, sx1 as f64, sy1 as f64);
+                assert!(parts.holds(&inside));
+                let beyond = Rect::new(sx0 as f64 - 1.0, sy0 as f64, sx1 as f64, sy1 as f64);
+                assert!(!parts.holds(&beyond));
                 parts.complete(&src);
                 assert!(
                     parts.is_whole()
-                        && parts.holds((rx0 as f64, ry0 as f64, rx1 as f64, ry1 as f64))
+                        && parts.holds(&Rect::new(rx0 as f64, ry0 as f64, rx1 as f64, ry1 as f64))
                 );
                 assert_eq!(bits(&parts), bits(&whole), "{region:?} {part:?}");
             }
@@ -877,8 +884,8 @@ mod tests {
             // A region (partly outside the image) equals the same pixels of the whole.
             let whole8 = gaussian_blur(&src8, &k);
             let mut pre = Preprocessor::new(k.clone());
-            pre.process(&src8, -3.0, 4.2, 20.5, 40.0);
-            assert_eq!(pre.region(), (0, 4, 21, 29));
+            pre.process(&src8, Rect::new(-3.0, 4.2, 20.5, 40.0));
+            assert_eq!(pre.region(), Rect::new(0.0, 4.0, 21.0, 29.0));
             let v = pre.view();
             for y in 4..29 {
                 for x in 0..21 {

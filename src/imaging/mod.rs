@@ -14,14 +14,15 @@ mod resample;
 mod sample;
 
 pub use filter::{
-    GaussianKernel, Preprocessor, downsample_half, downsample_half_into, downsample_half_rows_into,
-    gaussian_blur, gaussian_blur_into, gaussian_blur_rows_into, gaussian_kernel,
-    pad_replicate_into, pyramid,
+    COARSE_EPS, GaussianKernel, Preprocessor, downsample_half, downsample_half_into,
+    downsample_half_rows_into, gaussian_blur, gaussian_blur_into, gaussian_blur_rows_into,
+    gaussian_kernel, pad_replicate_into, pyramid,
 };
 pub use integral::Integral;
 pub use resample::resample_window;
 pub use sample::{
-    Border, ImageView, sample_grid_shifted, sample_value, sample_values, sample_values_gradients,
+    Border, ImageView, STAMP_LEVELS, new_stamp, sample_grid_shifted, sample_value, sample_values,
+    sample_values_gradients,
 };
 
 use crate::error::{Error, Result};

@@ -15,6 +15,16 @@ pub enum Border {
     Zero,
 }
 
+/// A new stamp for views of content just made ([`ImageView::stamp`]): unique in the process,
+/// and followed by [`STAMP_LEVELS`] - 1 more for the same content's pyramid levels.
+pub fn new_stamp() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(STAMP_LEVELS);
+    NEXT.fetch_add(STAMP_LEVELS, std::sync::atomic::Ordering::Relaxed)
+}
+
+/// The stamps reserved by one [`new_stamp`]: level `l` of the content is stamped `stamp + l`.
+pub const STAMP_LEVELS: u64 = 8;
+
 /// A read-only window of a float image placed at `(x0, y0)` in frame coordinates: points are
 /// given in frame coordinates and sampled from the window.
 #[derive(Clone, Copy, Debug)]
@@ -27,6 +37,8 @@ pub struct ImageView<'a> {
     /// Frame pixels per window pixel (2^l for level l of a pyramid).
     scale: f32,
     border: Border,
+    /// What content this is (see [`ImageView::stamp`]); 0: unknown.
+    stamp: u64,
 }
 
 impl<'a> ImageView<'a> {
@@ -47,7 +59,21 @@ impl<'a> ImageView<'a> {
             y0,
             scale: 1.0,
             border: Border::Replicate,
+            stamp: 0,
         }
+    }
+
+    /// The same view marked as showing the content `stamp` (see [`ImageView::stamp`]).
+    pub fn with_stamp(mut self, stamp: u64) -> Self {
+        self.stamp = stamp;
+        self
+    }
+
+    /// Which content the view shows: two views with the same non-zero stamp show the same
+    /// pixels (a pre-processed region is stamped anew each time it is made, [`new_stamp`]), so
+    /// what was sampled from one holds for the other; 0 for a view nothing is known of.
+    pub fn stamp(&self) -> u64 {
+        self.stamp
     }
 
     /// The same view as a pyramid level: each window pixel covers `scale` frame pixels, window

@@ -32,7 +32,7 @@ use crate::crew::{self, Crew, Shares};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad, apply_homography, homography_between};
-use crate::imaging::{self, GaussianKernel, GrayF32, ImageRef, ImageView, keypoints};
+use crate::imaging::{self, COARSE_EPS, GaussianKernel, GrayF32, ImageRef, ImageView, keypoints};
 use crate::params::{MethodParams, ParamDef};
 use crate::status::{LossReason, TrackStatus};
 use nalgebra::{Matrix2, SMatrix};
@@ -545,9 +545,6 @@ struct Buffers {
 /// Patches a thread takes at a time.
 const PATCH_BLOCK: usize = 16;
 
-/// The stop threshold of the coarse pyramid levels at least (pixels of the level).
-const COARSE_EPS: f64 = 0.05;
-
 /// Why a search failed.
 type Search = std::result::Result<(Warp, usize, f64), LossReason>;
 
@@ -1031,7 +1028,7 @@ impl PatchTracker {
         let border = half.ceil() as usize + 2;
         let bounds = match region {
             Some(q) => {
-                let (x0, y0, x1, y1) = q.bbox();
+                let crate::geometry::Rect { x0, y0, x1, y1 } = q.bbox();
                 (
                     x0.max(0.0) as usize,
                     y0.max(0.0) as usize,

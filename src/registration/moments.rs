@@ -5,7 +5,7 @@
 //! `J^T x` for a few per-pixel vectors `x` (the patch's unit vector, the ones, the template's
 //! unit vector for Newton's), and each `J^T x` is a sum of the same kind as `J^T r`
 //! ([`GridMoments::jtr`]); the AM assembles it ([`crate::am::Am::hessian_from_projections`],
-//! [`crate::registration::Context::moments_system`]).
+//! [`crate::sm::newton::moments_system`]).
 //!
 //! With an AM whose Hessian is `-J^T J` ([`crate::am::Am::hessian_is_minus_jtj`]: SSD, SCV, LSCV), a
 //! forward-compositional step needs `J^T J` and `J^T r`, where row `i` of `J` is the warped
@@ -770,261 +770,25 @@ fn fit_l(
     Some(out)
 }
 
+/// A skewed quad, for the tests of the moments and of the Newton systems made of them.
+#[cfg(test)]
+pub(crate) fn skewed() -> crate::geometry::Quad {
+    use crate::geometry::{Point, Quad};
+    Quad([
+        Point::new(100.0, 80.0),
+        Point::new(190.0, 95.0),
+        Point::new(175.0, 170.0),
+        Point::new(92.0, 150.0),
+    ])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::am::{self, HessianKind, jt_times, minus_jtj};
-    use crate::geometry::{Point, Quad};
-    use crate::registration::Context;
+    use crate::am::{self, HessianKind};
+    use crate::registration::Problem;
     use crate::rng::Rng;
-    use crate::ssm::{self, Params};
-
-    fn skewed() -> Quad {
-        Quad([
-            Point::new(100.0, 80.0),
-            Point::new(190.0, 95.0),
-            Point::new(175.0, 170.0),
-            Point::new(92.0, 150.0),
-        ])
-    }
-
-    /// `h2`, `g2` against `h1`, `g1` (row-major `dof x dof`), each entry within `2e-6` of its own
-    /// scale: `sqrt(|H_ii H_jj|)` for `H_ij` (the bound of Cauchy-Schwarz), `sqrt(|H_ii|) |r|`
-    /// for `g_i`.
-    fn close(h: (&[f64], &[f64]), g: (&[f64], &[f64]), dof: usize, r: &[f32], what: &str) {
-        close_to_scale(h, g, (h.0, 1.0), 2e-6, dof, r, what);
-    }
-
-    /// [`close`] with the scales taken from `s` times the diagonal of `jtj` (`J^T J` or its
-    /// negative: a Hessian `s J^T A J` with `|A| <= 1` has `|H_ij| <= |s| sqrt(jtj_ii jtj_jj)`,
-    /// and `|(J^T r)_i| <= sqrt(jtj_ii) |r|`), within `tol`.
-    fn close_to_scale(
-        h: (&[f64], &[f64]),
-        g: (&[f64], &[f64]),
-        (jtj, s): (&[f64], f64),
-        tol: f64,
-        dof: usize,
-        r: &[f32],
-        what: &str,
-    ) {
-        let d = |i: usize| jtj[i * dof + i].abs();
-        let rn = r
-            .iter()
-            .map(|&v| (v as f64) * (v as f64))
-            .sum::<f64>()
-            .sqrt();
-        for i in 0..dof {
-            for j in 0..dof {
-                let (x, y) = (h.0[i * dof + j], h.1[i * dof + j]);
-                let scale = s.abs() * (d(i) * d(j)).sqrt();
-                assert!(
-                    (x - y).abs() <= tol * scale,
-                    "{what}: H[{i}][{j}] {x} by the Jacobian, {y} by the moments"
-                );
-            }
-            let (x, y) = (g.0[i], g.1[i]);
-            assert!(
-                (x - y).abs() <= tol * d(i).sqrt() * rn,
-                "{what}: g[{i}] {x} by the Jacobian, {y} by the moments"
-            );
-        }
-    }
-
-    /// The template's gradient `(tx, ty)` in both coordinates: the normalised ones and the unit
-    /// square's (the same field).
-    fn set_template_gradient(ctx: &mut Context, tx: &[f32], ty: &[f32]) {
-        ctx.template_gx.copy_from_slice(tx);
-        ctx.template_gy.copy_from_slice(ty);
-        for i in 0..tx.len() {
-            let j = homography_jacobian(&ctx.unit, ctx.grid_u[i] as f64, ctx.grid_v[i] as f64);
-            let (a, b) = (tx[i] as f64, ty[i] as f64);
-            ctx.template_gu[i] = (a * j[0][0] + b * j[1][0]) as f32;
-            ctx.template_gv[i] = (a * j[0][1] + b * j[1][1]) as f32;
-        }
-    }
-
-    /// The pixel gradient `(gx, gy)` as the warped gradient (or its mean with the template's),
-    /// projected on `dw/dp` into the context's Jacobian.
-    fn through_the_jacobian(ctx: &mut Context, (gx, gy): (&[f32], &[f32]), p: &Params, mean: bool) {
-        ctx.work.gx.copy_from_slice(gx);
-        ctx.work.gy.copy_from_slice(gy);
-        if mean {
-            ctx.warped_gradient_mean(p);
-        } else {
-            ctx.warped_gradient(p);
-        }
-        ctx.project_gradients(None);
-    }
-
-    /// The pixel gradient `(gx, gy)` as the gradient with respect to the unit square's
-    /// coordinates (or its mean with the template's), in the context's `gx`, `gy`.
-    fn in_the_unit_square(ctx: &mut Context, (gx, gy): (&[f32], &[f32]), p: &Params, mean: bool) {
-        ctx.work.gx.copy_from_slice(gx);
-        ctx.work.gy.copy_from_slice(gy);
-        if mean {
-            ctx.unit_gradient_mean(p);
-        } else {
-            ctx.unit_gradient(p);
-        }
-    }
-
-    /// A warp a random step away from the identity.
-    fn warp_near_identity(ctx: &Context, rng: &mut Rng) -> Params {
-        let mut dp = [0.0; MAX_DOF];
-        for v in dp.iter_mut().take(ctx.dof) {
-            *v = 0.03 * rng.normal();
-        }
-        ctx.ssm.compose(&ctx.ssm.identity(), &dp).unwrap()
-    }
-
-    /// The moments' Newton system is the one of the warped gradient through `dw/dp`: every SSM
-    /// of six or more parameters, both grid layouts, sizes of one column block, of a last block
-    /// that overlaps the one before, and the default 50, a skewed quad, a warp
-    /// away from the identity, random pixel gradients and residuals, alone and in their mean
-    /// with the template's gradient (ESM's); and ICLK's `J^T r` through the template's Jacobian.
-    #[test]
-    fn the_moments_give_the_jacobians_newton_system() {
-        let mut rng = Rng::new(11);
-        let mut checked = 0;
-        for entry in ssm::REGISTRY {
-            let dof = ssm::build(entry.name).unwrap().dof();
-            for layout in [GridLayout::Centres, GridLayout::Border] {
-                for res in [8, 13, 50] {
-                    let model = ssm::build(entry.name).unwrap();
-                    let mut ctx =
-                        Context::new(model, am::build("ssd").unwrap(), HessianKind::Default, res);
-                    ctx.set_region(&skewed(), res, layout).unwrap();
-                    if dof < 6 {
-                        assert!(ctx.moments.is_none(), "{}: {dof} parameters", entry.name);
-                        continue;
-                    }
-                    assert!(ctx.moments_step(), "{} has no moments", entry.name);
-                    let n = res * res;
-                    let p = warp_near_identity(&ctx, &mut rng);
-                    ctx.warp_grid(&p);
-                    let mut draw = |scale: f64| -> Vec<f32> {
-                        (0..n).map(|_| (scale * rng.normal()) as f32).collect()
-                    };
-                    let (gx, gy, r) = (draw(20.0), draw(20.0), draw(10.0));
-                    // The template's gradient in both coordinates: the same field.
-                    let (tx, ty) = (draw(0.3), draw(0.3));
-                    set_template_gradient(&mut ctx, &tx, &ty);
-                    // ICLK's right-hand side: the template's Jacobian at the identity.
-                    let mut jt = vec![0.0; n * dof];
-                    Context::project(&tx, &ty, &ctx.dwdp0, dof, &mut jt);
-                    let (mut g1, mut g2) = ([0.0; MAX_DOF], [0.0; MAX_DOF]);
-                    jt_times(&jt, &r, dof, &mut g1);
-                    let (ta, tb) = (ctx.template_gu.clone(), ctx.template_gv.clone());
-                    ctx.moments.as_mut().unwrap().jtr(&ta, &tb, &r, &mut g2);
-                    let mut h1 = [0.0; MAX_DOF * MAX_DOF];
-                    minus_jtj(&jt, dof, &mut h1);
-                    let what = format!("{} {layout:?} {res}x{res} template", entry.name);
-                    close((&h1, &h1), (&g1, &g2), dof, &r, &what);
-                    for mean in [false, true] {
-                        ctx.work.grad.copy_from_slice(&r);
-                        through_the_jacobian(&mut ctx, (&gx, &gy), &p, mean);
-                        let (mut h1, mut g1) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
-                        minus_jtj(&ctx.work.jac, dof, &mut h1);
-                        jt_times(&ctx.work.jac, &r, dof, &mut g1);
-
-                        in_the_unit_square(&mut ctx, (&gx, &gy), &p, mean);
-                        let (mut h2, mut g2) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
-                        let (a, b) = (ctx.work.gx.clone(), ctx.work.gy.clone());
-                        ctx.moments
-                            .as_mut()
-                            .unwrap()
-                            .minus_jtj_and_jtr(&a, &b, &r, &mut h2, &mut g2);
-                        let what = format!("{} {layout:?} {res}x{res} mean {mean}", entry.name);
-                        close((&h1, &h2), (&g1, &g2), dof, &r, &what);
-                        checked += 1;
-                    }
-                }
-            }
-        }
-        assert!(checked >= 4 * 2 * 3 * 2, "{checked} systems checked");
-    }
-
-    /// The correlations' Newton system from the moments (`J^T J`, `J^T g` and the `J^T x` their
-    /// Hessian needs) is the one through the Jacobian: ZNCC and NCC, each Hessian kind, the
-    /// homography and the affine warp, 13 x 13 and 50 x 50, a warp away from the identity,
-    /// random patches and gradients, alone and in ESM's mean with the template's gradient.
-    #[test]
-    fn the_correlations_newton_system_from_the_moments_is_the_jacobians() {
-        let mut rng = Rng::new(17);
-        let mut checked = 0;
-        for am_name in ["zncc", "ncc"] {
-            for ssm_name in ["homography", "affine"] {
-                for res in [13, 50] {
-                    for kind in [
-                        HessianKind::GaussNewton,
-                        HessianKind::Newton,
-                        HessianKind::AfterConvergence,
-                    ] {
-                        let model = ssm::build(ssm_name).unwrap();
-                        let dof = model.dof();
-                        let mut ctx = Context::new(model, am::build(am_name).unwrap(), kind, res);
-                        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
-                        assert!(ctx.moments_step(), "{am_name} {ssm_name} has no moments");
-                        let n = res * res;
-                        let mut draw = |mean: f64, scale: f64| -> Vec<f32> {
-                            (0..n)
-                                .map(|_| (mean + scale * rng.normal()) as f32)
-                                .collect()
-                        };
-                        let (template, current) = (draw(120.0, 30.0), draw(110.0, 25.0));
-                        let (gx, gy) = (draw(0.0, 20.0), draw(0.0, 20.0));
-                        let (tx, ty) = (draw(0.0, 0.3), draw(0.0, 0.3));
-                        ctx.am.set_template(&template);
-                        set_template_gradient(&mut ctx, &tx, &ty);
-                        let p = warp_near_identity(&ctx, &mut rng);
-                        ctx.warp_grid(&p);
-                        ctx.work.values.copy_from_slice(&current);
-                        for mean in [false, true] {
-                            // Through the Jacobian.
-                            through_the_jacobian(&mut ctx, (&gx, &gy), &p, mean);
-                            let values = ctx.work.values.clone();
-                            ctx.am
-                                .gradient(am::Wrt::Current, &values, &mut ctx.work.grad);
-                            let (mut h1, mut g1) = ([0.0; MAX_DOF * MAX_DOF], [0.0; MAX_DOF]);
-                            let jac = ctx.work.jac.clone();
-                            ctx.am
-                                .hessian(am::Wrt::Current, kind, &values, &jac, dof, &mut h1);
-                            jt_times(&jac, &ctx.work.grad, dof, &mut g1);
-                            // The scale: J^T J and the correlation's factor beta / |P x|^2.
-                            let mut jtj = [0.0; MAX_DOF * MAX_DOF];
-                            minus_jtj(&jac, dof, &mut jtj);
-                            let centred = am_name == "zncc";
-                            let x = if kind == HessianKind::AfterConvergence {
-                                &template
-                            } else {
-                                &current
-                            };
-                            let m = if centred {
-                                x.iter().map(|&v| v as f64).sum::<f64>() / n as f64
-                            } else {
-                                0.0
-                            };
-                            let norm2: f64 = x.iter().map(|&v| (v as f64 - m).powi(2)).sum();
-                            let beta = if centred { n as f64 } else { 1.0 };
-                            // Through the moments, on the context's own buffers as the forward
-                            // methods call it.
-                            in_the_unit_square(&mut ctx, (&gx, &gy), &p, mean);
-                            ctx.am
-                                .gradient(am::Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
-                            let (h2, g2) = ctx.moments_system().unwrap();
-                            let what = format!("{am_name} {ssm_name} {res} {kind:?} mean {mean}");
-                            assert!(h1[..dof * dof].iter().any(|&v| v != 0.0), "{what}");
-                            let r = ctx.work.grad.clone();
-                            let scale = (&jtj[..], beta / norm2);
-                            close_to_scale((&h1, &h2), (&g1, &g2), scale, 2e-6, dof, &r, &what);
-                            checked += 1;
-                        }
-                    }
-                }
-            }
-        }
-        assert_eq!(checked, 2 * 2 * 2 * 3 * 2);
-    }
+    use crate::ssm;
 
     /// The vector kernel of the column sums is the plain one, bit for bit, masked lanes included.
     #[test]
@@ -1116,45 +880,30 @@ mod tests {
     /// not a family of homographies is refused (the fit is checked, not trusted).
     #[test]
     fn the_moments_are_refused_where_they_do_not_hold() {
-        let mut small = Context::new(
-            ssm::build("homography").unwrap(),
-            am::build("ssd").unwrap(),
-            HessianKind::Default,
-            7,
-        );
-        small.set_region(&skewed(), 7, GridLayout::Centres).unwrap();
-        assert!(small.moments.is_none());
+        let problem = |am_name: &str, res: usize| {
+            let mut p = Problem::new(
+                ssm::build("homography").unwrap(),
+                am::build(am_name).unwrap(),
+                HessianKind::Default,
+                res,
+            );
+            p.set_region(&skewed(), res, GridLayout::Centres).unwrap();
+            p
+        };
+        assert!(problem("ssd", 7).moments().is_none());
         let res = 9;
-        let mut ctx = Context::new(
-            ssm::build("homography").unwrap(),
-            am::build("mi").unwrap(),
-            HessianKind::Default,
-            res,
-        );
-        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
-        assert!(ctx.moments.is_none() && !ctx.moments_step());
-        let mut ctx = Context::new(
-            ssm::build("homography").unwrap(),
-            am::build("zncc").unwrap(),
-            HessianKind::Default,
-            res,
-        );
-        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
-        assert!(ctx.moments_step());
-        let mut ctx = Context::new(
-            ssm::build("homography").unwrap(),
-            am::build("ssd").unwrap(),
-            HessianKind::Default,
-            res,
-        );
-        ctx.set_region(&skewed(), res, GridLayout::Centres).unwrap();
-        let fits = |dwdp: &[f32]| GridMoments::new(&ctx.unit, res, GridLayout::Centres, dwdp, 8);
-        assert!(fits(&ctx.dwdp0).is_some());
+        assert!(problem("mi", res).moments().is_none());
+        assert!(problem("zncc", res).moments().is_some());
+        let ssd = problem("ssd", res);
+        let fits = |dwdp: &[f32]| GridMoments::new(ssd.unit(), res, GridLayout::Centres, dwdp, 8);
+        let dwdp0 = ssd.dwdp0().0;
+        assert!(fits(dwdp0).is_some());
         // dw_x/dp_0 = x^2 y: no homography moves points so.
         let n = res * res;
-        let mut bent = ctx.dwdp0.clone();
+        let mut bent = dwdp0.to_vec();
+        let (gx, gy) = ssd.grid();
         for i in 0..n {
-            let (x, y) = (ctx.grid_x[i], ctx.grid_y[i]);
+            let (x, y) = (gx[i], gy[i]);
             bent[i] = x * x * y;
         }
         assert!(fits(&bent).is_none());

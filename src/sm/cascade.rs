@@ -81,11 +81,11 @@ impl SearchMethod for Cascade {
         }
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let before = ctx.corners(&ctx.params);
+        let before = ctx.corners(&ctx.params());
         let k = self.stage.min(self.stages.len() - 1);
         let step = self.stages[k].iterate(ctx, img)?;
         self.count += 1;
-        let moved = ctx.corners(&ctx.params).change_norm(&before);
+        let moved = ctx.corners(&ctx.params()).change_norm(&before);
         let finished = match step.control {
             Control::Done => true,
             Control::Continue => false,
@@ -164,19 +164,19 @@ impl SearchMethod for Parallel {
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
         // Each stage runs its own loop with the tracker's stop test and iteration limit.
-        let start = ctx.params;
+        let start = ctx.params();
         let start_corners = ctx.corners(&start);
         let mut best: Option<(f64, crate::ssm::Params)> = None;
         let mut first_err = None;
         for s in &mut self.stages {
-            ctx.params = start;
+            ctx.set_params(start);
             s.start_frame(ctx);
             let mut prev = start_corners;
             let mut failed = None;
             for _ in 0..s.max_iterations(self.max_iters) {
                 match s.iterate(ctx, img) {
                     Ok(step) => {
-                        let now = ctx.corners(&ctx.params);
+                        let now = ctx.corners(&ctx.params());
                         let moved = now.change_norm(&prev);
                         prev = now;
                         if !now.is_finite() {
@@ -200,7 +200,7 @@ impl SearchMethod for Parallel {
                 first_err.get_or_insert(r);
                 continue;
             }
-            let p = ctx.params;
+            let p = ctx.params();
             let f = ctx.similarity_at(img, &p);
             if f.is_finite() && best.is_none_or(|(b, _)| f > b) {
                 best = Some((f, p));
@@ -208,11 +208,11 @@ impl SearchMethod for Parallel {
         }
         match best {
             Some((f, p)) => {
-                ctx.params = p;
+                ctx.set_params(p);
                 Ok(Step::done(f))
             }
             None => {
-                ctx.params = start;
+                ctx.set_params(start);
                 Err(first_err.unwrap_or(LossReason::NonFinite))
             }
         }
@@ -267,15 +267,15 @@ impl SearchMethod for LevenbergMarquardt {
         self.inner.start_frame(ctx);
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let start = ctx.params;
-        ctx.damping = self.lambda;
+        let start = ctx.params();
+        ctx.state_mut().set_damping(self.lambda);
         let step = self.inner.iterate(ctx, img);
-        ctx.damping = 0.0;
+        ctx.state_mut().set_damping(0.0);
         let step = step?;
         match self.last {
             Some((prev, f_prev)) if step.similarity < f_prev => {
                 // The previous step made things worse: undo it, damp more, try again from there.
-                ctx.params = prev;
+                ctx.set_params(prev);
                 self.lambda = (self.lambda * 10.0).min(1e8);
                 Ok(Step {
                     similarity: f_prev,

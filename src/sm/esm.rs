@@ -29,7 +29,7 @@
 //! under a gain change SSD's own maximum is not where the target is, and the template's half of
 //! ESM's Jacobian, which no light reaches, kept it closer.
 
-use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
+use super::{Context, LossReason, SearchMethod, SmDef, Step, Update, newton};
 use crate::am::Wrt;
 use crate::imaging::ImageView;
 use crate::params::ParamDef;
@@ -94,20 +94,18 @@ impl SearchMethod for Esm {
         self.start_frame(ctx);
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let p = ctx.params;
+        let p = ctx.params();
         ctx.sample_gradients_at(img, &p);
         // The warped gradient's mean with the template's (ESM's Jacobian), in one pass; an
         // iteration that ends below (its similarity having fallen) leaves it unused. With the
         // moments, the gradient with respect to the grid's unit square instead.
-        let moments = ctx.moments_step();
+        let moments = newton::moments_step(ctx);
         if moments {
             ctx.unit_gradient_mean(&p);
         } else {
             ctx.warped_gradient_mean(&p);
         }
-        let f = ctx
-            .am
-            .gradient(Wrt::Current, &ctx.work.values, &mut ctx.work.grad);
+        let f = ctx.am_gradient(Wrt::Current);
         match self.last {
             Some(prev) if f < prev - 1e-12 * prev.abs().max(1.0) => self.falls += 1,
             _ => self.falls = 0,
@@ -120,14 +118,14 @@ impl SearchMethod for Esm {
             && self.falls >= self.max_falls
             && let Some((bp, bf)) = self.best
         {
-            ctx.params = bp;
+            ctx.set_params(bp);
             return Ok(Step::done(bf));
         }
         if moments {
-            ctx.moments_newton_step(Update::Compose)?;
+            newton::moments_newton_step(ctx, Update::Compose)?;
         } else {
-            ctx.project_gradients(None);
-            ctx.forward_step_from_gradient(Update::Compose)?;
+            newton::project_gradients(ctx, None);
+            newton::forward_step_from_gradient(ctx, Update::Compose)?;
         }
         Ok(Step::auto(f))
     }

@@ -1,7 +1,7 @@
 //! Forward additive Lucas-Kanade (FALK, the original of Lucas and Kanade): linearise
 //! `I_t(w(x, p + dp))` with the frame gradient and `dw/dp` at the current `p`; `p <- p + dp`.
 
-use super::{Context, SearchMethod, SmDef, Step, Update};
+use super::{Context, SearchMethod, SmDef, Step, Update, newton};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
@@ -29,16 +29,13 @@ impl SearchMethod for Falk {
         true
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
-        let p = ctx.params;
+        let p = ctx.params();
         ctx.sample_gradients_at(img, &p);
         // d pixel / d (normalised point) is the scale of the normaliser.
-        let s = ctx.norm.scale as f32;
-        ctx.work
-            .gx
-            .iter_mut()
-            .chain(ctx.work.gy.iter_mut())
-            .for_each(|g| *g *= s);
-        ctx.project_gradients(Some(&p));
-        ctx.forward_step(Update::Additive).map(Step::auto)
+        let s = ctx.problem().norm().scale as f32;
+        let (gx, gy) = ctx.work_mut().gradients_mut();
+        gx.iter_mut().chain(gy.iter_mut()).for_each(|g| *g *= s);
+        newton::project_gradients(ctx, Some(&p));
+        newton::forward_step(ctx, Update::Additive).map(Step::auto)
     }
 }

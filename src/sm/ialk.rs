@@ -3,7 +3,7 @@
 //! `grad I_t(w(x, p)) ~ grad I*(x) (dw/dx)^-1`, so only the template is differentiated;
 //! `p <- p + dp`.
 
-use super::{Context, SearchMethod, SmDef, Step, Update};
+use super::{Context, SearchMethod, SmDef, Step, Update, newton};
 use crate::imaging::ImageView;
 use crate::registry::Entry;
 
@@ -34,12 +34,16 @@ impl SearchMethod for Ialk {
         true
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, super::LossReason> {
-        let p = ctx.params;
+        let p = ctx.params();
         ctx.sample_at(img, &p);
         // Template gradient times the inverse of the warp's point Jacobian (normalised frame).
-        let m = ctx.ssm.matrix(&p).cast::<f32>();
-        for i in 0..ctx.len() {
-            let (x, y) = (ctx.grid_x[i], ctx.grid_y[i]);
+        let m = ctx.ssm().matrix(&p).cast::<f32>();
+        let (problem, _, work) = ctx.parts_mut();
+        let ((grid_x, grid_y), (template_gx, template_gy)) =
+            (problem.grid(), problem.template_gradient());
+        let (gx, gy) = work.gradients_mut();
+        for i in 0..problem.len() {
+            let (x, y) = (grid_x[i], grid_y[i]);
             let iw = 1.0 / (m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)]);
             let u = (m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)]) * iw;
             let v = (m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)]) * iw;
@@ -48,12 +52,12 @@ impl SearchMethod for Ialk {
             let a10 = (m[(1, 0)] - v * m[(2, 0)]) * iw;
             let a11 = (m[(1, 1)] - v * m[(2, 1)]) * iw;
             let det = a00 * a11 - a01 * a10;
-            let (tx, ty) = (ctx.template_gx[i], ctx.template_gy[i]);
+            let (tx, ty) = (template_gx[i], template_gy[i]);
             // (tx, ty) A^-1 with A^-1 = [[a11, -a01], [-a10, a00]] / det.
-            ctx.work.gx[i] = (tx * a11 - ty * a10) / det;
-            ctx.work.gy[i] = (-tx * a01 + ty * a00) / det;
+            gx[i] = (tx * a11 - ty * a10) / det;
+            gy[i] = (-tx * a01 + ty * a00) / det;
         }
-        ctx.project_gradients(Some(&p));
-        ctx.forward_step(Update::Additive).map(Step::auto)
+        newton::project_gradients(ctx, Some(&p));
+        newton::forward_step(ctx, Update::Additive).map(Step::auto)
     }
 }

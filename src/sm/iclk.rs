@@ -10,7 +10,7 @@
 //! in its place cut the iterations (30 -> 9.6 a frame) but also the frequency of convergence
 //! from far starts (docs/speed.md, "Eighth pass"), so it is not used.
 
-use super::{Context, LossReason, SearchMethod, SmDef, Step, Update};
+use super::{Context, LossReason, SearchMethod, SmDef, Step, Update, newton};
 use crate::am::{HessianKind, Wrt, jt_times};
 use crate::imaging::ImageView;
 use crate::linalg::MAX_DOF;
@@ -47,23 +47,23 @@ impl Iclk {
     /// The constant Hessian: at the template the current patch equals it. Allocation-free (it
     /// runs after every frame for the AMs that keep a model).
     fn template_hessian(&mut self, ctx: &mut Context) {
-        let kind = match ctx.hessian {
+        let (problem, _, work) = ctx.parts_mut();
+        let kind = match problem.hessian() {
             HessianKind::Newton => HessianKind::AfterConvergence,
             k => k,
         };
-        let template = std::mem::take(&mut ctx.template);
+        let dof = problem.dof();
         // The AM's contract: the Hessian follows a gradient on the same patch.
-        ctx.am
-            .gradient(Wrt::Template, &template, &mut ctx.work.grad);
-        ctx.am.hessian(
+        let (am, template) = problem.am_and_template_mut();
+        am.gradient(Wrt::Template, template, work.grad_mut());
+        am.hessian(
             Wrt::Template,
             kind,
-            &template,
+            template,
             &self.jac,
-            ctx.dof,
+            dof,
             &mut self.hessian,
         );
-        ctx.template = template;
     }
 }
 
@@ -81,14 +81,10 @@ impl SearchMethod for Iclk {
         true
     }
     fn initialize(&mut self, ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
-        self.jac.resize(ctx.len() * ctx.dof, 0.0);
-        Context::project(
-            &ctx.template_gx,
-            &ctx.template_gy,
-            &ctx.dwdp0,
-            ctx.dof,
-            &mut self.jac,
-        );
+        let problem = ctx.problem();
+        self.jac.resize(problem.len() * problem.dof(), 0.0);
+        let (tx, ty) = problem.template_gradient();
+        newton::project(tx, ty, problem.dwdp0().0, problem.dof(), &mut self.jac);
         self.template_hessian(ctx);
         Ok(())
     }
@@ -98,30 +94,30 @@ impl SearchMethod for Iclk {
         self.template_hessian(ctx);
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let p = ctx.params;
-        // Often sampled there already (the driver's checks between the pyramid levels).
+        let p = ctx.params();
+        // Often sampled there already (the plan's checks between the pyramid levels).
         ctx.patch_at(img, &p);
-        let f = ctx
-            .am
-            .gradient(Wrt::Template, &ctx.work.values, &mut ctx.work.grad);
-        if ctx.hessian == HessianKind::Newton {
-            ctx.am.hessian(
+        let f = ctx.am_gradient(Wrt::Template);
+        let (problem, _, work) = ctx.parts_mut();
+        let dof = problem.dof();
+        if problem.hessian() == HessianKind::Newton {
+            problem.am_mut().hessian(
                 Wrt::Template,
                 HessianKind::Newton,
-                &ctx.work.values,
+                work.values(),
                 &self.jac,
-                ctx.dof,
+                dof,
                 &mut self.hessian,
             );
         }
         // J^T g: from the moments of the gradient times the template's gradient on the grid
         // where the region has them (six or more parameters, SSD), else through the Jacobian.
         let mut g = [0.0; MAX_DOF];
-        match ctx.moments.as_mut() {
-            Some(m) => m.jtr(&ctx.template_gu, &ctx.template_gv, &ctx.work.grad, &mut g),
-            None => jt_times(&self.jac, &ctx.work.grad, ctx.dof, &mut g),
+        match problem.moments_and_unit_gradient() {
+            (Some(m), (tu, tv)) => m.jtr(tu, tv, work.grad(), &mut g),
+            (None, _) => jt_times(&self.jac, work.grad(), dof, &mut g),
         }
-        ctx.solve_step(&g, &self.hessian, Update::ComposeInverse)?;
+        newton::solve_step(ctx, &g, &self.hessian, Update::ComposeInverse)?;
         Ok(Step::auto(f))
     }
 }

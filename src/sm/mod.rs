@@ -2,26 +2,31 @@
 //!
 //! A search method combines the AM and the SSM by the chain rule,
 //! `df/dp = df/dI . dI/dx . dw/dp`, and updates the parameters. It implements one iteration
-//! ([`SearchMethod::iterate`], the interface in [`crate::registration`]); the driver
-//! ([`crate::registration::RegistrationTracker`]) owns the loop, the stop test, the pyramid, the
-//! loss-of-track checks and the observer. The shared state and buffers of one tracker are in
-//! [`Context`] (allocated once, when the tracker is initialised).
+//! ([`SearchMethod::iterate`], the interface in [`crate::registration`]) and owns its
+//! mathematics: the Newton steps of the gradient methods are in [`newton`]. The executor
+//! ([`crate::registration::Executor`]) owns the loop, the stop test and the observer; the plan
+//! ([`crate::plan`]) the pyramid, the SSM hierarchy, the polish and the loss checks. A method
+//! works on a [`Context`]: the problem, the state and the buffers of one tracker's level
+//! (allocated once, when the tracker is initialised).
 //!
 //! Each method is one file and one line in [`REGISTRY`].
 
 mod cascade;
 mod esm;
 mod falk;
-mod fclk;
+pub mod fclk;
 mod ialk;
 mod iclk;
+pub mod newton;
 mod nn;
 mod nnic;
 mod pf;
 
 pub use crate::observe::{MethodVisual, ResponseMap};
 use crate::params::ParamDef;
-pub use crate::registration::{Context, Control, SearchMethod, SmConfig, Step, Update, Workspace};
+pub use crate::registration::{
+    Context, Control, Problem, SearchMethod, SmConfig, State, Step, Update, Workspace,
+};
 use crate::registry::{self, Entry};
 pub use crate::status::LossReason;
 

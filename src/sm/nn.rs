@@ -355,23 +355,23 @@ impl SearchMethod for Nn {
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         let n = ctx.len();
-        self.scorer = if ctx.am.capabilities().distance {
+        self.scorer = if ctx.am().capabilities().distance {
             None
         } else {
             // A copy: the tracker's model with its parameters.
-            Some(ctx.am.clone_am())
+            Some(ctx.am().clone_am())
         };
         let s = self.samples;
         self.n = n;
         let mut rng = Rng::new(self.seed);
-        let identity = ctx.ssm.identity();
+        let identity = ctx.ssm().identity();
         self.inverse.clear();
         self.candidates_quads.clear();
         self.data.resize(s * n, 0.0);
         self.norms.resize(s, 0.0);
         self.dist.resize(s, 0.0);
         self.query.resize(n, 0.0);
-        let base = ctx.template_corners;
+        let base = *ctx.problem().template_corners();
         for k in 0..s {
             // Sample 0 is the identity; a warp the SSM cannot fit or invert is drawn again.
             let (q, inv) = if k == 0 {
@@ -381,8 +381,8 @@ impl SearchMethod for Nn {
                 loop {
                     tries += 1;
                     let sigma = self.sigma / 4f64.powi((k % self.scales.max(1)) as i32);
-                    let q = random_warp(&*ctx.ssm, &base, sigma, &mut rng);
-                    if let Some((q, inv)) = q.and_then(|q| ctx.ssm.invert(&q).map(|i| (q, i))) {
+                    let q = random_warp(ctx.ssm(), &base, sigma, &mut rng);
+                    if let Some((q, inv)) = q.and_then(|q| ctx.ssm().invert(&q).map(|i| (q, i))) {
                         break (q, inv);
                     }
                     if tries > 100 {
@@ -393,14 +393,14 @@ impl SearchMethod for Nn {
             ctx.sample_at(img, &q);
             let row = &mut self.data[k * n..(k + 1) * n];
             if self.scorer.is_some() {
-                row.copy_from_slice(&ctx.work.values);
+                row.copy_from_slice(ctx.values());
             } else {
-                ctx.am.embed(&ctx.work.values, row);
+                ctx.am().embed(ctx.values(), row);
             }
             self.norms[k] = dot(row, row) as f32;
             self.inverse.push(inv);
             self.candidates_quads
-                .push(crate::ssm::warp_quad(&*ctx.ssm, &inv, &base));
+                .push(crate::ssm::warp_quad(ctx.ssm(), &inv, &base));
         }
         if !self.exact {
             let d = self.dims;
@@ -443,12 +443,12 @@ impl SearchMethod for Nn {
         Ok(())
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let p = ctx.params;
+        let p = ctx.params();
         let f = ctx.similarity_at(img, &p);
         if self.scorer.is_some() {
-            self.query.copy_from_slice(&ctx.work.values);
+            self.query.copy_from_slice(ctx.values());
         } else {
-            ctx.am.embed(&ctx.work.values, &mut self.query);
+            ctx.am().embed(ctx.values(), &mut self.query);
         }
         let k = self.nearest();
         self.chosen = k;

@@ -188,7 +188,7 @@ impl Scorer {
         let res = (ctx.len() as f64).sqrt().round() as usize;
         let square = res * res == ctx.len();
         let stride = match stride {
-            0 if ctx.am.pixelwise() => 2,
+            0 if ctx.am().pixelwise() => 2,
             0 => 1,
             s => s,
         };
@@ -208,12 +208,13 @@ impl Scorer {
                 .collect()
         };
         let pick = |v: &[f32]| index.iter().map(|&i| v[i]).collect::<Vec<f32>>();
-        let mut am = ctx.am.clone_am();
-        am.set_template(&pick(&ctx.template));
+        let mut am = ctx.am().clone_am();
+        am.set_template(&pick(ctx.problem().template()));
         let n = index.len();
+        let (grid_x, grid_y) = ctx.problem().grid();
         Scorer {
-            grid_x: pick(&ctx.grid_x),
-            grid_y: pick(&ctx.grid_y),
+            grid_x: pick(grid_x),
+            grid_y: pick(grid_y),
             index,
             am,
             px: vec![0.0; n],
@@ -253,13 +254,13 @@ impl SearchMethod for Pf {
     fn initialize(&mut self, ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         self.rng = Rng::new(self.seed);
         self.states.clear();
-        self.states.resize(self.particles, ctx.params);
+        self.states.resize(self.particles, ctx.params());
         self.sims.resize(self.particles, 0.0);
         self.corners.resize(self.particles, Quad::unit_square());
         self.weights
             .resize(self.particles, 1.0 / self.particles as f64);
         self.next.reserve(self.particles);
-        self.last = Some(ctx.params);
+        self.last = Some(ctx.params());
         let threads = threads_for(self.threads).clamp(1, self.particles);
         let scorer = || Scorer::new(ctx, self.stride, self.particles.div_ceil(threads));
         match self.crew.as_mut() {
@@ -270,22 +271,22 @@ impl SearchMethod for Pf {
         Ok(())
     }
     fn model_updated(&mut self, ctx: &mut Context) {
-        // The driver sampled the patch its model learnt into `work.values`.
+        // The executor sampled the patch its model learnt into the workspace's values.
         if let Some(crew) = self.crew.as_mut()
-            && ctx.am.updates_model()
+            && ctx.am().updates_model()
         {
-            crew.states()
-                .for_each(|mut s| s.update_model(&ctx.work.values));
+            crew.states().for_each(|mut s| s.update_model(ctx.values()));
         }
     }
     fn start_frame(&mut self, ctx: &mut Context) {
         self.round = 0;
-        if self.last != Some(ctx.params) {
-            self.states.iter_mut().for_each(|s| *s = ctx.params);
+        let p = ctx.params();
+        if self.last != Some(p) {
+            self.states.iter_mut().for_each(|s| *s = p);
         }
     }
     fn iterate(&mut self, ctx: &mut Context, img: &ImageView) -> Result<Step, LossReason> {
-        let base = ctx.template_corners;
+        let base = *ctx.problem().template_corners();
         let sigma = self.sigma * self.anneal.powi(self.round as i32);
         self.round += 1;
         // Motion model and measurement, member k of the crew moving and weighing the k-th
@@ -293,7 +294,7 @@ impl SearchMethod for Pf {
         // from the tracker's generator and i: the same numbers whichever thread draws them.
         let round_seed = self.rng.next_u64();
         let crew = self.crew.as_mut().ok_or(LossReason::Singular)?;
-        let (states, members, shared) = (&self.states, crew.len(), &*ctx);
+        let (states, members, shared) = (&self.states, crew.len(), ctx.problem());
         crew.run(&|scorer: &mut Scorer, k| {
             let mine = share(states.len(), members, k);
             scorer.out.clear();
@@ -301,15 +302,15 @@ impl SearchMethod for Pf {
             scorer.corners.clear();
             for i in mine {
                 let mut rng = Rng::new(round_seed.wrapping_add(i as u64));
-                let moved = random_warp(&*shared.ssm, &base, sigma, &mut rng)
-                    .and_then(|q| shared.ssm.compose(&states[i], &q))
+                let moved = random_warp(shared.ssm(), &base, sigma, &mut rng)
+                    .and_then(|q| shared.ssm().compose(&states[i], &q))
                     .filter(|s| s.iter().all(|v| v.is_finite()))
                     .unwrap_or(states[i]);
                 let f = scorer.similarity(img, &shared.pixel_matrix(&moved));
                 scorer.moved.push(moved);
                 scorer
                     .corners
-                    .push(crate::ssm::warp_quad(&*shared.ssm, &moved, &base));
+                    .push(crate::ssm::warp_quad(shared.ssm(), &moved, &base));
                 scorer.out.push(f);
             }
         });
@@ -353,14 +354,14 @@ impl SearchMethod for Pf {
             }
         }
         let estimate = ctx
-            .ssm
+            .ssm()
             .fit(&base.0, &Quad(mean).0)
             .filter(|p| p.iter().all(|v| v.is_finite()))
             .ok_or(LossReason::Singular)?;
         // `corners` and `weights` stay those of the particles before resampling (the teaching
         // view).
         self.resample();
-        ctx.params = estimate;
+        ctx.set_params(estimate);
         self.last = Some(estimate);
         let f = ctx.similarity_at(img, &estimate);
         Ok(if self.round >= self.rounds {
@@ -373,7 +374,7 @@ impl SearchMethod for Pf {
         // Where the particles of the last round were (their corners, kept in the order of the
         // weights) and what they weighed.
         let wmax = self.weights.iter().copied().fold(0.0, f64::max).max(1e-300);
-        let m = ctx.pixel_matrix(&ctx.ssm.identity());
+        let m = ctx.pixel_matrix(&ctx.ssm().identity());
         self.vis_quads.clear();
         self.vis_weights.clear();
         for (q, &w) in self.corners.iter().zip(&self.weights) {
@@ -431,9 +432,9 @@ mod tests {
             ctx.set_region(&q, 50, GridLayout::Centres).unwrap();
             ctx.sample_template(&img);
             let auto = Scorer::new(&ctx, 0, 10);
-            let expected = if ctx.am.pixelwise() { 625 } else { 2500 };
+            let expected = if ctx.am().pixelwise() { 625 } else { 2500 };
             assert_eq!(auto.index.len(), expected, "{am}");
-            let mut p = ctx.ssm.identity();
+            let mut p = ctx.ssm().identity();
             p[0] += 0.02;
             p[7] -= 0.01;
             let m = ctx.pixel_matrix(&p);
@@ -449,13 +450,14 @@ mod tests {
             let f = half.similarity(&img, &m);
             assert_eq!(half.index.len(), 625);
             let pick = |v: &[f32]| half.index.iter().map(|&i| v[i]).collect::<Vec<f32>>();
+            let (px, py) = ctx.work().points();
             for (k, &i) in half.index.iter().enumerate() {
-                assert!((half.px[k] - ctx.work.px[i]).abs() < 1e-4);
-                assert!((half.py[k] - ctx.work.py[i]).abs() < 1e-4);
+                assert!((half.px[k] - px[i]).abs() < 1e-4);
+                assert!((half.py[k] - py[i]).abs() < 1e-4);
             }
             let mut model = crate::am::build(am).unwrap();
-            model.set_template(&pick(&ctx.template));
-            let reference = model.similarity(&pick(&ctx.work.values));
+            model.set_template(&pick(ctx.problem().template()));
+            let reference = model.similarity(&pick(ctx.values()));
             assert!(
                 (f - reference).abs() <= 1e-9 * reference.abs().max(1.0),
                 "{am}: {f} {reference}"

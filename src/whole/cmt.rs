@@ -333,7 +333,7 @@ impl WholeTracker for Cmt {
         // The target seen smaller and larger (its region resampled): descriptors are not
         // scale-invariant, so these views let matching find the target again after a zoom.
         // They are extra model points whose offsets are in the initial frame's pixels.
-        let (x0, y0, x1, y1) = quad.bbox();
+        let crate::geometry::Rect { x0, y0, x1, y1 } = quad.bbox();
         let (bw, bh) = (x1 - x0 + 2.0 * MARGIN, y1 - y0 + 2.0 * MARGIN);
         let (bx, by) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
         let mut buf = Vec::new();

@@ -56,15 +56,15 @@ fn bench(c: &mut Criterion) {
             t.initialize(FrameInput::Smoothed(&smoothed), &truth)
                 .expect("init");
             t.set_corners(&start2).expect("corners");
-            let other = t.context().params;
+            let other = t.context().params();
             t.set_corners(&start).expect("corners");
             let (mut ctx, mut method) = t.into_parts();
-            let starts = [ctx.params, other];
+            let starts = [ctx.params(), other];
             let mut turn = 0;
             g.bench_function(format!("{sm}_{am}_{ssm}"), |b| {
                 b.iter(|| {
                     turn ^= 1;
-                    ctx.params = starts[turn];
+                    ctx.set_params(starts[turn]);
                     method.start_frame(&mut ctx);
                     black_box(method.iterate(&mut ctx, black_box(&view)).expect("step"))
                 })
@@ -79,55 +79,47 @@ fn bench(c: &mut Criterion) {
     t.initialize(FrameInput::Smoothed(&smoothed), &truth)
         .expect("init");
     let mut ctx = t.into_context();
-    let p = ctx.params;
+    let p = ctx.params();
     let mut g = c.benchmark_group("stage");
     g.bench_function("warp_grid", |b| b.iter(|| ctx.warp_grid(black_box(&p))));
     g.bench_function("sample values", |b| {
-        b.iter(|| ctx.sample(black_box(&view), false))
+        b.iter(|| ctx.work_mut().sample(black_box(&view), false))
     });
     g.bench_function("sample values+gradients", |b| {
-        b.iter(|| ctx.sample(black_box(&view), true))
+        b.iter(|| ctx.work_mut().sample(black_box(&view), true))
     });
     g.bench_function("warped_gradient", |b| {
         b.iter(|| {
-            ctx.sample(&view, true);
+            ctx.work_mut().sample(&view, true);
             ctx.warped_gradient(black_box(&p))
         })
     });
     // Fresh, finite gradients for the next stages (the loop above applied them once more).
-    ctx.sample(&view, true);
+    ctx.work_mut().sample(&view, true);
     ctx.warped_gradient(&p);
     let mut jac = vec![0f32; ctx.len() * 8];
+    let (gx, gy) = ctx.work().gradients();
     g.bench_function("project", |b| {
         b.iter(|| {
-            regtrack::sm::Context::project(
-                &ctx.work.gx,
-                &ctx.work.gy,
-                &ctx.dwdp0,
-                8,
-                black_box(&mut jac),
-            )
+            regtrack::sm::newton::project(gx, gy, ctx.problem().dwdp0().0, 8, black_box(&mut jac))
         })
     });
     // The compositional methods' projection: the homography's closed form at the identity.
     g.bench_function("project, closed form", |b| {
         b.iter(|| {
-            ctx.ssm.project_at_identity(
-                &ctx.work.gx,
-                &ctx.work.gy,
-                &ctx.grid_x,
-                &ctx.grid_y,
-                black_box(&mut jac),
-            )
+            let (grid_x, grid_y) = ctx.problem().grid();
+            ctx.ssm()
+                .project_at_identity(gx, gy, grid_x, grid_y, black_box(&mut jac))
         })
     });
     let mut h = [0.0; 64];
+    let values = ctx.values().to_vec();
     g.bench_function("J^T J", |b| {
         b.iter(|| {
-            ctx.am.hessian(
+            ctx.problem_mut().am_mut().hessian(
                 regtrack::am::Wrt::Current,
                 regtrack::am::HessianKind::GaussNewton,
-                &ctx.work.values,
+                &values,
                 black_box(&jac),
                 8,
                 &mut h,
@@ -143,14 +135,15 @@ fn bench(c: &mut Criterion) {
         .expect("init");
     t.set_corners(&start).expect("corners");
     let mut mi = t.into_context();
-    let q = mi.params;
+    let q = mi.params();
     mi.sample_at(&view, &q);
+    let mi_values = mi.values().to_vec();
     g.bench_function("MI Newton Hessian", |b| {
         b.iter(|| {
-            mi.am.hessian(
+            mi.problem_mut().am_mut().hessian(
                 regtrack::am::Wrt::Current,
                 regtrack::am::HessianKind::Newton,
-                &mi.work.values,
+                &mi_values,
                 black_box(&jac),
                 8,
                 &mut h,
@@ -159,19 +152,16 @@ fn bench(c: &mut Criterion) {
     });
     let mut jg = [0.0; 8];
     g.bench_function("J^T g", |b| {
-        b.iter(|| regtrack::am::jt_times(black_box(&jac), &ctx.work.grad, 8, &mut jg))
+        b.iter(|| regtrack::am::jt_times(black_box(&jac), ctx.work().grad(), 8, &mut jg))
     });
     // What the forward SSD methods run instead of the projection, `J^T J` and `J^T g`: the
     // Newton system from the gradient's moments on the grid.
     {
-        let (ga, gb, grad) = (
-            ctx.work.gx.clone(),
-            ctx.work.gy.clone(),
-            ctx.work.grad.clone(),
-        );
+        let (ga, gb) = ctx.work().gradients();
+        let (ga, gb, grad) = (ga.to_vec(), gb.to_vec(), ctx.work().grad().to_vec());
         let moments = ctx
-            .moments
-            .as_mut()
+            .problem_mut()
+            .moments_mut()
             .expect("SSD on the homography has the moments");
         g.bench_function("J^T J and J^T g from the moments", |b| {
             b.iter(|| moments.minus_jtj_and_jtr(black_box(&ga), &gb, &grad, &mut h, &mut jg))
@@ -188,7 +178,12 @@ fn bench(c: &mut Criterion) {
 
     let mut pre = Preprocessor::new(gaussian_kernel(5, 3.0));
     c.bench_function("preprocess 150x150 region (5x5 Gaussian)", |b| {
-        b.iter(|| pre.process(black_box(&img), 225.0, 125.0, 375.0, 275.0))
+        b.iter(|| {
+            pre.process(
+                black_box(&img),
+                regtrack::geometry::Rect::new(225.0, 125.0, 375.0, 275.0),
+            )
+        })
     });
     // The coarse pyramid levels the gradient methods search first (two by default).
     c.bench_function("pyramid levels 1-2 of a 150x150 region", |b| {

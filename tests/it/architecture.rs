@@ -29,6 +29,7 @@ const LAYERS: &[&str] = &[
     "visual_tracker",
     "registration",
     "sm",
+    "plan",
     "whole",
     "tracker",
     "catalogue",

@@ -685,7 +685,7 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     assert!(r.iterations.len() > 1, "{} iterations", r.iterations.len());
     // Each pyramid level samples its own grid (half the finer level's per side).
     for it in &r.iterations {
-        let side = regtrack::registration::level_res(r.res, it.level);
+        let side = regtrack::plan::level_res(r.res, it.level);
         assert_eq!(it.patch.len(), side * side, "level {}", it.level);
     }
     assert!(r.iterations.iter().any(|it| it.level > 0));
@@ -713,7 +713,7 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     h.state_mut().send(Command::SelectIteration(Some(0)));
     h.run_steps(3);
     let level = r.iterations[0].level;
-    let side = regtrack::registration::level_res(r.res, level);
+    let side = regtrack::plan::level_res(r.res, level);
     let label = format!("iteration 1: pyramid level {level}, {side}x{side}");
     assert!(h.query_by_label(&label).is_some(), "{label}");
 }

@@ -1,0 +1,291 @@
+//! The problem one registration tracker solves at one level, `argmax_p f(I*, I_t(w(x, p)))`:
+//! the models (the SSM's warp `w`, the AM's similarity `f`), the sampling grid `x` and the
+//! template `I*`. It is set up when the tracker is initialised ([`Problem::set_region`], then
+//! [`super::Context::sample_template`]) and only read while frames are searched, but for the
+//! AM's own scratch and the light model it may learn ([`Problem::am_mut`]) and the grid
+//! moments' sums ([`Problem::moments_mut`]).
+
+use super::Workspace;
+use super::moments::GridMoments;
+use crate::am::{Am, HessianKind};
+use crate::geometry::{Normaliser, Point, Quad, apply_homography};
+use crate::linalg::MAX_DOF;
+use crate::spec::GridLayout;
+use crate::ssm::{Params, Ssm};
+use nalgebra::Matrix3;
+
+/// See the module's documentation.
+#[derive(Debug)]
+pub struct Problem {
+    ssm: Box<dyn Ssm>,
+    am: Box<dyn Am>,
+    /// The Hessian kind to use (resolved: never [`HessianKind::Default`]).
+    hessian: HessianKind,
+    dof: usize,
+    /// Image <-> normalised frame.
+    norm: Normaliser,
+    /// The sampling grid, in normalised coordinates (see [`GridLayout`]).
+    grid_x: Vec<f32>,
+    grid_y: Vec<f32>,
+    /// The grid in the unit square's coordinates, where it is regular, and the homography `G`
+    /// from them to the normalised ones (`grid = G(grid_u, grid_v)`).
+    grid_u: Vec<f32>,
+    grid_v: Vec<f32>,
+    unit: Matrix3<f64>,
+    /// The initial quad in normalised coordinates.
+    template_corners: Quad,
+    /// Template intensities `I*` and their gradient in normalised coordinates.
+    template: Vec<f32>,
+    template_gx: Vec<f32>,
+    template_gy: Vec<f32>,
+    /// The template's gradient with respect to the unit square's coordinates (kept only with
+    /// the moments).
+    template_gu: Vec<f32>,
+    template_gv: Vec<f32>,
+    /// `dw/dp` at the identity on the grid (layout of [`Ssm::jacobian`]).
+    dwdp0: Vec<f32>,
+    /// Which rows of `dwdp0` (`2 k` for `dw_x/dp_k`, `2 k + 1` for `dw_y/dp_k`) are zero on the
+    /// whole grid (half of them for the affine and projective warps): projections skip them.
+    dwdp0_zero: [bool; 2 * MAX_DOF],
+    /// The forward steps' Newton system from the gradient's moments, for the AMs whose Hessian
+    /// is `-J^T J` or made from `J^T J` on the SSMs of six or more parameters
+    /// ([`super::moments`]).
+    moments: Option<GridMoments>,
+}
+
+impl Problem {
+    /// The problem of the given models on an `res x res` grid (buffers allocated here).
+    pub fn new(ssm: Box<dyn Ssm>, am: Box<dyn Am>, hessian: HessianKind, res: usize) -> Self {
+        let dof = ssm.dof();
+        let hessian = hessian.or(am.default_hessian());
+        let n = res * res;
+        let z = |len: usize| vec![0.0f32; len];
+        Problem {
+            ssm,
+            am,
+            hessian,
+            dof,
+            norm: Normaliser {
+                cx: 0.0,
+                cy: 0.0,
+                scale: 1.0,
+            },
+            grid_x: z(n),
+            grid_y: z(n),
+            grid_u: z(n),
+            grid_v: z(n),
+            unit: Matrix3::identity(),
+            template_corners: Quad::unit_square(),
+            template: z(n),
+            template_gx: z(n),
+            template_gy: z(n),
+            template_gu: Vec::new(),
+            template_gv: Vec::new(),
+            dwdp0: z(2 * n * dof),
+            dwdp0_zero: [false; 2 * MAX_DOF],
+            moments: None,
+        }
+    }
+
+    /// Sets up the grid and the normaliser for the initial quad `q` (image coordinates); returns
+    /// the SSM's identity, where the template is.
+    pub fn set_region(
+        &mut self,
+        q: &Quad,
+        res: usize,
+        layout: GridLayout,
+    ) -> crate::Result<Params> {
+        q.validate()?;
+        self.norm = Normaliser::of_quad(q);
+        let nq = q.map(|p| self.norm.to_norm(p));
+        let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
+            .ok_or_else(|| crate::Error::InvalidRegion(format!("{q} has no homography")))?;
+        // Centres: -0.5 + (k + 1/2) / res; border: -0.5 + k / (res - 1), corners included.
+        let (step, offset) = match layout {
+            GridLayout::Border if res > 1 => (1.0 / (res - 1) as f64, 0.0),
+            _ => (1.0 / res as f64, 0.5),
+        };
+        for r in 0..res {
+            for c in 0..res {
+                let u = Point::new(
+                    -0.5 + (c as f64 + offset) * step,
+                    -0.5 + (r as f64 + offset) * step,
+                );
+                let p = apply_homography(&h, u);
+                self.grid_x[r * res + c] = p.x as f32;
+                self.grid_y[r * res + c] = p.y as f32;
+                self.grid_u[r * res + c] = u.x as f32;
+                self.grid_v[r * res + c] = u.y as f32;
+            }
+        }
+        self.unit = h;
+        self.template_corners = nq;
+        let identity = self.ssm.identity();
+        self.ssm
+            .jacobian(&identity, &self.grid_x, &self.grid_y, &mut self.dwdp0);
+        let n = self.grid_x.len();
+        for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
+            *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
+        }
+        self.moments = if self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj() {
+            GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
+        } else {
+            None
+        };
+        let kept = if self.moments.is_some() { n } else { 0 };
+        self.template_gu.resize(kept, 0.0);
+        self.template_gv.resize(kept, 0.0);
+        Ok(identity)
+    }
+
+    /// Keeps `values` as the template, with its gradient in normalised coordinates `(gx, gy)`,
+    /// and gives it to the AM. The gradient in the unit square's coordinates is set apart
+    /// ([`Problem::set_template_unit_gradient`]).
+    pub(super) fn set_template(&mut self, values: &[f32], (gx, gy): (&[f32], &[f32])) {
+        self.template.copy_from_slice(values);
+        self.template_gx.copy_from_slice(gx);
+        self.template_gy.copy_from_slice(gy);
+        self.am.set_template(&self.template);
+    }
+
+    /// Keeps the gradient the workspace sampled as the template's in the unit square's
+    /// coordinates (`m`: those coordinates to pixels); only with the moments.
+    pub(super) fn set_template_unit_gradient(&mut self, m: &Matrix3<f32>, work: &Workspace) {
+        work.chain_gradients_into(
+            m,
+            (&self.grid_u, &self.grid_v),
+            (&mut self.template_gu, &mut self.template_gv),
+        );
+    }
+
+    /// The template's gradients in both coordinates, set by a test (the normalised ones and the
+    /// unit square's).
+    #[cfg(test)]
+    pub(crate) fn template_gradients_mut(&mut self) -> [&mut [f32]; 4] {
+        [
+            &mut self.template_gx,
+            &mut self.template_gy,
+            &mut self.template_gu,
+            &mut self.template_gv,
+        ]
+    }
+
+    pub fn ssm(&self) -> &dyn Ssm {
+        &*self.ssm
+    }
+    pub fn am(&self) -> &dyn Am {
+        &*self.am
+    }
+    /// The AM, for what changes in it: its scratch, and the model it learns
+    /// ([`Am::update_model`]).
+    pub fn am_mut(&mut self) -> &mut dyn Am {
+        &mut *self.am
+    }
+    /// The Hessian kind of the Newton steps (resolved: never [`HessianKind::Default`]).
+    pub fn hessian(&self) -> HessianKind {
+        self.hessian
+    }
+    /// The SSM's parameters.
+    pub fn dof(&self) -> usize {
+        self.dof
+    }
+    /// Number of sampled points.
+    pub fn len(&self) -> usize {
+        self.grid_x.len()
+    }
+    /// Whether the grid is empty.
+    pub fn is_empty(&self) -> bool {
+        self.grid_x.is_empty()
+    }
+    /// Image <-> normalised frame.
+    pub fn norm(&self) -> &Normaliser {
+        &self.norm
+    }
+    /// The sampling grid, in normalised coordinates.
+    pub fn grid(&self) -> (&[f32], &[f32]) {
+        (&self.grid_x, &self.grid_y)
+    }
+    /// The grid in the unit square's coordinates.
+    pub fn unit_grid(&self) -> (&[f32], &[f32]) {
+        (&self.grid_u, &self.grid_v)
+    }
+    /// The homography from the unit square's coordinates to the normalised ones.
+    pub fn unit(&self) -> &Matrix3<f64> {
+        &self.unit
+    }
+    /// The initial quad in normalised coordinates.
+    pub fn template_corners(&self) -> &Quad {
+        &self.template_corners
+    }
+    /// The template's intensities.
+    pub fn template(&self) -> &[f32] {
+        &self.template
+    }
+    /// The template's gradient in normalised coordinates.
+    pub fn template_gradient(&self) -> (&[f32], &[f32]) {
+        (&self.template_gx, &self.template_gy)
+    }
+    /// The template's gradient in the unit square's coordinates (empty without the moments).
+    pub fn template_unit_gradient(&self) -> (&[f32], &[f32]) {
+        (&self.template_gu, &self.template_gv)
+    }
+    /// `dw/dp` at the identity on the grid, and which of its rows are zero on the whole grid.
+    pub fn dwdp0(&self) -> (&[f32], &[bool; 2 * MAX_DOF]) {
+        (&self.dwdp0, &self.dwdp0_zero)
+    }
+    /// The grid moments, where the region has them.
+    pub fn moments(&self) -> Option<&GridMoments> {
+        self.moments.as_ref()
+    }
+    /// The grid moments, for their sums.
+    pub fn moments_mut(&mut self) -> Option<&mut GridMoments> {
+        self.moments.as_mut()
+    }
+    /// The AM and the template, at once (for the AM's derivatives at the template).
+    pub fn am_and_template_mut(&mut self) -> (&mut dyn Am, &[f32]) {
+        (&mut *self.am, &self.template)
+    }
+    /// The AM and the grid moments, at once.
+    pub fn am_and_moments_mut(&mut self) -> (&mut dyn Am, Option<&mut GridMoments>) {
+        (&mut *self.am, self.moments.as_mut())
+    }
+    /// The moments and what their sums read, at once.
+    pub fn moments_and_unit_gradient(&mut self) -> (Option<&mut GridMoments>, (&[f32], &[f32])) {
+        (
+            self.moments.as_mut(),
+            (&self.template_gu, &self.template_gv),
+        )
+    }
+
+    /// The matrix taking normalised template points to frame pixels under `p`.
+    pub fn pixel_matrix(&self, p: &Params) -> Matrix3<f64> {
+        self.norm.to_image_matrix() * self.ssm.matrix(p)
+    }
+
+    /// The corners under `p`, in frame pixels.
+    pub fn corners(&self, p: &Params) -> Quad {
+        let m = self.pixel_matrix(p);
+        self.template_corners.map(|c| apply_homography(&m, c))
+    }
+
+    /// The corners under `p`, in the normalised frame.
+    pub fn normalised_corners(&self, p: &Params) -> Quad {
+        let m = self.ssm.matrix(p);
+        self.template_corners.map(|c| apply_homography(&m, c))
+    }
+
+    /// The SSM's parameters whose corners best fit `q` (frame pixels), `None` if it cannot.
+    pub fn fit(&self, q: &Quad) -> Option<Params> {
+        self.fit_normalised(&q.map(|p| self.norm.to_norm(p)))
+    }
+
+    /// The SSM's parameters whose corners best fit `q` (normalised frame).
+    pub fn fit_normalised(&self, q: &Quad) -> Option<Params> {
+        self.ssm.fit(&self.template_corners.0, &q.0)
+    }
+
+    /// `dw/dp` at `p` on the grid, into `out` (layout of [`Ssm::jacobian`]).
+    pub fn jacobian(&self, p: &Params, out: &mut [f32]) {
+        self.ssm.jacobian(p, &self.grid_x, &self.grid_y, out);
+    }
+}

@@ -1,0 +1,274 @@
+//! Where a registration tracker reads a frame: [`FrameSource`] pre-processes the region around
+//! the target (conversion to float, Gaussian smoothing, the pyramid's levels) into buffers it
+//! keeps between frames, and hands out views of it. It is the one place that knows the cases of
+//! [`FrameInput`] (an 8-bit frame, a float one, someone else's buffer, a frame already
+//! smoothed).
+//!
+//! A search whose patches are all at the parameters it reports ([`crate::registration::SearchMethod::local`])
+//! may read the region smoothed only where its patches so far read ([`Reader::Part`]):
+//! [`Reader::cover`] smooths the rest before a patch reads beyond (the region's whole smoothing
+//! was a seventh of a frame's work for a target that stays within a few pixels of where it
+//! started). The values read are the same bits either way: a pixel's smoothed value depends
+//! only on the image around it.
+
+use crate::geometry::{Quad, Rect};
+use crate::imaging::{GaussianKernel, ImageRef, ImageView, Preprocessor, gaussian_kernel};
+use crate::imaging::{GrayF32, new_stamp};
+use crate::visual_tracker::FrameInput;
+
+/// Pixels around a patch's corners its sampling reads: the 4 x 4 neighbourhood of a point
+/// (one before, two after) and a pixel for rounding.
+const READ_PX: f64 = 4.0;
+
+/// The pixels the patch whose corners are `q` reads, grown by `more`: the bounding box of a
+/// convex quad (which holds its grid's points); everything for any other.
+pub fn reads(q: &Quad, more: f64) -> Rect {
+    if !(q.is_finite() && q.is_convex()) {
+        return Rect::EVERYTHING;
+    }
+    q.bbox().grown(READ_PX + more)
+}
+
+/// The region to pre-process around `q`: its bounding box grown by `margin` times its larger
+/// side and 8 px.
+pub fn region_around(q: &Quad, margin: f64) -> Rect {
+    let b = q.bbox();
+    b.grown(margin * b.width().max(b.height()) + 8.0)
+}
+
+/// A frame as the pre-processor reads it.
+#[derive(Clone, Copy)]
+enum Raw<'a> {
+    U8(ImageRef<'a, u8>),
+    F32(ImageRef<'a, f32>),
+    /// Already smoothed by the caller: read as it is.
+    Smoothed(&'a GrayF32),
+}
+
+impl<'a> Raw<'a> {
+    fn of(input: FrameInput<'a>) -> Self {
+        match input {
+            FrameInput::Gray8(img) => Raw::U8(img.into()),
+            FrameInput::View8(img) => Raw::U8(img),
+            FrameInput::Gray32(img) => Raw::F32(img.into()),
+            FrameInput::Smoothed(img) => Raw::Smoothed(img),
+        }
+    }
+}
+
+/// See the module's documentation.
+#[derive(Clone, Debug)]
+pub struct FrameSource {
+    /// The finest level's region, smoothed by the tracker's kernel, and its coarser levels.
+    pre: Preprocessor,
+    /// The coarser levels of a frame the caller smoothed.
+    copy: Preprocessor,
+    /// The coarse pyramid levels made of each region.
+    levels: usize,
+    /// The stamp of the views of a frame the caller smoothed ([`ImageView::stamp`]).
+    stamp: u64,
+}
+
+impl FrameSource {
+    /// A source that smooths with `kernel` and makes `levels` coarser levels of each region.
+    pub fn new(kernel: GaussianKernel, levels: usize) -> Self {
+        FrameSource {
+            pre: Preprocessor::new(kernel),
+            copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
+            levels,
+            stamp: 0,
+        }
+    }
+
+    /// The smoothing kernel of the finest level.
+    pub fn kernel(&self) -> &GaussianKernel {
+        self.pre.kernel()
+    }
+
+    /// Pre-processes `region` of `input` (and its pyramid levels).
+    pub fn prepare(&mut self, input: FrameInput<'_>, region: Rect) {
+        self.prepare_part(input, region, region);
+    }
+
+    /// [`FrameSource::prepare`], smoothing the finest level only within `part` of the region
+    /// (see [`Reader::Part`]; the pyramid's levels need the whole region).
+    pub fn prepare_part(&mut self, input: FrameInput<'_>, region: Rect, part: Rect) {
+        // Another frame or region: views of it are new content.
+        self.stamp = new_stamp();
+        let pre = match Raw::of(input) {
+            Raw::U8(img) => {
+                self.pre.process_part(img, region, part);
+                &mut self.pre
+            }
+            Raw::F32(img) => {
+                self.pre.process_part(img, region, part);
+                &mut self.pre
+            }
+            Raw::Smoothed(img) => {
+                if self.levels == 0 {
+                    return;
+                }
+                self.copy.process(img, region);
+                &mut self.copy
+            }
+        };
+        pre.build_levels(self.levels);
+    }
+
+    /// The region last pre-processed, in whole pixels.
+    pub fn region(&self) -> Rect {
+        self.pre.region()
+    }
+
+    /// Whether the region last pre-processed is smoothed whole (not only in part).
+    pub fn is_whole(&self) -> bool {
+        self.pre.is_whole()
+    }
+
+    /// Pyramid level `level` (0: the finest) of the frame last prepared from `input`.
+    pub fn view<'a>(&'a self, input: FrameInput<'a>, level: usize) -> ImageView<'a> {
+        match input {
+            FrameInput::Smoothed(img) if level == 0 => img.view().with_stamp(self.stamp),
+            FrameInput::Smoothed(_) => self.copy.level_view(level),
+            _ => self.pre.level_view(level),
+        }
+    }
+
+    /// The finest level of the frame last prepared from `input`, to be read by a search:
+    /// smoothed only in part when `part` (as [`FrameSource::prepare_part`] left it).
+    pub fn reader<'a>(&'a mut self, input: FrameInput<'a>, part: bool) -> Reader<'a> {
+        if part && !matches!(input, FrameInput::Smoothed(_)) {
+            Reader::Part {
+                pre: &mut self.pre,
+                input,
+            }
+        } else {
+            Reader::Whole(self.view(input, 0))
+        }
+    }
+
+    /// Makes sure that the patch with corners `q` reads pre-processed pixels of `input`: the
+    /// region is made again around `q` (grown by `margin`, see [`region_around`]) when `q` is
+    /// not inside it, completed when it was smoothed only in part.
+    pub fn hold(&mut self, input: FrameInput<'_>, q: &Quad, margin: f64) {
+        let smoothed = matches!(input, FrameInput::Smoothed(_));
+        if !self.region().contains(&q.bbox()) && !smoothed {
+            self.prepare(input, region_around(q, margin));
+        } else if !self.pre.holds(&reads(q, 0.0)) {
+            // A region smoothed in part, by another search than the one whose end is kept.
+            complete(&mut self.pre, input);
+        }
+    }
+
+    /// Whether a frame may be read in parts: raw input (a frame the caller smoothed is read
+    /// whole).
+    pub fn can_part(input: FrameInput<'_>) -> bool {
+        !matches!(input, FrameInput::Smoothed(_))
+    }
+}
+
+/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part.
+fn complete(pre: &mut Preprocessor, input: FrameInput<'_>) {
+    match Raw::of(input) {
+        Raw::U8(img) => pre.complete(img),
+        Raw::F32(img) => pre.complete(img),
+        Raw::Smoothed(_) => {}
+    }
+}
+
+/// The finest level a search reads. Either a view that holds every pixel it may read (the
+/// pre-processed region, a pre-smoothed frame, a pyramid level) or the region smoothed only
+/// where the patches so far read (see the module's documentation).
+pub enum Reader<'a> {
+    Whole(ImageView<'a>),
+    Part {
+        pre: &'a mut Preprocessor,
+        input: FrameInput<'a>,
+    },
+}
+
+impl Reader<'_> {
+    /// The view to sample.
+    pub fn view(&self) -> ImageView<'_> {
+        match self {
+            Reader::Whole(v) => *v,
+            Reader::Part { pre, .. } => pre.view(),
+        }
+    }
+
+    /// Makes sure that the patch with corners `q` reads smoothed pixels only.
+    pub fn cover(&mut self, q: &Quad) {
+        if let Reader::Part { pre, input } = self
+            && !pre.holds(&reads(q, 0.0))
+        {
+            complete(pre, *input);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::imaging::GrayU8;
+
+    fn frame() -> GrayU8 {
+        let data = (0..64 * 48).map(|i| ((i * 37) % 251) as u8).collect();
+        GrayU8::from_vec(64, 48, data).unwrap()
+    }
+
+    /// Each frame prepared is new content (a new stamp, for every level and for a frame the
+    /// caller smoothed), completing a region smoothed in part is not; `hold` makes the region
+    /// again around a quad outside it and completes one smoothed in part.
+    #[test]
+    fn a_prepared_frame_is_new_content_and_hold_covers_a_quad() {
+        let g = frame();
+        let input = FrameInput::Gray8(&g);
+        let mut src = FrameSource::new(gaussian_kernel(5, 1.0), 1);
+        src.prepare(input, Rect::new(4.0, 4.0, 40.0, 30.0));
+        let (a0, a1) = (src.view(input, 0).stamp(), src.view(input, 1).stamp());
+        assert!(a0 != 0 && a1 != 0 && a0 != a1);
+        src.prepare(input, Rect::new(4.0, 4.0, 40.0, 30.0));
+        let (b0, b1) = (src.view(input, 0).stamp(), src.view(input, 1).stamp());
+        assert!(b0 != a0 && b1 != a1 && b0 != b1);
+        let smoothed = crate::imaging::gaussian_blur(&g, src.kernel());
+        let s = FrameInput::Smoothed(&smoothed);
+        src.prepare(s, Rect::new(4.0, 4.0, 40.0, 30.0));
+        let c0 = src.view(s, 0).stamp();
+        src.prepare(s, Rect::new(4.0, 4.0, 40.0, 30.0));
+        assert!(c0 != 0 && src.view(s, 0).stamp() != c0);
+
+        // In part, then held around a quad inside the region: completed, same stamp.
+        let mut src = FrameSource::new(gaussian_kernel(5, 1.0), 0);
+        let region = Rect::new(0.0, 0.0, 50.0, 40.0);
+        src.prepare_part(input, region, Rect::new(10.0, 10.0, 20.0, 20.0));
+        assert!(!src.is_whole());
+        let stamp = src.view(input, 0).stamp();
+        let q = Quad::from_rect(25.0, 20.0, 10.0, 10.0);
+        src.hold(input, &q, 0.25);
+        assert!(src.is_whole() && src.region() == region);
+        assert_eq!(src.view(input, 0).stamp(), stamp);
+        // A quad beyond the region: made again around it.
+        let far = Quad::from_rect(50.0, 30.0, 8.0, 8.0);
+        src.hold(input, &far, 0.25);
+        assert!(src.region().contains(&far.bbox()));
+        assert_ne!(src.view(input, 0).stamp(), stamp);
+        // Read in part, a reader covers what a patch reads.
+        src.prepare_part(input, region, Rect::new(10.0, 10.0, 30.0, 30.0));
+        let mut reader = src.reader(input, true);
+        reader.cover(&Quad::from_rect(15.0, 15.0, 5.0, 5.0));
+        assert!(matches!(reader, Reader::Part { ref pre, .. } if !pre.is_whole()));
+        reader.cover(&q);
+        assert!(matches!(reader, Reader::Part { ref pre, .. } if pre.is_whole()));
+        assert!(matches!(src.reader(s, true), Reader::Whole(_)));
+    }
+
+    #[test]
+    fn what_a_patch_reads_is_its_box_grown_or_everything() {
+        let q = Quad::from_rect(10.0, 20.0, 30.0, 40.0);
+        assert_eq!(reads(&q, 1.0), Rect::new(5.0, 15.0, 45.0, 65.0));
+        let mut folded = q;
+        folded.0.swap(0, 1);
+        assert_eq!(reads(&folded, 1.0), Rect::EVERYTHING);
+        assert_eq!(region_around(&q, 0.5), Rect::new(-18.0, -8.0, 68.0, 88.0));
+    }
+}

@@ -9,8 +9,9 @@
 //! - Gauss-Newton Hessian of `beta (1 - |o - v|^2 / 2)`: `-beta / n^2 (P - v v^T)`;
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
-use super::{HessianKind, Wrt, accumulate_jtj, jt_times_many, sum};
+use super::{HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::{accumulate_jtj, jt_times_many, sum};
 
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Correlation {

@@ -314,7 +314,7 @@ impl Am for IlmSsd {
         let n = self.template.len();
         match wrt {
             Wrt::Current => {
-                super::minus_jtj(jac, dof, out);
+                crate::linalg::minus_jtj(jac, dof, out);
                 self.add_projection(jac, dof, false, out);
             }
             Wrt::Template => {

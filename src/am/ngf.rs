@@ -53,8 +53,9 @@
 //! stacked field `n(x)` (whose squared distance is `-2f`), has `2N` values and [`Am::embed`]
 //! writes `N`.
 
-use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt, dot};
+use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::dot;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {

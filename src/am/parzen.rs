@@ -84,7 +84,7 @@
 //! otherwise, e.g. when a search method asks for a Hessian first). When the Hessians are Newton's
 //! at the current patch, the gradient's pass also makes the Hessian's per-pixel diagonal terms.
 
-use crate::linalg::MAX_DOF;
+use crate::linalg::{MAX_DOF, negative_part};
 
 /// The paper's and MTF's bins (KLD's, and the weights' default).
 pub(crate) const DEFAULT_BINS: usize = 8;
@@ -214,11 +214,7 @@ fn spline_pair(
     d: &mut [[f32; 4]; 2],
     d2: &mut [[f32; 4]; 2],
 ) {
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each store writes the eight
     // values of a `[[f32; 4]; 2]`, each load reads the four of a `[f32; 4]`.
     unsafe {
@@ -240,11 +236,7 @@ fn spline_pair(
         _mm256_storeu_ps(d.as_mut_ptr() as *mut f32, _mm256_mul_ps(dv, m));
         _mm256_storeu_ps(d2.as_mut_ptr() as *mut f32, _mm256_mul_ps(d2v, m));
     }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(simd = "avx2"))]
     for k in 0..2 {
         spline(f[k], inside[k], &mut w[k], &mut d[k], &mut d2[k]);
     }
@@ -271,7 +263,7 @@ fn bin_coordinate(v: f32, bins: &Bins) -> (usize, f32, f32) {
 }
 
 /// [`bin_coordinate`] of four values at once (AVX2).
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(simd = "avx2")]
 #[inline(always)]
 fn bin_coordinates4(
     v: &[f32; 4],
@@ -321,11 +313,7 @@ struct Block([f64; 16]);
 /// `block[4 u + v] += x_u y_v` (each product exact, fused).
 #[inline(always)]
 fn add_block(block: &mut Block, x: &[f64; 4], y: &[f32; 4]) {
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     // SAFETY: AVX2 and FMA are enabled at compile time (cfg); the loads read the four values
     // of `x` and `y`, the aligned loads and stores the four rows of the 128-byte aligned block.
     unsafe {
@@ -340,11 +328,7 @@ fn add_block(block: &mut Block, x: &[f64; 4], y: &[f32; 4]) {
             );
         }
     }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(simd = "avx2"))]
     add_block_portable(block, x, y);
 }
 
@@ -407,11 +391,7 @@ fn joint_histogram(p: &mut [f64], blocks: &mut Vec<Block>, side: usize, t: &Weig
 #[inline(always)]
 fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f32; 4]) -> f64 {
     assert!(cells.len() >= 3 * side + 4);
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     // SAFETY: AVX2 and FMA are enabled at compile time (cfg); row u reads cells u side ..
     // u side + 4, inside `cells` (asserted above).
     unsafe {
@@ -428,11 +408,7 @@ fn bilinear_form(cells: &[f64], side: usize, x: &[f64; 4], y: &[f32; 4]) -> f64 
         );
         (r[0] + r[1]) + (r[2] + r[3])
     }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(simd = "avx2"))]
     bilinear_form_portable(cells, side, x, y)
 }
 
@@ -458,11 +434,7 @@ fn bilinear_forms<const M: usize>(
     let span = 3 * side + 4;
     #[allow(unused_mut)]
     let mut done = 0;
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     // SAFETY: AVX2 and FMA are enabled at compile time (cfg); pixel l's loads read its cells,
     // a bounds-checked slice of `span` cells (row u: cells u side .. u side + 4 < span), its
     // `x` and its `ys[m]` (four f64 each, j < n); the stores write outs[m][done .. done + 4],
@@ -527,11 +499,7 @@ pub(crate) struct Lanes(pub [f32; MAX_DOF]);
 #[inline(always)]
 fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32; MAX_DOF]) {
     assert!(cells.len() >= 3 * side + 4);
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma",
-    ))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a cell is eight f32 (MAX_DOF
         // == 8), and row u touches cells u side .. u side + 4, inside `cells` (asserted above).
@@ -557,7 +525,7 @@ fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32
 #[inline(always)]
 fn flush_lanes(acc: &mut [f64], b: &mut Lanes) {
     let acc: &mut [f64; MAX_DOF] = acc.try_into().expect("a cell is MAX_DOF lanes");
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 is enabled at compile time (cfg); `acc` and `b` are eight lanes each
         // (MAX_DOF == 8), `b` on a 32-byte boundary (`Lanes`' alignment).
@@ -717,11 +685,7 @@ impl SameBin {
 #[inline(always)]
 fn run_sums(rows: &[Lanes], order: &[u32], basis: &[[f32; MOMENTS]]) -> [[f32; MAX_DOF]; MOMENTS] {
     let mut acc = [[0f32; MAX_DOF]; MOMENTS];
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a row is eight f32 on a
         // 32-byte boundary (`Lanes`, MAX_DOF == 8), read through a bounds-checked index; each
@@ -764,7 +728,7 @@ fn jacobian_rows(
     let len = block.len();
     assert!(dof <= MAX_DOF && rows.len() >= len && jac.len() >= dof * n && block.end <= n);
     let mut done = 0;
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 is enabled at compile time (cfg); parameter k's loads read
         // jac[k n + block.start + i .. + 8] with i + 8 <= len (inside, asserted above); the
@@ -839,14 +803,7 @@ fn add_v_portable(
 }
 
 /// [`add_block`] in plain Rust (the same bits: each product exact, fused).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+#[cfg(any(test, not(simd = "avx2")))]
 fn add_block_portable(block: &mut Block, x: &[f64; 4], y: &[f32; 4]) {
     for u in 0..4 {
         for v in 0..4 {
@@ -857,14 +814,7 @@ fn add_block_portable(block: &mut Block, x: &[f64; 4], y: &[f32; 4]) {
 }
 
 /// [`bilinear_form`] in plain Rust.
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+#[cfg(any(test, not(simd = "avx2")))]
 fn bilinear_form_portable(cells: &[f64], side: usize, x: &[f64; 4], y: &[f32; 4]) -> f64 {
     let mut rows = [0.0; 4];
     for u in 0..4 {
@@ -920,12 +870,12 @@ impl Weights {
         let (mut lo, mut hi) = (bins.side, 0);
         // Without DERIVATIVES the derivatives go to these locals and are dropped.
         let (mut d, mut d2) = ([0.0; 4], [0.0; 4]);
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        #[cfg(simd = "avx2")]
         let (mut ds, mut d2s) = ([[0.0; 4]; 2], [[0.0; 4]; 2]);
         // The bin coordinates of four pixels at a time (first bin, fraction, inside the range),
         // then each pixel's weights.
         let mut done = 0;
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        #[cfg(simd = "avx2")]
         {
             use std::arch::x86_64::*;
             // The first bins' range, lane by lane (four minima and maxima in one register each).
@@ -1476,11 +1426,7 @@ fn same_bin_v(
 /// `cell += sum_m c[m] moments[m]` (eight lanes), the sum made in registers first.
 #[inline(always)]
 fn add_cell(cell: &mut [f64; MAX_DOF], c: &[f64; MOMENTS], moments: &[[f64; MAX_DOF]; MOMENTS]) {
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each load or store reads or
         // writes four of the eight lanes (MAX_DOF == 8) of a cell or of a moment.
@@ -1698,11 +1644,7 @@ fn newton(
 /// row's factor `w t_i` broadcast from a register; the lower triangle is the upper's mirror.
 fn weighted_gram(terms: &[(f64, [f64; MAX_DOF])]) -> [f64; MAX_DOF * MAX_DOF] {
     let mut q = [0.0; MAX_DOF * MAX_DOF];
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     if MAX_DOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); the loads read the eight
         // lanes of a term (MAX_DOF == 8), the stores write the four lanes at 8 i and 8 i + 4 of
@@ -1753,15 +1695,7 @@ fn weighted_gram(terms: &[(f64, [f64; MAX_DOF])]) -> [f64; MAX_DOF * MAX_DOF] {
 }
 
 /// [`weighted_gram`] in plain Rust (the same bits: the upper triangle's blocks made as there,
-/// then mirrored).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+/// then mirrored; also where `MAX_DOF` is not eight).
 fn weighted_gram_portable(terms: &[(f64, [f64; MAX_DOF])], q: &mut [f64; MAX_DOF * MAX_DOF]) {
     let half = MAX_DOF / 2;
     for (w, t) in terms {
@@ -1782,77 +1716,6 @@ fn mirror(q: &mut [f64; MAX_DOF * MAX_DOF]) {
     for i in 1..MAX_DOF {
         for j in 0..i {
             q[i * MAX_DOF + j] = q[j * MAX_DOF + i];
-        }
-    }
-}
-
-/// Replaces the symmetric `dof x dof` matrix in `h` (row-major) by its negative semi-definite
-/// part (cyclic Jacobi eigen-decomposition, positive eigenvalues set to zero).
-pub(crate) fn negative_part(h: &mut [f64; MAX_DOF * MAX_DOF], dof: usize) {
-    let n = dof;
-    let mut a = [0.0f64; MAX_DOF * MAX_DOF];
-    let mut e = [0.0f64; MAX_DOF * MAX_DOF];
-    for i in 0..n {
-        for j in 0..n {
-            a[i * MAX_DOF + j] = 0.5 * (h[i * n + j] + h[j * n + i]);
-        }
-        e[i * MAX_DOF + i] = 1.0;
-    }
-    for _sweep in 0..60 {
-        let mut off = 0.0;
-        let mut total = 0.0;
-        for i in 0..n {
-            for j in 0..n {
-                let v = a[i * MAX_DOF + j] * a[i * MAX_DOF + j];
-                total += v;
-                if i != j {
-                    off += v;
-                }
-            }
-        }
-        if off <= 1e-30 * total || total == 0.0 {
-            break;
-        }
-        for p in 0..n {
-            for r in p + 1..n {
-                let apr = a[p * MAX_DOF + r];
-                if apr == 0.0 {
-                    continue;
-                }
-                let (app, arr) = (a[p * MAX_DOF + p], a[r * MAX_DOF + r]);
-                let theta = (arr - app) / (2.0 * apr);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (akp, akr) = (a[k * MAX_DOF + p], a[k * MAX_DOF + r]);
-                    a[k * MAX_DOF + p] = c * akp - s * akr;
-                    a[k * MAX_DOF + r] = s * akp + c * akr;
-                }
-                for k in 0..n {
-                    let (apk, ark) = (a[p * MAX_DOF + k], a[r * MAX_DOF + k]);
-                    a[p * MAX_DOF + k] = c * apk - s * ark;
-                    a[r * MAX_DOF + k] = s * apk + c * ark;
-                }
-                for k in 0..n {
-                    let (ekp, ekr) = (e[k * MAX_DOF + p], e[k * MAX_DOF + r]);
-                    e[k * MAX_DOF + p] = c * ekp - s * ekr;
-                    e[k * MAX_DOF + r] = s * ekp + c * ekr;
-                }
-            }
-        }
-    }
-    for i in 0..n {
-        for j in 0..n {
-            let mut v = 0.0;
-            for k in 0..n {
-                let l = a[k * MAX_DOF + k];
-                if l < 0.0 {
-                    v += l * e[i * MAX_DOF + k] * e[j * MAX_DOF + k];
-                }
-            }
-            h[i * n + j] = v;
         }
     }
 }
@@ -1895,7 +1758,7 @@ mod tests {
     #[test]
     fn kernels_equal_their_plain_versions() {
         let mut rng = crate::rng::Rng::new(7);
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        #[cfg(simd = "avx2")]
         for bins in [Bins::default(), Bins::new(16)] {
             let odd = [
                 f32::NAN,

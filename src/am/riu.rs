@@ -40,10 +40,9 @@
 //! either patch); Gauss-Newton (default) the negative semi-definite part of Newton, as for SSIM.
 //! No embedding (the ratio couples the two patches).
 
-use super::parzen::negative_part;
 use super::ssim::{Jet, add_moment_form};
-use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt, dot};
-use crate::linalg::MAX_DOF;
+use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
+use crate::linalg::{MAX_DOF, dot, negative_part};
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
@@ -81,7 +80,7 @@ impl Riu {
         self.r.clear();
         self.r
             .extend(current.iter().zip(&self.w).map(|(&c, &w)| (c + EPS) * w));
-        let m = super::sum(&self.r) / n;
+        let m = crate::linalg::sum(&self.r) / n;
         let mut lanes = [0.0f64; 8];
         let e = self.r.chunks_exact(8);
         for &x in e.remainder() {

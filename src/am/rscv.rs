@@ -17,8 +17,9 @@
 //! et al. reversed SCV).
 
 use super::intensity_map::{MapFit, PlMap, jt_diag_j};
-use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
+use super::{Am, AmBuilder, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::minus_jtj;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {

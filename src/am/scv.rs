@@ -25,8 +25,9 @@
 //! that changes every frame: nearest-neighbour search ranks by SSD to the unmapped template).
 
 use super::intensity_map::{MapFit, PlMap, Regions, jt_diag_j};
-use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
+use super::{Am, AmBuilder, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::minus_jtj;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {

@@ -1,7 +1,8 @@
 //! Sum of squared differences: `f = -1/2 sum_i (I*_i - I_i)^2`.
 
-use super::{Am, AmBuilder, HessianKind, Wrt, minus_jtj};
+use super::{Am, AmBuilder, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::minus_jtj;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {

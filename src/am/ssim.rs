@@ -41,9 +41,9 @@
 //! comparing the patch with the last one (which costs as much). No scratch is allocated after
 //! the first call. No embedding: there is no L2 geometry ranking patches as SSIM does.
 
-use super::parzen::negative_part;
-use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt, accumulate_jtj, dot, sum};
+use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
+use crate::linalg::{accumulate_jtj, dot, negative_part, sum};
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {

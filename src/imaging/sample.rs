@@ -228,9 +228,9 @@ pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         return;
     }
     // Whole groups of eight points with AVX2, the rest below.
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(simd = "avx2")]
     let done = avx2::values(img, xs, ys, out);
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    #[cfg(not(simd = "avx2"))]
     let done = 0;
     let (xs, ys, out) = (&xs[done..], &ys[done..], &mut out[done..]);
     // The vector path leaves fewer than eight: scratch arrays that short need no zeroing of a
@@ -412,9 +412,9 @@ pub fn sample_values_gradients(
         return;
     }
     // Whole groups of eight points with AVX2, the rest below.
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(simd = "avx2")]
     let done = avx2::values_gradients(img, xs, ys, values, gx, gy);
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    #[cfg(not(simd = "avx2"))]
     let done = 0;
     let (xs, ys) = (&xs[done..], &ys[done..]);
     let out = (&mut values[done..], &mut gx[done..], &mut gy[done..]);
@@ -482,7 +482,7 @@ fn values_gradients_rest<const B: usize>(
 /// AVX2 versions of the sampling loops: eight points at a time, the pixels of each point read
 /// with short loads of neighbouring pixels and transposed (gathers are several times slower on
 /// CPUs with the gather-data-sampling mitigation).
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(simd = "avx2")]
 mod avx2 {
     use super::ImageView;
     use std::arch::x86_64::*;

@@ -34,19 +34,11 @@ pub(super) fn template_rows(
     ty: &mut [f32],
 ) -> [f32; 5] {
     rows.check(t, tx, ty);
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     {
         simd::template_rows(rows, t, tx, ty)
     }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(simd = "avx2"))]
     {
         portable::template_rows(rows, t, tx, ty)
     }
@@ -55,19 +47,11 @@ pub(super) fn template_rows(
 /// `(sum a[i] v[i], sum b[i] v[i])` in one pass; the three lengths are equal multiples of 8.
 pub(super) fn dot2(a: &[f32], b: &[f32], v: &[f32]) -> (f32, f32) {
     assert!(a.len() == v.len() && b.len() == v.len() && v.len().is_multiple_of(8));
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     {
         simd::dot2(a, b, v)
     }
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(simd = "avx2"))]
     {
         portable::dot2(a, b, v)
     }
@@ -95,11 +79,7 @@ pub(super) fn dot(a: &[f32], b: &[f32]) -> f32 {
 
 use crate::linalg::lanes_sum;
 
-#[cfg(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-))]
+#[cfg(simd = "avx2")]
 mod simd {
     use super::{Rows, lanes_sum};
     use std::arch::x86_64::*;
@@ -191,14 +171,7 @@ mod simd {
 
 /// The kernels in plain Rust, lane for lane as the intrinsics compute them: the build for
 /// other CPUs, and compared with [`simd`] by a test.
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+#[cfg(any(test, not(simd = "avx2")))]
 mod portable {
     use super::{Rows, lanes_sum};
 

@@ -48,9 +48,9 @@ pub use retry::Retry;
 pub use search::Search;
 pub use tracker::RegistrationTracker;
 
-use crate::am::{BlockCorrelation, PatchSums};
 use crate::error::Result;
 use crate::geometry::Quad;
+use crate::registration::{BlockCorrelation, PatchSums};
 use crate::registration::{Context, Executor, FrameSource, Reader, SearchMethod};
 use crate::spec::TrackerParams;
 use crate::ssm::Params;

@@ -9,10 +9,10 @@
 use super::judge::SearchResult;
 use super::tracker::CONFIDENCE_BLOCKS;
 use super::{Estimate, RegistrationTracker};
-use crate::am::BlockCorrelation;
 use crate::geometry::{Point, Quad, Rect, apply_homography};
 use crate::imaging::{ImageView, sample_value};
 use crate::observe::Observer;
+use crate::registration::BlockCorrelation;
 use crate::registration::Problem;
 use crate::ssm::Params;
 use crate::status::FrameTiming;

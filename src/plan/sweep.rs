@@ -3,12 +3,13 @@
 //! centre.
 
 use super::RegistrationTracker;
-use crate::am::{Wrt, jt_times};
+use crate::am::Wrt;
 use crate::error::{Error, Result};
 use crate::geometry::{Quad, alignment_error};
 use crate::imaging::ImageView;
 use crate::landscape::{Landscape, LandscapeSpec};
 use crate::linalg::MAX_DOF;
+use crate::linalg::jt_times;
 use crate::registration::Context;
 use crate::sm::newton;
 use crate::ssm::Params;

@@ -5,12 +5,12 @@
 //! (the loss checks), [`super::redetect`] (after a loss).
 
 use super::{Init, Judges, Plan, Searcher, redetect::Detector};
-use crate::am::BlockCorrelation;
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
 use crate::imaging::gaussian_kernel;
 use crate::landscape::{Landscape, LandscapeSpec};
 use crate::observe::Observer;
+use crate::registration::BlockCorrelation;
 use crate::registration::{Context, FrameSource, LossCheck, SearchMethod, region_around};
 use crate::spec::{LossPolicy, RegistrationSpec, TrackerParams, TrackerSpec};
 use crate::ssm::Params;

@@ -1,7 +1,7 @@
 //! Knowing when the tracker is lost: the checks a frame's confidence must pass.
 //!
 //! The confidence of a frame is the block-wise correlation of the patch where the search ended
-//! with the template ([`crate::am::BlockCorrelation`]): near 1 on the target whatever the light,
+//! with the template ([`super::BlockCorrelation`]): near 1 on the target whatever the light,
 //! near 0 on anything else. A frame is lost when its confidence is
 //! - below `min_confidence` (the target is not there), or below `min_confidence + 0.1` when the
 //!   search ran out of iterations without settling (a search that wanders ends on look-alikes:

@@ -11,6 +11,7 @@
 //! search methods ([`crate::sm`]) implement its interface and hold their Newton steps; the plan
 //! of stages a tracker runs per frame ([`crate::plan`]) drives the executor.
 
+mod block_correlation;
 mod confidence;
 mod context;
 mod executor;
@@ -22,6 +23,7 @@ mod source;
 mod state;
 mod workspace;
 
+pub use block_correlation::{BlockCorrelation, MAX_BLOCKS, PatchSums, block_correlation};
 pub use confidence::{Judged, LossCheck, MIN_DOF};
 pub use context::Context;
 pub use executor::{Executor, Limits, Ran};

@@ -330,19 +330,11 @@ macro_rules! kernel {
         assert!(
             $c0 + 8 <= $res && end <= $a.len() && end <= $b.len() && end <= $r.len() && $skip < 8
         );
-        #[cfg(all(
-            target_arch = "x86_64",
-            target_feature = "avx2",
-            target_feature = "fma"
-        ))]
+        #[cfg(simd = "avx2")]
         {
             $simd($a, $b, $r, $res, $c0, $skip, $vpow)
         }
-        #[cfg(not(all(
-            target_arch = "x86_64",
-            target_feature = "avx2",
-            target_feature = "fma"
-        )))]
+        #[cfg(not(simd = "avx2"))]
         {
             $plain($a, $b, $r, $res, $c0, $skip, $vpow)
         }
@@ -382,11 +374,7 @@ fn column_block16(
     vpow: &[[f32; POWERS]],
     (out, stride): (&mut [f32], usize),
 ) -> bool {
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    #[cfg(simd = "avx2")]
     if crate::cpu::avx512() {
         let end = (vpow.len().max(1) - 1) * res + c0 + 16;
         assert!(c0 + 16 <= res && end <= a.len() && end <= b.len() && end <= r.len());
@@ -419,14 +407,7 @@ fn column_block_r(
 }
 
 /// [`column_block_r`] without vector instructions (the same bits).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+#[cfg(any(test, not(simd = "avx2")))]
 fn column_block_r_portable(
     a: &[f32],
     b: &[f32],
@@ -452,14 +433,7 @@ fn column_block_r_portable(
 
 /// [`column_block`] without vector instructions: the same products and sums, lane by lane, in
 /// the same order (so the same bits).
-#[cfg_attr(
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ),
-    allow(dead_code)
-)]
+#[cfg(any(test, not(simd = "avx2")))]
 fn column_block_portable(
     a: &[f32],
     b: &[f32],
@@ -494,11 +468,7 @@ fn column_block_portable(
     acc
 }
 
-#[cfg(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-))]
+#[cfg(simd = "avx2")]
 mod simd {
     use super::{Lanes, POWERS, SUMS};
     use std::arch::x86_64::*;

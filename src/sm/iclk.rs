@@ -11,9 +11,10 @@
 //! from far starts (docs/speed.md, "Eighth pass"), so it is not used.
 
 use super::{Context, LossReason, SearchMethod, SmDef, Step, Update, newton};
-use crate::am::{HessianKind, Wrt, jt_times};
+use crate::am::{HessianKind, Wrt};
 use crate::imaging::ImageView;
 use crate::linalg::MAX_DOF;
+use crate::linalg::jt_times;
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<SmDef> = Entry {

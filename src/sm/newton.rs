@@ -12,8 +12,9 @@
 //! file says so and calls these.
 
 use super::{Context, LossReason, Update};
-use crate::am::{Wrt, jt_times};
+use crate::am::Wrt;
 use crate::linalg::MAX_DOF;
+use crate::linalg::jt_times;
 use crate::ssm::Params;
 
 /// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
@@ -201,7 +202,8 @@ pub fn solve_step(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::am::{self, HessianKind, minus_jtj};
+    use crate::am::{self, HessianKind};
+    use crate::linalg::minus_jtj;
     use crate::registration::moments::{homography_jacobian, skewed};
     use crate::rng::Rng;
     use crate::spec::GridLayout;

@@ -27,9 +27,10 @@
 //! query, but exactly the model's nearest neighbour).
 
 use super::{Context, LossReason, MethodVisual, SearchMethod, SmConfig, SmDef, Step, Update};
-use crate::am::{Capabilities, dot};
+use crate::am::Capabilities;
 use crate::geometry::Quad;
 use crate::imaging::ImageView;
+use crate::linalg::dot;
 use crate::params::ParamDef;
 use crate::registry::Entry;
 use crate::rng::Rng;

@@ -152,7 +152,7 @@ fn bench(c: &mut Criterion) {
     });
     let mut jg = [0.0; 8];
     g.bench_function("J^T g", |b| {
-        b.iter(|| regtrack::am::jt_times(black_box(&jac), ctx.work().grad(), 8, &mut jg))
+        b.iter(|| regtrack::linalg::jt_times(black_box(&jac), ctx.work().grad(), 8, &mut jg))
     });
     // What the forward SSD methods run instead of the projection, `J^T J` and `J^T g`: the
     // Newton system from the gradient's moments on the grid.
@@ -172,7 +172,7 @@ fn bench(c: &mut Criterion) {
         smoothed.data[..2500].to_vec(),
         smoothed.data[2500..5000].to_vec(),
     );
-    let confidence = regtrack::am::BlockCorrelation::new(&t0, 50, 4);
+    let confidence = regtrack::registration::BlockCorrelation::new(&t0, 50, 4);
     g.bench_function("confidence", |b| b.iter(|| confidence.of(black_box(&t1))));
     g.finish();
 

@@ -699,6 +699,7 @@ fn run_bench(
         seq.name,
         repeats
     );
+    println!("kernels: {}", regtrack::cpu::kernels());
     println!("{}", bench::BenchRow::HEADER);
     let mut rows = Vec::new();
     for spec in specs {

@@ -1,6 +1,15 @@
 //! Small dense linear algebra on stack arrays: the `S x S` (S <= 8) Newton systems of the search
-//! methods, and the matrix exponential and logarithm used by the SL3 state space model; and the
-//! median of a sample.
+//! methods, the matrix exponential and logarithm used by the SL3 state space model, the median
+//! of a sample; the products of patches and pixel Jacobians ([`products`]: `J^T J`, `J^T v`,
+//! dot products) and the negative semi-definite part of a Hessian ([`eigen`]).
+
+pub mod eigen;
+pub mod products;
+
+pub use eigen::negative_part;
+pub use products::{
+    accumulate_jtj, accumulate_weighted_jtj, dot, jt_times, jt_times_many, minus_jtj, sum,
+};
 
 use nalgebra::{Matrix3, SMatrix};
 

@@ -4,7 +4,7 @@
 #   ev    the evidence set with --reinit (rendered by docs/evidence.sh's first part)
 #   evn   the same without re-initialisation
 #   fast  six fast-motion renders (the coffee over the brick, UCSB profiles at 1-3x speed)
-#   stars the star field and lit  the other lit sequences (the ignored test write_the_lit_sequences)
+#   stars the star field and lit  the other lit sequences (the test write_the_lit_sequences)
 #   st2   four dim star fields (docs/render_stars.py)
 #   box, box2  a camera around a box whose faces turn to a lamp (docs/render_box.py, two seeds)
 # and, when VISP=path/to/visp_track is given (built from ../shared/peers/visp, whose run.py it
@@ -20,7 +20,7 @@ ev=target/evidence/data
 [ -f "$ev/bricks_zm.txt" ] || { echo "render the evidence set first: bash docs/evidence.sh" >&2; exit 1; }
 data=$out/data
 [ -f "$data/lit/stars.txt" ] || REGTRACK_LIT_OUT="$data/lit" cargo test --quiet --test it \
-    write_the_lit_sequences -- --ignored
+    write_the_lit_sequences
 motion=../shared/data/motion
 for spec in m1x2:m1:2 m3x2:m3:2 ucx1:uc:1 m1x3:m1:3 m2x1:m2:1 pdx2:pd:2; do
     IFS=: read -r name profile step <<<"$spec"

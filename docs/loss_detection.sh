@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Reproduces the loss-detection tables of docs/robustness.md ("Knowing when it is lost"): the
-# evidence set (rendered by docs/evidence.sh's first part), the lit sequences (the ignored test
+# evidence set (rendered by docs/evidence.sh's first part), the lit sequences (the test
 # write_the_lit_sequences) and three fast-motion renders, each run by ESM, FCLK, FALK, ICLK x SSD,
 # ZNCC on homography with --reinit and with on_loss=continue; "before" is the same with the checks
 # off. The lost_when_off / lost_when_on columns of each summary.csv are the figures.
@@ -14,7 +14,7 @@ ev=target/evidence/data
 [ -f "$ev/bricks_zm.txt" ] || { echo "render the evidence set first: bash docs/evidence.sh" >&2; exit 1; }
 lit=$out/data/lit
 [ -f "$lit/stars.txt" ] || REGTRACK_LIT_OUT=$(realpath -m "$lit") cargo test --quiet --test it \
-    write_the_lit_sequences -- --ignored
+    write_the_lit_sequences
 fast=$out/data/fast
 tex=assets/textures
 for spec in m1x2:ucsb_bricks_m1:2 m3x2:ucsb_bricks_m3:2 ucx1:ucsb_bricks_uc:1; do

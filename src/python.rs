@@ -514,13 +514,14 @@ impl SequenceIter {
 /// A live source: a V4L2 camera (`"/dev/video0"`) or an FFmpeg test source
 /// (`"lavfi:testsrc=size=320x240:rate=30"`), read by `ffmpeg`, as an iterator of grey `uint8`
 /// frames `(H, W)`, always the newest: frames that arrive while Python works are dropped and
-/// counted (`dropped`). Iteration ends when the source stops (`stopped` says why); a source
-/// that stops before its first frame raises `regtrack.Error`.
+/// counted (`dropped`, after the first). Iteration ends when the source stops (`stopped` says
+/// why); a source that stops before its first frame raises `regtrack.Error`. The library's live
+/// run ([`crate::dataset::live::LiveRun`], as `regtrack track --camera` and the inspector).
 ///
 /// >>> for frame in regtrack.Camera("/dev/video0", size=(640, 480)): ...
 #[pyclass(name = "Camera", module = "regtrack")]
 pub struct PyCamera {
-    live: Option<crate::dataset::live::Live>,
+    live: Option<crate::dataset::live::LiveRun>,
     dropped: u64,
     stopped: Option<String>,
     /// Frames handed out.
@@ -534,7 +535,8 @@ impl PyCamera {
     fn new(source: &str, size: (usize, usize)) -> PyResult<Self> {
         Ok(PyCamera {
             live: Some(
-                crate::dataset::live::Live::open(source, size.0, size.1).map_err(library_error)?,
+                crate::dataset::live::LiveRun::open(source, size.0, size.1)
+                    .map_err(library_error)?,
             ),
             dropped: 0,
             stopped: None,
@@ -567,9 +569,10 @@ impl PyCamera {
         let Some(live) = self.live.as_mut() else {
             return Ok(None);
         };
-        match py.detach(|| live.newest()) {
-            Ok(f) => {
-                self.dropped += f.dropped;
+        match py.detach(|| live.take(None)) {
+            Ok(None) => Ok(None),
+            Ok(Some(f)) => {
+                self.dropped = live.info().dropped;
                 self.given += 1;
                 let (w, h) = (f.image.width, f.image.height);
                 Ok(Some(

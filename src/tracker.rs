@@ -43,6 +43,24 @@ impl Tracker {
     }
 }
 
+impl Tracker {
+    /// Frame `index` of a stream the tracker follows from its start (a live run's): on the
+    /// first it is initialised on `init`, on the others updated; the corners while it tracks.
+    pub fn follow(
+        &mut self,
+        input: FrameInput<'_>,
+        init: &crate::geometry::Quad,
+        index: usize,
+    ) -> Result<Option<crate::geometry::Quad>> {
+        if index == 0 {
+            self.initialize(input, init)?;
+            return Ok(Some(*init));
+        }
+        let out = self.update(input, &mut crate::observe::NoObserver);
+        Ok((out.status == TrackStatus::Tracking).then_some(out.corners))
+    }
+}
+
 impl std::ops::Deref for Tracker {
     type Target = dyn VisualTracker;
     fn deref(&self) -> &Self::Target {

@@ -119,42 +119,25 @@ pub struct ExperimentJob {
     pub trackers: Vec<(usize, TrackerSpec, usize, Quad)>,
 }
 
-/// What a live run has done so far (sent with every live frame).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct LiveInfo {
-    pub source: String,
-    /// Frames received and shown.
-    pub frames: usize,
-    /// Frames the source sent that came while the trackers were busy (never shown).
-    pub dropped: u64,
-    /// Frames per second shown, over the last second or so.
-    pub fps: f32,
-    /// The recording's ground-truth file and its frames, while recording.
-    pub recording: Option<(PathBuf, usize)>,
-}
+pub use crate::dataset::live::LiveInfo;
 
 /// Live frames kept for initialising a tracker on the frame a box was drawn on (about 3 s at
 /// 30 fps).
 pub const LIVE_KEPT: usize = 90;
 
-/// A live source being shown and tracked.
-struct LiveRun {
-    live: crate::dataset::live::Live,
+/// A live source being shown and tracked: the library's run ([`crate::dataset::live::LiveRun`]),
+/// the newest frames, and which tracker's corners the recording keeps.
+struct LiveShown {
+    run: crate::dataset::live::LiveRun,
     /// The newest frames, by index.
     kept: std::collections::VecDeque<(usize, GrayU8)>,
-    recording: Option<(crate::dataset::live::Recording, usize)>,
-    info: LiveInfo,
-    /// When the frames of the last second were shown (for the rate).
-    shown: std::collections::VecDeque<Instant>,
+    /// The tracker whose corners are recorded, while recording.
+    recorded: Option<usize>,
 }
 
-impl LiveRun {
-    /// Ends the recording, if one runs: its ground-truth file and frames (kept on disk).
-    fn stop_recording(&mut self) -> Option<(PathBuf, usize)> {
-        self.info.recording = None;
-        self.recording
-            .take()
-            .map(|(r, _)| (r.path().to_path_buf(), r.frames()))
+impl LiveShown {
+    fn info(&self) -> &LiveInfo {
+        self.run.info()
     }
 }
 
@@ -410,7 +393,7 @@ struct Thread<W: Fn() + Sync> {
     templates: Vec<Arc<Vec<f32>>>,
     generation: u64,
     frame: usize,
-    live: Option<LiveRun>,
+    live: Option<LiveShown>,
 }
 
 impl<W: Fn() + Sync> Thread<W> {
@@ -733,7 +716,7 @@ impl<W: Fn() + Sync> Thread<W> {
         }
         let Some((spec, quad)) = tracker else { return };
         let len = match (&self.live, &self.sequence) {
-            (Some(run), _) => run.info.frames,
+            (Some(run), _) => run.info().frames,
             (None, Some(seq)) => seq.len(),
             (None, None) => return,
         };
@@ -808,24 +791,18 @@ impl<W: Fn() + Sync> Thread<W> {
     /// Opens a live source; its frames then come between jobs ([`Thread::live_step`]).
     fn open_live(&mut self, generation: u64, source: String, width: usize, height: usize) {
         self.end_live(None);
-        match crate::dataset::live::Live::open(&source, width, height) {
-            Ok(live) => {
+        match crate::dataset::live::LiveRun::open(&source, width, height) {
+            Ok(run) => {
                 self.sequence = None;
                 self.trackers.clear();
                 self.templates.clear();
                 self.generation = generation;
                 self.frame = 0;
-                let info = LiveInfo {
-                    source,
-                    ..LiveInfo::default()
-                };
-                self.reply(Reply::Live(info.clone()));
-                self.live = Some(LiveRun {
-                    live,
+                self.reply(Reply::Live(run.info().clone()));
+                self.live = Some(LiveShown {
+                    run,
                     kept: Default::default(),
-                    recording: None,
-                    info,
-                    shown: Default::default(),
+                    recorded: None,
                 });
             }
             Err(e) => self.reply(Reply::LiveEnded {
@@ -837,37 +814,20 @@ impl<W: Fn() + Sync> Thread<W> {
     /// Takes the newest live frame (waiting a little for one), tracks it with the trackers
     /// initialised so far, records it when recording, and sends it.
     fn live_step(&mut self) {
-        let Some(run) = self.live.as_mut() else {
+        let Some(live) = self.live.as_mut() else {
             return;
         };
-        let frame = match run.live.newest_within(Duration::from_millis(50)) {
-            Ok(Some(f)) => f,
+        let taken = match live.run.take(Some(Duration::from_millis(50))) {
+            Ok(Some(t)) => t,
             Ok(None) => return,
-            Err(e) => {
-                let at = run.info.frames + 1;
-                return self.end_live(Some(format!("{e} (at live frame {at})")));
-            }
+            Err(e) => return self.end_live(Some(e.to_string())),
         };
-        let i = run.info.frames;
-        if i > 0 {
-            run.info.dropped += frame.dropped;
+        let i = taken.index;
+        live.kept.push_back((i, taken.image));
+        if live.kept.len() > LIVE_KEPT {
+            live.kept.pop_front();
         }
-        run.info.frames += 1;
-        let now = Instant::now();
-        run.shown.push_back(now);
-        while run
-            .shown
-            .front()
-            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
-        {
-            run.shown.pop_front();
-        }
-        run.info.fps = run.shown.len() as f32;
-        run.kept.push_back((i, frame.image));
-        if run.kept.len() > LIVE_KEPT {
-            run.kept.pop_front();
-        }
-        let gray = &run.kept.back().expect("just pushed").1;
+        let gray = &live.kept.back().expect("just pushed").1;
         let image = gray_image(i, gray);
         // Trackers initialised on this frame or before (a box drawn on a kept frame starts
         // its tracker there) follow it.
@@ -888,20 +848,15 @@ impl<W: Fn() + Sync> Thread<W> {
             ));
         }
         self.frame = i;
-        let mut failed = None;
-        if let Some((rec, index)) = run.recording.as_mut() {
-            let corners = results
+        let corners = live.recorded.and_then(|index| {
+            results
                 .iter()
-                .find(|r| r.tracker == *index && r.status == TrackStatus::Tracking)
-                .map(|r| r.corners);
-            match rec.push(gray, corners.as_ref()) {
-                Ok(()) => run.info.recording = Some((rec.path().to_path_buf(), rec.frames())),
-                Err(e) => failed = Some(e),
-            }
-        }
-        if let Some(e) = failed {
+                .find(|r| r.tracker == index && r.status == TrackStatus::Tracking)
+                .map(|r| r.corners)
+        });
+        if let Err((e, kept)) = live.run.record(gray, corners.as_ref()) {
             // The recording stops (what it wrote is kept); the live view goes on.
-            let kept = run.stop_recording();
+            live.recorded = None;
             self.reply(Reply::Error {
                 context: "the recording stopped".into(),
                 error: e,
@@ -913,7 +868,7 @@ impl<W: Fn() + Sync> Thread<W> {
         let info = self
             .live
             .as_ref()
-            .map(|r| r.info.clone())
+            .map(|r| r.info().clone())
             .unwrap_or_default();
         self.reply(Reply::Frame {
             generation: self.generation,
@@ -927,24 +882,22 @@ impl<W: Fn() + Sync> Thread<W> {
 
     /// Starts or stops recording the live frames.
     fn record(&mut self, what: Option<(PathBuf, usize)>) {
-        let Some(run) = self.live.as_mut() else {
+        let Some(live) = self.live.as_mut() else {
             return self.reply(Reply::Error {
                 context: "cannot record".into(),
                 error: Error::InvalidParameter("no live source is open".into()),
             });
         };
-        let ended = run.stop_recording();
+        let ended = live.run.stop_recording();
+        live.recorded = None;
         let mut error = None;
         if let Some((root, index)) = what {
-            match crate::dataset::live::Recording::create_fresh(&root) {
-                Ok(r) => {
-                    run.info.recording = Some((r.path().to_path_buf(), 0));
-                    run.recording = Some((r, index));
-                }
+            match live.run.start_recording(&root, None) {
+                Ok(_) => live.recorded = Some(index),
                 Err(e) => error = Some(e),
             }
         }
-        let info = run.info.clone();
+        let info = live.info().clone();
         if let Some(e) = error {
             self.reply(Reply::Error {
                 context: "cannot record".into(),
@@ -959,10 +912,10 @@ impl<W: Fn() + Sync> Thread<W> {
 
     /// Closes the live source, if one runs (the recording it made stays on disk).
     fn end_live(&mut self, error: Option<String>) {
-        let Some(mut run) = self.live.take() else {
+        let Some(mut live) = self.live.take() else {
             return;
         };
-        if let Some((path, frames)) = run.stop_recording() {
+        if let Some((path, frames)) = live.run.stop_recording() {
             self.reply(Reply::RecordingEnded { path, frames });
         }
         self.reply(Reply::LiveEnded { error });

@@ -285,3 +285,144 @@ impl Recording {
         &self.gt_path
     }
 }
+
+/// What a live run shows of itself.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LiveInfo {
+    pub source: String,
+    /// Frames taken (and tracked, shown).
+    pub frames: usize,
+    /// Frames the source sent after the first one taken that were never taken (they came
+    /// while the trackers were busy).
+    pub dropped: u64,
+    /// Frames taken per second, over the last second or so.
+    pub fps: f32,
+    /// The recording's ground-truth file and its frames, while recording.
+    pub recording: Option<(std::path::PathBuf, usize)>,
+}
+
+/// A frame a live run took: its index in the run and its image.
+pub struct Taken {
+    pub index: usize,
+    pub image: GrayU8,
+}
+
+/// A live run, the one loop of every live user (`regtrack track --camera`, the inspector's live
+/// mode, Python's `Camera`): the newest frame of a source each time ([`LiveRun::take`]),
+/// counted (frames, frames dropped, the rate over the last second), and, when asked, recorded
+/// as a sequence with the corners its caller tracked on it ([`LiveRun::record`]). What tracks
+/// the frames is the caller's: one tracker initialised on the first frame, or the inspector's
+/// trackers started on frames a box was drawn on.
+pub struct LiveRun {
+    live: Live,
+    info: LiveInfo,
+    /// When the frames of the last second were taken (for the rate).
+    taken: std::collections::VecDeque<std::time::Instant>,
+    recording: Option<Recording>,
+}
+
+impl LiveRun {
+    /// Opens `source` at `width x height` (see [`Live::open`]).
+    pub fn open(source: &str, width: usize, height: usize) -> Result<LiveRun> {
+        Ok(LiveRun {
+            live: Live::open(source, width, height)?,
+            info: LiveInfo {
+                source: source.to_string(),
+                ..LiveInfo::default()
+            },
+            taken: Default::default(),
+            recording: None,
+        })
+    }
+
+    /// The run so far.
+    pub fn info(&self) -> &LiveInfo {
+        &self.info
+    }
+
+    /// The newest frame, waiting at most `wait` for one (`None`: as long as it takes): `None`
+    /// when none came within `wait`; an error once the source stopped (naming it and the frame
+    /// it stopped at).
+    pub fn take(&mut self, wait: Option<std::time::Duration>) -> Result<Option<Taken>> {
+        let got = match wait {
+            Some(w) => self.live.newest_within(w),
+            None => self.live.newest().map(Some),
+        };
+        let frame = match got {
+            Ok(Some(f)) => f,
+            Ok(None) => return Ok(None),
+            Err(Error::Live { name, message }) => {
+                return Err(Error::Live {
+                    name,
+                    message: format!("{message} (at live frame {})", self.info.frames + 1),
+                });
+            }
+            Err(e) => return Err(e),
+        };
+        let index = self.info.frames;
+        if index > 0 {
+            self.info.dropped += frame.dropped;
+        }
+        self.info.frames += 1;
+        let now = std::time::Instant::now();
+        self.taken.push_back(now);
+        while self
+            .taken
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > std::time::Duration::from_secs(1))
+        {
+            self.taken.pop_front();
+        }
+        self.info.fps = self.taken.len() as f32;
+        Ok(Some(Taken {
+            index,
+            image: frame.image,
+        }))
+    }
+
+    /// Starts recording the frames taken from now on as the sequence `ROOT/NAME`, or under the
+    /// first free name `live`, `live_2`... without a name; the recording that ran is ended (its
+    /// ground-truth file and frames, kept on disk).
+    pub fn start_recording(
+        &mut self,
+        root: &std::path::Path,
+        name: Option<&str>,
+    ) -> Result<Option<(std::path::PathBuf, usize)>> {
+        let ended = self.stop_recording();
+        let r = match name {
+            Some(n) => Recording::create(root, n)?,
+            None => Recording::create_fresh(root)?,
+        };
+        self.info.recording = Some((r.path().to_path_buf(), 0));
+        self.recording = Some(r);
+        Ok(ended)
+    }
+
+    /// Ends the recording, if one runs: its ground-truth file and frames (kept on disk).
+    pub fn stop_recording(&mut self) -> Option<(std::path::PathBuf, usize)> {
+        self.info.recording = None;
+        self.recording
+            .take()
+            .map(|r| (r.path().to_path_buf(), r.frames()))
+    }
+
+    /// Records a frame taken and the corners tracked on it (`None`: lost, or not tracked), when
+    /// recording. A failed write ends the recording (what it wrote is kept: `Err` with it).
+    #[allow(clippy::type_complexity)]
+    pub fn record(
+        &mut self,
+        image: &GrayU8,
+        corners: Option<&crate::geometry::Quad>,
+    ) -> std::result::Result<(), (Error, Option<(std::path::PathBuf, usize)>)> {
+        let Some(r) = self.recording.as_mut() else {
+            return Ok(());
+        };
+        match r.push(image, corners) {
+            Ok(()) => {
+                self.info.recording = Some((r.path().to_path_buf(), r.frames()));
+                Ok(())
+            }
+            Err(e) => Err((e, self.stop_recording())),
+        }
+    }
+}

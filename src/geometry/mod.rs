@@ -26,6 +26,12 @@ impl Point {
     pub fn is_finite(self) -> bool {
         self.x.is_finite() && self.y.is_finite()
     }
+    /// Whether the point is more than half a `width x height` frame beyond its edges: where a
+    /// tracked target's centre is taken to have left the frame.
+    pub fn far_outside(self, width: usize, height: usize) -> bool {
+        let (w, h) = (width as f64, height as f64);
+        self.x < -0.5 * w || self.x > 1.5 * w || self.y < -0.5 * h || self.y > 1.5 * h
+    }
 }
 
 /// An axis-aligned rectangle `[x0, x1) x [y0, y1)` in image (or normalised) coordinates: a

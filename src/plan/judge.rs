@@ -32,9 +32,7 @@ pub fn check_quad(q: &Quad, initial_area: f64, (fw, fh): (usize, usize)) -> Resu
     if !q.is_convex() || area < initial_area / 100.0 || area > initial_area * 100.0 {
         return Err(LossReason::Degenerate);
     }
-    let c = q.centroid();
-    let (w, h) = (fw as f64, fh as f64);
-    if c.x < -0.5 * w || c.x > 1.5 * w || c.y < -0.5 * h || c.y > 1.5 * h {
+    if q.centroid().far_outside(fw, fh) {
         return Err(LossReason::OutOfFrame);
     }
     Ok(())

@@ -35,6 +35,54 @@ impl Features {
     }
 }
 
+/// What a correlation filter of a `tw x th` target starts from: the window it reads, its
+/// Fourier transform, the Hann window and the spectrum of the response it learns to give (a
+/// Gaussian `output_sigma` times the target's size wide, in cells).
+pub struct Basis {
+    pub win: Window,
+    pub fft: Fft2,
+    pub hann: Vec<f32>,
+    pub yf: Vec<C32>,
+}
+
+impl Basis {
+    /// See [`Basis`]; `padding`, `template_size`, `features` and `cell` as [`Window::new`].
+    pub fn new(
+        (tw, th): (f64, f64),
+        (padding, template_size): (f64, usize),
+        (features, cell): (Features, usize),
+        output_sigma: f64,
+    ) -> Self {
+        let win = Window::new(tw, th, padding, template_size, features, cell);
+        let (w, h) = win.cells();
+        let mut fft = Fft2::new(w, h);
+        let sigma = (tw * th).sqrt() * output_sigma / win.cell_px(1.0);
+        let mut yf = Vec::new();
+        fft.forward_real(&gaussian_label(w, h, sigma), &mut yf);
+        Basis {
+            win,
+            fft,
+            hann: hann2(w, h),
+            yf,
+        }
+    }
+}
+
+/// The response whose spectrum is `spectrum` (transformed back in place), its real part into
+/// `buf`, and its peak (see [`peak`]) on `win`'s cells.
+pub fn response_peak(
+    fft: &mut Fft2,
+    spectrum: &mut [C32],
+    buf: &mut Vec<f32>,
+    win: &Window,
+) -> (f64, f64, f64) {
+    fft.inverse(spectrum);
+    buf.clear();
+    buf.extend(spectrum.iter().map(|v| v.re));
+    let (w, h) = win.cells();
+    peak(buf, w, h)
+}
+
 /// The window a filter reads: `pw x ph` resampled pixels (a whole number of cells) covering
 /// `pw * px x ph * px` frame pixels around the target.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -309,11 +309,7 @@ impl State {
         for i in 0..n {
             self.acc[i] /= self.den[i] + lambda;
         }
-        self.fft.inverse(&mut self.acc);
-        self.buf.clear();
-        self.buf.extend(self.acc.iter().map(|v| v.re));
-        let (w, h) = self.win.cells();
-        cf::peak(&self.buf, w, h)
+        cf::response_peak(&mut self.fft, &mut self.acc, &mut self.buf, &self.win)
     }
 }
 
@@ -324,24 +320,18 @@ impl WholeTracker for Dsst {
 
     fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
         let (tw, th) = self.base.size0;
-        let win = Window::new(
-            tw,
-            th,
-            self.padding,
-            self.template_size,
-            Features::Hog,
-            self.cell,
+        let cf::Basis { win, fft, hann, yf } = cf::Basis::new(
+            (tw, th),
+            (self.padding, self.template_size),
+            (Features::Hog, self.cell),
+            self.output_sigma,
         );
         let (w, h) = win.cells();
-        let mut fft = Fft2::new(w, h);
-        let sigma = (tw * th).sqrt() * self.output_sigma / win.cell_px(1.0);
-        let mut yf = Vec::new();
-        fft.forward_real(&cf::gaussian_label(w, h, sigma), &mut yf);
         let n = w * h;
         let mut st = State {
             win,
             fft,
-            hann: cf::hann2(w, h),
+            hann,
             yf,
             num: vec![C32::default(); n * win.features.channels()],
             den: vec![0.0; n],

@@ -187,11 +187,7 @@ impl State {
         for (k, a) in self.kf.iter_mut().zip(&self.alphaf) {
             *k *= *a;
         }
-        self.fft.inverse(&mut self.kf);
-        self.buf.clear();
-        self.buf.extend(self.kf.iter().map(|v| v.re));
-        let (w, h) = self.win.cells();
-        cf::peak(&self.buf, w, h)
+        cf::response_peak(&mut self.fft, &mut self.kf, &mut self.buf, &self.win)
     }
 }
 
@@ -201,25 +197,18 @@ impl WholeTracker for Kcf {
     base_field!();
 
     fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
-        let (tw, th) = self.base.size0;
-        let win = Window::new(
-            tw,
-            th,
-            self.padding,
-            self.template_size,
-            self.features,
-            self.cell,
+        let cf::Basis { win, fft, hann, yf } = cf::Basis::new(
+            self.base.size0,
+            (self.padding, self.template_size),
+            (self.features, self.cell),
+            self.output_sigma,
         );
         let (w, h) = win.cells();
-        let mut fft = Fft2::new(w, h);
-        let sigma = (tw * th).sqrt() * self.output_sigma / win.cell_px(1.0);
-        let mut yf = Vec::new();
-        fft.forward_real(&cf::gaussian_label(w, h, sigma), &mut yf);
         let n = w * h;
         let mut st = State {
             win,
             fft,
-            hann: cf::hann2(w, h),
+            hann,
             yf,
             xf: vec![C32::default(); n * win.features.channels()],
             alphaf: vec![C32::default(); n],

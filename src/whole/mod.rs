@@ -270,8 +270,8 @@ impl Base {
             if !(0.05..=20.0).contains(&pose.scale) {
                 return Err(LossReason::Degenerate);
             }
-            let (w, h) = (frame_size.0 as f64, frame_size.1 as f64);
-            if pose.cx < -0.5 * w || pose.cx > 1.5 * w || pose.cy < -0.5 * h || pose.cy > 1.5 * h {
+            let centre = crate::geometry::Point::new(pose.cx, pose.cy);
+            if centre.far_outside(frame_size.0, frame_size.1) {
                 return Err(LossReason::OutOfFrame);
             }
             Ok((pose, sim))

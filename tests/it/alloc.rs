@@ -51,25 +51,56 @@ fn update_does_not_allocate() {
                 .map(|p| regtrack::geometry::Point::new(p.x + 0.7 * k as f64, p.y - 0.4 * k as f64))
         })
         .collect();
-    // Every SM x AM; by default each on one of the SSMs in turn (every SSM is met across the
-    // grid), with REGTRACK_FULL_TESTS=1 on each of them. Two threads share the combinations:
+    // Every SM x AM of the registries; by default each on one of the SSMs in turn (every SSM
+    // is met across the grid), with REGTRACK_FULL_TESTS=1 on each of them. A combination that
+    // does not build must be one the capabilities refuse. Two threads share the combinations:
     // the counter is per thread, so each sees only its own tracker's allocations.
-    const SSMS: [&str; 4] = ["homography", "sl3", "corner", "affine"];
+    let ssms = regtrack::ssm::REGISTRY;
+    let (method, tracker) = (
+        regtrack::params::MethodParams::default(),
+        regtrack::tracker::TrackerParams::default(),
+    );
+    let cfg = regtrack::sm::SmConfig {
+        method: &method,
+        tracker: &tracker,
+    };
     let mut combos = Vec::new();
     let mut pair = 0;
     for sm in regtrack::sm::REGISTRY {
+        let needs = regtrack::sm::build(sm.name, &cfg).unwrap().requires();
         for am in regtrack::am::REGISTRY {
+            let refused = am
+                .build
+                .default_model()
+                .capabilities()
+                .missing(&needs)
+                .is_some();
             pair += 1;
-            for (k, ssm) in SSMS.iter().enumerate() {
-                if full_tests() || pair % SSMS.len() == k {
-                    // Combinations the capabilities refuse are checked by the recovery test.
-                    if let Ok(spec) = TrackerSpec::from_names(sm.name, am.name, ssm) {
+            for (k, ssm) in ssms.iter().enumerate() {
+                if !(full_tests() || pair % ssms.len() == k) {
+                    continue;
+                }
+                match TrackerSpec::from_names(sm.name, am.name, ssm.name) {
+                    Ok(spec) => {
+                        assert!(!refused, "{} x {} builds", sm.name, am.name);
                         combos.push(spec);
                     }
+                    Err(e) => assert!(
+                        refused,
+                        "{} x {} x {} does not build: {e}",
+                        sm.name, am.name, ssm.name
+                    ),
                 }
             }
         }
     }
+    // Every SSM met, and most pairs run.
+    let met: std::collections::BTreeSet<String> = combos
+        .iter()
+        .filter_map(|s| s.registration().map(|r| r.ssm.clone()))
+        .collect();
+    assert_eq!(met.len(), ssms.len(), "{met:?}");
+    assert!(combos.len() * 10 >= pair * 8, "{} of {pair}", combos.len());
     let check = |mut spec: TrackerSpec| {
         // A pyramid too (its levels are kept between frames as well).
         let affine = spec.registration().is_some_and(|r| r.ssm == "affine");

@@ -564,7 +564,7 @@ fn a_live_source_is_tracked_dropped_recorded_and_its_end_reported() {
     );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && err.contains("stopped after") && err.contains("(frame "),
+        !o.status.success() && err.contains("stopped after") && err.contains("(at live frame "),
         "{err}"
     );
     assert!(

@@ -10,7 +10,35 @@ use regtrack::app::command::Command;
 use regtrack::app::state::{SequenceSource, State};
 use regtrack::dataset::synth::{SynthConfig, render_sequence};
 use regtrack::geometry::Point;
+use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
+
+/// How many times the inspectors' workers have woken their UI (the app's repaint callback,
+/// called after every reply): [`step_until`] waits for the next wake instead of sleeping.
+static WAKES: (Mutex<u64>, Condvar) = (Mutex::new(0), Condvar::new());
+
+/// The wake callback the tests' inspectors are built with.
+fn wake() {
+    let (count, changed) = &WAKES;
+    *count.lock().unwrap() += 1;
+    changed.notify_all();
+}
+
+/// The wakes so far.
+fn wakes() -> u64 {
+    *WAKES.0.lock().unwrap()
+}
+
+/// Waits until a wake after `seen` (any inspector's: a spurious one only costs a check), at
+/// most `limit`; returns the wakes then.
+fn wait_for_wake(seen: u64, limit: Duration) -> u64 {
+    let (count, changed) = &WAKES;
+    let guard = count.lock().unwrap();
+    let (guard, _) = changed
+        .wait_timeout_while(guard, limit, |n| *n == seen)
+        .unwrap();
+    *guard
+}
 
 /// A short synthetic sequence (PNG frames) in `dir`.
 fn small_sequence(dir: &std::path::Path, frames: usize) -> std::path::PathBuf {
@@ -28,7 +56,7 @@ fn small_sequence(dir: &std::path::Path, frames: usize) -> std::path::PathBuf {
 }
 
 fn harness(state: State) -> Harness<'static, InspectorApp> {
-    let app = InspectorApp::new(state, || {});
+    let app = InspectorApp::new(state, wake);
     Harness::builder()
         .with_size(egui::Vec2::new(1400.0, 900.0))
         .with_max_steps(10_000)
@@ -42,13 +70,15 @@ fn frame_width(h: &Harness<'static, InspectorApp>) -> f32 {
     b.x - a.x
 }
 
-/// Steps the UI until `done` holds (the worker runs on its own thread).
+/// Steps the UI until `done` holds: the worker runs on its own thread, and each step waits for
+/// its next reply (the wake it sends), or at most 50 ms for what no reply announces.
 fn step_until(
     h: &mut Harness<'static, InspectorApp>,
     what: &str,
     done: impl Fn(&InspectorApp) -> bool,
 ) {
     let start = Instant::now();
+    let mut seen = wakes();
     while !done(h.state()) {
         assert!(
             start.elapsed() < Duration::from_secs(60),
@@ -57,7 +87,7 @@ fn step_until(
             h.state().status()
         );
         h.step();
-        std::thread::sleep(Duration::from_millis(5));
+        seen = wait_for_wake(seen, Duration::from_millis(50));
     }
     h.step();
 }
@@ -722,7 +752,7 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
 fn at_1000x700_the_frame_keeps_most_of_the_window() {
     let d = TempDir::new("gui-small");
     let seq = small_sequence(d.path(), 3);
-    let app = InspectorApp::new(state_on(&seq), || {});
+    let app = InspectorApp::new(state_on(&seq), wake);
     let mut h = Harness::builder()
         .with_size(egui::Vec2::new(1000.0, 700.0))
         .with_max_steps(10_000)
@@ -1089,8 +1119,11 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
     let held = h.state().state.frame;
     for k in 2..=4 {
         h.hover_at(a + (b - a) * (k as f32 / 4.0));
-        h.step();
-        std::thread::sleep(Duration::from_millis(80));
+        // A new live frame arrives while the box is being drawn.
+        let arrived = h.state().live().unwrap().frames;
+        step_until(&mut h, "a live frame while drawing", |a| {
+            a.live().is_some_and(|l| l.frames > arrived)
+        });
     }
     // The image held while the box was drawn, though frames kept coming.
     assert_eq!(h.state().state.frame, held);

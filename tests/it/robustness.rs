@@ -463,18 +463,15 @@ fn esm_does_not_run_away_when_its_steps_lower_the_similarity() {
     }
 }
 
-/// Not a test: writes the light sequences above to disk in the MTF layout (PNG frames), for
-/// `regtrack eval` and for older builds (docs/robustness.md compares the code the issue measured
-/// with today's on them): `REGTRACK_LIT_OUT=/tmp/lit cargo test --test it
-/// write_the_lit_sequences -- --ignored`.
+/// The light sequences above written in the MTF layout (PNG frames) read back as they were
+/// rendered: every frame, the target's corners. With `REGTRACK_LIT_OUT=/tmp/lit cargo test
+/// --test it write_the_lit_sequences` they are kept there, for `regtrack eval` and for older
+/// builds (docs/robustness.md compares the code the issue measured with today's on them).
 #[test]
-#[ignore]
 fn write_the_lit_sequences() {
-    let Ok(out) = std::env::var("REGTRACK_LIT_OUT") else {
-        eprintln!("set REGTRACK_LIT_OUT to the output folder");
-        return;
-    };
-    let root = std::path::Path::new(&out);
+    let temp = crate::common::TempDir::new("lit");
+    let out = std::env::var_os("REGTRACK_LIT_OUT").map(std::path::PathBuf::from);
+    let root = out.as_deref().unwrap_or(temp.path());
     let mut seqs: Vec<(String, Vec<GrayU8>, Quad)> = Vec::new();
     let (f, q) = sparse_lit_sequence(121, 1, true, true, true);
     seqs.push(("sparse".into(), f, q));
@@ -485,7 +482,12 @@ fn write_the_lit_sequences() {
         seqs.push((format!("brick{}", (c * 100.0) as i32), f, q));
     }
     for (name, frames, q) in seqs {
-        write_static_sequence(root, &name, &frames, &q);
+        let seq = write_static_sequence(root, &name, &frames, &q);
+        assert_eq!(seq.len(), frames.len(), "{name}");
+        for i in [0, frames.len() / 2, frames.len() - 1] {
+            assert_eq!(seq.ground_truth(i), Some(q), "{name} {i}");
+            assert_eq!(seq.load_gray(i).unwrap().data, frames[i].data, "{name} {i}");
+        }
     }
 }
 

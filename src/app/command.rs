@@ -153,18 +153,11 @@ impl InspectorApp {
         }
     }
 
-    /// The one handler of every command.
+    /// The one handler of every command: each arm a call to what carries it out, by concern
+    /// (sessions and sources in `sources.rs`, runs in `runs.rs`, experiments in
+    /// `experiments.rs`, the ground truth in `gt_edit.rs`, the trackers and the view here).
     pub fn apply(&mut self, cmd: Command) {
-        if self.is_live()
-            && matches!(
-                cmd,
-                Command::Play | Command::Step | Command::RerunFrom(_) | Command::Pause
-            )
-        {
-            self.rt.msg.status =
-                "live: the frames come from the source (Stop camera, then open the recording \
-                 to step through it)"
-                    .into();
+        if self.refused_live(&cmd) {
             return;
         }
         match cmd {
@@ -173,141 +166,27 @@ impl InspectorApp {
                 self.rt.seq.fresh = true;
                 self.open(src)
             }
-            Command::AddTracker => {
-                let n = self.state.trackers.len();
-                let mut entry = self
-                    .state
-                    .trackers
-                    .last()
-                    .cloned()
-                    .unwrap_or_else(|| State::default().trackers[0].clone());
-                entry.color = PALETTE[n % PALETTE.len()];
-                entry.init = InitSource::GroundTruth;
-                self.rt.msg.status = format!(
-                    "tracker {} added: a copy of tracker {n} (pick its methods in its panel)",
-                    n + 1
-                );
-                self.state.trackers.push(entry);
-                self.rt.run.results.edit().push(Vec::new());
-                self.rt.run.starts.push(self.state.start_frame);
-                // Only the new tracker runs (up to where the others are).
-                self.rerun_tracker(n);
-            }
-            Command::RemoveTracker(i) => {
-                if i < self.state.trackers.len() {
-                    self.state.trackers.remove(i);
-                    if i < self.rt.run.results.len() {
-                        self.rt.run.results.edit().remove(i);
-                    }
-                    if i < self.rt.run.starts.len() {
-                        self.rt.run.starts.remove(i);
-                    }
-                    if i < self.rt.run.reinits.len() {
-                        self.rt.run.reinits.remove(i);
-                    }
-                    self.rt.worker.send(Job::Remove { index: i });
-                    self.state.selected_tracker = self
-                        .state
-                        .selected_tracker
-                        .min(self.state.trackers.len().saturating_sub(1));
-                }
-            }
-            Command::SetTracker(i, entry) => {
-                if let Some(t) = self.state.trackers.get_mut(i) {
-                    let rerun = t.spec != entry.spec || t.enabled != entry.enabled;
-                    *t = entry;
-                    if rerun {
-                        match crate::tracker::Tracker::new(&t.spec) {
-                            // Re-run once the pointer is released (not on every drag step);
-                            // the other trackers keep their results.
-                            Ok(_) => {
-                                self.rt.run.rerun_due.insert(i);
-                            }
-                            Err(e) => self.error(format!("tracker {}: {e}", i + 1)),
-                        }
-                    }
-                }
-            }
-            Command::Play => {
-                let n = self.frame_count();
-                let until = self.rt.run.tracked_until;
-                if n == 0 {
-                } else if until.is_some_and(|u| self.state.frame < u) {
-                    // Replay the stored results up to the last tracked frame, then go on.
-                    self.rt.run.replaying = Some(std::time::Instant::now());
-                } else if until.is_some_and(|u| u + 1 >= n) {
-                    self.rt.msg.status = "at the end of the sequence: |< Start and Play replays, \
-                                      Re-run from here tracks again"
-                        .into();
-                } else {
-                    self.rt.run.playing = true;
-                    self.rt.worker.send(Job::Advance {
-                        generation: self.rt.run.generation,
-                        frames: None,
-                        fps: self.state.playback_fps,
-                    });
-                }
-            }
-            Command::Pause => {
-                self.rt.run.playing = false;
-                self.rt.run.replaying = None;
-                self.rt.worker.stop();
-            }
-            Command::Step => {
-                self.rt.worker.send(Job::Advance {
-                    generation: self.rt.run.generation,
-                    frames: Some(1),
-                    fps: 0.0,
-                });
-            }
-            Command::Seek(i) => {
-                self.rt.run.replaying = None;
-                if self.rt.run.playing {
-                    self.rt.run.playing = false;
-                    self.rt.worker.stop();
-                }
-                let n = self.frame_count();
-                if n > 0 {
-                    self.state.frame = i.min(n - 1);
-                    self.rt.ui.selected_iteration = None;
-                    self.rt.worker.send(Job::Show(self.state.frame));
-                }
-            }
-            Command::SetPlaybackFps(f) => {
-                // 0 (as fast as possible), or a speed in the widget's range.
-                self.state.playback_fps = if f > 0.0 {
-                    f.clamp(
-                        *super::state::PLAYBACK_FPS.start(),
-                        *super::state::PLAYBACK_FPS.end(),
-                    )
-                } else {
-                    0.0
-                }
-            }
+            Command::AddTracker => self.add_tracker(),
+            Command::RemoveTracker(i) => self.remove_tracker(i),
+            Command::SetTracker(i, entry) => self.set_tracker(i, entry),
+            Command::Play => self.play(),
+            Command::Pause => self.pause(),
+            Command::Step => self.rt.worker.send(Job::Advance {
+                generation: self.rt.run.generation,
+                frames: Some(1),
+                fps: 0.0,
+            }),
+            Command::Seek(i) => self.seek(i),
+            Command::SetPlaybackFps(f) => self.set_playback_fps(f),
             Command::RerunFrom(f) => {
                 // Re-tracking from here, and playing on; the results before stay.
                 self.restart_from(f, true);
                 self.rt.run.play_after_start = true;
             }
-            Command::InitTracker(i, init) => {
-                if let Some(t) = self.state.trackers.get_mut(i) {
-                    t.init = init;
-                    // This tracker starts on the shown frame; the others keep their results.
-                    if let Some(s) = self.rt.run.starts.get_mut(i) {
-                        *s = self.state.frame;
-                    }
-                    self.rerun_tracker(i);
-                }
-            }
+            Command::InitTracker(i, init) => self.init_tracker(i, init),
             Command::SelectTracker(i) => self.state.selected_tracker = i,
             Command::SelectIteration(it) => self.rt.ui.selected_iteration = it,
-            Command::SetTool(t) => {
-                if t == Tool::EditGroundTruth && self.rt.ui.tool != t {
-                    // The ground-truth mode needs the gray frame: show the frame again.
-                    self.rt.display.texture_frame = None;
-                }
-                self.rt.ui.tool = t;
-            }
+            Command::SetTool(t) => self.set_tool(t),
             Command::SetView(v) => self.state.view = v,
             Command::ShowLandscape(open) => self.state.view.show_landscape = open,
             Command::EnlargeLandscape(big) => self.rt.ui.landscape.enlarged = big,
@@ -320,22 +199,8 @@ impl InspectorApp {
             Command::OpenDialog { folder } => self.open_dialog(folder),
             Command::SetSessionPath(p) => self.rt.ui.session_path = p,
             Command::SaveSession(p) => self.save_session(p, false),
-            Command::ConfirmOverwrite(yes) => {
-                if let Some(p) = self.rt.ui.confirm_overwrite.take() {
-                    if yes {
-                        self.save_session(p, true);
-                    } else {
-                        self.rt.msg.status = format!("not saved: {} kept", p.display());
-                    }
-                }
-            }
-            Command::LoadSession(p) => match State::load(&p) {
-                Ok(s) => {
-                    self.set_session_path(&p);
-                    self.load_state(s);
-                }
-                Err(e) => self.error(format!("cannot load the session: {e}")),
-            },
+            Command::ConfirmOverwrite(yes) => self.confirm_overwrite(yes),
+            Command::LoadSession(p) => self.load_session(p),
             Command::ReportError(e) => self.error(e),
             Command::OpenCamera {
                 source,
@@ -343,15 +208,7 @@ impl InspectorApp {
                 height,
             } => self.open_live(source, width, height),
             Command::StopCamera => self.rt.worker.send(Job::StopLive),
-            Command::Record(on) => {
-                let what = on.then(|| {
-                    (
-                        PathBuf::from(self.rt.live.record_folder.trim()),
-                        self.state.selected_tracker,
-                    )
-                });
-                self.rt.worker.send(Job::Record(what));
-            }
+            Command::Record(on) => self.record(on),
             Command::SetRecordFolder(f) => self.rt.live.record_folder = f,
             Command::Perturb => self.perturb(),
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
@@ -370,6 +227,102 @@ impl InspectorApp {
                 }
             }
         }
+    }
+
+    /// Live, the frames come from the source: playing and stepping are refused, with why.
+    fn refused_live(&mut self, cmd: &Command) -> bool {
+        let refused = self.is_live()
+            && matches!(
+                cmd,
+                Command::Play | Command::Step | Command::RerunFrom(_) | Command::Pause
+            );
+        if refused {
+            self.rt.msg.status =
+                "live: the frames come from the source (Stop camera, then open the recording \
+                 to step through it)"
+                    .into();
+        }
+        refused
+    }
+
+    /// A new tracker, a copy of the last one, started from the ground truth; it alone runs up
+    /// to where the others are.
+    fn add_tracker(&mut self) {
+        let n = self.state.trackers.len();
+        let mut entry = self
+            .state
+            .trackers
+            .last()
+            .cloned()
+            .unwrap_or_else(|| State::default().trackers[0].clone());
+        entry.color = PALETTE[n % PALETTE.len()];
+        entry.init = InitSource::GroundTruth;
+        self.rt.msg.status = format!(
+            "tracker {} added: a copy of tracker {n} (pick its methods in its panel)",
+            n + 1
+        );
+        self.state.trackers.push(entry);
+        self.rt.run.results.edit().push(Vec::new());
+        self.rt.run.starts.push(self.state.start_frame);
+        self.rerun_tracker(n);
+    }
+
+    fn remove_tracker(&mut self, i: usize) {
+        if i >= self.state.trackers.len() {
+            return;
+        }
+        self.state.trackers.remove(i);
+        if i < self.rt.run.results.len() {
+            self.rt.run.results.edit().remove(i);
+        }
+        if i < self.rt.run.starts.len() {
+            self.rt.run.starts.remove(i);
+        }
+        if i < self.rt.run.reinits.len() {
+            self.rt.run.reinits.remove(i);
+        }
+        self.rt.worker.send(Job::Remove { index: i });
+        self.state.selected_tracker = self
+            .state
+            .selected_tracker
+            .min(self.state.trackers.len().saturating_sub(1));
+    }
+
+    /// A tracker's settings changed: a new method or its enabling re-runs it (once the pointer
+    /// is released, not on every drag step; the other trackers keep their results).
+    fn set_tracker(&mut self, i: usize, entry: crate::session::TrackerEntry) {
+        let Some(t) = self.state.trackers.get_mut(i) else {
+            return;
+        };
+        let rerun = t.spec != entry.spec || t.enabled != entry.enabled;
+        *t = entry;
+        if rerun {
+            match crate::tracker::Tracker::new(&t.spec) {
+                Ok(_) => {
+                    self.rt.run.rerun_due.insert(i);
+                }
+                Err(e) => self.error(format!("tracker {}: {e}", i + 1)),
+            }
+        }
+    }
+
+    /// Tracker `i` starts on the shown frame from `init`; the others keep their results.
+    fn init_tracker(&mut self, i: usize, init: InitSource) {
+        if let Some(t) = self.state.trackers.get_mut(i) {
+            t.init = init;
+            if let Some(s) = self.rt.run.starts.get_mut(i) {
+                *s = self.state.frame;
+            }
+            self.rerun_tracker(i);
+        }
+    }
+
+    fn set_tool(&mut self, t: Tool) {
+        if t == Tool::EditGroundTruth && self.rt.ui.tool != t {
+            // The ground-truth mode needs the gray frame: show the frame again.
+            self.rt.display.texture_frame = None;
+        }
+        self.rt.ui.tool = t;
     }
 
     /// Ground truth of a frame as shown: corrected, else fitted on the chosen SSM; a drag in

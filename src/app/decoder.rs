@@ -3,7 +3,6 @@
 //! [`AHEAD`] of them, so memory stays bounded); a frame being decoded is waited for on a
 //! condition variable.
 
-use super::worker::FrameImage;
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
@@ -11,6 +10,15 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::mpsc::{Sender, channel};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
+
+/// A decoded frame for display (RGBA, 8 bits per channel).
+#[derive(Clone, Debug)]
+pub struct FrameImage {
+    pub index: usize,
+    pub width: usize,
+    pub height: usize,
+    pub rgba: Vec<u8>,
+}
 
 /// Frames decoded ahead of the one asked for, at most this many (memory stays bounded whatever
 /// the sequence's length: about 4 x 1280 x 720 x 5 bytes).
@@ -98,7 +106,7 @@ impl Ahead {
         let spawned = std::thread::Builder::new()
             .name("regtrack-decoder".into())
             .spawn(move || {
-                super::worker::yield_to_window();
+                super::background::yield_to_window();
                 let (lock, decoded) = &*state;
                 while let Ok((seq, i)) = rx.recv() {
                     let id = Arc::as_ptr(&seq) as usize;

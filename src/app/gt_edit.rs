@@ -242,110 +242,27 @@ impl InspectorApp {
             }
             GtCommand::PickCorner(c) => self.rt.gt.corner = c.map(|k| k.min(3)),
             GtCommand::Step(s) => self.rt.gt.step = s.clamp(0.1, 64.0),
-            GtCommand::Nudge { dx, dy } => {
-                let Some(q) = self.ground_truth(frame) else {
-                    return;
-                };
-                let moved = match self.rt.gt.corner {
-                    Some(k) => gt::move_corner(
-                        &self.state.gt_ssm,
-                        &q,
-                        k,
-                        Point::new(q.0[k].x + dx, q.0[k].y + dy),
-                    ),
-                    None => q.map(|c| Point::new(c.x + dx, c.y + dy)),
-                };
-                let what = match self.rt.gt.corner {
-                    Some(k) => format!("nudge corner {}", k + 1),
-                    None => "nudge the quad".into(),
-                };
-                self.apply_gt(GtCommand::Commit {
-                    frame,
-                    quad: moved,
-                    label: what,
-                });
-            }
-            GtCommand::ToggleOccluded => {
-                let occluded = self.gt_frame(frame) == Some(GtFrame::Occluded);
-                // Unmarking goes back to the original corners.
-                let after = (!occluded).then_some(Mark::Occluded);
-                self.gt_edit(
-                    &format!(
-                        "{} frame {}",
-                        if occluded {
-                            "unmark occluded"
-                        } else {
-                            "mark occluded"
-                        },
-                        frame + 1
-                    ),
-                    vec![(frame, after)],
-                );
-            }
-            GtCommand::Revert => {
-                self.gt_edit(
-                    &format!("revert frame {} to the original", frame + 1),
-                    vec![(frame, None)],
-                );
-            }
+            GtCommand::Nudge { dx, dy } => self.nudge(frame, dx, dy),
+            GtCommand::ToggleOccluded => self.toggle_occluded(frame),
+            GtCommand::Revert => self.gt_edit(
+                &format!("revert frame {} to the original", frame + 1),
+                vec![(frame, None)],
+            ),
             GtCommand::Undo => self.step_history(true),
             GtCommand::Redo => self.step_history(false),
-            GtCommand::Export => {
-                let Some(seq) = self.rt.seq.sequence.clone() else {
-                    return;
-                };
-                match gt::export(&seq, self.rt.gt.corrections.edit(), &self.state.gt_ssm) {
-                    Ok(paths) => {
-                        self.rt.msg.status = format!("exported: {}", super::list_paths(&paths))
-                    }
-                    Err(e) => self.error(format!("cannot export the ground truth: {e}")),
+            GtCommand::Export => self.export_gt(),
+            GtCommand::JumpWorst => match self.worst_frame() {
+                Some(f) => self.apply(Command::Seek(f)),
+                None => {
+                    self.rt.msg.status = "no uncorrected frame with a residual or a tracker".into()
                 }
-            }
-            GtCommand::JumpWorst => {
-                if let Some(f) = self.worst_frame() {
-                    self.apply(Command::Seek(f));
-                } else {
-                    self.rt.msg.status = "no uncorrected frame with a residual or a tracker".into();
-                }
-            }
+            },
             GtCommand::Interpolate => self.interpolate(),
             GtCommand::Propagate => {
                 self.propagate(self.state.frame, crate::gt::PropagateLimits::default())
             }
-            GtCommand::InterpolateSelection => {
-                let Some((a, b)) = self.rt.gt.selection else {
-                    return;
-                };
-                match (self.ground_truth(a), self.ground_truth(b)) {
-                    (Some(qa), Some(qb)) if b > a + 1 => self.interpolate_between((a, qa), (b, qb)),
-                    (Some(_), Some(_)) => {
-                        self.rt.msg.status =
-                            "select at least three frames: the ends are the key frames".into()
-                    }
-                    _ => self.error(format!(
-                        "interpolation over frames {}-{} needs corners on both ends",
-                        a + 1,
-                        b + 1
-                    )),
-                }
-            }
-            GtCommand::PropagateSelection => {
-                let Some((a, b)) = self.rt.gt.selection else {
-                    return;
-                };
-                if b == a {
-                    self.rt.msg.status = "select more than one frame to propagate over".into();
-                    return;
-                }
-                let limits = crate::gt::PropagateLimits {
-                    max_frames: b - a,
-                    // The user chose the range: frames where the old ground truth agrees are
-                    // proposed too (the jump and loss stops stay).
-                    agree_frames: 0,
-                    ..Default::default()
-                };
-                self.propagate(a, limits);
-            }
+            GtCommand::InterpolateSelection => self.interpolate_selection(),
+            GtCommand::PropagateSelection => self.propagate_selection(),
             GtCommand::AcceptProposal => {
                 if let Some((label, p)) = self.rt.gt.proposal.take() {
                     let changes = p
@@ -359,50 +276,143 @@ impl InspectorApp {
             GtCommand::Select(sel) => {
                 self.rt.gt.selection = sel.map(|(a, b)| (a.min(b), a.max(b)));
             }
-            GtCommand::AcceptProposalInSelection => {
-                let Some((a, b)) = self.rt.gt.selection else {
-                    return;
-                };
-                if let Some((label, mut p)) = self.rt.gt.proposal.take() {
-                    let (inside, outside): (Vec<_>, Vec<_>) =
-                        p.frames.iter().partition(|(f, _)| (a..=b).contains(f));
-                    let changes: Vec<(usize, Option<Mark>)> = inside
-                        .iter()
-                        .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
-                        .collect();
-                    let n = changes.len();
-                    p.frames = outside;
-                    if !p.frames.is_empty() {
-                        self.rt.gt.proposal = Some((label.clone(), p));
-                    }
-                    self.gt_edit(
-                        &format!("{label}, frames {}-{} ({n})", a + 1, b + 1),
-                        changes,
-                    );
-                }
-            }
-            GtCommand::RevertSelection => {
-                let Some((a, b)) = self.rt.gt.selection else {
-                    return;
-                };
-                let key = self.gt_key();
-                let changes: Vec<(usize, Option<Mark>)> = (a..=b)
-                    .filter(|&f| self.rt.gt.corrections.mark(&key, f).is_some())
-                    .map(|f| (f, None))
-                    .collect();
-                if changes.is_empty() {
-                    self.rt.msg.status = "no correction in the selection".into();
-                } else {
-                    self.gt_edit(
-                        &format!("delete the corrections of frames {}-{}", a + 1, b + 1),
-                        changes,
-                    );
-                }
-            }
+            GtCommand::AcceptProposalInSelection => self.accept_proposal_in_selection(),
+            GtCommand::RevertSelection => self.revert_selection(),
             GtCommand::RejectProposal => {
                 self.rt.gt.proposal = None;
                 self.rt.msg.status = "proposal rejected".into();
             }
+        }
+    }
+
+    /// Moves the picked corner (or the whole quad) of `frame` by `(dx, dy)`.
+    fn nudge(&mut self, frame: usize, dx: f64, dy: f64) {
+        let Some(q) = self.ground_truth(frame) else {
+            return;
+        };
+        let moved = match self.rt.gt.corner {
+            Some(k) => gt::move_corner(
+                &self.state.gt_ssm,
+                &q,
+                k,
+                Point::new(q.0[k].x + dx, q.0[k].y + dy),
+            ),
+            None => q.map(|c| Point::new(c.x + dx, c.y + dy)),
+        };
+        let what = match self.rt.gt.corner {
+            Some(k) => format!("nudge corner {}", k + 1),
+            None => "nudge the quad".into(),
+        };
+        self.apply_gt(GtCommand::Commit {
+            frame,
+            quad: moved,
+            label: what,
+        });
+    }
+
+    /// Marks `frame` occluded, or unmarks it (back to the original corners).
+    fn toggle_occluded(&mut self, frame: usize) {
+        let occluded = self.gt_frame(frame) == Some(GtFrame::Occluded);
+        let after = (!occluded).then_some(Mark::Occluded);
+        let what = if occluded {
+            "unmark occluded"
+        } else {
+            "mark occluded"
+        };
+        self.gt_edit(&format!("{what} frame {}", frame + 1), vec![(frame, after)]);
+    }
+
+    /// Writes the corrected ground truth beside the sequence's.
+    fn export_gt(&mut self) {
+        let Some(seq) = self.rt.seq.sequence.clone() else {
+            return;
+        };
+        match gt::export(&seq, self.rt.gt.corrections.edit(), &self.state.gt_ssm) {
+            Ok(paths) => self.rt.msg.status = format!("exported: {}", super::list_paths(&paths)),
+            Err(e) => self.error(format!("cannot export the ground truth: {e}")),
+        }
+    }
+
+    /// The selection's inner frames from its ends' corners.
+    fn interpolate_selection(&mut self) {
+        let Some((a, b)) = self.rt.gt.selection else {
+            return;
+        };
+        match (self.ground_truth(a), self.ground_truth(b)) {
+            (Some(qa), Some(qb)) if b > a + 1 => self.interpolate_between((a, qa), (b, qb)),
+            (Some(_), Some(_)) => {
+                self.rt.msg.status =
+                    "select at least three frames: the ends are the key frames".into()
+            }
+            _ => self.error(format!(
+                "interpolation over frames {}-{} needs corners on both ends",
+                a + 1,
+                b + 1
+            )),
+        }
+    }
+
+    /// Propagates over the selection, and no further.
+    fn propagate_selection(&mut self) {
+        let Some((a, b)) = self.rt.gt.selection else {
+            return;
+        };
+        if b == a {
+            self.rt.msg.status = "select more than one frame to propagate over".into();
+            return;
+        }
+        let limits = crate::gt::PropagateLimits {
+            max_frames: b - a,
+            // The user chose the range: frames where the old ground truth agrees are proposed
+            // too (the jump and loss stops stay).
+            agree_frames: 0,
+            ..Default::default()
+        };
+        self.propagate(a, limits);
+    }
+
+    /// Accepts the proposal's frames inside the selection; the rest stays proposed.
+    fn accept_proposal_in_selection(&mut self) {
+        let Some((a, b)) = self.rt.gt.selection else {
+            return;
+        };
+        let Some((label, mut p)) = self.rt.gt.proposal.take() else {
+            return;
+        };
+        let (inside, outside): (Vec<_>, Vec<_>) =
+            p.frames.iter().partition(|(f, _)| (a..=b).contains(f));
+        let changes: Vec<(usize, Option<Mark>)> = inside
+            .iter()
+            .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
+            .collect();
+        let n = changes.len();
+        p.frames = outside;
+        if !p.frames.is_empty() {
+            self.rt.gt.proposal = Some((label.clone(), p));
+        }
+        self.gt_edit(
+            &format!("{label}, frames {}-{} ({n})", a + 1, b + 1),
+            changes,
+        );
+    }
+
+    /// Deletes the corrections of the selected frames (one edit).
+    fn revert_selection(&mut self) {
+        let Some((a, b)) = self.rt.gt.selection else {
+            return;
+        };
+        let key = self.gt_key();
+        let changes: Vec<(usize, Option<Mark>)> = (a..=b)
+            .filter(|&f| self.rt.gt.corrections.mark(&key, f).is_some())
+            .map(|f| (f, None))
+            .collect();
+        if changes.is_empty() {
+            self.rt.msg.status = "no correction in the selection".into();
+        } else {
+            self.gt_edit(
+                &format!("delete the corrections of frames {}-{}", a + 1, b + 1),
+                changes,
+            );
         }
     }
 
@@ -581,44 +591,7 @@ impl InspectorApp {
             if !editing || i.modifiers.command {
                 return;
             }
-            for (k, key) in [
-                egui::Key::Num1,
-                egui::Key::Num2,
-                egui::Key::Num3,
-                egui::Key::Num4,
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                if i.key_pressed(key) {
-                    cmds.push(Command::Gt(GtCommand::PickCorner(Some(k))));
-                }
-            }
-            if i.key_pressed(egui::Key::Num0) || i.key_pressed(egui::Key::Q) {
-                cmds.push(Command::Gt(GtCommand::PickCorner(None)));
-            }
-            let s = self.rt.gt.step;
-            for (key, dx, dy) in [
-                (egui::Key::ArrowLeft, -s, 0.0),
-                (egui::Key::ArrowRight, s, 0.0),
-                (egui::Key::ArrowUp, 0.0, -s),
-                (egui::Key::ArrowDown, 0.0, s),
-            ] {
-                // Every press counts, also several within one frame of the window.
-                let k = i.num_presses(key) as f64;
-                if k > 0.0 {
-                    cmds.push(Command::Gt(GtCommand::Nudge {
-                        dx: dx * k,
-                        dy: dy * k,
-                    }));
-                }
-            }
-            if i.key_pressed(egui::Key::Plus) || i.key_pressed(egui::Key::Equals) {
-                cmds.push(Command::Gt(GtCommand::Step(s * 2.0)));
-            }
-            if i.key_pressed(egui::Key::Minus) {
-                cmds.push(Command::Gt(GtCommand::Step(s / 2.0)));
-            }
+            self.corner_keys(i, &mut cmds);
             let (n, frame) = (self.frame_count(), self.state.frame);
             let next = i.num_presses(egui::Key::N) + i.num_presses(egui::Key::PageDown);
             if next > 0 && frame + 1 < n {
@@ -643,6 +616,48 @@ impl InspectorApp {
         });
         for c in cmds {
             self.send(c);
+        }
+    }
+
+    /// The keys that pick a corner, move it (or the quad) and change the step.
+    fn corner_keys(&self, i: &egui::InputState, cmds: &mut Vec<Command>) {
+        for (k, key) in [
+            egui::Key::Num1,
+            egui::Key::Num2,
+            egui::Key::Num3,
+            egui::Key::Num4,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if i.key_pressed(key) {
+                cmds.push(Command::Gt(GtCommand::PickCorner(Some(k))));
+            }
+        }
+        if i.key_pressed(egui::Key::Num0) || i.key_pressed(egui::Key::Q) {
+            cmds.push(Command::Gt(GtCommand::PickCorner(None)));
+        }
+        let s = self.rt.gt.step;
+        for (key, dx, dy) in [
+            (egui::Key::ArrowLeft, -s, 0.0),
+            (egui::Key::ArrowRight, s, 0.0),
+            (egui::Key::ArrowUp, 0.0, -s),
+            (egui::Key::ArrowDown, 0.0, s),
+        ] {
+            // Every press counts, also several within one frame of the window.
+            let k = i.num_presses(key) as f64;
+            if k > 0.0 {
+                cmds.push(Command::Gt(GtCommand::Nudge {
+                    dx: dx * k,
+                    dy: dy * k,
+                }));
+            }
+        }
+        if i.key_pressed(egui::Key::Plus) || i.key_pressed(egui::Key::Equals) {
+            cmds.push(Command::Gt(GtCommand::Step(s * 2.0)));
+        }
+        if i.key_pressed(egui::Key::Minus) {
+            cmds.push(Command::Gt(GtCommand::Step(s / 2.0)));
         }
     }
 }

@@ -3,10 +3,11 @@
 //! modes), and [`Versioned`] values whose caches follow every change.
 
 use super::command::Command;
+use super::decoder::FrameImage;
 use super::gt_edit::GtRuntime;
 use super::panels;
 use super::state::SequenceSource;
-use super::worker::{FrameImage, TrackerFrame, Worker};
+use super::worker::{TrackerFrame, Worker};
 use crate::dataset::Sequence;
 use crate::geometry::Point;
 use eframe::egui;

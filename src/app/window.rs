@@ -83,20 +83,12 @@ impl InspectorApp {
         if let Some(message) = failed {
             plan.requested = true;
             let path = plan.path.clone();
-            let result = plan.result.clone();
-            let ctx2 = ctx.clone();
-            ctx.request_screenshot(move |img| {
-                let saved = save_png(&path, &img).and(Err(AppError::Failed {
+            return capture(ctx, plan, move |img| {
+                save_png(&path, img).and(Err(AppError::Failed {
                     path: path.clone(),
                     message,
-                }));
-                if let Ok(mut r) = result.lock() {
-                    *r = Some(saved);
-                }
-                ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
-                ctx2.request_repaint();
+                }))
             });
-            return;
         }
         if n == 0 {
             ctx.request_repaint();
@@ -127,18 +119,28 @@ impl InspectorApp {
         }
         plan.requested = true;
         let path = plan.path.clone();
-        let result = plan.result.clone();
-        let ctx2 = ctx.clone();
         let summary = frame_rate_summary(&self.rt.frame_times);
-        ctx.request_screenshot(move |img| {
-            let saved = save_png(&path, &img).map(|()| summary);
-            if let Ok(mut r) = result.lock() {
-                *r = Some(saved);
-            }
-            ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
-            ctx2.request_repaint();
-        });
+        capture(ctx, plan, move |img| save_png(&path, img).map(|()| summary));
     }
+}
+
+/// Captures the window, keeps what `save` makes of the image as the plan's result, and closes
+/// the window.
+fn capture(
+    ctx: &egui::Context,
+    plan: &ScreenshotPlan,
+    save: impl FnOnce(&egui::ColorImage) -> Result<String, AppError> + Send + 'static,
+) {
+    let result = plan.result.clone();
+    let ctx2 = ctx.clone();
+    ctx.request_screenshot(move |img| {
+        let saved = save(&img);
+        if let Ok(mut r) = result.lock() {
+            *r = Some(saved);
+        }
+        ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+        ctx2.request_repaint();
+    });
 }
 
 pub(super) fn help_window(ctx: &egui::Context, open: &mut bool) {

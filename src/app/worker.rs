@@ -5,7 +5,7 @@
 //! tracking, propagating corrections, sweeping a landscape) never runs on the UI thread.
 //! Results of an older generation (before a re-initialisation) are dropped by the UI.
 
-use super::decoder::{AHEAD, Ahead, decode_frame, gray_image};
+use super::decoder::{AHEAD, Ahead, FrameImage, decode_frame, gray_image};
 use super::state::SequenceSource;
 use crate::dataset::{Sequence, demo};
 use crate::error::{Error, Result};
@@ -20,15 +20,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::time::{Duration, Instant};
-
-/// A decoded frame for display (RGBA, 8 bits per channel).
-#[derive(Clone, Debug)]
-pub struct FrameImage {
-    pub index: usize,
-    pub width: usize,
-    pub height: usize,
-    pub rgba: Vec<u8>,
-}
 
 /// One tracker's result on one frame.
 #[derive(Clone, Debug)]
@@ -302,21 +293,6 @@ pub struct Worker {
     pub spawn_error: Option<String>,
 }
 
-/// Lowers the calling thread's scheduling priority (Linux: its nice value to 10) so that the
-/// window's thread, and the renderer's, get the cores first: on two cores a tracker running
-/// flat out otherwise starves the window (12 fps measured with two learning trackers). The
-/// trackers lose only what the window uses. Elsewhere it does nothing.
-pub(super) fn yield_to_window() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: gettid and setpriority take and return plain integers; on Linux a thread id is a
-    // valid PRIO_PROCESS target and the call changes that thread alone. A failure (as from a
-    // sandbox that forbids it) leaves the priority as it was, which is harmless.
-    unsafe {
-        let tid = libc::gettid();
-        libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, 10);
-    }
-}
-
 impl Worker {
     /// Starts the thread; `wake` is called after every reply (to request a repaint).
     pub fn spawn(wake: impl Fn() + Send + Sync + 'static) -> Worker {
@@ -329,7 +305,7 @@ impl Worker {
         let spawned = std::thread::Builder::new()
             .name("regtrack-worker".into())
             .spawn(move || {
-                yield_to_window();
+                super::background::yield_to_window();
                 Thread::new(tx2, epoch2, move || wake2()).run(job_rx)
             });
         Worker {
@@ -364,7 +340,7 @@ impl Worker {
         std::thread::Builder::new()
             .name(name.to_string())
             .spawn(move || {
-                yield_to_window();
+                super::background::yield_to_window();
                 let _ = tx.send(task());
                 wake();
             })
@@ -436,85 +412,93 @@ impl<W: Fn() + Sync> Thread<W> {
                 }
             };
             let (epoch, job) = next;
-            match job {
-                Job::Open(src) => {
-                    self.end_live(None);
-                    self.open(src)
+            self.job(job, epoch);
+        }
+    }
+
+    /// Carries out one job (`epoch`: when it was sent, for a stop sent after it).
+    fn job(&mut self, job: Job, epoch: u64) {
+        match job {
+            Job::Open(src) => {
+                self.end_live(None);
+                self.open(src)
+            }
+            Job::Live {
+                generation,
+                source,
+                width,
+                height,
+            } => self.open_live(generation, source, width, height),
+            Job::Record(what) => self.record(what),
+            Job::StopLive => self.end_live(None),
+            Job::Show(i) => match self.decode(i) {
+                Ok((_, img)) => self.reply(Reply::Image(img)),
+                Err(e) => self.reply(Reply::FrameError { index: i, error: e }),
+            },
+            Job::Start {
+                generation,
+                frame,
+                trackers,
+            } => self.start(generation, frame, trackers),
+            Job::Rerun {
+                generation,
+                index,
+                tracker,
+                from,
+                until,
+            } => {
+                if generation == self.generation {
+                    self.rerun(index, tracker.map(|b| *b), from, until);
                 }
-                Job::Live {
-                    generation,
-                    source,
-                    width,
-                    height,
-                } => self.open_live(generation, source, width, height),
-                Job::Record(what) => self.record(what),
-                Job::StopLive => self.end_live(None),
-                Job::Show(i) => match self.decode(i) {
-                    Ok((_, img)) => self.reply(Reply::Image(img)),
-                    Err(e) => self.reply(Reply::FrameError { index: i, error: e }),
-                },
-                Job::Start {
-                    generation,
-                    frame,
-                    trackers,
-                } => self.start(generation, frame, trackers),
-                Job::Rerun {
-                    generation,
-                    index,
-                    tracker,
-                    from,
-                    until,
-                } => {
-                    if generation == self.generation {
-                        self.rerun(index, tracker.map(|b| *b), from, until);
-                    }
-                }
-                Job::Experiment(job) => {
-                    let results = self.experiment(&job);
-                    self.reply(Reply::Experiment {
-                        key: job.key,
-                        results,
+            }
+            Job::Experiment(job) => {
+                let results = self.experiment(&job);
+                self.reply(Reply::Experiment {
+                    key: job.key,
+                    results,
+                });
+            }
+            Job::Landscape(job) => {
+                let result = self.landscape(&job);
+                self.reply(Reply::Landscape {
+                    key: job.key.clone(),
+                    result,
+                });
+            }
+            Job::Propagate(job) => {
+                let result = self.propagate(&job);
+                self.reply(Reply::Proposal {
+                    label: job.label,
+                    result,
+                });
+            }
+            Job::Remove { index } => self.remove(index),
+            Job::Advance {
+                generation,
+                frames,
+                fps,
+            } => {
+                if generation == self.generation {
+                    self.advance(frames, fps, epoch)
+                } else {
+                    self.reply(Reply::Stopped {
+                        generation,
+                        frame: self.frame,
                     });
                 }
-                Job::Landscape(job) => {
-                    let result = self.landscape(&job);
-                    self.reply(Reply::Landscape {
-                        key: job.key.clone(),
-                        result,
-                    });
-                }
-                Job::Propagate(job) => {
-                    let result = self.propagate(&job);
-                    self.reply(Reply::Proposal {
-                        label: job.label,
-                        result,
-                    });
-                }
-                Job::Remove { index } => {
-                    if let Some(k) = self.trackers.iter().position(|t| t.0 == index) {
-                        self.trackers.remove(k);
-                        self.templates.remove(k);
-                    }
-                    for t in &mut self.trackers {
-                        if t.0 > index {
-                            t.0 -= 1;
-                        }
-                    }
-                }
-                Job::Advance {
-                    generation,
-                    frames,
-                    fps,
-                } => {
-                    if generation == self.generation {
-                        self.advance(frames, fps, epoch)
-                    } else {
-                        self.reply(Reply::Stopped {
-                            generation,
-                            frame: self.frame,
-                        });
-                    }
-                }
+            }
+        }
+    }
+
+    /// Tracker `index` is gone: the later ones move down.
+    fn remove(&mut self, index: usize) {
+        if let Some(k) = self.trackers.iter().position(|t| t.0 == index) {
+            self.trackers.remove(k);
+            self.templates.remove(k);
+        }
+        for t in &mut self.trackers {
+            if t.0 > index {
+                t.0 -= 1;
             }
         }
     }
@@ -721,26 +705,8 @@ impl<W: Fn() + Sync> Thread<W> {
             (None, None) => return,
         };
         let until = until.min(len.saturating_sub(1)).max(from);
-        let gray = match self.decode(from) {
-            Ok(v) => v.0,
-            Err(e) => {
-                return self.reply(Reply::FrameError {
-                    index: from,
-                    error: e,
-                });
-            }
-        };
-        let mut t = match Tracker::new(&spec).and_then(|mut t| {
-            t.initialize(FrameInput::Gray8(&gray), &quad)?;
-            Ok(t)
-        }) {
-            Ok(t) => t,
-            Err(e) => {
-                return self.reply(Reply::Error {
-                    context: spec.label(),
-                    error: e,
-                });
-            }
+        let Some(mut t) = self.start_one(&spec, &quad, from) else {
+            return;
         };
         let template = Arc::new(
             t.inspection()
@@ -786,6 +752,34 @@ impl<W: Fn() + Sync> Thread<W> {
         self.reply(Reply::Progress(String::new(), 0, 0));
         self.trackers.push((index, t));
         self.templates.push(template);
+    }
+
+    /// A tracker of `spec` initialised on `quad` in frame `from` (`None`, the reason replied,
+    /// when the frame cannot be read or the tracker cannot start there).
+    fn start_one(&mut self, spec: &TrackerSpec, quad: &Quad, from: usize) -> Option<Tracker> {
+        let gray = match self.decode(from) {
+            Ok(v) => v.0,
+            Err(e) => {
+                self.reply(Reply::FrameError {
+                    index: from,
+                    error: e,
+                });
+                return None;
+            }
+        };
+        match Tracker::new(spec).and_then(|mut t| {
+            t.initialize(FrameInput::Gray8(&gray), quad)?;
+            Ok(t)
+        }) {
+            Ok(t) => Some(t),
+            Err(e) => {
+                self.reply(Reply::Error {
+                    context: spec.label(),
+                    error: e,
+                });
+                None
+            }
+        }
     }
 
     /// Opens a live source; its frames then come between jobs ([`Thread::live_step`]).
@@ -989,25 +983,5 @@ impl<W: Fn() + Sync> Thread<W> {
             generation: self.generation,
             frame: self.frame,
         });
-    }
-}
-
-#[cfg(all(test, target_os = "linux"))]
-mod tests {
-    #[test]
-    fn background_threads_yield_to_the_window() {
-        // SAFETY: reads the calling thread's nice value; plain integers in and out.
-        let nice =
-            || unsafe { libc::getpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t) };
-        let before = nice();
-        let niceness = std::thread::spawn(move || {
-            super::yield_to_window();
-            nice()
-        })
-        .join()
-        .unwrap();
-        // 10, or more when the test itself runs at a lower priority.
-        assert!(niceness >= 10, "nice {niceness}");
-        assert_eq!(nice(), before, "the calling thread keeps its priority");
     }
 }

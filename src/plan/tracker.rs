@@ -124,6 +124,69 @@ impl RegistrationTracker {
     }
 }
 
+impl RegistrationTracker {
+    /// A frame tracked: where it ended is kept, and its patch for the next frame's check.
+    fn tracked(
+        &mut self,
+        input: FrameInput<'_>,
+        out: super::Estimate,
+        start_corners: &Quad,
+        timing: FrameTiming,
+    ) -> FrameOutcome {
+        self.motion = (0..4)
+            .map(|i| out.corners.0[i].dist(start_corners.0[i]))
+            .fold(0.0, f64::max);
+        self.finest.ctx.set_params(out.params);
+        self.corners = out.corners;
+        self.status = TrackStatus::Tracking;
+        self.lost_at = None;
+        // The next frame's patch is compared with this one's (made in place: a frame's update
+        // does not allocate once the buffers have grown).
+        self.remember_patch(input, &out);
+        FrameOutcome {
+            frame: self.frame,
+            status: TrackStatus::Tracking,
+            corners: out.corners,
+            iterations: out.iterations,
+            converged: out.converged,
+            similarity: out.similarity,
+            searched: true,
+            estimate: Some(out.corners),
+            confidence: out.confidence,
+            timing,
+        }
+    }
+
+    /// A frame lost for `reason`: the tracker stays where the frame started (`start`), and
+    /// searches from `lost_at` too next time.
+    fn lost(
+        &mut self,
+        reason: LossReason,
+        out: Option<super::Estimate>,
+        (start_params, start_corners): (Params, Quad),
+        lost_at: Option<Params>,
+        timing: FrameTiming,
+    ) -> FrameOutcome {
+        self.forget_previous();
+        self.finest.ctx.set_params(start_params);
+        self.status = TrackStatus::Lost(reason);
+        self.lost_at = lost_at;
+        let finite = out.filter(|o| o.corners.is_finite());
+        FrameOutcome {
+            frame: self.frame,
+            status: self.status,
+            corners: start_corners,
+            iterations: out.map_or(0, |o| o.iterations),
+            converged: false,
+            similarity: f64::NAN,
+            searched: true,
+            estimate: finite.map(|o| o.corners),
+            confidence: finite.and_then(|o| o.confidence),
+            timing,
+        }
+    }
+}
+
 impl VisualTracker for RegistrationTracker {
     fn landscape(
         &mut self,
@@ -268,48 +331,9 @@ impl VisualTracker for RegistrationTracker {
             other => other,
         };
         let outcome = match checked {
-            Ok(out) => {
-                self.motion = (0..4)
-                    .map(|i| out.corners.0[i].dist(start_corners.0[i]))
-                    .fold(0.0, f64::max);
-                self.finest.ctx.set_params(out.params);
-                self.corners = out.corners;
-                self.status = TrackStatus::Tracking;
-                self.lost_at = None;
-                // The next frame's patch is compared with this one's (made in place: a frame's
-                // update does not allocate once the buffers have grown).
-                self.remember_patch(input, &out);
-                FrameOutcome {
-                    frame: self.frame,
-                    status: TrackStatus::Tracking,
-                    corners: out.corners,
-                    iterations: out.iterations,
-                    converged: out.converged,
-                    similarity: out.similarity,
-                    searched: true,
-                    estimate: Some(out.corners),
-                    confidence: out.confidence,
-                    timing,
-                }
-            }
+            Ok(out) => self.tracked(input, out, &start_corners, timing),
             Err((reason, out)) => {
-                self.forget_previous();
-                self.finest.ctx.set_params(start_params);
-                self.status = TrackStatus::Lost(reason);
-                self.lost_at = lost_at;
-                let finite = out.filter(|o| o.corners.is_finite());
-                FrameOutcome {
-                    frame: self.frame,
-                    status: self.status,
-                    corners: start_corners,
-                    iterations: out.map_or(0, |o| o.iterations),
-                    converged: false,
-                    similarity: f64::NAN,
-                    searched: true,
-                    estimate: finite.map(|o| o.corners),
-                    confidence: finite.and_then(|o| o.confidence),
-                    timing,
-                }
+                self.lost(reason, out, (start_params, start_corners), lost_at, timing)
             }
         };
         observer.frame_finished(self.frame, &outcome);

@@ -21,118 +21,133 @@ pub fn top_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 out.push(Command::SetView(view));
             }
             ui.separator();
-            if ui
-                .button("Open folder…")
-                .on_hover_text("A folder of frames or an MTF dataset sequence folder")
-                .clicked()
-            {
-                out.push(Command::OpenDialog { folder: true });
-            }
-            if ui
-                .button("Open file…")
-                .on_hover_text(
-                    "An MTF <seq>.txt, a POT _gt_points.txt, or a video (mp4, mkv, avi, webm...) \
-                     with its ground truth beside it",
-                )
-                .clicked()
-            {
-                out.push(Command::OpenDialog { folder: false });
-            }
-            // Typed path: works without a desktop portal.
-            let id = ui.make_persistent_id("path_input");
-            let mut path = super::remembered_text(ui, id);
-            let edit = ui.add(
-                egui::TextEdit::singleline(&mut path)
-                    .hint_text("or type a path and press Enter")
-                    .desired_width(130.0),
-            );
-            let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-            if (ui.button("Open path").clicked() || enter) && !path.trim().is_empty() {
-                let p = PathBuf::from(path.trim());
-                out.push(Command::OpenSequence(SequenceSource::Path(p)));
-            }
-            super::remember_text(ui, id, path);
-            if ui
-                .button("Demo")
-                .on_hover_text("The bundled demo sequence")
-                .clicked()
-            {
-                out.push(Command::OpenSequence(SequenceSource::Demo));
-            }
-            // In a menu: the top bar stays one line at 1280 px.
-            ui.menu_button("Camera…", |ui| {
-                ui.horizontal(|ui| camera_controls(ui, out));
-            })
-            .response
-            .on_hover_text("Open a live camera or an FFmpeg test source");
-            if !app.recent().is_empty() {
-                ui.menu_button("Recent", |ui| {
-                    for p in app.recent().iter().cloned() {
-                        if ui.button(p.display().to_string()).clicked() {
-                            out.push(Command::OpenSequence(SequenceSource::Path(p)));
-                            ui.close();
-                        }
-                    }
-                })
-                .response
-                .on_hover_text("Sequences opened lately (kept between runs)");
-            }
-            ui.separator();
-            let label = ui.label("Session:");
-            let mut session = app.rt.ui.session_path.clone();
-            if ui
-                .add(egui::TextEdit::singleline(&mut session).desired_width(130.0))
-                .labelled_by(label.id)
-                .changed()
-            {
-                out.push(Command::SetSessionPath(session));
-            }
-            if ui.button("Save session").clicked() {
-                out.push(Command::SaveSession(PathBuf::from(
-                    app.rt.ui.session_path.trim(),
-                )));
-            }
-            if ui.button("Load session").clicked() {
-                out.push(Command::LoadSession(PathBuf::from(
-                    app.rt.ui.session_path.trim(),
-                )));
-            }
+            open_controls(app, ui, out);
+            session_controls(app, ui, out);
         });
-        ui.horizontal(|ui| {
-            if let Some((what, d, t)) = &app.rt.msg.progress {
-                ui.spinner();
-                if *t > 0 {
-                    ui.add(
-                        egui::ProgressBar::new(*d as f32 / *t as f32)
-                            .text(format!("{what}: {d}/{t}"))
-                            .desired_width(300.0),
-                    );
-                } else {
-                    ui.label(what.as_str());
-                }
-            }
-            ui.label(app.rt.msg.status.as_str());
-        });
-        let mut dismiss = None;
-        for (i, e) in app.rt.msg.errors.iter().enumerate() {
-            // The dismiss button first, so that a long message wraps after it, never over it.
-            ui.horizontal_top(|ui| {
-                if ui.small_button("dismiss").clicked() {
-                    dismiss = Some(i);
-                }
-                ui.add(
-                    egui::Label::new(
-                        egui::RichText::new(format!("Error: {e}"))
-                            .color(egui::Color32::from_rgb(255, 110, 110)),
-                    )
-                    .wrap(),
-                );
-            });
-        }
-        if let Some(i) = dismiss {
-            out.push(Command::DismissError(i));
-        }
+        messages(app, ui, out);
     });
+}
+
+/// Opening a sequence: a folder, a file, a typed path, the demo, a camera, a recent one.
+fn open_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    if ui
+        .button("Open folder…")
+        .on_hover_text("A folder of frames or an MTF dataset sequence folder")
+        .clicked()
+    {
+        out.push(Command::OpenDialog { folder: true });
+    }
+    if ui
+        .button("Open file…")
+        .on_hover_text(
+            "An MTF <seq>.txt, a POT _gt_points.txt, or a video (mp4, mkv, avi, webm...) \
+             with its ground truth beside it",
+        )
+        .clicked()
+    {
+        out.push(Command::OpenDialog { folder: false });
+    }
+    // Typed path: works without a desktop portal.
+    let id = ui.make_persistent_id("path_input");
+    let mut path = super::remembered_text(ui, id);
+    let edit = ui.add(
+        egui::TextEdit::singleline(&mut path)
+            .hint_text("or type a path and press Enter")
+            .desired_width(130.0),
+    );
+    let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+    if (ui.button("Open path").clicked() || enter) && !path.trim().is_empty() {
+        let p = PathBuf::from(path.trim());
+        out.push(Command::OpenSequence(SequenceSource::Path(p)));
+    }
+    super::remember_text(ui, id, path);
+    if ui
+        .button("Demo")
+        .on_hover_text("The bundled demo sequence")
+        .clicked()
+    {
+        out.push(Command::OpenSequence(SequenceSource::Demo));
+    }
+    // In a menu: the top bar stays one line at 1280 px.
+    ui.menu_button("Camera…", |ui| {
+        ui.horizontal(|ui| camera_controls(ui, out));
+    })
+    .response
+    .on_hover_text("Open a live camera or an FFmpeg test source");
+    if !app.recent().is_empty() {
+        ui.menu_button("Recent", |ui| {
+            for p in app.recent().iter().cloned() {
+                if ui.button(p.display().to_string()).clicked() {
+                    out.push(Command::OpenSequence(SequenceSource::Path(p)));
+                    ui.close();
+                }
+            }
+        })
+        .response
+        .on_hover_text("Sequences opened lately (kept between runs)");
+    }
+}
+
+/// The session's file: save and load.
+fn session_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    ui.separator();
+    let label = ui.label("Session:");
+    let mut session = app.rt.ui.session_path.clone();
+    if ui
+        .add(egui::TextEdit::singleline(&mut session).desired_width(130.0))
+        .labelled_by(label.id)
+        .changed()
+    {
+        out.push(Command::SetSessionPath(session));
+    }
+    if ui.button("Save session").clicked() {
+        out.push(Command::SaveSession(PathBuf::from(
+            app.rt.ui.session_path.trim(),
+        )));
+    }
+    if ui.button("Load session").clicked() {
+        out.push(Command::LoadSession(PathBuf::from(
+            app.rt.ui.session_path.trim(),
+        )));
+    }
+}
+
+/// The progress, the status line and the errors (each dismissable).
+fn messages(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    ui.horizontal(|ui| {
+        if let Some((what, d, t)) = &app.rt.msg.progress {
+            ui.spinner();
+            if *t > 0 {
+                ui.add(
+                    egui::ProgressBar::new(*d as f32 / *t as f32)
+                        .text(format!("{what}: {d}/{t}"))
+                        .desired_width(300.0),
+                );
+            } else {
+                ui.label(what.as_str());
+            }
+        }
+        ui.label(app.rt.msg.status.as_str());
+    });
+    let mut dismiss = None;
+    for (i, e) in app.rt.msg.errors.iter().enumerate() {
+        // The dismiss button first, so that a long message wraps after it, never over it.
+        ui.horizontal_top(|ui| {
+            if ui.small_button("dismiss").clicked() {
+                dismiss = Some(i);
+            }
+            ui.add(
+                egui::Label::new(
+                    egui::RichText::new(format!("Error: {e}"))
+                        .color(egui::Color32::from_rgb(255, 110, 110)),
+                )
+                .wrap(),
+            );
+        });
+    }
+    if let Some(i) = dismiss {
+        out.push(Command::DismissError(i));
+    }
 }
 
 /// A live source to open: a V4L2 device or an FFmpeg test source, and its frame size.

@@ -248,6 +248,26 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
         return None;
     };
     let t = Transform::new(rect, app.rt.display.image_size, &app.state.view);
+    draw_image(app, &painter, &t, &texture);
+    let frame = app.state.frame;
+    draw_truth_and_proposal(app, &painter, &t, frame);
+    if let Some((states, half)) = app.patches_on(frame) {
+        draw_patches(&painter, &t, states, half);
+    }
+    draw_trackers(app, &painter, &t, frame);
+    draw_iteration_and_experiment(app, &painter, &t, frame);
+    interact(app, ui, out, &response, &t, &painter);
+    Some(t)
+}
+
+/// The frame's image, or why it could not be read (instead of the previous image under this
+/// frame's ground truth).
+fn draw_image(
+    app: &InspectorApp,
+    painter: &egui::Painter,
+    t: &Transform,
+    texture: &egui::TextureHandle,
+) {
     let [w, h] = app.rt.display.image_size;
     match app
         .rt
@@ -273,11 +293,19 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             );
         }
         None => {
-            draw_frame(&painter, &t, &texture, app.rt.display.image_size);
+            draw_frame(painter, t, texture, app.rt.display.image_size);
         }
     }
+}
 
-    let frame = app.state.frame;
+/// The ground truth (with the 8-DOF one under a low-DOF one when correcting it) and a pending
+/// proposal's quad.
+fn draw_truth_and_proposal(
+    app: &InspectorApp,
+    painter: &egui::Painter,
+    t: &Transform,
+    frame: usize,
+) {
     let numbers = app.state.view.show_corner_numbers;
     if app.state.view.show_ground_truth {
         // The 8-DOF ground truth under a low-DOF one, thin.
@@ -285,14 +313,14 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             && crate::gt::ssm_key(&app.state.gt_ssm).is_ok_and(|k| k != "homography")
             && let Some(full) = app.sequence().and_then(|s| s.ground_truth(frame))
         {
-            let pts = quad_points(&t, &full);
+            let pts = quad_points(t, &full);
             painter.add(Shape::closed_line(
                 pts,
                 Stroke::new(1.0, GT_COLOR.gamma_multiply(0.6)),
             ));
         }
         if let Some(gt) = app.ground_truth(frame) {
-            draw_quad(&painter, &t, &gt, GT_COLOR, true, numbers);
+            draw_quad(painter, t, &gt, GT_COLOR, true, numbers);
         }
     }
     if let Some(q) = app
@@ -300,7 +328,7 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
         .and_then(|p| p.frames.iter().find(|(f, _)| *f == frame))
         .map(|(_, q)| *q)
     {
-        draw_quad(&painter, &t, &q, PROPOSAL_COLOR, true, false);
+        draw_quad(painter, t, &q, PROPOSAL_COLOR, true, false);
         painter.text(
             t.to_screen(q.0[0]) + Vec2::new(0.0, -14.0),
             egui::Align2::LEFT_BOTTOM,
@@ -309,20 +337,22 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             PROPOSAL_COLOR,
         );
     }
-    if let Some((states, half)) = app.patches_on(frame) {
-        draw_patches(&painter, &t, states, half);
-    }
+}
+
+/// Each tracker's quad and label, and what the methods show of themselves.
+fn draw_trackers(app: &InspectorApp, painter: &egui::Painter, t: &Transform, frame: usize) {
+    let numbers = app.state.view.show_corner_numbers;
     if app.state.view.show_samples {
         for (i, entry) in app.state.trackers.iter().enumerate() {
             if let Some(v) = app.result(i, frame).and_then(|r| r.visual.as_ref()) {
-                draw_visual(&painter, &t, v, color(entry.color));
+                draw_visual(painter, t, v, color(entry.color));
             }
         }
     }
     for (i, entry) in app.state.trackers.iter().enumerate() {
         if let Some(r) = app.result(i, frame) {
             let c = color(entry.color);
-            draw_tracker_quad(&painter, &t, r, c, numbers);
+            draw_tracker_quad(painter, t, r, c, numbers);
             let label = match r.status {
                 TrackStatus::Lost(reason) => format!("{} lost: {reason}", i + 1),
                 _ => format!("{}", i + 1),
@@ -336,6 +366,15 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             );
         }
     }
+}
+
+/// The selected iteration of the inspected tracker, and the convergence experiment's start.
+fn draw_iteration_and_experiment(
+    app: &InspectorApp,
+    painter: &egui::Painter,
+    t: &Transform,
+    frame: usize,
+) {
     // The selected iteration of the inspected tracker.
     if let (Some(it), Some(r)) = (
         app.rt.ui.selected_iteration,
@@ -353,7 +392,7 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             c.g().saturating_add(90),
             c.b().saturating_add(90),
         );
-        draw_quad(&painter, &t, &rec.corners, light, true, false);
+        draw_quad(painter, t, &rec.corners, light, true, false);
         painter.text(
             t.to_screen(rec.corners.0[0]) + Vec2::new(0.0, -16.0),
             egui::Align2::LEFT_BOTTOM,
@@ -364,7 +403,7 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
     }
     // The convergence experiment's start, dashed white.
     if let Some(e) = app.experiment_on(frame) {
-        let pts = quad_points(&t, &e.start);
+        let pts = quad_points(t, &e.start);
         let mut closed = pts.clone();
         closed.push(pts[0]);
         painter.add(Shape::dashed_line(
@@ -381,8 +420,6 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
             Color32::WHITE,
         );
     }
-    interact(app, ui, out, &response, &t, &painter);
-    Some(t)
 }
 
 /// What a method shows: a response map under everything (blue to yellow, translucent), a
@@ -412,45 +449,8 @@ fn draw_patches(
 }
 
 fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Color32) {
-    if let Some(m) = &v.map
-        && m.width > 0
-        && m.height > 0
-        && m.values.len() == m.width * m.height
-    {
-        let (lo, hi) = m
-            .values
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            });
-        let span = (hi - lo).max(1e-12);
-        // The map's cells, along its quad's sides (an axis-aligned box for the filters).
-        let q = m.at.0;
-        let at = |u: f64, w: f64| crate::geometry::Point {
-            x: q[0].x + u * (q[1].x - q[0].x) + w * (q[3].x - q[0].x),
-            y: q[0].y + u * (q[1].y - q[0].y) + w * (q[3].y - q[0].y),
-        };
-        let mut mesh = egui::Mesh::default();
-        for j in 0..m.height {
-            for i in 0..m.width {
-                let v = ((m.values[j * m.width + i] - lo) / span).clamp(0.0, 1.0);
-                let col = Color32::from_rgba_unmultiplied(
-                    (255.0 * v) as u8,
-                    (200.0 * v + 40.0 * (1.0 - v)) as u8,
-                    (160.0 * (1.0 - v)) as u8,
-                    (40.0 + 120.0 * v) as u8,
-                );
-                let (u0, u1) = (i as f64 / m.width as f64, (i + 1) as f64 / m.width as f64);
-                let (w0, w1) = (j as f64 / m.height as f64, (j + 1) as f64 / m.height as f64);
-                let base = mesh.vertices.len() as u32;
-                for (u, w) in [(u0, w0), (u1, w0), (u1, w1), (u0, w1)] {
-                    mesh.colored_vertex(t.to_screen(at(u, w)), col);
-                }
-                mesh.add_triangle(base, base + 1, base + 2);
-                mesh.add_triangle(base, base + 2, base + 3);
-            }
-        }
-        painter.add(Shape::mesh(mesh));
+    if let Some(m) = &v.map {
+        draw_response_map(painter, t, m);
     }
     let boxes = v.label == "detections";
     // Weights relative to the largest: a particle filter's sum to 1 over hundreds of particles,
@@ -503,6 +503,48 @@ fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Colo
     }
 }
 
+/// A response map under everything (blue to yellow, translucent), its cells along its quad's
+/// sides (an axis-aligned box for the filters).
+fn draw_response_map(painter: &egui::Painter, t: &Transform, m: &crate::observe::MapRecord) {
+    if m.width == 0 || m.height == 0 || m.values.len() != m.width * m.height {
+        return;
+    }
+    let (lo, hi) = m
+        .values
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let span = (hi - lo).max(1e-12);
+    // The map's cells, along its quad's sides (an axis-aligned box for the filters).
+    let q = m.at.0;
+    let at = |u: f64, w: f64| crate::geometry::Point {
+        x: q[0].x + u * (q[1].x - q[0].x) + w * (q[3].x - q[0].x),
+        y: q[0].y + u * (q[1].y - q[0].y) + w * (q[3].y - q[0].y),
+    };
+    let mut mesh = egui::Mesh::default();
+    for j in 0..m.height {
+        for i in 0..m.width {
+            let v = ((m.values[j * m.width + i] - lo) / span).clamp(0.0, 1.0);
+            let col = Color32::from_rgba_unmultiplied(
+                (255.0 * v) as u8,
+                (200.0 * v + 40.0 * (1.0 - v)) as u8,
+                (160.0 * (1.0 - v)) as u8,
+                (40.0 + 120.0 * v) as u8,
+            );
+            let (u0, u1) = (i as f64 / m.width as f64, (i + 1) as f64 / m.width as f64);
+            let (w0, w1) = (j as f64 / m.height as f64, (j + 1) as f64 / m.height as f64);
+            let base = mesh.vertices.len() as u32;
+            for (u, w) in [(u0, w0), (u1, w0), (u1, w1), (u0, w1)] {
+                mesh.colored_vertex(t.to_screen(at(u, w)), col);
+            }
+            mesh.add_triangle(base, base + 1, base + 2);
+            mesh.add_triangle(base, base + 2, base + 3);
+        }
+    }
+    painter.add(Shape::mesh(mesh));
+}
+
 fn interact(
     app: &InspectorApp,
     ui: &egui::Ui,
@@ -511,7 +553,6 @@ fn interact(
     t: &Transform,
     painter: &egui::Painter,
 ) {
-    let hover = response.hover_pos();
     zoom(app, ui, out, response, t);
     match app.rt.ui.tool.clone() {
         Tool::Navigate => {
@@ -523,75 +564,99 @@ fn interact(
                 out.push(Command::SetView(view));
             }
         }
-        Tool::DrawQuad {
-            tracker,
-            mut corners,
-        } => {
-            for (k, p) in corners.iter().enumerate() {
-                painter.circle_filled(t.to_screen(*p), 4.0, Color32::YELLOW);
-                painter.text(
-                    t.to_screen(*p) + Vec2::new(5.0, -5.0),
-                    egui::Align2::LEFT_BOTTOM,
-                    (k + 1).to_string(),
-                    egui::FontId::monospace(12.0),
-                    Color32::YELLOW,
-                );
-            }
-            painter.text(
-                t.rect.left_top() + Vec2::new(8.0, 8.0),
-                egui::Align2::LEFT_TOP,
-                format!(
-                    "tracker {}: click corner {} of 4 (upper-left first, clockwise)",
-                    tracker + 1,
-                    corners.len() + 1
-                ),
-                egui::FontId::proportional(15.0),
-                Color32::YELLOW,
-            );
-            if let (true, Some(pos)) = (response.clicked(), response.interact_pointer_pos()) {
-                corners.push(t.to_image(pos));
-                if corners.len() == 4 {
-                    let q = Quad([corners[0], corners[1], corners[2], corners[3]]);
-                    finish_drawing(out, tracker, q);
-                } else {
-                    out.push(Command::SetTool(Tool::DrawQuad { tracker, corners }));
-                }
-            }
+        Tool::DrawQuad { tracker, corners } => {
+            draw_quad_tool(out, response, t, painter, tracker, corners)
         }
         Tool::DrawBox { tracker, start } => {
-            painter.text(
-                t.rect.left_top() + Vec2::new(8.0, 8.0),
-                egui::Align2::LEFT_TOP,
-                format!("tracker {}: drag a box", tracker + 1),
-                egui::FontId::proportional(15.0),
-                Color32::YELLOW,
-            );
-            // From where the button went down, not where the drag was recognised (a few px on).
-            if response.drag_started()
-                && let Some(pos) = ui
-                    .input(|i| i.pointer.press_origin())
-                    .or(response.interact_pointer_pos())
-            {
-                out.push(Command::SetTool(Tool::DrawBox {
-                    tracker,
-                    start: Some(t.to_image(pos)),
-                }));
-            }
-            if let (Some(a), Some(pos)) = (start, response.interact_pointer_pos().or(hover)) {
-                let b = t.to_image(pos);
-                let q = Quad::from_rect(
-                    a.x.min(b.x),
-                    a.y.min(b.y),
-                    (a.x - b.x).abs(),
-                    (a.y - b.y).abs(),
-                );
-                draw_quad(painter, t, &q, Color32::YELLOW, true, false);
-                if response.drag_stopped() {
-                    finish_drawing(out, tracker, q);
-                }
-            }
+            draw_box_tool(ui, out, response, t, painter, (tracker, start))
         }
         Tool::EditGroundTruth => edit_ground_truth(app, ui, out, response, t, painter),
+    }
+}
+
+/// Drawing a quad for `tracker`: its corners so far, a click adds one; the fourth starts the
+/// tracker there.
+fn draw_quad_tool(
+    out: &mut Commands,
+    response: &egui::Response,
+    t: &Transform,
+    painter: &egui::Painter,
+    tracker: usize,
+    mut corners: Vec<Point>,
+) {
+    for (k, p) in corners.iter().enumerate() {
+        painter.circle_filled(t.to_screen(*p), 4.0, Color32::YELLOW);
+        painter.text(
+            t.to_screen(*p) + Vec2::new(5.0, -5.0),
+            egui::Align2::LEFT_BOTTOM,
+            (k + 1).to_string(),
+            egui::FontId::monospace(12.0),
+            Color32::YELLOW,
+        );
+    }
+    painter.text(
+        t.rect.left_top() + Vec2::new(8.0, 8.0),
+        egui::Align2::LEFT_TOP,
+        format!(
+            "tracker {}: click corner {} of 4 (upper-left first, clockwise)",
+            tracker + 1,
+            corners.len() + 1
+        ),
+        egui::FontId::proportional(15.0),
+        Color32::YELLOW,
+    );
+    if let (true, Some(pos)) = (response.clicked(), response.interact_pointer_pos()) {
+        corners.push(t.to_image(pos));
+        if corners.len() == 4 {
+            let q = Quad([corners[0], corners[1], corners[2], corners[3]]);
+            finish_drawing(out, tracker, q);
+        } else {
+            out.push(Command::SetTool(Tool::DrawQuad { tracker, corners }));
+        }
+    }
+}
+
+/// Dragging a box for `tracker` (from where the drag `start`ed); its release starts the
+/// tracker there.
+fn draw_box_tool(
+    ui: &egui::Ui,
+    out: &mut Commands,
+    response: &egui::Response,
+    t: &Transform,
+    painter: &egui::Painter,
+    (tracker, start): (usize, Option<Point>),
+) {
+    let hover = response.hover_pos();
+    painter.text(
+        t.rect.left_top() + Vec2::new(8.0, 8.0),
+        egui::Align2::LEFT_TOP,
+        format!("tracker {}: drag a box", tracker + 1),
+        egui::FontId::proportional(15.0),
+        Color32::YELLOW,
+    );
+    // From where the button went down, not where the drag was recognised (a few px on).
+    if response.drag_started()
+        && let Some(pos) = ui
+            .input(|i| i.pointer.press_origin())
+            .or(response.interact_pointer_pos())
+    {
+        out.push(Command::SetTool(Tool::DrawBox {
+            tracker,
+            start: Some(t.to_image(pos)),
+        }));
+    }
+    if let (Some(a), Some(pos)) = (start, response.interact_pointer_pos().or(hover)) {
+        let b = t.to_image(pos);
+        let q = Quad::from_rect(
+            a.x.min(b.x),
+            a.y.min(b.y),
+            (a.x - b.x).abs(),
+            (a.y - b.y).abs(),
+        );
+        draw_quad(painter, t, &q, Color32::YELLOW, true, false);
+        if response.drag_stopped() {
+            finish_drawing(out, tracker, q);
+        }
     }
 }
 
@@ -626,42 +691,7 @@ fn edit_ground_truth(
         }
         return;
     };
-    /// What a drag holds: what was grabbed, the press point, the quad then.
-    type Grab = (crate::gt::Grab, Point, Quad);
-    let id = response.id.with("gt_grab");
-    if response.drag_started()
-        && let Some(pos) = ui
-            .input(|i| i.pointer.press_origin())
-            .or(response.interact_pointer_pos())
-    {
-        // A corner within 15 screen px, else the whole quad from inside it.
-        let p = t.to_image(pos);
-        let grab: Option<Grab> = crate::gt::grab(&gt, p, 15.0 / t.scale as f64).map(|g| (g, p, gt));
-        if let Some((g, _, _)) = grab {
-            out.push(Command::Gt(GtCommand::PickCorner(g.corner())));
-        }
-        ui.data_mut(|d| d.insert_temp(id, grab));
-    }
-    let grab: Option<Grab> = ui.data(|d| d.get_temp(id)).flatten();
-    if let Some((g, from, q0)) = grab
-        && let Some(pos) = response.interact_pointer_pos().or(response.hover_pos())
-    {
-        let moved = crate::gt::drag(&app.state.gt_ssm, &q0, g, from, t.to_image(pos));
-        if response.drag_stopped() {
-            ui.data_mut(|d| d.remove::<Option<Grab>>(id));
-            let label = match g.corner() {
-                Some(k) => format!("move corner {}", k + 1),
-                None => "move the quad".into(),
-            };
-            out.push(Command::Gt(GtCommand::Commit {
-                frame,
-                quad: moved,
-                label,
-            }));
-        } else if response.dragged() {
-            out.push(Command::Gt(GtCommand::Drag { frame, quad: moved }));
-        }
-    }
+    drag_ground_truth(app, ui, out, response, t, &gt);
     for (k, p) in gt.0.iter().enumerate() {
         let picked = picked == Some(k);
         painter.circle_stroke(
@@ -687,6 +717,56 @@ fn edit_ground_truth(
         egui::FontId::proportional(13.0),
         Color32::YELLOW,
     );
+}
+
+/// What a drag of the ground truth holds: what was grabbed, the press point, the quad then.
+type Grab = (crate::gt::Grab, Point, Quad);
+
+/// A drag of a corner (within 15 screen px) or of the whole quad (from inside it): shown as it
+/// goes, committed on release.
+fn drag_ground_truth(
+    app: &InspectorApp,
+    ui: &egui::Ui,
+    out: &mut Commands,
+    response: &egui::Response,
+    t: &Transform,
+    gt: &Quad,
+) {
+    let frame = app.state.frame;
+    let id = response.id.with("gt_grab");
+    if response.drag_started()
+        && let Some(pos) = ui
+            .input(|i| i.pointer.press_origin())
+            .or(response.interact_pointer_pos())
+    {
+        // A corner within 15 screen px, else the whole quad from inside it.
+        let p = t.to_image(pos);
+        let grab: Option<Grab> = crate::gt::grab(gt, p, 15.0 / t.scale as f64).map(|g| (g, p, *gt));
+        if let Some((g, _, _)) = grab {
+            out.push(Command::Gt(GtCommand::PickCorner(g.corner())));
+        }
+        ui.data_mut(|d| d.insert_temp(id, grab));
+    }
+    let grab: Option<Grab> = ui.data(|d| d.get_temp(id)).flatten();
+    if let Some((g, from, q0)) = grab
+        && let Some(pos) = response.interact_pointer_pos().or(response.hover_pos())
+    {
+        let moved = crate::gt::drag(&app.state.gt_ssm, &q0, g, from, t.to_image(pos));
+        if response.drag_stopped() {
+            ui.data_mut(|d| d.remove::<Option<Grab>>(id));
+            let label = match g.corner() {
+                Some(k) => format!("move corner {}", k + 1),
+                None => "move the quad".into(),
+            };
+            out.push(Command::Gt(GtCommand::Commit {
+                frame,
+                quad: moved,
+                label,
+            }));
+        } else if response.dragged() {
+            out.push(Command::Gt(GtCommand::Drag { frame, quad: moved }));
+        }
+    }
 }
 
 fn finish_drawing(out: &mut Commands, tracker: usize, q: Quad) {
@@ -766,36 +846,8 @@ pub fn gt_strip(app: &InspectorApp, ui: &mut egui::Ui) {
     };
     // Magnifier around the picked corner (or the centre), 6x.
     if let Some(texture) = app.rt.display.texture.clone() {
-        let c = picked.map_or(gt.centroid(), |k| gt.0[k]);
-        let r = side / 12.0;
-        let [w, h] = app.rt.display.image_size;
-        let (w, h) = (w.max(1) as f32, h.max(1) as f32);
         let area = Rect::from_min_size(rect.left_top(), Vec2::splat(side));
-        let uv = Rect::from_min_max(
-            Pos2::new((c.x as f32 + 0.5 - r) / w, (c.y as f32 + 0.5 - r) / h),
-            Pos2::new((c.x as f32 + 0.5 + r) / w, (c.y as f32 + 0.5 + r) / h),
-        );
-        painter.rect_filled(area, 0.0, Color32::BLACK);
-        painter.image(texture.id(), area, uv, Color32::WHITE);
-        let mag = |p: Point| {
-            area.center()
-                + Vec2::new(
-                    (p.x - c.x) as f32 * side / (2.0 * r),
-                    (p.y - c.y) as f32 * side / (2.0 * r),
-                )
-        };
-        let pts: Vec<Pos2> = gt.0.iter().map(|p| mag(*p)).collect();
-        let clip = painter.with_clip_rect(area);
-        clip.add(Shape::closed_line(pts.clone(), Stroke::new(1.5, GT_COLOR)));
-        if let Some(k) = picked {
-            clip.circle_stroke(pts[k], 6.0, Stroke::new(1.5, Color32::WHITE));
-        }
-        painter.rect_stroke(
-            area,
-            0.0,
-            Stroke::new(1.0, Color32::GRAY),
-            egui::StrokeKind::Inside,
-        );
+        let c = magnifier(app, &painter, &texture, area, (&gt, picked));
         label(
             area,
             match picked {
@@ -826,6 +878,48 @@ pub fn gt_strip(app: &InspectorApp, ui: &mut egui::Ui) {
             label(r, text);
         }
     }
+}
+
+/// The frame around the picked corner of `gt` (or its centre) magnified 6x into `area`, the
+/// quad over it; returns the point magnified.
+fn magnifier(
+    app: &InspectorApp,
+    painter: &egui::Painter,
+    texture: &egui::TextureHandle,
+    area: Rect,
+    (gt, picked): (&Quad, Option<usize>),
+) -> Point {
+    let side = area.width();
+    let c = picked.map_or(gt.centroid(), |k| gt.0[k]);
+    let r = side / 12.0;
+    let [w, h] = app.rt.display.image_size;
+    let (w, h) = (w.max(1) as f32, h.max(1) as f32);
+    let uv = Rect::from_min_max(
+        Pos2::new((c.x as f32 + 0.5 - r) / w, (c.y as f32 + 0.5 - r) / h),
+        Pos2::new((c.x as f32 + 0.5 + r) / w, (c.y as f32 + 0.5 + r) / h),
+    );
+    painter.rect_filled(area, 0.0, Color32::BLACK);
+    painter.image(texture.id(), area, uv, Color32::WHITE);
+    let mag = |p: Point| {
+        area.center()
+            + Vec2::new(
+                (p.x - c.x) as f32 * side / (2.0 * r),
+                (p.y - c.y) as f32 * side / (2.0 * r),
+            )
+    };
+    let pts: Vec<Pos2> = gt.0.iter().map(|p| mag(*p)).collect();
+    let clip = painter.with_clip_rect(area);
+    clip.add(Shape::closed_line(pts.clone(), Stroke::new(1.5, GT_COLOR)));
+    if let Some(k) = picked {
+        clip.circle_stroke(pts[k], 6.0, Stroke::new(1.5, Color32::WHITE));
+    }
+    painter.rect_stroke(
+        area,
+        0.0,
+        Stroke::new(1.0, Color32::GRAY),
+        egui::StrokeKind::Inside,
+    );
+    c
 }
 
 /// The template and the shown frame's ground-truth region, rectified, as textures (made again

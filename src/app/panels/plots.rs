@@ -48,147 +48,11 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
         egui::ScrollArea::both()
             .auto_shrink([false, true])
             .show(ui, |ui| {
-                ui.horizontal_wrapped(|ui| {
-                    ui.heading("Success rate");
-                    let id = ui.make_persistent_id("export_folder");
-                    let mut folder = super::remembered_text(ui, id);
-                    if folder.is_empty() {
-                        folder = "plots".into();
-                    }
-                    if ui
-                        .small_button("Export plots")
-                        .on_hover_text(
-                            "Write the success rates, the errors per frame, a landscape \
-                             curve and the frequency of convergence as SVG and PNG into the \
-                             folder at the right (the figures of regtrack report)",
-                        )
-                        .clicked()
-                    {
-                        out.push(Command::ExportPlots(std::path::PathBuf::from(
-                            folder.trim(),
-                        )));
-                    }
-                    ui.add(egui::TextEdit::singleline(&mut folder).desired_width(90.0))
-                        .on_hover_text("The folder the plots are written to");
-                    super::remember_text(ui, id, folder);
-                });
-                axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
-                    .height(190.0)
-                    // Below the curves (they rise at the left and run along the top).
-                    .legend(Legend::default().position(Corner::RightBottom))
-                    .include_x(0.0)
-                    .include_x(20.0)
-                    .include_y(0.0)
-                    .include_y(1.0)
-                    .allow_scroll(false)
-                    .show(ui, |p| {
-                        let ab = app.state.view.ab;
-                        for (i, t) in app.state.trackers.iter().enumerate() {
-                            // In A/B mode, only A and B.
-                            if ab.is_some_and(|(a, b)| i != a && i != b) {
-                                continue;
-                            }
-                            let curve = app.success_curve(i);
-                            if !curve.is_empty() {
-                                let pts: Vec<[f64; 2]> =
-                                    curve.iter().map(|(x, y)| [*x, *y]).collect();
-                                p.line(
-                                    Line::new(
-                                        format!("{} {}", i + 1, t.spec.label()),
-                                        PlotPoints::from(pts),
-                                    )
-                                    .color(color(t.color)),
-                                );
-                            }
-                        }
-                    });
+                export_row(ui, out);
+                success_plot(app, ui);
                 ui.heading("Alignment error and confidence per frame");
                 error_legend(app, ui);
-                let shown = app.state.frame;
-                let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
-                    .custom_y_axes(vec![
-                        AxisHints::new_y()
-                            .label("E_AL (px)")
-                            .label_spacing(14.0..=22.0),
-                        AxisHints::new_y()
-                            .label("confidence (dashed)")
-                            .placement(HPlacement::Right)
-                            .label_spacing(14.0..=22.0)
-                            .formatter(|m, _| {
-                                let c = m.value / CONFIDENCE_SCALE;
-                                if (0.0..=1.0).contains(&c) {
-                                    format!("{c:.1}")
-                                } else {
-                                    String::new()
-                                }
-                            }),
-                    ])
-                    .height(170.0)
-                    .include_y(0.0)
-                    .allow_scroll(false)
-                    .allow_drag(false)
-                    .show(ui, |p| {
-                        let ab = app.state.view.ab;
-                        for (i, t) in app.state.trackers.iter().enumerate() {
-                            if ab.is_some_and(|(a, b)| i != a && i != b) {
-                                continue;
-                            }
-                            let pts: Vec<[f64; 2]> = app
-                                .errors(i)
-                                .into_iter()
-                                .filter(|(_, e)| e.is_finite())
-                                .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
-                                .collect();
-                            if !pts.is_empty() {
-                                p.line(
-                                    Line::new(format!("{}", i + 1), PlotPoints::from(pts))
-                                        .color(color(t.color)),
-                                );
-                            }
-                            // The confidence, dashed, and the frames reported lost (under the
-                            // tracker's legend entry, which shows and hides all three).
-                            let conf = app.confidences(i);
-                            let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
-                            let line: Vec<[f64; 2]> = conf
-                                .iter()
-                                .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
-                                .collect();
-                            if !line.is_empty() {
-                                p.line(
-                                    Line::new(format!("{}", i + 1), PlotPoints::from(line))
-                                        .color(color(t.color).gamma_multiply(0.7))
-                                        .style(LineStyle::dashed_loose()),
-                                );
-                            }
-                            let lost: Vec<[f64; 2]> = conf
-                                .iter()
-                                .filter(|(_, _, lost)| *lost)
-                                .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
-                                .collect();
-                            if !lost.is_empty() {
-                                p.points(
-                                    Points::new(format!("{}", i + 1), PlotPoints::from(lost))
-                                        .shape(MarkerShape::Cross)
-                                        .radius(3.0)
-                                        .color(egui::Color32::from_rgb(230, 60, 60)),
-                                );
-                            }
-                        }
-                        // The shown frame; a click seeks.
-                        p.vline(
-                            VLine::new("shown frame", (shown + 1) as f64)
-                                .color(egui::Color32::from_gray(160)),
-                        );
-                        p.set_auto_bounds(true);
-                        p.pointer_coordinate()
-                    });
-                if r.response.clicked()
-                    && let Some(pt) = r.inner
-                    && app.frame_count() > 0
-                {
-                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
-                    out.push(Command::Seek(f));
-                }
+                error_plot(app, ui, out);
                 if let Some((a, b)) = app.state.view.ab {
                     disagreement(app, ui, out, a, b);
                 }
@@ -202,6 +66,157 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
             });
     });
     super::remember_share(&ctx, "plots", shown.response.rect.width());
+}
+
+/// The success-rate heading with the export button and its folder.
+fn export_row(ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    ui.horizontal_wrapped(|ui| {
+        ui.heading("Success rate");
+        let id = ui.make_persistent_id("export_folder");
+        let mut folder = super::remembered_text(ui, id);
+        if folder.is_empty() {
+            folder = "plots".into();
+        }
+        if ui
+            .small_button("Export plots")
+            .on_hover_text(
+                "Write the success rates, the errors per frame, a landscape \
+                 curve and the frequency of convergence as SVG and PNG into the \
+                 folder at the right (the figures of regtrack report)",
+            )
+            .clicked()
+        {
+            out.push(Command::ExportPlots(std::path::PathBuf::from(
+                folder.trim(),
+            )));
+        }
+        ui.add(egui::TextEdit::singleline(&mut folder).desired_width(90.0))
+            .on_hover_text("The folder the plots are written to");
+        super::remember_text(ui, id, folder);
+    });
+}
+
+/// The success rate of every tracker shown (A and B only in A/B mode).
+fn success_plot(app: &InspectorApp, ui: &mut egui::Ui) {
+    axes(Plot::new("sr_plot"), "threshold t (px)", "SR")
+        .height(190.0)
+        // Below the curves (they rise at the left and run along the top).
+        .legend(Legend::default().position(Corner::RightBottom))
+        .include_x(0.0)
+        .include_x(20.0)
+        .include_y(0.0)
+        .include_y(1.0)
+        .allow_scroll(false)
+        .show(ui, |p| {
+            let ab = app.state.view.ab;
+            for (i, t) in app.state.trackers.iter().enumerate() {
+                // In A/B mode, only A and B.
+                if ab.is_some_and(|(a, b)| i != a && i != b) {
+                    continue;
+                }
+                let curve = app.success_curve(i);
+                if !curve.is_empty() {
+                    let pts: Vec<[f64; 2]> = curve.iter().map(|(x, y)| [*x, *y]).collect();
+                    p.line(
+                        Line::new(
+                            format!("{} {}", i + 1, t.spec.label()),
+                            PlotPoints::from(pts),
+                        )
+                        .color(color(t.color)),
+                    );
+                }
+            }
+        });
+}
+
+/// The alignment error and the confidence per frame, the lost frames marked; a click seeks.
+fn error_plot(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    let shown = app.state.frame;
+    let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
+        .custom_y_axes(vec![
+            AxisHints::new_y()
+                .label("E_AL (px)")
+                .label_spacing(14.0..=22.0),
+            AxisHints::new_y()
+                .label("confidence (dashed)")
+                .placement(HPlacement::Right)
+                .label_spacing(14.0..=22.0)
+                .formatter(|m, _| {
+                    let c = m.value / CONFIDENCE_SCALE;
+                    if (0.0..=1.0).contains(&c) {
+                        format!("{c:.1}")
+                    } else {
+                        String::new()
+                    }
+                }),
+        ])
+        .height(170.0)
+        .include_y(0.0)
+        .allow_scroll(false)
+        .allow_drag(false)
+        .show(ui, |p| {
+            let ab = app.state.view.ab;
+            for (i, t) in app.state.trackers.iter().enumerate() {
+                if !ab.is_some_and(|(a, b)| i != a && i != b) {
+                    tracker_errors(app, p, i, color(t.color));
+                }
+            }
+            // The shown frame; a click seeks.
+            p.vline(
+                VLine::new("shown frame", (shown + 1) as f64).color(egui::Color32::from_gray(160)),
+            );
+            p.set_auto_bounds(true);
+            p.pointer_coordinate()
+        });
+    if r.response.clicked()
+        && let Some(pt) = r.inner
+        && app.frame_count() > 0
+    {
+        let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
+        out.push(Command::Seek(f));
+    }
+}
+
+/// Tracker `i`'s alignment errors, its confidence (dashed) and the frames reported lost, all
+/// under its legend entry (which shows and hides the three).
+fn tracker_errors(app: &InspectorApp, p: &mut egui_plot::PlotUi<'_>, i: usize, c: egui::Color32) {
+    let pts: Vec<[f64; 2]> = app
+        .errors(i)
+        .into_iter()
+        .filter(|(_, e)| e.is_finite())
+        .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
+        .collect();
+    if !pts.is_empty() {
+        p.line(Line::new(format!("{}", i + 1), PlotPoints::from(pts)).color(c));
+    }
+    // The confidence, dashed, and the frames reported lost (under the
+    // tracker's legend entry, which shows and hides all three).
+    let conf = app.confidences(i);
+    let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
+    let line: Vec<[f64; 2]> = conf
+        .iter()
+        .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+        .collect();
+    if !line.is_empty() {
+        p.line(
+            Line::new(format!("{}", i + 1), PlotPoints::from(line))
+                .color(c.gamma_multiply(0.7))
+                .style(LineStyle::dashed_loose()),
+        );
+    }
+    let lost: Vec<[f64; 2]> = conf
+        .iter()
+        .filter(|(_, _, lost)| *lost)
+        .map(|(f, c, _)| [(f + 1) as f64, scaled(*c)])
+        .collect();
+    if !lost.is_empty() {
+        p.points(
+            Points::new(format!("{}", i + 1), PlotPoints::from(lost))
+                .shape(MarkerShape::Cross)
+                .radius(3.0)
+                .color(egui::Color32::from_rgb(230, 60, 60)),
+        );
+    }
 }
 
 /// The error plot's legend, above it (inside, it covered the curves): each tracker's colour and
@@ -256,6 +271,80 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
     });
 }
 
+/// A whole tracker makes one update per frame: what it did.
+fn whole_tracker_note(ui: &mut egui::Ui, name: &str, r: &crate::app::worker::TrackerFrame) {
+    ui.label(format!(
+        "{name}: one update per frame · {:?} · {:.0} µs · score {:.3}",
+        r.status,
+        r.search_us,
+        r.iterations.last().map_or(f64::NAN, |it| it.similarity)
+    ));
+    ui.label(
+        egui::RichText::new(
+            "Its internals (response map, detections, keypoints) are drawn on the frame with \
+             \"show method internals\" (trackers panel).",
+        )
+        .small(),
+    );
+}
+
+/// The similarity and the corner change per iteration, and the slider of the iteration the
+/// frame view draws.
+fn iteration_plots(
+    app: &InspectorApp,
+    ui: &mut egui::Ui,
+    out: &mut Vec<Command>,
+    r: &crate::app::worker::TrackerFrame,
+    c: egui::Color32,
+) {
+    let n = r.iterations.len();
+    let cost: Vec<[f64; 2]> = r
+        .iterations
+        .iter()
+        .map(|it| [it.iteration as f64 + 1.0, it.similarity])
+        .collect();
+    let step: Vec<[f64; 2]> = r
+        .iterations
+        .iter()
+        .map(|it| [it.iteration as f64 + 1.0, it.step.max(1e-6).log10()])
+        .collect();
+    let marker = app.rt.ui.selected_iteration.map(|k| {
+        VLine::new("selected iteration", (k + 1) as f64).color(egui::Color32::from_gray(170))
+    });
+    ui.columns(2, |cols| {
+        axes(Plot::new("cost_plot"), "iteration", "similarity f")
+            .height(130.0)
+            .allow_scroll(false)
+            .show(&mut cols[0], |p| {
+                p.line(Line::new("f", PlotPoints::from(cost)).color(c));
+                if let Some(m) = marker.clone() {
+                    p.vline(m);
+                }
+            });
+        axes(
+            Plot::new("step_plot"),
+            "iteration",
+            "log10 corner change (px)",
+        )
+        .height(130.0)
+        .allow_scroll(false)
+        .show(&mut cols[1], |p| {
+            p.line(Line::new("step", PlotPoints::from(step)).color(c));
+            if let Some(m) = marker.clone() {
+                p.vline(m);
+            }
+        });
+    });
+    let mut sel = app.rt.ui.selected_iteration.map_or(0, |s| s + 1);
+    let changed = ui
+        .add(egui::Slider::new(&mut sel, 0..=n).text("iteration (0 = none)"))
+        .on_hover_text("The frame view draws the quad after this iteration, dashed")
+        .changed();
+    if changed {
+        out.push(Command::SelectIteration(sel.checked_sub(1)));
+    }
+}
+
 fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let i = app.state.selected_tracker;
     let frame = app.state.frame;
@@ -281,71 +370,14 @@ fn convergence(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     });
     if let Some(name) = whole {
         // A whole tracker makes one update per frame: no iterations to plot.
-        ui.label(format!(
-            "{name}: one update per frame · {:?} · {:.0} µs · score {:.3}",
-            r.status,
-            r.search_us,
-            r.iterations.last().map_or(f64::NAN, |it| it.similarity)
-        ));
-        ui.label(
-            egui::RichText::new(
-                "Its internals (response map, detections, keypoints) are drawn on the frame with \
-                 \"show method internals\" (trackers panel).",
-            )
-            .small(),
-        );
-        return;
+        return whole_tracker_note(ui, &name, &r);
     }
     ui.label(format!(
         "{n} iterations · {:?} · {:.0} µs",
         r.status, r.search_us
     ));
     if n > 0 {
-        let cost: Vec<[f64; 2]> = r
-            .iterations
-            .iter()
-            .map(|it| [it.iteration as f64 + 1.0, it.similarity])
-            .collect();
-        let step: Vec<[f64; 2]> = r
-            .iterations
-            .iter()
-            .map(|it| [it.iteration as f64 + 1.0, it.step.max(1e-6).log10()])
-            .collect();
-        let marker = app.rt.ui.selected_iteration.map(|k| {
-            VLine::new("selected iteration", (k + 1) as f64).color(egui::Color32::from_gray(170))
-        });
-        ui.columns(2, |cols| {
-            axes(Plot::new("cost_plot"), "iteration", "similarity f")
-                .height(130.0)
-                .allow_scroll(false)
-                .show(&mut cols[0], |p| {
-                    p.line(Line::new("f", PlotPoints::from(cost)).color(c));
-                    if let Some(m) = marker.clone() {
-                        p.vline(m);
-                    }
-                });
-            axes(
-                Plot::new("step_plot"),
-                "iteration",
-                "log10 corner change (px)",
-            )
-            .height(130.0)
-            .allow_scroll(false)
-            .show(&mut cols[1], |p| {
-                p.line(Line::new("step", PlotPoints::from(step)).color(c));
-                if let Some(m) = marker.clone() {
-                    p.vline(m);
-                }
-            });
-        });
-        let mut sel = app.rt.ui.selected_iteration.map_or(0, |s| s + 1);
-        let changed = ui
-            .add(egui::Slider::new(&mut sel, 0..=n).text("iteration (0 = none)"))
-            .on_hover_text("The frame view draws the quad after this iteration, dashed")
-            .changed();
-        if changed {
-            out.push(Command::SelectIteration(sel.checked_sub(1)));
-        }
+        iteration_plots(app, ui, out, &r, c);
     }
     patches(app, ui, i, frame, &r);
 }
@@ -357,38 +389,7 @@ fn frequency(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         .id_salt("frequency")
         .show(ui, |ui| {
             let running = app.frequency().is_some_and(|f| f.result.is_none());
-            ui.horizontal_wrapped(|ui| {
-                let id = ui.make_persistent_id("frequency_starts");
-                let mut starts: usize = ui
-                    .data(|d| d.get_temp(id))
-                    .unwrap_or(app.rt.ui.frequency_starts);
-                ui.add(
-                    egui::DragValue::new(&mut starts)
-                        .range(1..=1000)
-                        .suffix(" starts"),
-                )
-                .on_hover_text("Starts per noise level (each a fresh tracker)");
-                ui.data_mut(|d| d.insert_temp(id, starts));
-                if ui
-                    .add_enabled(
-                        !running,
-                        egui::Button::new(if running {
-                            "Running…"
-                        } else {
-                            "Run on this frame"
-                        }),
-                    )
-                    .on_hover_text(
-                        "Every enabled tracker initialised at the ground truth of this frame, \
-                         then started on the same frame from the corners moved by Gaussian \
-                         noise of σ = 1..10 px; a start converges when it ends within 1 px \
-                         (Baker and Matthews' experiment; regtrack converge on the command line)",
-                    )
-                    .clicked()
-                {
-                    out.push(Command::ConvergenceFrequency(starts));
-                }
-            });
+            frequency_run_row(app, ui, out, running);
             let Some(f) = app.frequency() else {
                 ui.label(egui::RichText::new("not run yet").small().weak());
                 return;
@@ -436,6 +437,42 @@ fn frequency(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                     }
                 });
         });
+}
+
+/// The starts per noise level and the button that runs the frequency of convergence.
+fn frequency_run_row(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, running: bool) {
+    ui.horizontal_wrapped(|ui| {
+        let id = ui.make_persistent_id("frequency_starts");
+        let mut starts: usize = ui
+            .data(|d| d.get_temp(id))
+            .unwrap_or(app.rt.ui.frequency_starts);
+        ui.add(
+            egui::DragValue::new(&mut starts)
+                .range(1..=1000)
+                .suffix(" starts"),
+        )
+        .on_hover_text("Starts per noise level (each a fresh tracker)");
+        ui.data_mut(|d| d.insert_temp(id, starts));
+        if ui
+            .add_enabled(
+                !running,
+                egui::Button::new(if running {
+                    "Running…"
+                } else {
+                    "Run on this frame"
+                }),
+            )
+            .on_hover_text(
+                "Every enabled tracker initialised at the ground truth of this frame, \
+                 then started on the same frame from the corners moved by Gaussian \
+                 noise of σ = 1..10 px; a start converges when it ends within 1 px \
+                 (Baker and Matthews' experiment; regtrack converge on the command line)",
+            )
+            .clicked()
+        {
+            out.push(Command::ConvergenceFrequency(starts));
+        }
+    });
 }
 
 /// The convergence experiment: perturb the start on this frame, run every enabled tracker
@@ -498,6 +535,41 @@ fn experiment_controls(
     }
 }
 
+/// The template (`kind` 0), the warped patch (1) or their difference (2) of `r` as an image,
+/// in the template's grey range (the difference four times brighter; black for a coarser
+/// level's patch, whose grid is not the template's).
+fn patch_image(
+    r: &crate::app::worker::TrackerFrame,
+    current: &[f32],
+    size: [usize; 2],
+    coarse: bool,
+    kind: usize,
+) -> egui::ColorImage {
+    let n = r.res * r.res;
+    let (lo, hi) = r
+        .template
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let span = (hi - lo).max(1e-3);
+    let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
+    let (g, size): (Vec<u8>, _) = match kind {
+        0 => (r.template.iter().map(|&v| to8(v)).collect(), [r.res, r.res]),
+        1 => (current.iter().map(|&v| to8(v)).collect(), size),
+        _ if coarse => (vec![0; n], [r.res, r.res]),
+        _ => (
+            r.template
+                .iter()
+                .zip(current)
+                .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
+                .collect(),
+            size,
+        ),
+    };
+    egui::ColorImage::from_gray(size, &g)
+}
+
 fn patches(
     app: &InspectorApp,
     ui: &mut egui::Ui,
@@ -538,37 +610,13 @@ fn patches(
             r.template.len(),
         ),
     );
-    let image = |kind: usize| {
-        let (lo, hi) = r
-            .template
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let span = (hi - lo).max(1e-3);
-        let to8 = |v: f32| ((v - lo) / span * 255.0).clamp(0.0, 255.0) as u8;
-        let (g, size): (Vec<u8>, _) = match kind {
-            0 => (r.template.iter().map(|&v| to8(v)).collect(), [r.res, r.res]),
-            1 => (current.iter().map(|&v| to8(v)).collect(), size),
-            _ if coarse.is_some() => (vec![0; n], [r.res, r.res]),
-            _ => (
-                r.template
-                    .iter()
-                    .zip(current)
-                    .map(|(a, b)| ((a - b).abs() / span * 4.0 * 255.0).clamp(0.0, 255.0) as u8)
-                    .collect(),
-                size,
-            ),
-        };
-        egui::ColorImage::from_gray(size, &g)
-    };
     let handles = [(0, "template"), (1, "patch"), (2, "error")].map(|(kind, name)| {
         super::cached_texture(
             ui.ctx(),
             &format!("{name}{i}"),
             key,
             egui::TextureOptions::NEAREST,
-            || image(kind),
+            || patch_image(r, current, size, coarse.is_some(), kind),
         )
     });
     let at = match (selected, coarse) {
@@ -632,48 +680,12 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         .show(ui, |ui| {
             let names = app.inspected_param_names();
             let dof = names.len();
-            let name = |k: usize| names.get(k).copied().unwrap_or("?");
             if dof == 0 {
                 ui.label("the inspected tracker has no warp parameters");
                 return;
             }
             let mut settings = app.state.view.landscape;
-            let v = &mut settings;
-            ui.horizontal(|ui| {
-                ui.label("x");
-                egui::ComboBox::from_id_salt("landscape_x")
-                    .selected_text(name(v.x))
-                    .show_ui(ui, |ui| {
-                        for k in 0..dof {
-                            ui.selectable_value(&mut v.x, k, name(k));
-                        }
-                    });
-                ui.label("y");
-                egui::ComboBox::from_id_salt("landscape_y")
-                    .selected_text(v.y.map_or("none", name))
-                    .show_ui(ui, |ui| {
-                        ui.selectable_value(&mut v.y, None, "none");
-                        for k in 0..dof {
-                            ui.selectable_value(&mut v.y, Some(k), name(k));
-                        }
-                    });
-                v.x = v.x.min(dof - 1);
-                if v.y.is_some_and(|y| y >= dof) {
-                    v.y = None;
-                }
-                ui.add(
-                    egui::DragValue::new(&mut v.radius)
-                        .range(crate::app::state::LANDSCAPE_RADIUS)
-                        .speed(0.1)
-                        .prefix("± ")
-                        .suffix(" px"),
-                )
-                .on_hover_text("Half-width of the sweep, in px of mean corner motion");
-            });
-            ui.horizontal(|ui| {
-                ui.radio_value(&mut v.around_truth, false, "around the estimate");
-                ui.radio_value(&mut v.around_truth, true, "around the ground truth");
-            });
+            landscape_settings(ui, &mut settings, names);
             if settings != app.state.view.landscape {
                 out.push(Command::SetLandscape(settings));
             }
@@ -697,28 +709,74 @@ fn landscape(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         out.push(Command::ShowLandscape(!app.state.view.show_landscape));
     }
     if app.state.view.show_landscape && app.landscape_enlarged() {
-        let i = app.state.selected_tracker;
-        let names = app.inspected_param_names();
-        let mut keep = true;
-        egui::Window::new(format!(
-            "Cost landscape: tracker {}, frame {}",
-            i + 1,
-            app.state.frame + 1
-        ))
-        .id(egui::Id::unique("landscape_window"))
-        .open(&mut keep)
-        .resizable(true)
-        .default_size([620.0, 600.0])
-        // Over the frame, not over the panel that shows its settings.
-        .default_pos(ui.ctx().content_rect().left_top() + egui::vec2(240.0, 60.0))
-        .show(ui.ctx(), |ui| {
-            // The plot takes what the window leaves after the caption and the colour bar.
-            let h = (ui.available_height() - 70.0).max(160.0);
-            landscape_plot(app, ui, names, Some(h));
-        });
-        if !keep {
-            out.push(Command::EnlargeLandscape(false));
+        landscape_window(app, ui, out);
+    }
+}
+
+/// The landscape's axes (`x`, `y` among the parameters `names`), its half-width and its centre.
+fn landscape_settings(ui: &mut egui::Ui, v: &mut crate::app::LandscapeSettings, names: &[&str]) {
+    let dof = names.len();
+    let name = |k: usize| names.get(k).copied().unwrap_or("?");
+    ui.horizontal(|ui| {
+        ui.label("x");
+        egui::ComboBox::from_id_salt("landscape_x")
+            .selected_text(name(v.x))
+            .show_ui(ui, |ui| {
+                for k in 0..dof {
+                    ui.selectable_value(&mut v.x, k, name(k));
+                }
+            });
+        ui.label("y");
+        egui::ComboBox::from_id_salt("landscape_y")
+            .selected_text(v.y.map_or("none", name))
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut v.y, None, "none");
+                for k in 0..dof {
+                    ui.selectable_value(&mut v.y, Some(k), name(k));
+                }
+            });
+        v.x = v.x.min(dof - 1);
+        if v.y.is_some_and(|y| y >= dof) {
+            v.y = None;
         }
+        ui.add(
+            egui::DragValue::new(&mut v.radius)
+                .range(crate::app::state::LANDSCAPE_RADIUS)
+                .speed(0.1)
+                .prefix("± ")
+                .suffix(" px"),
+        )
+        .on_hover_text("Half-width of the sweep, in px of mean corner motion");
+    });
+    ui.horizontal(|ui| {
+        ui.radio_value(&mut v.around_truth, false, "around the estimate");
+        ui.radio_value(&mut v.around_truth, true, "around the ground truth");
+    });
+}
+
+/// The landscape enlarged in a window of its own.
+fn landscape_window(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    let i = app.state.selected_tracker;
+    let names = app.inspected_param_names();
+    let mut keep = true;
+    egui::Window::new(format!(
+        "Cost landscape: tracker {}, frame {}",
+        i + 1,
+        app.state.frame + 1
+    ))
+    .id(egui::Id::unique("landscape_window"))
+    .open(&mut keep)
+    .resizable(true)
+    .default_size([620.0, 600.0])
+    // Over the frame, not over the panel that shows its settings.
+    .default_pos(ui.ctx().content_rect().left_top() + egui::vec2(240.0, 60.0))
+    .show(ui.ctx(), |ui| {
+        // The plot takes what the window leaves after the caption and the colour bar.
+        let h = (ui.available_height() - 70.0).max(160.0);
+        landscape_plot(app, ui, names, Some(h));
+    });
+    if !keep {
+        out.push(Command::EnlargeLandscape(false));
     }
 }
 

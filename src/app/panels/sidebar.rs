@@ -49,56 +49,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             ui.heading("Trackers");
             let n = app.state.trackers.len();
             for i in 0..n {
-                let entry = app.state.trackers[i].clone();
-                let mut next = entry.clone();
-                let stats = tracker_stats(app, i);
-                egui::Frame::group(ui.style()).show(ui, |ui| {
-                    ui.horizontal_wrapped(|ui| {
-                        ui.color_edit_button_srgb(&mut next.color);
-                        ui.checkbox(&mut next.enabled, format!("Tracker {}", i + 1));
-                        if ui.radio(app.state.selected_tracker == i, "inspect").on_hover_text("Show its iterations").clicked() {
-                            out.push(Command::SelectTracker(i));
-                        }
-                        if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
-                            next.spec = kind;
-                        }
-                    });
-                    if let Some(r) = next.spec.registration_mut() {
-                        if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
-                            r.sm = v;
-                            // Another method has other parameters.
-                            r.keep_known_params();
-                        }
-                        if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &r.am, am::REGISTRY) {
-                            r.am = v;
-                            r.keep_known_params();
-                        }
-                        if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &r.ssm, ssm::REGISTRY) {
-                            r.ssm = v;
-                        }
-                    }
-                    ui.collapsing(format!("Parameters {}", i + 1), |ui| {
-                        param_grid(ui, i, &mut next.spec);
-                    });
-                    ui.horizontal_wrapped(|ui| {
-                        if ui.button("Init from GT").on_hover_text("Start from the ground truth of this frame").clicked() {
-                            out.push(Command::InitTracker(i, InitSource::GroundTruth));
-                        }
-                        if ui.button("Draw quad").on_hover_text("Click the four corners on the frame").clicked() {
-                            out.push(Command::SetTool(Tool::DrawQuad { tracker: i, corners: Vec::new() }));
-                        }
-                        if ui.button("Draw box").on_hover_text("Drag a box on the frame").clicked() {
-                            out.push(Command::SetTool(Tool::DrawBox { tracker: i, start: None }));
-                        }
-                        if ui.button("Remove").clicked() {
-                            out.push(Command::RemoveTracker(i));
-                        }
-                    });
-                    ui.label(egui::RichText::new(stats).small().color(color(entry.color)));
-                });
-                if next != entry {
-                    out.push(Command::SetTracker(i, next));
-                }
+                tracker_group(app, ui, out, i);
             }
             if ui.button("Add tracker").clicked() {
                 out.push(Command::AddTracker);
@@ -106,29 +57,121 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             ab_controls(app, ui, out);
             patch_controls(app, ui, out);
             ui.separator();
-            ui.heading("Ground truth");
-            let mut view = app.state.view.clone();
-            ui.checkbox(&mut view.show_ground_truth, "show ground truth");
-            ui.checkbox(&mut view.show_corner_numbers, "number the corners");
-            ui.checkbox(&mut view.show_samples, "show method internals")
-                .on_hover_text("On the newest frame: where NN and PF looked (brighter = more similar), KCF's and DSST's response map, TLD's detections and flow points, CMT's keypoints (inliers bright), RCT's candidates");
-            if view != app.state.view {
-                out.push(Command::SetView(view));
-            }
-            if let Some(v) = method_combo(ui, "GT SSM".into(), &app.state.gt_ssm, ssm::REGISTRY) {
-                out.push(Command::SetGtSsm(v));
-            }
-            ui.label(egui::RichText::new("Trackers are scored against the ground truth projected on this SSM (low-DOF ground truth).").small());
-            let editing = app.rt.ui.tool == Tool::EditGroundTruth;
-            if ui.selectable_label(editing, "Edit ground-truth corners").on_hover_text("Ground-truth mode: drag a corner or the quad; keys 1-4/0, arrows, +/-, N/P, J, O").clicked() {
-                out.push(Command::SetTool(if editing { Tool::Navigate } else { Tool::EditGroundTruth }));
-            }
-            if editing {
-                gt_controls(app, ui, out);
-            }
+            ground_truth_section(app, ui, out);
         });
     });
     super::remember_share(&ctx, "trackers", shown.response.rect.width());
+}
+
+/// Tracker `i`'s group: its colour, enabling, kind and methods, parameters, how it starts, and
+/// what it did.
+fn tracker_group(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, i: usize) {
+    let entry = app.state.trackers[i].clone();
+    let mut next = entry.clone();
+    let stats = tracker_stats(app, i);
+    egui::Frame::group(ui.style()).show(ui, |ui| {
+        ui.horizontal_wrapped(|ui| {
+            ui.color_edit_button_srgb(&mut next.color);
+            ui.checkbox(&mut next.enabled, format!("Tracker {}", i + 1));
+            if ui
+                .radio(app.state.selected_tracker == i, "inspect")
+                .on_hover_text("Show its iterations")
+                .clicked()
+            {
+                out.push(Command::SelectTracker(i));
+            }
+            if let Some(kind) = tracker_kind_combo(ui, i, &next.spec) {
+                next.spec = kind;
+            }
+        });
+        if let Some(r) = next.spec.registration_mut() {
+            if let Some(v) = method_combo(ui, format!("SM {}", i + 1), &r.sm, sm::REGISTRY) {
+                r.sm = v;
+                // Another method has other parameters.
+                r.keep_known_params();
+            }
+            if let Some(v) = method_combo(ui, format!("AM {}", i + 1), &r.am, am::REGISTRY) {
+                r.am = v;
+                r.keep_known_params();
+            }
+            if let Some(v) = method_combo(ui, format!("SSM {}", i + 1), &r.ssm, ssm::REGISTRY) {
+                r.ssm = v;
+            }
+        }
+        ui.collapsing(format!("Parameters {}", i + 1), |ui| {
+            param_grid(ui, i, &mut next.spec);
+        });
+        ui.horizontal_wrapped(|ui| {
+            if ui
+                .button("Init from GT")
+                .on_hover_text("Start from the ground truth of this frame")
+                .clicked()
+            {
+                out.push(Command::InitTracker(i, InitSource::GroundTruth));
+            }
+            if ui
+                .button("Draw quad")
+                .on_hover_text("Click the four corners on the frame")
+                .clicked()
+            {
+                out.push(Command::SetTool(Tool::DrawQuad {
+                    tracker: i,
+                    corners: Vec::new(),
+                }));
+            }
+            if ui
+                .button("Draw box")
+                .on_hover_text("Drag a box on the frame")
+                .clicked()
+            {
+                out.push(Command::SetTool(Tool::DrawBox {
+                    tracker: i,
+                    start: None,
+                }));
+            }
+            if ui.button("Remove").clicked() {
+                out.push(Command::RemoveTracker(i));
+            }
+        });
+        ui.label(egui::RichText::new(stats).small().color(color(entry.color)));
+    });
+    if next != entry {
+        out.push(Command::SetTracker(i, next));
+    }
+}
+
+/// The ground truth: what is shown of it, its SSM, and its correction mode.
+fn ground_truth_section(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    ui.heading("Ground truth");
+    let mut view = app.state.view.clone();
+    ui.checkbox(&mut view.show_ground_truth, "show ground truth");
+    ui.checkbox(&mut view.show_corner_numbers, "number the corners");
+    ui.checkbox(&mut view.show_samples, "show method internals")
+        .on_hover_text("On the newest frame: where NN and PF looked (brighter = more similar), KCF's and DSST's response map, TLD's detections and flow points, CMT's keypoints (inliers bright), RCT's candidates");
+    if view != app.state.view {
+        out.push(Command::SetView(view));
+    }
+    if let Some(v) = method_combo(ui, "GT SSM".into(), &app.state.gt_ssm, ssm::REGISTRY) {
+        out.push(Command::SetGtSsm(v));
+    }
+    ui.label(egui::RichText::new("Trackers are scored against the ground truth projected on this SSM (low-DOF ground truth).").small());
+    let editing = app.rt.ui.tool == Tool::EditGroundTruth;
+    if ui
+        .selectable_label(editing, "Edit ground-truth corners")
+        .on_hover_text(
+            "Ground-truth mode: drag a corner or the quad; keys 1-4/0, arrows, +/-, N/P, J, O",
+        )
+        .clicked()
+    {
+        out.push(Command::SetTool(if editing {
+            Tool::Navigate
+        } else {
+            Tool::EditGroundTruth
+        }));
+    }
+    if editing {
+        gt_controls(app, ui, out);
+    }
 }
 
 /// Many patches: how many, their warp, and a run from the shown frame (drawn on the frames).
@@ -276,6 +319,36 @@ fn ab_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
 /// The ground-truth mode's controls: corner, step, undo/redo, occluded, propagate,
 /// interpolate, export.
 fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    gt_cursor(app, ui, out);
+    gt_history(app, ui, out);
+    let occluded = app.gt_frame(app.state.frame) == Some(crate::gt::GtFrame::Occluded);
+    ui.horizontal(|ui| {
+        if ui
+            .selectable_label(occluded, "Occluded")
+            .on_hover_text("O: not annotatable; skipped by the evaluation")
+            .clicked()
+        {
+            out.push(Command::Gt(GtCommand::ToggleOccluded));
+        }
+        if ui
+            .button("Jump to worst")
+            .on_hover_text(
+                "J: the uncorrected frame with the largest fit residual or tracker error",
+            )
+            .clicked()
+        {
+            out.push(Command::Gt(GtCommand::JumpWorst));
+        }
+    });
+    if let Some(r) = app.gt_residual(app.state.frame) {
+        ui.label(format!("fit residual on this frame: {r:.2} px"));
+    }
+    gt_proposals(app, ui, out);
+    gt_journal(app, ui, out);
+}
+
+/// Which corner (or the whole quad) the keys move, and by how much.
+fn gt_cursor(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let (picked, step) = app.gt_cursor();
     ui.horizontal(|ui| {
         ui.label("move");
@@ -300,6 +373,10 @@ fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             out.push(Command::Gt(GtCommand::Step(step * 2.0)));
         }
     });
+}
+
+/// Undo, redo, revert the frame.
+fn gt_history(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let (done, redo) = {
         let (d, r) = app.corrections().history();
         (
@@ -333,28 +410,10 @@ fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             out.push(Command::Gt(GtCommand::Revert));
         }
     });
-    let occluded = app.gt_frame(app.state.frame) == Some(crate::gt::GtFrame::Occluded);
-    ui.horizontal(|ui| {
-        if ui
-            .selectable_label(occluded, "Occluded")
-            .on_hover_text("O: not annotatable; skipped by the evaluation")
-            .clicked()
-        {
-            out.push(Command::Gt(GtCommand::ToggleOccluded));
-        }
-        if ui
-            .button("Jump to worst")
-            .on_hover_text(
-                "J: the uncorrected frame with the largest fit residual or tracker error",
-            )
-            .clicked()
-        {
-            out.push(Command::Gt(GtCommand::JumpWorst));
-        }
-    });
-    if let Some(r) = app.gt_residual(app.state.frame) {
-        ui.label(format!("fit residual on this frame: {r:.2} px"));
-    }
+}
+
+/// Propagation and interpolation, and a pending proposal to accept or reject.
+fn gt_proposals(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     ui.horizontal(|ui| {
         let running = app.gt_propagating();
         if ui.add_enabled(!running, egui::Button::new(if running { "Propagating…" } else { "Propagate" }))
@@ -386,6 +445,10 @@ fn gt_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             }
         });
     }
+}
+
+/// Where the corrections are kept, and their export.
+fn gt_journal(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let c = app.corrections();
     let journal = c
         .journal_path()

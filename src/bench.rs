@@ -27,7 +27,7 @@ pub struct BenchRow {
     /// Frames tracked per repeat (the target may be lost before the end).
     pub frames: usize,
     pub iterations_per_frame: f64,
-    /// The time of one iteration: the search method's step and the driver's bookkeeping of it.
+    /// The time of one iteration: the search method's step and the executor's bookkeeping of it.
     pub us_per_iteration: f64,
     /// A frame's time outside its iterations: the pyramid levels, the loss-of-track checks.
     pub us_per_frame_other: f64,

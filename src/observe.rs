@@ -1,4 +1,4 @@
-//! The per-iteration observer: the tracker's driver reports every iteration to it. The
+//! The per-iteration observer: the tracker's executor reports every iteration to it. The
 //! inspector's convergence plot and step-through view are built on [`Recorder`]; benchmarks use
 //! [`NoObserver`].
 
@@ -75,7 +75,7 @@ pub struct Iteration<'a> {
     pub step: f64,
     /// Time since the frame's update started.
     pub elapsed: Duration,
-    /// The time this iteration took: the search method's step and the driver's bookkeeping of
+    /// The time this iteration took: the search method's step and the executor's bookkeeping of
     /// it (the line search, the stop test), not the observer's own work.
     pub duration: Duration,
     /// The patch sampled at the parameters after the iteration (pre-processed frame, `res x res`),

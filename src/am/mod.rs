@@ -113,7 +113,7 @@ pub type Projections<'a> = &'a mut dyn FnMut(&[&[f32]], &mut [[f64; MAX_DOF]]);
 /// possibly [`Am::hessian`] on the same patch: a model computes the statistics of a patch (means,
 /// norms, joint histograms) in the first call and the Hessian reuses them, so they are never built
 /// twice. For the models that say so in [`Am::updates_model`], each time the search settles on a
-/// frame the driver calls [`Am::update_model`] with the patch sampled there and lets the search go
+/// frame the executor calls [`Am::update_model`] with the patch sampled there and lets the search go
 /// on (up to three times a frame), so that the model follows the light of the frame being tracked.
 pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     /// The registry name.
@@ -193,7 +193,7 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     fn pixelwise(&self) -> bool {
         false
     }
-    /// Whether [`Am::update_model`] does something (the driver then samples the patch where the
+    /// Whether [`Am::update_model`] does something (the executor then samples the patch where the
     /// search settles for it).
     fn updates_model(&self) -> bool {
         false

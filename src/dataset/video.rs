@@ -1,7 +1,7 @@
 //! Video files as sequences, decoded by the `ffmpeg` program as a subprocess (grey raw frames on
 //! a pipe), with `ffprobe` for the size, the frame rate and the frame count.
 //!
-//! Why a subprocess (README, "Video"): it needs nothing at build time, so `cargo run` and
+//! Why a subprocess (docs/video.md, "Video files"): it needs nothing at build time, so `cargo run` and
 //! `cargo test` keep working on a machine without FFmpeg's development packages, and it has
 //! FFmpeg's whole coverage of containers and codecs. Decoding is sequential. The frames decoded
 //! last are kept (a bounded cache: stepping back a little decodes nothing); a frame further

@@ -1,5 +1,5 @@
-//! The interface between the driver and a search method: one iteration
-//! ([`SearchMethod::iterate`]) on the shared [`Context`], and what the driver does after it
+//! The interface between the executor and a search method: one iteration
+//! ([`SearchMethod::iterate`]) on the shared [`Context`], and what the executor does after it
 //! ([`Step`], [`Control`]). The methods themselves are in [`crate::sm`].
 
 use super::Context;
@@ -10,10 +10,10 @@ use crate::params::{MethodParams, ParamDef};
 use crate::spec::TrackerParams;
 use crate::status::LossReason;
 
-/// What the driver does after an iteration.
+/// What the executor does after an iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Control {
-    /// The driver's stop test decides (the corners moved less than `eps`).
+    /// The executor's stop test decides (the corners moved less than `eps`).
     Auto,
     /// The method has finished this frame (one-shot methods such as NN, the last stage of a
     /// cascade).
@@ -31,7 +31,7 @@ pub struct Step {
 }
 
 impl Step {
-    /// A step left to the driver's stop test.
+    /// A step left to the executor's stop test.
     pub fn auto(similarity: f64) -> Self {
         Step {
             similarity,
@@ -63,7 +63,7 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     fn initialize(&mut self, _ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {
         Ok(())
     }
-    /// Whether the driver's line search (tracker parameter `line_search`) applies: the
+    /// Whether the executor's line search (tracker parameter `line_search`) applies: the
     /// method's iteration is a Newton step from where it started, which a shorter step along
     /// the same direction may improve on (the Lucas-Kanade methods).
     fn line_search(&self) -> bool {
@@ -71,13 +71,13 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     }
     /// Whether the method linearises with the template's gradients (ICLK, IALK, ESM in part),
     /// so that its fixed point is the AM's optimum only where the frame looks like the
-    /// template: the driver then polishes its result (tracker parameter `polish`).
+    /// template: the plan then polishes its result (tracker parameter `polish`).
     fn template_linearised(&self) -> bool {
         false
     }
-    /// Whether every patch the method samples in a frame is at `ctx.params` as the driver sees
+    /// Whether every patch the method samples in a frame is at `ctx.params` as the executor sees
     /// it, before or after an iteration (or at parameters it had before in the frame): the
-    /// driver then smooths the frame only around them (see the driver's `Source`). Not for
+    /// frame source then smooths the frame only around them (see `crate::registration::Reader::Part`). Not for
     /// methods that sample candidates elsewhere (NN's samples, PF's particles).
     fn local(&self) -> bool {
         false

@@ -8,7 +8,7 @@
 //! so for MI, but 1.25x it for CCRE with 8 bins (2.3-2.8x with 4): ICLK-CCRE overshoots, and
 //! without the line search settles into a 2-cycle a few tenths of a pixel wide. The mixed term
 //! in its place cut the iterations (30 -> 9.6 a frame) but also the frequency of convergence
-//! from far starts (docs/speed.md, "Eighth pass"), so it is not used.
+//! from far starts (docs/speed.md, "ICLK's Hessian with CCRE"), so it is not used.
 
 use super::{Context, LossReason, SearchMethod, SmDef, Step, Update, newton};
 use crate::am::{HessianKind, Wrt};

@@ -8,7 +8,7 @@
 //! `I_0(w(w(x, q_k), p_0))`, and indexes the AM's embeddings of these patches. A frame's patch at
 //! `p` that looks like sample `k` means the target sits at `p o q_k^-1`: each iteration finds the
 //! nearest sample and composes with its stored inverse. Sample 0 is the identity, so a converged
-//! frame stops moving and the driver's stop test ends it.
+//! frame stops moving and the executor's stop test ends it.
 //!
 //! The index: exact brute force over the full embeddings costs `samples x N` multiply-adds per
 //! query (25 M for NN10K at 50x50, and 100 MB of samples read per query: memory-bound); the

@@ -9,7 +9,7 @@
 //!
 //! The particles are weighed on a sub-grid, every `stride`-th sample of the tracker's grid in
 //! each direction, with a copy of the AM whose template is the sub-grid's; the estimate's
-//! similarity, which the driver judges, is on the whole grid. By default the per-pixel AMs
+//! similarity, which the plan judges, is on the whole grid. By default the per-pixel AMs
 //! ([`crate::am::Am::pixelwise`]: SSD, ZNCC, ...) take every other sample, a quarter of them (25 x
 //! 25 of the paper's 50 x 50): the frame is already smoothed by the tracker's pre-smoothing, so
 //! the sub-grid sees what the grid sees, less densely. The models fitted to the whole patch (MI's
@@ -21,7 +21,7 @@
 //! from the tracker's generator, so the result is the same, bit for bit, with any number of
 //! threads.
 //! Each frame runs up to `rounds` rounds, the noise shrinking by `anneal` each round (an annealed
-//! filter), so that the estimate settles; the driver's stop test may end the frame earlier. When
+//! filter), so that the estimate settles; the executor's stop test may end the frame earlier. When
 //! something else moved the estimate between frames (a cascade's earlier stage, a re-initialisation), the
 //! particles start again from it.
 

@@ -191,3 +191,85 @@ fn crate_paths_are_read_from_groups_too() {
         ["am", "sm", "Error", "ssm"]
     );
 }
+
+/// The inspector's modules (`src/app/*.rs`, `panels/` as one) import one another without a
+/// circle: the edges are the `super::name` and `crate::app::name` paths of each file (outside
+/// comments) naming another of them.
+#[test]
+fn the_inspectors_modules_import_no_circle() {
+    let app = root().join("src/app");
+    let mut modules: Vec<String> = std::fs::read_dir(&app)
+        .expect("src/app")
+        .filter_map(|e| {
+            let p = e.expect("entry").path();
+            let name = p.file_stem()?.to_string_lossy().to_string();
+            (p.is_dir() || p.extension().is_some_and(|x| x == "rs")).then_some(name)
+        })
+        .filter(|n| n != "mod")
+        .collect();
+    modules.sort();
+    let mut edges: BTreeMap<String, std::collections::BTreeSet<String>> = BTreeMap::new();
+    for m in &modules {
+        let mut files = Vec::new();
+        let dir = app.join(m);
+        if dir.is_dir() {
+            rust_files(&dir, &mut files);
+        } else {
+            files.push(app.join(format!("{m}.rs")));
+        }
+        for f in files {
+            let text = std::fs::read_to_string(&f).expect("source");
+            let code: String = text
+                .lines()
+                .filter(|l| !l.trim_start().starts_with("//"))
+                .collect::<Vec<_>>()
+                .join("\n");
+            for prefix in ["super::", "crate::app::"] {
+                for (i, _) in code.match_indices(prefix) {
+                    let name: String = code[i + prefix.len()..]
+                        .chars()
+                        .take_while(|c| c.is_alphanumeric() || *c == '_')
+                        .collect();
+                    // Inside panels/, `super::` is panels itself.
+                    let own = dir.is_dir() && prefix == "super::";
+                    if !own && &name != m && modules.contains(&name) {
+                        edges.entry(m.clone()).or_default().insert(name);
+                    }
+                }
+            }
+        }
+    }
+    // The test reads what it should: the worker uses the decoder.
+    assert!(edges["worker"].contains("decoder"), "{edges:?}");
+    // Depth-first: a module met again on the current path closes a circle.
+    fn visit(
+        m: &str,
+        edges: &BTreeMap<String, std::collections::BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut std::collections::BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(k) = path.iter().position(|p| p == m) {
+            let mut circle = path[k..].to_vec();
+            circle.push(m.to_string());
+            return Some(circle);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_string());
+        for n in edges.get(m).into_iter().flatten() {
+            if let Some(c) = visit(n, edges, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m.to_string());
+        None
+    }
+    let mut done = std::collections::BTreeSet::new();
+    for m in &modules {
+        if let Some(c) = visit(m, &edges, &mut Vec::new(), &mut done) {
+            panic!("an import circle in src/app: {}", c.join(" -> "));
+        }
+    }
+}

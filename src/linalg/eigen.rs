@@ -103,37 +103,26 @@ mod tests {
                 let d = nalgebra::DMatrix::from_fn(n, n, |i, j| if i == j { f(l[i]) } else { 0.0 });
                 &q * d * q.transpose()
             };
-            let a = build(&|x| x);
-            let want = build(&|x| x.min(0.0));
-            let mut h = [0.0; MAX_DOF * MAX_DOF];
-            for i in 0..n {
-                for j in 0..n {
-                    h[i * n + j] = a[(i, j)];
-                }
-            }
-            negative_part(&mut h, n);
-            for i in 0..n {
-                for j in 0..n {
-                    assert!((h[i * n + j] - want[(i, j)]).abs() < 1e-9, "{n}: [{i},{j}]");
-                }
-            }
-            let neg = build(&|x| -x.abs());
-            let pos = build(&|x| x.abs());
-            for (src, kept) in [(neg, true), (pos, false)] {
+            // The negative part of the matrix `m`, by `negative_part`.
+            let negative = |m: &nalgebra::DMatrix<f64>| {
                 let mut h = [0.0; MAX_DOF * MAX_DOF];
                 for i in 0..n {
                     for j in 0..n {
-                        h[i * n + j] = src[(i, j)];
+                        h[i * n + j] = m[(i, j)];
                     }
                 }
                 negative_part(&mut h, n);
-                for i in 0..n {
-                    for j in 0..n {
-                        let w = if kept { src[(i, j)] } else { 0.0 };
-                        assert!((h[i * n + j] - w).abs() < 1e-9, "{n} {kept}");
-                    }
-                }
-            }
+                nalgebra::DMatrix::from_fn(n, n, |i, j| h[i * n + j])
+            };
+            let close = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>| {
+                (a - b).abs().max() < 1e-9
+            };
+            // Both signs; negative definite kept; positive definite gone.
+            assert!(close(&negative(&build(&|x| x)), &build(&|x| x.min(0.0))), "{n}");
+            let neg = build(&|x| -x.abs());
+            assert!(close(&negative(&neg), &neg), "{n}");
+            let zero = nalgebra::DMatrix::zeros(n, n);
+            assert!(close(&negative(&build(&|x| x.abs())), &zero), "{n}");
         }
     }
 }

@@ -114,11 +114,13 @@ mod tests {
                 negative_part(&mut h, n);
                 nalgebra::DMatrix::from_fn(n, n, |i, j| h[i * n + j])
             };
-            let close = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>| {
-                (a - b).abs().max() < 1e-9
-            };
+            let close =
+                |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>| (a - b).abs().max() < 1e-9;
             // Both signs; negative definite kept; positive definite gone.
-            assert!(close(&negative(&build(&|x| x)), &build(&|x| x.min(0.0))), "{n}");
+            assert!(
+                close(&negative(&build(&|x| x)), &build(&|x| x.min(0.0))),
+                "{n}"
+            );
             let neg = build(&|x| -x.abs());
             assert!(close(&negative(&neg), &neg), "{n}");
             let zero = nalgebra::DMatrix::zeros(n, n);

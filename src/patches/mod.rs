@@ -5,7 +5,7 @@
 //! every one with its own warp, translation or affine ([`PatchWarp`]), by inverse-compositional
 //! Lucas-Kanade (Baker and Matthews) over one pre-processed frame shared by all: one smoothing,
 //! one Gaussian pyramid, built once per frame (in bands of rows, by the threads). Patches are
-//! independent, so they are tracked in parallel over the cores (a [`Crew`]: each thread takes
+//! independent, so they are tracked in parallel over the cores (a [`crate::crew::Crew`]: each thread takes
 //! blocks of neighbouring patches and works in its own scratch, so a patch's template, made
 //! again each frame, never leaves that core's cache) and give the same result, bit for bit, on
 //! any number of threads.
@@ -13,7 +13,7 @@
 //! The template of a patch is the previous frame's patch (`template=previous`, as KLT does:
 //! no appearance drift, a slow positional one) or the first frame's (`template=first`: no
 //! positional drift; with an affine warp it follows rotation, scale and shear). Each frame a
-//! patch reports a [`TrackStatus`]: it is lost when it leaves the frame, when its window is flat
+//! patch reports a [`crate::status::TrackStatus`]: it is lost when it leaves the frame, when its window is flat
 //! (`min_eigen`), when its values stop being finite, when its affine shape degenerates, when
 //! the tracked patch no longer looks like its template (`min_ncc`), or, with `fb_max`, when
 //! tracking it back to the previous frame misses its start by more than `fb_max` pixels (the
@@ -26,7 +26,7 @@
 //! warped grid `I(W(u))`, solves `dp = H^-1 SD^T (I(W(u)) - T(u))` and composes the inverse of
 //! the increment, `W <- W o W(dp)^-1`, until the patch's corners move less than `eps` pixels
 //! (of that level). A translation warp samples a grid that only shifts, whose bilinear weights
-//! are the same for every sample ([`imaging::sample_grid_shifted`]).
+//! are the same for every sample ([`crate::imaging::sample_grid_shifted`]).
 
 mod frame;
 mod kernels;

@@ -231,9 +231,9 @@ impl Plan {
         build: BuildSearcher<'_>,
     ) -> Result<Self> {
         // The coarse levels widen the basin of the methods that descend a gradient; the
-        // sampling methods (NN, PF) search the spread of their own samples, at the finest
-        // level only.
-        let levels = if main.sm.requires().derivatives {
+        // sampling methods (NN, PF) search the spread of their own samples and the grid
+        // methods have their patches, at the finest level only.
+        let levels = if main.sm.pyramid() {
             params.pyramid_levels
         } else {
             1

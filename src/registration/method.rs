@@ -58,6 +58,13 @@ pub trait SearchMethod: Send + std::fmt::Debug {
             distance: false,
         }
     }
+    /// Whether coarser pyramid levels widen the method's basin (tracker parameter
+    /// `pyramid_levels`): so for the methods that descend a gradient; not for the sampling
+    /// methods (they search the spread of their own samples) nor for the grid methods (their
+    /// patches do).
+    fn pyramid(&self) -> bool {
+        self.requires().derivatives
+    }
     /// Called once the template is set in `ctx` (values and gradients sampled) with the
     /// (pre-processed) initialisation frame, which sampling methods draw warped patches from.
     fn initialize(&mut self, _ctx: &mut Context, _img: &ImageView) -> Result<(), LossReason> {

@@ -16,14 +16,30 @@ use crate::am::Capabilities;
 use crate::imaging::ImageView;
 
 /// The union of what the stages need.
-fn union(stages: &[Box<dyn SearchMethod>]) -> Capabilities {
-    stages.iter().fold(Capabilities::default(), |acc, s| {
+pub(super) fn union<'a>(stages: impl IntoIterator<Item = &'a dyn SearchMethod>) -> Capabilities {
+    stages.into_iter().fold(Capabilities::default(), |acc, s| {
         let r = s.requires();
         Capabilities {
             derivatives: acc.derivatives || r.derivatives,
             distance: acc.distance || r.distance,
         }
     })
+}
+
+/// Whether a stage of a composite has finished its frame: it says so, or (left to the stop
+/// test) its corners moved less than `eps`, or it took its `max_iters`.
+pub(super) fn finished(
+    control: Control,
+    moved: f64,
+    eps: f64,
+    count: usize,
+    max_iters: usize,
+) -> bool {
+    (match control {
+        Control::Done => true,
+        Control::Continue => false,
+        Control::Auto => moved < eps,
+    }) || count >= max_iters
 }
 
 /// Stages run one after the other on each frame.
@@ -56,7 +72,7 @@ impl SearchMethod for Cascade {
         &self.name
     }
     fn requires(&self) -> Capabilities {
-        union(&self.stages)
+        union(self.stages.iter().map(|s| &**s))
     }
     fn template_linearised(&self) -> bool {
         // The frame ends with the last stage.
@@ -86,12 +102,7 @@ impl SearchMethod for Cascade {
         let step = self.stages[k].iterate(ctx, img)?;
         self.count += 1;
         let moved = ctx.corners(&ctx.params()).change_norm(&before);
-        let finished = match step.control {
-            Control::Done => true,
-            Control::Continue => false,
-            Control::Auto => moved < self.eps,
-        } || self.count >= self.max_iters;
-        if !finished {
+        if !finished(step.control, moved, self.eps, self.count, self.max_iters) {
             return Ok(Step {
                 similarity: step.similarity,
                 control: Control::Continue,
@@ -146,7 +157,7 @@ impl SearchMethod for Parallel {
         &self.name
     }
     fn requires(&self) -> Capabilities {
-        union(&self.stages)
+        union(self.stages.iter().map(|s| &**s))
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         for s in &mut self.stages {

@@ -15,12 +15,15 @@ mod cascade;
 mod esm;
 mod falk;
 pub mod fclk;
+mod grid;
 mod ialk;
 mod iclk;
 pub mod newton;
 mod nn;
 mod nnic;
 mod pf;
+mod rklt;
+mod robust;
 
 pub use crate::observe::{MethodVisual, ResponseMap};
 use crate::params::ParamDef;
@@ -51,6 +54,8 @@ pub const REGISTRY: &[Entry<SmDef>] = &[
     nn::ENTRY_10K,
     nnic::ENTRY,
     pf::ENTRY,
+    grid::ENTRY,
+    rklt::ENTRY,
 ];
 
 /// The stages of a composite name: `Some(("cascade", ["nn", "iclk"]))`.

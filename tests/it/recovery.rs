@@ -168,7 +168,22 @@ fn every_combination_recovers_a_known_warp() {
 
 #[test]
 fn sampling_methods_are_precise_on_low_dof_and_seeded() {
-    for sm in ["nn1k", "nn10k", "pf", "nnic"] {
+    // Every method of the registry that searches elsewhere than at its parameters (NN, PF,
+    // NNIC, the grid methods: not `local`), to half a pixel on the low-DOF warps.
+    let (method, tracker) = (MethodParams::default(), TrackerParams::default());
+    let cfg = sm::SmConfig {
+        method: &method,
+        tracker: &tracker,
+    };
+    let nonlocal: Vec<&str> = sm::REGISTRY
+        .iter()
+        .filter(|e| !sm::build(e.name, &cfg).unwrap().local())
+        .map(|e| e.name)
+        .collect();
+    for name in ["nn1k", "pf", "nnic", "grid", "rklt"] {
+        assert!(nonlocal.contains(&name), "{nonlocal:?}");
+    }
+    for sm in nonlocal {
         for m in ["translation", "similitude"] {
             let spec = TrackerSpec::from_names(sm, "ssd", m).unwrap();
             let ok = converged(&spec, 2.0, 40, 0.5, 7);

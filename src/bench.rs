@@ -39,18 +39,23 @@ pub struct BenchRow {
     pub live_fps: f64,
     /// Initialisation time (template, NN index, ...), ms.
     pub init_ms: f64,
+    /// The longest update while lost (ms): the tracker, lost on a frame of noise the size of the
+    /// sequence's, updated on [`LOST_FRAMES`] more (each a search for the target, as
+    /// `on_loss=redetect` makes it).
+    #[serde(default)]
+    pub lost_ms: f64,
     /// Frames lost (in the live-path run).
     pub lost_at: Option<usize>,
 }
 
 impl BenchRow {
     /// The column names of [`BenchRow::line`].
-    pub const HEADER: &'static str = "tracker                     frames it/frame  us/iter  other us/frame  tracker FPS   live FPS  live us/iter   init ms";
+    pub const HEADER: &'static str = "tracker                     frames it/frame  us/iter  other us/frame  tracker FPS   live FPS  live us/iter   init ms   lost ms";
 
     /// The row as `regtrack bench` prints it, under [`BenchRow::HEADER`].
     pub fn line(&self) -> String {
         format!(
-            "{:<26} {:>7} {:>8.2} {:>8.2} {:>15.1} {:>12.0} {:>10.0} {:>13.2} {:>9.1}{}",
+            "{:<26} {:>7} {:>8.2} {:>8.2} {:>15.1} {:>12.0} {:>10.0} {:>13.2} {:>9.1} {:>9.2}{}",
             self.tracker,
             self.frames,
             self.iterations_per_frame,
@@ -60,12 +65,16 @@ impl BenchRow {
             self.live_fps,
             self.live_us_per_iteration,
             self.init_ms,
+            self.lost_ms,
             self.lost_at
                 .map(|f| format!("  (lost at frame {f})"))
                 .unwrap_or_default()
         )
     }
 }
+
+/// How many updates while lost `bench_tracker` times.
+pub const LOST_FRAMES: usize = 12;
 
 /// Frames of a sequence loaded in memory.
 pub struct LoadedFrames {
@@ -169,6 +178,7 @@ pub fn bench_tracker(
             live_upi.push(busy * 1e6 / counter.iterations.max(1) as f64);
         }
     }
+    let lost_ms = lost_update_ms(spec, frames)?;
     Ok(BenchRow {
         tracker: spec.label(),
         frames: tracked,
@@ -179,8 +189,35 @@ pub fn bench_tracker(
         tracker_fps: median(fps_t),
         live_fps: median(fps_l),
         init_ms: median(init_ms),
+        lost_ms,
         lost_at,
     })
+}
+
+/// The longest of [`LOST_FRAMES`] updates while lost, ms: the tracker initialised on the first
+/// frame, then given frames of seeded noise of the same size (the target gone: it is lost on
+/// the first, and searches for the target on every one after).
+fn lost_update_ms(spec: &TrackerSpec, frames: &LoadedFrames) -> Result<f64> {
+    let first = &frames.gray[0];
+    let mut rng = crate::rng::Rng::new(7);
+    let noise = GrayU8 {
+        width: first.width,
+        height: first.height,
+        data: (0..first.data.len())
+            .map(|_| (rng.uniform() * 255.99) as u8)
+            .collect(),
+    };
+    let mut t = Tracker::new(spec)?;
+    t.initialize(FrameInput::Gray8(first), &frames.init)?;
+    let mut counter = IterationCounter::default();
+    t.update(FrameInput::Gray8(&noise), &mut counter);
+    let mut longest = 0.0f64;
+    for _ in 0..LOST_FRAMES {
+        let start = Instant::now();
+        t.update(FrameInput::Gray8(&noise), &mut counter);
+        longest = longest.max(start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(longest)
 }
 
 #[cfg(test)]
@@ -218,10 +255,12 @@ mod tests {
             live_us_per_frame >= row.live_us_per_iteration * row.iterations_per_frame * 0.5,
             "{row:?}"
         );
-        // The line has the header's columns: the name and eight figures.
+        // Lost, an update searches for the target: it takes time, and it is said.
+        assert!(row.lost_ms > 0.0 && row.lost_ms.is_finite(), "{row:?}");
+        // The line has the header's columns: the name and nine figures.
         let line = row.line();
         let fields: Vec<&str> = line.split_whitespace().collect();
-        assert_eq!(fields.len(), 9, "{line}");
+        assert_eq!(fields.len(), 10, "{line}");
         assert_eq!(fields[0], "iclk_ssd_homography");
         let live_upi: f64 = fields[7].parse().unwrap();
         assert!(

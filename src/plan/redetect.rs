@@ -1,19 +1,24 @@
 //! The policy after a loss (tracker parameter `on_loss=redetect`, the default): when a lost
 //! tracker's searches from its last good estimate (and from where the rejected search ended)
-//! fail the checks again, the whole frame is searched for the template. The last good quad is
-//! moved over the frame in steps of a sixth of its size, at [`REDETECT_SCALES`]; each candidate
-//! is ranked by its confidence on a quarter of the grid ([`Detector`]); the
-//! [`REDETECT_REFINED`] best are refined by the plan in turn, and the first that passes the
-//! checks (the confidence's whatever the SSM) is the frame's end.
+//! fail the checks again, the frame is searched for the template, within a budget. The last
+//! good quad is moved over the frame in steps of a sixth of its size, at [`REDETECT_SCALES`], in
+//! rings around where it was lost (nearest first: a target that comes back mostly comes back
+//! near); each candidate is ranked by its confidence on a quarter of the grid ([`Detector`]).
+//! A lost frame ranks at most [`REDETECT_BUDGET`] candidates, from where the last frame's search
+//! stopped ([`Scan`]), so that no update while lost takes long (the whole frame is covered in a
+//! few frames: the search goes on where it stopped, ring after ring, and starts again near once
+//! the frame is covered). The [`REDETECT_REFINED`] best of the frame's candidates are refined
+//! by the plan in turn, and the first that passes the checks (the confidence's whatever the
+//! SSM) is the frame's end.
 
 use super::judge::SearchResult;
 use super::tracker::CONFIDENCE_BLOCKS;
 use super::{Estimate, RegistrationTracker};
-use crate::geometry::{Point, Quad, Rect, apply_homography};
-use crate::imaging::{ImageView, sample_value};
+use crate::geometry::{Point, Quad, Rect};
+use crate::imaging::{ImageView, sample_values};
 use crate::observe::Observer;
 use crate::registration::BlockCorrelation;
-use crate::registration::Problem;
+use crate::registration::{Problem, warp_points};
 use crate::ssm::Params;
 use crate::status::FrameTiming;
 use crate::visual_tracker::FrameInput;
@@ -21,31 +26,79 @@ use std::time::Instant;
 
 /// The scales of the last good quad at which the frame is searched.
 pub const REDETECT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
-/// The candidates of the frame search that are refined.
+/// The candidates of a frame's search that are refined.
 pub const REDETECT_REFINED: usize = 3;
+/// The most candidates a lost frame ranks (`regtrack bench`'s `lost ms` is the longest update
+/// while lost).
+pub const REDETECT_BUDGET: usize = 300;
+
+/// Where the frame search goes on: the ring around the last good position (in steps; 0 is the
+/// position itself) and the next of its candidates (positions times scales).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Scan {
+    ring: usize,
+    next: usize,
+}
+
+impl Scan {
+    /// The candidates of ring `r`: its positions (1, then `8 r`) times the scales.
+    fn size(r: usize) -> usize {
+        REDETECT_SCALES.len() * if r == 0 { 1 } else { 8 * r }
+    }
+
+    /// The offset (in steps) and the scale of candidate `next` of ring `r`: the ring's square
+    /// walked clockwise from its upper-left corner.
+    fn at(r: usize, next: usize) -> ((i64, i64), f64) {
+        let scale = REDETECT_SCALES[next % REDETECT_SCALES.len()];
+        let k = next / REDETECT_SCALES.len();
+        if r == 0 {
+            return ((0, 0), scale);
+        }
+        let (r, side, t) = (r as i64, (k / (2 * r)) as i64, (k % (2 * r)) as i64);
+        let offset = match side {
+            0 => (-r + t, -r),
+            1 => (r, -r + t),
+            2 => (r - t, r),
+            _ => (-r, r - t),
+        };
+        (offset, scale)
+    }
+}
 
 /// The grid samples the frame search ranks its candidates on (every other one per axis, a
 /// quarter of the work), the template there, and a buffer for a candidate's patch: made when
 /// the template is sampled, so that a lost frame does not allocate either.
 #[derive(Debug, Default)]
 pub struct Detector {
-    picks: Vec<usize>,
-    confidence: BlockCorrelation,
+    /// The grid's points the detector samples (every other one per axis), normalised frame.
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    /// Where they are under a candidate (frame pixels), and the values there.
+    px: Vec<f32>,
+    py: Vec<f32>,
     patch: Vec<f32>,
+    confidence: BlockCorrelation,
+    /// Where the frame search goes on.
+    pub(super) scan: Scan,
 }
 
 impl Detector {
-    /// The detector of a `res x res` template.
-    pub fn new(res: usize, template: &[f32]) -> Self {
+    /// The detector of a `res x res` template sampled on the grid `(grid_x, grid_y)`.
+    pub fn new(res: usize, template: &[f32], (grid_x, grid_y): (&[f32], &[f32])) -> Self {
         let side = res.div_ceil(2);
         let picks: Vec<usize> = (0..side)
             .flat_map(|j| (0..side).map(move |i| 2 * j * res + 2 * i))
             .collect();
         let picked: Vec<f32> = picks.iter().map(|&k| template[k]).collect();
+        let n = picks.len();
         Detector {
+            xs: picks.iter().map(|&k| grid_x[k]).collect(),
+            ys: picks.iter().map(|&k| grid_y[k]).collect(),
+            px: vec![0.0; n],
+            py: vec![0.0; n],
+            patch: vec![0.0; n],
             confidence: BlockCorrelation::new(&picked, side, CONFIDENCE_BLOCKS),
-            patch: vec![0.0; picks.len()],
-            picks,
+            scan: Scan::default(),
         }
     }
 
@@ -59,11 +112,8 @@ impl Detector {
     ) -> Option<(f64, Params)> {
         let p = problem.fit(q)?;
         let m = problem.pixel_matrix(&p);
-        let (gx, gy) = problem.grid();
-        for (v, &k) in self.patch.iter_mut().zip(&self.picks) {
-            let pt = apply_homography(&m, Point::new(gx[k] as f64, gy[k] as f64));
-            *v = sample_value(view, pt.x as f32, pt.y as f32);
-        }
+        warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
+        sample_values(view, &self.px, &self.py, &mut self.patch);
         Some((self.confidence.of(&self.patch), p))
     }
 }
@@ -85,29 +135,56 @@ impl RegistrationTracker {
         let c = base.centroid();
         let b = base.bbox();
         let step = (b.width().max(b.height()) / 6.0).max(4.0);
+        // The rings that reach every corner of the frame.
+        let reach = [
+            (0.0, 0.0),
+            (fw as f64, 0.0),
+            (0.0, fh as f64),
+            (fw as f64, fh as f64),
+        ]
+        .iter()
+        .map(|&(x, y)| ((x - c.x).abs().max((y - c.y).abs()) / step).ceil() as usize)
+        .max()
+        .unwrap_or(0);
+        // The best candidates: confidence and the SSM's parameters there.
         let mut best = [(f64::NEG_INFINITY, self.finest.ctx.params()); REDETECT_REFINED];
+        let place = |(cx, cy): (f64, f64), scale: f64| {
+            base.map(|p| Point::new(cx + scale * (p.x - c.x), cy + scale * (p.y - c.y)))
+        };
         let t1 = Instant::now();
         {
             let view = self.src.view(input, 0);
             let (problem, det) = (self.finest.ctx.problem(), &mut self.detector);
-            for scale in REDETECT_SCALES {
-                let mut cy = step / 2.0;
-                while cy < fh as f64 {
-                    let mut cx = step / 2.0;
-                    while cx < fw as f64 {
-                        let q = base.map(|p| {
-                            Point::new(cx + scale * (p.x - c.x), cy + scale * (p.y - c.y))
-                        });
-                        if let Some((conf, p)) = det.candidate(problem, &view, &q) {
-                            // Keep the best few, best first.
-                            if conf > best[REDETECT_REFINED - 1].0 {
-                                best[REDETECT_REFINED - 1] = (conf, p);
-                                best.sort_by(|a, b| b.0.total_cmp(&a.0));
-                            }
+            let (mut ranked, mut wrapped) = (0, false);
+            while ranked < REDETECT_BUDGET {
+                let Scan { ring, next } = det.scan;
+                if next >= Scan::size(ring) {
+                    det.scan = Scan {
+                        ring: if ring >= reach { 0 } else { ring + 1 },
+                        next: 0,
+                    };
+                    // Once round the frame in one frame (a small frame): enough.
+                    if ring >= reach {
+                        if wrapped {
+                            break;
                         }
-                        cx += step;
+                        wrapped = true;
                     }
-                    cy += step;
+                    continue;
+                }
+                det.scan.next += 1;
+                let ((i, j), scale) = Scan::at(ring, next);
+                let (cx, cy) = (c.x + i as f64 * step, c.y + j as f64 * step);
+                if cx < 0.0 || cy < 0.0 || cx >= fw as f64 || cy >= fh as f64 {
+                    continue;
+                }
+                ranked += 1;
+                if let Some((conf, p)) = det.candidate(problem, &view, &place((cx, cy), scale)) {
+                    // Keep the best few, best first.
+                    if conf > best[REDETECT_REFINED - 1].0 {
+                        best[REDETECT_REFINED - 1] = (conf, p);
+                        best.sort_by(|a, b| b.0.total_cmp(&a.0));
+                    }
                 }
             }
         }
@@ -123,7 +200,17 @@ impl RegistrationTracker {
             if let Ok(out) = found
                 && self.accept(&out, (fw, fh), true).is_ok()
             {
-                return Some(out);
+                if out.converged {
+                    return Some(out);
+                }
+                // Far from a candidate, the search may end at its iteration limit on the way
+                // to the target: once more from there (only when the target is found).
+                let again =
+                    self.search_from(input, out.params, &out.corners, observer, started, timing);
+                return Some(match again {
+                    Ok(better) if self.accept(&better, (fw, fh), true).is_ok() => better,
+                    _ => out,
+                });
             }
         }
         None
@@ -134,12 +221,27 @@ impl RegistrationTracker {
 mod tests {
     use super::*;
     use crate::observe::NoObserver;
+
+    /// Every ring's candidates are the cells of its square, each once, at every scale.
+    #[test]
+    fn a_ring_walks_its_square_once() {
+        for r in 0..6 {
+            let mut seen = std::collections::BTreeSet::new();
+            for next in 0..Scan::size(r) {
+                let ((i, j), scale) = Scan::at(r, next);
+                assert_eq!(i.abs().max(j.abs()) as usize, r);
+                assert!(seen.insert((i, j, (scale * 100.0) as i64)), "{r} {next}");
+            }
+            assert_eq!(seen.len(), Scan::size(r));
+        }
+    }
     use crate::plan::harness::{error, shifted, tracker};
     use crate::status::TrackStatus;
     use crate::visual_tracker::VisualTracker;
 
     /// The detector ranks the target above the quads around it; a tracker moved far from the
-    /// target (lost) finds it again on the next frame by searching the whole frame.
+    /// target (lost) finds it again within the frames its search takes to reach it, each lost
+    /// frame ranking at most the budget's candidates, nearest rings first.
     #[test]
     fn the_frame_search_finds_the_target_again() {
         let (mut t, gray, quads) = tracker(("iclk", "zncc", "homography"), |_| {}, (4, 1));
@@ -160,15 +262,30 @@ mod tests {
                 .unwrap();
             assert!(off < on - 0.2, "{dx} {dy}: {off} vs {on}");
         }
-        // Lost far away: the next frame's searches from there fail, the frame search does not.
+        // Lost far away: the searches from there fail, the frame search does not, once its
+        // rings reach the target (160 px right, 110 down: ring 7 of steps of 24 px, the 675th
+        // candidate, the third lost frame with a budget of 300).
         t.set_corners(&shifted(&quads[1], 160.0, 110.0)).unwrap();
         t.status = TrackStatus::Lost(crate::status::LossReason::LowConfidence);
-        let out = t.update(FrameInput::Gray8(&gray[2]), &mut NoObserver);
-        assert_eq!(out.status, TrackStatus::Tracking);
+        let mut found = None;
+        for k in 0..4 {
+            let before = t.detector.scan;
+            let out = t.update(FrameInput::Gray8(&gray[2]), &mut NoObserver);
+            if out.status == TrackStatus::Tracking {
+                found = Some((k, out.corners));
+                break;
+            }
+            // Each lost frame goes on where the last one stopped.
+            assert_ne!(t.detector.scan, before);
+        }
+        let (k, corners) = found.expect("found again");
+        assert!((1..=3).contains(&k), "found on lost frame {k}");
         assert!(
-            error(&out.corners, &quads[2]) < 0.5,
+            error(&corners, &quads[2]) < 0.5,
             "{}",
-            error(&out.corners, &quads[2])
+            error(&corners, &quads[2])
         );
+        // Tracked again: the next loss searches near first.
+        assert_eq!(t.detector.scan, Scan::default());
     }
 }

@@ -140,6 +140,7 @@ impl RegistrationTracker {
         self.corners = out.corners;
         self.status = TrackStatus::Tracking;
         self.lost_at = None;
+        self.detector.scan = Default::default();
         // The next frame's patch is compared with this one's (made in place: a frame's update
         // does not allocate once the buffers have grown).
         self.remember_patch(input, &out);
@@ -251,7 +252,7 @@ impl VisualTracker for RegistrationTracker {
         self.initial_area = quad.signed_area().abs();
         let template = ctx.problem().template();
         self.judges.template = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
-        self.detector = Detector::new(res, template);
+        self.detector = Detector::new(res, template, ctx.problem().grid());
         self.loss.reset();
         self.lost_at = None;
         self.forget_previous();
@@ -277,6 +278,7 @@ impl VisualTracker for RegistrationTracker {
         self.loss.reset();
         self.forget_previous();
         self.lost_at = None;
+        self.detector.scan = Default::default();
         Ok(())
     }
 

@@ -33,7 +33,7 @@ done
 [ -f "$data/box2/box2_right.txt" ] || python3 docs/render_box.py "$data/box2" --seed 2 \
     --name box2 --textures skimage_camera.png,skimage_chelsea.png
 sets="ev:$ev:reinit: evn:$ev::: fast:$data/fast::: stars:$data/lit::stars lit:$data/lit::sparse,brick50,brick100 st2:$data/stars2::: box:$data/box::: box2:$data/box2:::"
-paper=(--sigma 3 --levels 1 --line_search off --polish off --on_loss stop)
+paper=(--sigma 3 --levels 1 --line_search off --polish off --on_loss stop --predict off)
 for s in $sets; do
     IFS=: read -r name dir mode seqs _ <<<"$s"
     flags=(); [ "$mode" = reinit ] && flags=(--reinit)

@@ -51,6 +51,27 @@ impl RegistrationTracker {
         })
     }
 
+    /// Whether a frame's run would be tracked (the checks of [`RegistrationTracker::judge`],
+    /// nothing kept).
+    pub(super) fn passes(&self, result: &SearchResult, size: (usize, usize)) -> bool {
+        let Ok(out) = result else {
+            return false;
+        };
+        check_quad(&out.corners, self.initial_area, size).is_ok()
+            && (self.finest.ctx.dof() < MIN_DOF
+                || self.loss.check(&self.judged(out), &self.params).is_ok())
+    }
+
+    /// What the confidence checks judge `out` by.
+    fn judged(&self, out: &Estimate) -> Judged {
+        Judged {
+            confidence: out.confidence.unwrap_or(f64::NAN),
+            frame_confidence: out.frame_confidence,
+            converged: out.converged,
+            resuming: self.status != TrackStatus::Tracking,
+        }
+    }
+
     /// The checks a frame's end must pass to be tracked: its quad's, then (if `confidence`)
     /// its confidence's, which a passing frame joins the history of.
     pub(super) fn accept(
@@ -61,15 +82,8 @@ impl RegistrationTracker {
     ) -> Result<(), LossReason> {
         check_quad(&out.corners, self.initial_area, size)?;
         if confidence {
-            self.loss.judge(
-                &Judged {
-                    confidence: out.confidence.unwrap_or(f64::NAN),
-                    frame_confidence: out.frame_confidence,
-                    converged: out.converged,
-                    resuming: self.status != TrackStatus::Tracking,
-                },
-                &self.params,
-            )?;
+            let judged = self.judged(out);
+            self.loss.judge(&judged, &self.params)?;
         }
         Ok(())
     }

@@ -32,6 +32,7 @@ mod hierarchy;
 pub mod judge;
 mod measure;
 mod polish;
+pub mod predict;
 mod pyramid;
 pub mod redetect;
 pub mod regrow;

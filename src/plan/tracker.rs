@@ -4,7 +4,7 @@
 //! [`super::regrow`] (a frame's run of the plan, redone on a larger region), [`super::judge`]
 //! (the loss checks), [`super::redetect`] (after a loss).
 
-use super::{Init, Judges, Plan, Searcher, redetect::Detector};
+use super::{Init, Judges, Plan, Searcher, predict::Predictor, redetect::Detector};
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
 use crate::imaging::gaussian_kernel;
@@ -51,6 +51,8 @@ pub struct RegistrationTracker {
     /// The largest move of a corner in the last tracked frame (pixels): how far beyond its
     /// start the first part of the next frame's region is smoothed.
     pub(super) motion: f64,
+    /// Where the next frame's search starts (`predict=on`).
+    pub(super) predictor: Predictor,
 }
 
 impl RegistrationTracker {
@@ -77,6 +79,7 @@ impl RegistrationTracker {
             detector: Detector::default(),
             partial: true,
             motion: 0.0,
+            predictor: Predictor::default(),
         }
     }
 
@@ -137,6 +140,11 @@ impl RegistrationTracker {
             .map(|i| out.corners.0[i].dist(start_corners.0[i]))
             .fold(0.0, f64::max);
         self.finest.ctx.set_params(out.params);
+        if self.status == TrackStatus::Tracking {
+            self.predictor.tracked(&self.corners, &out.corners);
+        } else {
+            self.predictor.reset();
+        }
         self.corners = out.corners;
         self.status = TrackStatus::Tracking;
         self.lost_at = None;
@@ -169,6 +177,7 @@ impl RegistrationTracker {
         timing: FrameTiming,
     ) -> FrameOutcome {
         self.forget_previous();
+        self.predictor.reset();
         self.finest.ctx.set_params(start_params);
         self.status = TrackStatus::Lost(reason);
         self.lost_at = lost_at;
@@ -185,6 +194,22 @@ impl RegistrationTracker {
             confidence: finite.and_then(|o| o.confidence),
             timing,
         }
+    }
+}
+
+impl RegistrationTracker {
+    /// Where the next frame's search starts when it is predicted (`predict=on`, tracking, and
+    /// a prediction away from the last pose): its parameters and corners.
+    fn predicted(&self, resume: bool) -> Option<(Params, Quad)> {
+        if !self.params.predict || resume {
+            return None;
+        }
+        let q = self.predictor.predict(&self.corners);
+        if q == self.corners {
+            return None;
+        }
+        let p = self.finest.ctx.problem().fit(&q)?;
+        Some((p, self.finest.ctx.corners(&p)))
     }
 }
 
@@ -255,6 +280,7 @@ impl VisualTracker for RegistrationTracker {
         self.detector = Detector::new(res, template, ctx.problem().grid());
         self.loss.reset();
         self.lost_at = None;
+        self.predictor.reset();
         self.forget_previous();
         Ok(())
     }
@@ -278,6 +304,7 @@ impl VisualTracker for RegistrationTracker {
         self.loss.reset();
         self.forget_previous();
         self.lost_at = None;
+        self.predictor.reset();
         self.detector.scan = Default::default();
         Ok(())
     }
@@ -298,14 +325,32 @@ impl VisualTracker for RegistrationTracker {
         let start_params = self.finest.ctx.params();
         let start_corners = self.corners;
         let started = Instant::now();
+        // From where the target is going (`predict`), else from the last pose.
+        let predicted = self.predicted(resume);
+        let (from_params, from_corners) = predicted.unwrap_or((start_params, start_corners));
         let mut result = self.search_from(
             input,
-            start_params,
-            &start_corners,
+            from_params,
+            &from_corners,
             observer,
             started,
             &mut timing,
         );
+        // The prediction checked: a search from it that fails the checks is done again from
+        // the last pose, and the more confident end is kept.
+        if predicted.is_some() && !self.passes(&result, input.size()) {
+            let other = self.search_from(
+                input,
+                start_params,
+                &start_corners,
+                observer,
+                started,
+                &mut timing,
+            );
+            if super::judge::confidence_of(&other) > super::judge::confidence_of(&result) {
+                result = other;
+            }
+        }
         // Lost and searching on: also from where the last search ended when only its
         // confidence failed. A frame judged lost on the target (a sudden blur) is then found
         // again, where a search from the last good estimate alone falls behind a moving target

@@ -81,6 +81,21 @@ impl LossCheck {
     /// Whether a frame is tracked (see the module's header for the rules); a frame tracked on
     /// from a tracked previous frame joins the history.
     pub fn judge(&mut self, frame: &Judged, params: &TrackerParams) -> Result<(), LossReason> {
+        self.check(frame, params)?;
+        // Only frames tracked on from a tracked one: frames found again after a loss would let
+        // a look-alike's level into the reference.
+        if frame.frame_confidence.is_none() {
+            return Ok(());
+        }
+        if self.recent.len() == HISTORY {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(frame.confidence);
+        Ok(())
+    }
+
+    /// Whether a frame would be tracked, leaving the history as it is.
+    pub fn check(&self, frame: &Judged, params: &TrackerParams) -> Result<(), LossReason> {
         let Judged {
             confidence,
             frame_confidence,
@@ -108,19 +123,11 @@ impl LossCheck {
             && confidence >= drop
             && confidence >= resume
             && frame_confidence.is_none_or(|c| c >= params.min_frame_confidence);
-        if !ok {
-            return Err(LossReason::LowConfidence);
+        if ok {
+            Ok(())
+        } else {
+            Err(LossReason::LowConfidence)
         }
-        // Only frames tracked on from a tracked one: frames found again after a loss would let
-        // a look-alike's level into the reference.
-        if frame_confidence.is_none() {
-            return Ok(());
-        }
-        if self.recent.len() == HISTORY {
-            self.recent.pop_front();
-        }
-        self.recent.push_back(confidence);
-        Ok(())
     }
 }
 

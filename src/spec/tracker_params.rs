@@ -220,6 +220,11 @@ tracker_params! {
     /// (its confidence), at most `max_iters` of them.
     polish: bool = choice_default(OFF_ON, 1),
         "off (the classic methods), or on: after ICLK, IALK or ESM converge, forward steps toward the AM's own optimum while the patch grows more like the template";
+    /// The corners move on at their last velocity, damped by the factor (0, 0.5 or 1) that has
+    /// predicted the tracked frames best so far (`plan::predict`); when the search from there
+    /// fails the checks, the frame is searched from the last pose too.
+    predict: bool = choice_default(OFF_ON, 1),
+        "off (each frame's search starts at the last pose), or on: where the target is going (constant velocity, damped, checked against the frames tracked)";
 }
 
 choice_param!(Illumination {

@@ -66,6 +66,7 @@ pub fn paper_settings(spec: &mut regtrack::tracker::TrackerSpec) {
         ("line_search", "off"),
         ("polish", "off"),
         ("on_loss", "stop"),
+        ("predict", "off"),
     ] {
         spec.set_param(k, v).unwrap();
     }

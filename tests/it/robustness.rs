@@ -537,7 +537,9 @@ fn a_lost_tracker_says_so_and_a_tracking_one_does_not() {
     // frames). With `on_loss=continue` each tracker searches every frame, so every frame is
     // judged. Before the confidence checks, 22 % of the 226 frames more than 20 px off were
     // reported lost here; with them all 108 are (the trackers now wait at the last good
-    // estimate instead of following the background), and 1 of 414 frames within 5 px.
+    // estimate instead of following the background), and 1 of 414 frames within 5 px. With the
+    // motion prediction (`predict=on`) the trackers hold more of the fast sequence: 40 frames
+    // off are left, all reported lost.
     use regtrack::dataset::synth::{SynthConfig, render_sequence};
     use regtrack::eval::{self, EvalOptions};
     let d = crate::common::TempDir::new("loss");
@@ -575,7 +577,7 @@ fn a_lost_tracker_says_so_and_a_tracking_one_does_not() {
     };
     let off = frames(&|r| r.estimate_error > eval::LOSS_OFF);
     let on = frames(&|r| r.estimate_error <= eval::LOSS_ON);
-    assert!(off >= 50 && on >= 300, "{off} frames off, {on} on");
+    assert!(off >= 30 && on >= 300, "{off} frames off, {on} on");
     let refs: Vec<&eval::RunResult> = runs.iter().collect();
     let s = eval::summarize("ALL", &refs);
     assert!(
@@ -812,6 +814,9 @@ fn the_polish_holds_a_blurred_wall_that_iclk_drifts_off() {
         let sr = |polish: &str| {
             let mut spec = TrackerSpec::from_names("iclk", am, "homography").unwrap();
             spec.set_param("polish", polish).unwrap();
+            // The polish alone: with the motion prediction ICLK-ZNCC holds more of the wall
+            // without the polish too (SR@5 0.63).
+            spec.set_param("predict", "off").unwrap();
             let run =
                 eval::run_sequence(&seq, &spec, &EvalOptions::default(), None, &mut NoObserver)
                     .unwrap();

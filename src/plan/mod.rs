@@ -28,6 +28,7 @@
 //! builds the standard plans of every combination of the tracker parameters that add stages
 //! and tracks a rendered sequence with each.
 
+mod escalate;
 mod hierarchy;
 pub mod judge;
 mod measure;
@@ -41,12 +42,13 @@ mod search;
 mod sweep;
 mod tracker;
 
+pub use escalate::{EASY, Escalate};
 pub use hierarchy::{HIERARCHY, Hierarchy};
 pub use measure::Measure;
 pub use polish::Polish;
 pub use pyramid::{MIN_LEVEL_RES, Pyramid, level_res};
 pub use retry::Retry;
-pub use search::Search;
+pub use search::{SEARCH, Search};
 pub use tracker::RegistrationTracker;
 
 use crate::error::Result;
@@ -245,7 +247,7 @@ impl Plan {
         } else {
             None
         };
-        let mut finest: Vec<Box<dyn Stage>> = vec![Box::new(Search)];
+        let mut finest: Vec<Box<dyn Stage>> = vec![Box::new(SEARCH)];
         if params.polish && main.sm.template_linearised() {
             finest.push(Box::new(Polish));
         }
@@ -254,9 +256,23 @@ impl Plan {
         if let Some(h) = hierarchy {
             stages.push(Box::new(h));
         }
-        match pyramid {
-            Some(p) => stages.push(Box::new(Retry::new(vec![Box::new(p)], finest))),
-            None => stages.extend(finest),
+        let full: Vec<Box<dyn Stage>> = match pyramid {
+            Some(p) => vec![Box::new(Retry::new(vec![Box::new(p)], finest))],
+            None => finest,
+        };
+        // Something beyond the search and the measure to escalate to: a first attempt at the
+        // finest level alone.
+        let more = full.len() > 2 || full.iter().any(|s| s.levels() > 0);
+        if params.escalate && more {
+            let first: Vec<Box<dyn Stage>> = vec![
+                Box::new(Search {
+                    max_iters: Some(escalate::FIRST_ITERS),
+                }),
+                Box::new(Measure),
+            ];
+            stages.push(Box::new(Escalate::new(first, full)));
+        } else {
+            stages.extend(full);
         }
         Ok(Plan::new(stages))
     }
@@ -336,57 +352,67 @@ mod tests {
     fn every_stage_of_the_standard_plans_runs() {
         let (gray, quads) = frames(12, 2);
         let mut seen = std::collections::BTreeSet::new();
-        for sm in ["iclk", "fclk", "nn1k"] {
-            for hierarchy in [false, true] {
-                for levels in [1, 3] {
-                    for polish in [false, true] {
-                        let mut s = spec(sm, "ssd", "homography");
-                        s.params.ssm_hierarchy = hierarchy;
-                        s.params.pyramid_levels = levels;
-                        s.params.polish = polish;
-                        let mut t = RegistrationTracker::new(&s).unwrap();
-                        let gradient = sm != "nn1k";
-                        let finest = if polish && sm == "iclk" {
-                            "search, polish, measure"
-                        } else {
-                            "search, measure"
-                        };
-                        let mut expected = Vec::new();
-                        if hierarchy {
-                            expected.push("hierarchy".to_string());
-                        }
-                        if gradient && levels > 1 {
-                            expected.push(format!("retry(pyramid; {finest})"));
-                        } else {
-                            expected.extend(finest.split(", ").map(String::from));
-                        }
-                        let stages = t.stages();
-                        assert_eq!(stages, expected, "{s:?}");
-                        seen.extend(stages);
-                        t.initialize(FrameInput::Gray8(&gray[0]), &quads[0])
-                            .unwrap();
-                        let mut levels_seen = Levels::default();
-                        let mut tracked = 0;
-                        for g in &gray[1..] {
-                            let out = t.update(FrameInput::Gray8(g), &mut levels_seen);
-                            tracked += (out.status == TrackStatus::Tracking) as usize;
-                        }
-                        assert!(2 * tracked >= gray.len() - 1, "{s:?}: {tracked} tracked");
-                        assert!(levels_seen.1 > 0, "{s:?}");
-                        // The pyramid's levels were searched.
-                        assert_eq!(
-                            levels_seen.0.iter().any(|&l| l > 0),
-                            gradient && levels > 1,
-                            "{s:?}: levels {:?}",
-                            levels_seen.0
-                        );
-                    }
-                }
+        let combinations = ["iclk", "fclk", "nn1k"].into_iter().flat_map(|sm| {
+            [false, true].into_iter().flat_map(move |h| {
+                [1, 3].into_iter().flat_map(move |l| {
+                    [false, true]
+                        .into_iter()
+                        .flat_map(move |p| [false, true].map(|e| (sm, h, l, p, e)))
+                })
+            })
+        });
+        for (sm, hierarchy, levels, polish, escalate) in combinations {
+            let mut s = spec(sm, "ssd", "homography");
+            s.params.ssm_hierarchy = hierarchy;
+            s.params.pyramid_levels = levels;
+            s.params.polish = polish;
+            s.params.escalate = escalate;
+            let mut t = RegistrationTracker::new(&s).unwrap();
+            let gradient = sm != "nn1k";
+            let finest = if polish && sm == "iclk" {
+                "search, polish, measure"
+            } else {
+                "search, measure"
+            };
+            let mut expected = Vec::new();
+            if hierarchy {
+                expected.push("hierarchy".to_string());
             }
+            let full: Vec<String> = if gradient && levels > 1 {
+                vec![format!("retry(pyramid; {finest})")]
+            } else {
+                finest.split(", ").map(String::from).collect()
+            };
+            if escalate && full != ["search", "measure"] {
+                expected.push(format!("escalate(search, measure; {})", full.join(", ")));
+            } else {
+                expected.extend(full);
+            }
+            let stages = t.stages();
+            assert_eq!(stages, expected, "{s:?}");
+            seen.extend(stages);
+            t.initialize(FrameInput::Gray8(&gray[0]), &quads[0])
+                .unwrap();
+            let mut levels_seen = Levels::default();
+            let mut tracked = 0;
+            for g in &gray[1..] {
+                let out = t.update(FrameInput::Gray8(g), &mut levels_seen);
+                tracked += (out.status == TrackStatus::Tracking) as usize;
+            }
+            assert!(2 * tracked >= gray.len() - 1, "{s:?}: {tracked} tracked");
+            assert!(levels_seen.1 > 0, "{s:?}");
+            // The pyramid's levels were searched.
+            assert_eq!(
+                levels_seen.0.iter().any(|&l| l > 0),
+                gradient && levels > 1,
+                "{s:?}: levels {:?}",
+                levels_seen.0
+            );
         }
         for stage in [
             "hierarchy",
             "retry(pyramid; search, polish, measure)",
+            "escalate(search, measure; retry(pyramid; search, polish, measure))",
             "search",
         ] {
             assert!(seen.contains(stage), "{stage}: {seen:?}");
@@ -405,6 +431,7 @@ mod tests {
         ] {
             let mut s = spec(sm, "zncc", "affine");
             s.params.pyramid_levels = 1;
+            s.params.escalate = false;
             let t = RegistrationTracker::new(&s).unwrap();
             let expected: &[&str] = if polished {
                 &["search", "polish", "measure"]
@@ -582,6 +609,7 @@ pub(crate) mod harness {
         let input = FrameInput::Gray8(frame);
         let mut src = FrameSource::new(t.src.kernel().clone(), stage.levels());
         src.prepare(input, t.region_around(quad));
+        src.build_levels(input);
         stage
             .initialize(&Init {
                 quad,

@@ -165,7 +165,7 @@ mod tests {
         let start = shifted(&quads[4], 1.5, 1.0);
         let mut counter = IterationCounter::default();
         with_run(&mut t, &gray[4], &start, &mut counter, |run| {
-            Search.run(run).unwrap();
+            Search::default().run(run).unwrap();
             let searched = run.estimate;
             let before = confidence_at(run, &searched.params);
             Polish.run(run).unwrap();

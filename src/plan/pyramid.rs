@@ -58,8 +58,11 @@ impl Stage for Pyramid {
         "pyramid"
     }
 
+    /// The levels are made (and the finest level's region completed) before any is read: a
+    /// frame whose search settles at the finest level first (`escalate`) smooths only the
+    /// part of the region it reads.
     fn local(&self, _finest: &dyn SearchMethod) -> bool {
-        false
+        true
     }
 
     fn levels(&self) -> usize {
@@ -86,6 +89,7 @@ impl Stage for Pyramid {
         let params = run.params;
         let start = run.estimate.params;
         let mut p = start;
+        run.src.build_levels(run.input);
         let mut limits = Limits::of(params);
         limits.max_iters = params.max_iters.div_ceil(3);
         for (l, Searcher { ctx, sm }) in self.coarse.iter_mut().enumerate().rev() {

@@ -1,13 +1,20 @@
 //! The tracker's own search method at the finest level, from the frame's estimate: the
-//! executor's loop with the tracker's limits.
+//! executor's loop with the tracker's limits (or fewer iterations, for a first attempt that
+//! is worth keeping only if it settles quickly, [`super::Escalate`]).
 
 use super::{FrameRun, Stage};
 use crate::registration::{Limits, SearchMethod};
 use crate::status::LossReason;
 
-/// See the module's documentation.
-#[derive(Clone, Copy, Debug)]
-pub struct Search;
+/// See the module's documentation: at most `max_iters` iterations when set (else the
+/// tracker's).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Search {
+    pub max_iters: Option<usize>,
+}
+
+/// The tracker's search with the tracker's limits.
+pub const SEARCH: Search = Search { max_iters: None };
 
 impl Stage for Search {
     fn name(&self) -> &'static str {
@@ -19,7 +26,10 @@ impl Stage for Search {
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> Result<(), LossReason> {
-        let limits = Limits::of(run.params);
+        let mut limits = Limits::of(run.params);
+        if let Some(n) = self.max_iters {
+            limits.max_iters = limits.max_iters.min(n);
+        }
         let first = run.estimate.iterations;
         let from = run.estimate.params;
         let (finest, mut reader, exec) = run.finest();
@@ -63,7 +73,7 @@ mod tests {
         let mut counter = IterationCounter::default();
         let e = with_run(&mut t, &gray[5], &start, &mut counter, |run| {
             run.estimate.iterations = 7;
-            Search.run(run).unwrap();
+            Search::default().run(run).unwrap();
             assert_eq!(run.estimate.params, run.finest.ctx.params());
             run.estimate
         });

@@ -245,6 +245,7 @@ impl VisualTracker for RegistrationTracker {
         ctx.set_region(quad, res, self.params.grid)?;
         self.src
             .prepare(input, region_around(quad, self.params.roi_margin));
+        self.src.build_levels(input);
         let view = self.src.view(input, 0);
         ctx.sample_template(&view);
         let (tx, ty) = ctx.problem().template_gradient();

@@ -91,7 +91,7 @@ impl<'a> Executor<'a> {
         sm.start_frame(ctx);
         let budget = sm.max_iterations(limits.max_iters);
         let mut relearnt = 0;
-        let mut line = LineSearch::new(limits.line_search && sm.line_search());
+        let mut line = LineSearch::new(limits.line_search && sm.line_search(), limits.eps);
         for it in 0..budget {
             let iteration_started = Instant::now();
             let from = ctx.params();
@@ -141,7 +141,7 @@ impl<'a> Executor<'a> {
                     relearnt += 1;
                     // The similarity changes with the model: values before and after do not
                     // compare.
-                    line = LineSearch::new(line.is_on());
+                    line = LineSearch::new(line.is_on(), limits.eps);
                     ctx.learn_model(&reader.view());
                     sm.model_updated(ctx);
                     continue;

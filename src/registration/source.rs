@@ -10,6 +10,10 @@
 //! was a seventh of a frame's work for a target that stays within a few pixels of where it
 //! started). The values read are the same bits either way: a pixel's smoothed value depends
 //! only on the image around it.
+//!
+//! The pyramid's coarser levels are made only when a stage asks for them
+//! ([`FrameSource::build_levels`]): a frame that the finest level's search settles does not
+//! pay for them.
 
 use crate::geometry::{Quad, Rect};
 use crate::imaging::{GaussianKernel, ImageRef, ImageView, Preprocessor, gaussian_kernel};
@@ -65,6 +69,10 @@ pub struct FrameSource {
     copy: Preprocessor,
     /// The coarse pyramid levels made of each region.
     levels: usize,
+    /// Whether the last region's coarse levels are made, and the region (for a frame the caller
+    /// smoothed, whose levels are made of a copy of it).
+    built: bool,
+    region: Rect,
     /// The stamp of the views of a frame the caller smoothed ([`ImageView::stamp`]).
     stamp: u64,
 }
@@ -76,6 +84,8 @@ impl FrameSource {
             pre: Preprocessor::new(kernel),
             copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
             levels,
+            built: false,
+            region: Rect::default(),
             stamp: 0,
         }
     }
@@ -85,31 +95,41 @@ impl FrameSource {
         self.pre.kernel()
     }
 
-    /// Pre-processes `region` of `input` (and its pyramid levels).
+    /// Pre-processes `region` of `input` (its pyramid levels when asked,
+    /// [`FrameSource::build_levels`]).
     pub fn prepare(&mut self, input: FrameInput<'_>, region: Rect) {
         self.prepare_part(input, region, region);
     }
 
     /// [`FrameSource::prepare`], smoothing the finest level only within `part` of the region
-    /// (see [`Reader::Part`]; the pyramid's levels need the whole region).
+    /// (see [`Reader::Part`]; the pyramid's levels complete it when they are made).
     pub fn prepare_part(&mut self, input: FrameInput<'_>, region: Rect, part: Rect) {
         // Another frame or region: views of it are new content.
         self.stamp = new_stamp();
+        self.built = false;
+        self.region = region;
+        match Raw::of(input) {
+            Raw::U8(img) => self.pre.process_part(img, region, part),
+            Raw::F32(img) => self.pre.process_part(img, region, part),
+            Raw::Smoothed(_) => {}
+        }
+    }
+
+    /// Makes the coarser pyramid levels of the region last prepared (completing its smoothing
+    /// first), once per region.
+    pub fn build_levels(&mut self, input: FrameInput<'_>) {
+        if self.built || self.levels == 0 {
+            return;
+        }
+        self.built = true;
         let pre = match Raw::of(input) {
-            Raw::U8(img) => {
-                self.pre.process_part(img, region, part);
-                &mut self.pre
-            }
-            Raw::F32(img) => {
-                self.pre.process_part(img, region, part);
-                &mut self.pre
-            }
             Raw::Smoothed(img) => {
-                if self.levels == 0 {
-                    return;
-                }
-                self.copy.process(img, region);
+                self.copy.process(img, self.region);
                 &mut self.copy
+            }
+            _ => {
+                complete(&mut self.pre, input);
+                &mut self.pre
             }
         };
         pre.build_levels(self.levels);
@@ -225,9 +245,11 @@ mod tests {
         let input = FrameInput::Gray8(&g);
         let mut src = FrameSource::new(gaussian_kernel(5, 1.0), 1);
         src.prepare(input, Rect::new(4.0, 4.0, 40.0, 30.0));
+        src.build_levels(input);
         let (a0, a1) = (src.view(input, 0).stamp(), src.view(input, 1).stamp());
         assert!(a0 != 0 && a1 != 0 && a0 != a1);
         src.prepare(input, Rect::new(4.0, 4.0, 40.0, 30.0));
+        src.build_levels(input);
         let (b0, b1) = (src.view(input, 0).stamp(), src.view(input, 1).stamp());
         assert!(b0 != a0 && b1 != a1 && b0 != b1);
         let smoothed = crate::imaging::gaussian_blur(&g, src.kernel());

@@ -24,7 +24,7 @@ use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
 
 /// The fraction of the recent frames' median confidence a first attempt must reach to end the
-/// frame (the same bar as [`super::retry::RETRY_BELOW`]: a frame that reaches it is one the
+/// frame (the same bar as the retry's, `retry::RETRY_BELOW`: a frame that reaches it is one the
 /// pyramid's retry would have kept too).
 pub const EASY: f64 = super::retry::RETRY_BELOW;
 

@@ -204,7 +204,24 @@ impl RegistrationTracker {
         canonical.am = main.context().am().name().to_string();
         canonical.ssm = main.context().ssm().name().to_string();
         let plan = Plan::standard(&spec.params, &canonical.ssm, &main, &build)?;
-        Ok(RegistrationTracker::from_plan(canonical, main, plan))
+        let tracker = RegistrationTracker::from_plan(canonical.clone(), main, plan);
+        // The second hypothesis: the same SSM and tracker parameters (without one of its own),
+        // the method's and AM's defaults.
+        match spec.params.second.names() {
+            Some((sm, am)) => {
+                let mut params = spec.params.clone();
+                params.second = Default::default();
+                let other = RegistrationSpec {
+                    sm: sm.into(),
+                    am: am.into(),
+                    ssm: canonical.ssm,
+                    params,
+                    method: Default::default(),
+                };
+                Ok(tracker.with_second(RegistrationTracker::new(&other)?))
+            }
+            None => Ok(tracker),
+        }
     }
 }
 

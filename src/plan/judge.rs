@@ -23,6 +23,14 @@ pub fn confidence_of(r: &SearchResult) -> f64 {
     }
 }
 
+/// The iterations a frame's run took (none for a run that failed before any end).
+pub fn iterations_of(r: &SearchResult) -> usize {
+    match r {
+        Ok(o) | Err((_, Some(o))) => o.iterations,
+        Err((_, None)) => 0,
+    }
+}
+
 /// The checks on a frame's final quad in a `fw x fh` frame, against the track's initial area.
 pub fn check_quad(q: &Quad, initial_area: f64, (fw, fh): (usize, usize)) -> Result<(), LossReason> {
     if !q.is_finite() {

@@ -30,6 +30,7 @@ impl Stage for Measure {
             previous,
             has_previous,
             sums,
+            ..
         } = &mut *run.judges;
         let previous = has_previous.then_some(&*previous);
         let e = &mut run.estimate;

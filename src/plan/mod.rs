@@ -19,7 +19,8 @@
 //!   last tracked frame's patch).
 //!
 //! Around the plan, the tracker's policies: a search that leaves the pre-processed region is
-//! redone on a larger one ([`regrow`]); a frame is judged by the loss checks ([`judge`]); a
+//! redone on a larger one ([`regrow`]); a frame is judged by the loss checks ([`judge`]), its
+//! confidence allowing for motion blur when it moved fast (`blur.rs`); a
 //! lost tracker searches also from where the rejected search ended, then the whole frame
 //! ([`redetect`]).
 //!
@@ -28,6 +29,7 @@
 //! builds the standard plans of every combination of the tracker parameters that add stages
 //! and tracks a rendered sequence with each.
 
+mod blur;
 mod escalate;
 mod hierarchy;
 pub mod judge;
@@ -39,6 +41,7 @@ pub mod redetect;
 pub mod regrow;
 mod retry;
 mod search;
+mod second;
 mod sweep;
 mod tracker;
 
@@ -136,6 +139,9 @@ pub struct Judges {
     /// sampling of the finest workspace ([`crate::registration::Workspace::samples`]) that
     /// patch was: if the frame keeps it, it becomes `previous` without being summed again.
     pub(crate) sums: (Option<u64>, PatchSums),
+    /// The template blurred along a frame's motion, and its confidence (`blur`).
+    pub(crate) blurred: Vec<f32>,
+    pub(crate) blur: BlockCorrelation,
 }
 
 impl Judges {

@@ -53,6 +53,10 @@ pub struct RegistrationTracker {
     pub(super) motion: f64,
     /// Where the next frame's search starts (`predict=on`).
     pub(super) predictor: Predictor,
+    /// The last frame tracked (the velocity of a target found again is over the frames since).
+    pub(super) last_tracked: usize,
+    /// The second hypothesis on frames that fail the checks (`second`, `plan/second.rs`).
+    pub(super) second: Option<Box<RegistrationTracker>>,
 }
 
 impl RegistrationTracker {
@@ -80,7 +84,15 @@ impl RegistrationTracker {
             partial: true,
             motion: 0.0,
             predictor: Predictor::default(),
+            last_tracked: 0,
+            second: None,
         }
+    }
+
+    /// Adds the second hypothesis (`second`): a tracker of the same SSM.
+    pub fn with_second(mut self, second: RegistrationTracker) -> Self {
+        self.second = Some(Box::new(second));
+        self
     }
 
     /// Current SSM parameters (normalised frame).
@@ -143,8 +155,10 @@ impl RegistrationTracker {
         if self.status == TrackStatus::Tracking {
             self.predictor.tracked(&self.corners, &out.corners);
         } else {
-            self.predictor.reset();
+            let gap = self.frame.saturating_sub(self.last_tracked);
+            self.predictor.found_again(&self.corners, &out.corners, gap);
         }
+        self.last_tracked = self.frame;
         self.corners = out.corners;
         self.status = TrackStatus::Tracking;
         self.lost_at = None;
@@ -177,7 +191,7 @@ impl RegistrationTracker {
         timing: FrameTiming,
     ) -> FrameOutcome {
         self.forget_previous();
-        self.predictor.reset();
+        self.predictor.lost();
         self.finest.ctx.set_params(start_params);
         self.status = TrackStatus::Lost(reason);
         self.lost_at = lost_at;
@@ -270,14 +284,21 @@ impl VisualTracker for RegistrationTracker {
             src: &self.src,
             params: &self.params,
         })?;
+        if let Some(second) = &mut self.second {
+            second.initialize(input, quad)?;
+        }
         self.status = TrackStatus::Tracking;
         self.frame = 0;
+        self.last_tracked = 0;
         self.motion = 0.0;
         let ctx = &self.finest.ctx;
         self.corners = ctx.corners(&ctx.params());
         self.initial_area = quad.signed_area().abs();
         let template = ctx.problem().template();
         self.judges.template = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
+        // Made here so that a frame's update does not allocate.
+        self.judges.blurred = vec![0.0; res * res];
+        self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
         self.detector = Detector::new(res, template, ctx.problem().grid());
         self.loss.reset();
         self.lost_at = None;
@@ -352,6 +373,17 @@ impl VisualTracker for RegistrationTracker {
                 result = other;
             }
         }
+        // Tracking, and the search failed the checks: the second hypothesis from the same
+        // start, the more confident end kept.
+        if !resume
+            && self.second.is_some()
+            && !self.passes(&result, input.size())
+            && let Some(other) =
+                self.second_hypothesis(input, &from_corners, super::judge::iterations_of(&result))
+            && super::judge::confidence_of(&other) > super::judge::confidence_of(&result)
+        {
+            result = other;
+        }
         // Lost and searching on: also from where the last search ended when only its
         // confidence failed. A frame judged lost on the target (a sudden blur) is then found
         // again, where a search from the last good estimate alone falls behind a moving target
@@ -362,6 +394,13 @@ impl VisualTracker for RegistrationTracker {
             if super::judge::confidence_of(&other) > super::judge::confidence_of(&result) {
                 result = other;
             }
+        }
+        // Tracking on, and only the confidence failing: allowing for the blur of a fast move.
+        if self.status == TrackStatus::Tracking
+            && !self.passes(&result, input.size())
+            && let Ok(out) = &mut result
+        {
+            self.allow_for_blur(input, out);
         }
         let checked = self.judge(result, input.size());
         // Where a search that only failed the confidence checks ended: with `on_loss=continue`

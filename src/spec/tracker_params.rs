@@ -232,6 +232,12 @@ tracker_params! {
     /// off were reported lost with it, 0.955 without (docs/robustness.md).
     escalate: bool = choice_default(OFF_ON, 0),
         "off (every frame runs the pyramid and the polish), or on: each frame is first searched at the finest level alone (at most 10 iterations), and the pyramid and the polish run only when that search did not settle as confidently as the recent frames";
+    /// A frame whose search (from the prediction and from the last pose) fails the checks is
+    /// searched again by a second tracker of this method and AM from the same start, and the
+    /// end more like the template (the first tracker's confidence, both measured alike) is
+    /// judged (`plan/second.rs`). While tracking only: a lost tracker's frames do not pay it.
+    second: SecondHypothesis = choice(SecondHypothesis::NAMES),
+        "none, or the search method and AM of a second hypothesis tried on the frames whose search fails the checks (esm_ssd, fclk_ssd, ...), the more confident end kept";
 }
 
 choice_param!(Illumination {
@@ -262,6 +268,39 @@ choice_param!(GridLayout {
     Centres = "centres",
     Border = "border",
 });
+
+/// The second hypothesis of a tracker (`second`): none, or a search method and an AM.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SecondHypothesis {
+    #[default]
+    None,
+    EsmSsd,
+    EsmZncc,
+    FclkSsd,
+    FclkZncc,
+    IclkSsd,
+    IclkZncc,
+}
+
+choice_param!(SecondHypothesis {
+    None = "none",
+    EsmSsd = "esm_ssd",
+    EsmZncc = "esm_zncc",
+    FclkSsd = "fclk_ssd",
+    FclkZncc = "fclk_zncc",
+    IclkSsd = "iclk_ssd",
+    IclkZncc = "iclk_zncc",
+});
+
+impl SecondHypothesis {
+    /// The search method and the AM, if any.
+    pub fn names(self) -> Option<(&'static str, &'static str)> {
+        let name = Self::NAMES[self.to_param() as usize];
+        name.split_once('_')
+            .filter(|_| self != SecondHypothesis::None)
+    }
+}
 
 /// What a tracker does after a loss of track.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

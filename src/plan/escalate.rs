@@ -18,7 +18,7 @@
 //! settles in a few iterations. A hard frame (a large or sudden motion, blur, a change of
 //! light) pays both.
 
-use super::{Estimate, FrameRun, Init, Stage, run_stages};
+use super::{Estimate, FrameRun, Init, Stage, TwoStages, measured, run_stages};
 use crate::error::Result;
 use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
@@ -35,23 +35,15 @@ pub const FIRST_ITERS: usize = 10;
 /// when its end is not easy, `then` (the full stages) from the same start.
 #[derive(Debug)]
 pub struct Escalate {
-    first: Vec<Box<dyn Stage>>,
-    then: Vec<Box<dyn Stage>>,
+    stages: TwoStages,
 }
 
 impl Escalate {
     pub fn new(first: Vec<Box<dyn Stage>>, then: Vec<Box<dyn Stage>>) -> Self {
-        Escalate { first, then }
+        Escalate {
+            stages: TwoStages::new(first, then),
+        }
     }
-
-    fn stages(&self) -> impl Iterator<Item = &Box<dyn Stage>> {
-        self.first.iter().chain(&self.then)
-    }
-}
-
-/// The confidence an estimate was measured at (NaN before it was).
-fn confidence(e: &Estimate) -> f64 {
-    e.confidence.unwrap_or(f64::NAN)
 }
 
 /// Whether a first attempt's end `e` is good enough to end the frame, against the track's
@@ -61,7 +53,7 @@ pub fn easy(e: &Estimate, reference: Option<f64>, min_frame: f64) -> bool {
         return false;
     };
     e.converged
-        && at_least(confidence(e), EASY * reference)
+        && at_least(measured(e), EASY * reference)
         && e.frame_confidence.is_none_or(|f| at_least(f, min_frame))
 }
 
@@ -71,33 +63,24 @@ impl Stage for Escalate {
     }
 
     fn describe(&self) -> String {
-        let list = |v: &[Box<dyn Stage>]| {
-            v.iter()
-                .map(|s| s.describe())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        format!("escalate({}; {})", list(&self.first), list(&self.then))
+        self.stages.describe(self.name())
     }
 
     fn local(&self, finest: &dyn SearchMethod) -> bool {
-        self.stages().all(|s| s.local(finest))
+        self.stages.local(finest)
     }
 
     fn levels(&self) -> usize {
-        self.stages().map(|s| s.levels()).max().unwrap_or(0)
+        self.stages.levels()
     }
 
     fn initialize(&mut self, init: &Init<'_>) -> Result<()> {
-        self.first
-            .iter_mut()
-            .chain(&mut self.then)
-            .try_for_each(|s| s.initialize(init))
+        self.stages.initialize(init)
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
         let start = run.estimate;
-        let tried = run_stages(&mut self.first, run);
+        let tried = run_stages(&mut self.stages.first, run);
         let first = run.estimate;
         if tried.is_ok() && easy(&first, run.reference, run.params.min_frame_confidence) {
             return Ok(());
@@ -106,7 +89,7 @@ impl Stage for Escalate {
             iterations: first.iterations,
             ..start
         };
-        let full = run_stages(&mut self.then, run);
+        let full = run_stages(&mut self.stages.then, run);
         let second = run.estimate;
         run.estimate = match full {
             Ok(()) => second,

@@ -208,6 +208,59 @@ pub trait Stage: std::fmt::Debug + Send {
     }
 }
 
+/// The two lists of stages a policy stage holds and runs (the pyramid's [`Retry`], the
+/// [`Escalate`] stage): `first`, then `then`, with what the plan asks of stages summed over
+/// both.
+#[derive(Debug)]
+pub struct TwoStages {
+    pub(crate) first: Vec<Box<dyn Stage>>,
+    pub(crate) then: Vec<Box<dyn Stage>>,
+}
+
+impl TwoStages {
+    pub fn new(first: Vec<Box<dyn Stage>>, then: Vec<Box<dyn Stage>>) -> Self {
+        TwoStages { first, then }
+    }
+
+    fn all(&self) -> impl Iterator<Item = &Box<dyn Stage>> {
+        self.first.iter().chain(&self.then)
+    }
+
+    /// `name(first; then)`, each stage as it describes itself.
+    pub fn describe(&self, name: &str) -> String {
+        let list = |v: &[Box<dyn Stage>]| {
+            v.iter()
+                .map(|s| s.describe())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        format!("{name}({}; {})", list(&self.first), list(&self.then))
+    }
+
+    /// Whether every stage of both is local ([`Stage::local`]).
+    pub fn local(&self, finest: &dyn SearchMethod) -> bool {
+        self.all().all(|s| s.local(finest))
+    }
+
+    /// The most coarse levels a stage of either reads.
+    pub fn levels(&self) -> usize {
+        self.all().map(|s| s.levels()).max().unwrap_or(0)
+    }
+
+    /// Sets up every stage of both.
+    pub fn initialize(&mut self, init: &Init<'_>) -> Result<()> {
+        self.first
+            .iter_mut()
+            .chain(&mut self.then)
+            .try_for_each(|s| s.initialize(init))
+    }
+}
+
+/// The confidence an estimate was measured at (NaN before it was).
+pub(crate) fn measured(e: &Estimate) -> f64 {
+    e.confidence.unwrap_or(f64::NAN)
+}
+
 /// Runs `stages` in turn on the frame; the first failure ends the frame.
 pub fn run_stages(
     stages: &mut [Box<dyn Stage>],

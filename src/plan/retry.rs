@@ -5,7 +5,7 @@
 //! light may still have looked better than the start, and the finest level then settles on a
 //! look-alike nearby.)
 
-use super::{Estimate, FrameRun, Init, Stage, run_stages};
+use super::{Estimate, FrameRun, Init, Stage, TwoStages, measured, run_stages};
 use crate::error::Result;
 use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
@@ -18,23 +18,15 @@ pub const RETRY_BELOW: f64 = 0.95;
 /// level's stages, ending with the confidence measured) search from there and may run again.
 #[derive(Debug)]
 pub struct Retry {
-    first: Vec<Box<dyn Stage>>,
-    then: Vec<Box<dyn Stage>>,
+    stages: TwoStages,
 }
 
 impl Retry {
     pub fn new(first: Vec<Box<dyn Stage>>, then: Vec<Box<dyn Stage>>) -> Self {
-        Retry { first, then }
+        Retry {
+            stages: TwoStages::new(first, then),
+        }
     }
-
-    fn stages(&self) -> impl Iterator<Item = &Box<dyn Stage>> {
-        self.first.iter().chain(&self.then)
-    }
-}
-
-/// The confidence an estimate was measured at (NaN before it was).
-fn confidence(e: &Estimate) -> f64 {
-    e.confidence.unwrap_or(f64::NAN)
 }
 
 impl Stage for Retry {
@@ -43,39 +35,30 @@ impl Stage for Retry {
     }
 
     fn local(&self, finest: &dyn SearchMethod) -> bool {
-        self.stages().all(|s| s.local(finest))
+        self.stages.local(finest)
     }
 
     fn describe(&self) -> String {
-        let list = |v: &[Box<dyn Stage>]| {
-            v.iter()
-                .map(|s| s.describe())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        format!("retry({}; {})", list(&self.first), list(&self.then))
+        self.stages.describe(self.name())
     }
 
     fn levels(&self) -> usize {
-        self.stages().map(|s| s.levels()).max().unwrap_or(0)
+        self.stages.levels()
     }
 
     fn initialize(&mut self, init: &Init<'_>) -> Result<()> {
-        self.first
-            .iter_mut()
-            .chain(&mut self.then)
-            .try_for_each(|s| s.initialize(init))
+        self.stages.initialize(init)
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
         let start = run.estimate;
-        run_stages(&mut self.first, run)?;
+        run_stages(&mut self.stages.first, run)?;
         let moved = run.estimate.params != start.params;
-        run_stages(&mut self.then, run)?;
+        run_stages(&mut self.stages.then, run)?;
         let first = run.estimate;
         let low = run
             .reference
-            .is_some_and(|r| !at_least(confidence(&first), RETRY_BELOW * r));
+            .is_some_and(|r| !at_least(measured(&first), RETRY_BELOW * r));
         if !(moved && low) {
             return Ok(());
         }
@@ -83,10 +66,10 @@ impl Stage for Retry {
             iterations: first.iterations,
             ..start
         };
-        let again = run_stages(&mut self.then, run);
+        let again = run_stages(&mut self.stages.then, run);
         let second = run.estimate;
         run.estimate = match again {
-            Ok(()) if confidence(&second) > confidence(&first) => second,
+            Ok(()) if measured(&second) > measured(&first) => second,
             Ok(()) => Estimate {
                 iterations: second.iterations,
                 ..first

@@ -199,14 +199,7 @@ pub fn bench_tracker(
 /// the first, and searches for the target on every one after).
 fn lost_update_ms(spec: &TrackerSpec, frames: &LoadedFrames) -> Result<f64> {
     let first = &frames.gray[0];
-    let mut rng = crate::rng::Rng::new(7);
-    let noise = GrayU8 {
-        width: first.width,
-        height: first.height,
-        data: (0..first.data.len())
-            .map(|_| (rng.uniform() * 255.99) as u8)
-            .collect(),
-    };
+    let noise = GrayU8::noise(first.width, first.height, &mut crate::rng::Rng::new(7));
     let mut t = Tracker::new(spec)?;
     t.initialize(FrameInput::Gray8(first), &frames.init)?;
     let mut counter = IterationCounter::default();

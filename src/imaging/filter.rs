@@ -729,9 +729,7 @@ mod tests {
     fn a_region_smoothed_in_parts_is_the_region_smoothed_at_once() {
         let mut rng = crate::rng::Rng::new(5);
         let (w, h) = (61usize, 47usize);
-        let data = (0..w * h).map(|_| (rng.uniform() * 255.99) as u8).collect();
-        let src = crate::imaging::GrayU8::from_vec(w, h, data);
-        let src = src.unwrap();
+        let src = crate::imaging::GrayU8::noise(w, h, &mut rng);
         let mut whole = Preprocessor::new(gaussian_kernel(5, 0.9));
         let mut parts = whole.clone();
         let bits = |p: &Preprocessor| -> Vec<u32> { p.out.iter().map(|v| v.to_bits()).collect() };

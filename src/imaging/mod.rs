@@ -140,6 +140,17 @@ impl Pixel for f32 {
 }
 
 impl GrayU8 {
+    /// A `width x height` image of uniform noise over the gray levels, drawn from `rng`.
+    pub fn noise(width: usize, height: usize, rng: &mut crate::rng::Rng) -> GrayU8 {
+        Image {
+            width,
+            height,
+            data: (0..width * height)
+                .map(|_| (rng.uniform() * 255.99) as u8)
+                .collect(),
+        }
+    }
+
     /// The image as floats (gray levels 0..255).
     pub fn to_f32(&self) -> GrayF32 {
         Image {

@@ -93,18 +93,12 @@ impl Stage for Escalate {
         if tried.is_ok() && easy(&first, run.reference, run.params.min_frame_confidence) {
             return Ok(());
         }
-        run.estimate = Estimate {
-            iterations: first.iterations,
-            ..start
-        };
+        run.estimate = start.with_iterations(first.iterations);
         let full = run_stages(&mut self.stages.then, run);
         let second = run.estimate;
         run.estimate = match full {
             Ok(()) => second,
-            Err(_) if tried.is_ok() => Estimate {
-                iterations: second.iterations,
-                ..first
-            },
+            Err(_) if tried.is_ok() => first.with_iterations(second.iterations),
             Err(e) => return Err(e),
         };
         run.finest.ctx.set_params(run.estimate.params);

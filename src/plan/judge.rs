@@ -23,6 +23,17 @@ pub fn confidence_of(r: &SearchResult) -> f64 {
     }
 }
 
+/// The more confident of two runs of a frame (the first on a tie).
+// By value: a frame's update does not allocate.
+#[allow(clippy::result_large_err)]
+pub fn more_confident(a: SearchResult, b: SearchResult) -> SearchResult {
+    if confidence_of(&b) > confidence_of(&a) {
+        b
+    } else {
+        a
+    }
+}
+
 /// The iterations a frame's run took (none for a run that failed before any end).
 pub fn iterations_of(r: &SearchResult) -> usize {
     match r {

@@ -51,7 +51,7 @@ pub use measure::Measure;
 pub use polish::Polish;
 pub use pyramid::{MIN_LEVEL_RES, Pyramid, level_res};
 pub use retry::Retry;
-pub use search::{SEARCH, Search};
+pub use search::Search;
 pub use tracker::RegistrationTracker;
 
 use crate::error::Result;
@@ -124,6 +124,12 @@ impl Estimate {
             confidence: None,
             frame_confidence: None,
         }
+    }
+
+    /// This estimate, counting `iterations` for the frame (a run that goes on from it, or
+    /// from where the frame started, after other stages' iterations).
+    pub fn with_iterations(self, iterations: usize) -> Self {
+        Estimate { iterations, ..self }
     }
 }
 
@@ -306,7 +312,7 @@ impl Plan {
         } else {
             None
         };
-        let mut finest: Vec<Box<dyn Stage>> = vec![Box::new(SEARCH)];
+        let mut finest: Vec<Box<dyn Stage>> = vec![Box::new(Search::default())];
         if params.polish && main.sm.template_linearised() {
             finest.push(Box::new(Polish));
         }

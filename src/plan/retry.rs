@@ -5,7 +5,7 @@
 //! light may still have looked better than the start, and the finest level then settles on a
 //! look-alike nearby.)
 
-use super::{Estimate, FrameRun, Init, Stage, TwoStages, measured, run_stages};
+use super::{FrameRun, Init, Stage, TwoStages, measured, run_stages};
 use crate::error::Result;
 use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
@@ -62,18 +62,12 @@ impl Stage for Retry {
         if !(moved && low) {
             return Ok(());
         }
-        run.estimate = Estimate {
-            iterations: first.iterations,
-            ..start
-        };
+        run.estimate = start.with_iterations(first.iterations);
         let again = run_stages(&mut self.stages.then, run);
         let second = run.estimate;
         run.estimate = match again {
             Ok(()) if measured(&second) > measured(&first) => second,
-            Ok(()) => Estimate {
-                iterations: second.iterations,
-                ..first
-            },
+            Ok(()) => first.with_iterations(second.iterations),
             Err(_) => first,
         };
         run.finest.ctx.set_params(run.estimate.params);

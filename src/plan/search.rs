@@ -13,9 +13,6 @@ pub struct Search {
     pub max_iters: Option<usize>,
 }
 
-/// The tracker's search with the tracker's limits.
-pub const SEARCH: Search = Search { max_iters: None };
-
 impl Stage for Search {
     fn name(&self) -> &'static str {
         "search"

@@ -4,6 +4,7 @@
 //! [`super::regrow`] (a frame's run of the plan, redone on a larger region), [`super::judge`]
 //! (the loss checks), [`super::redetect`] (after a loss).
 
+use super::judge::{iterations_of, more_confident};
 use super::{Init, Judges, Plan, Searcher, predict::Predictor, redetect::Detector};
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
@@ -358,49 +359,47 @@ impl VisualTracker for RegistrationTracker {
             started,
             &mut timing,
         );
-        // The prediction checked: a search from it that fails the checks is done again from
-        // the last pose, and the more confident end is kept.
-        if predicted.is_some() && !self.passes(&result, input.size()) {
-            let other = self.search_from(
-                input,
-                start_params,
-                &start_corners,
-                observer,
-                started,
-                &mut timing,
-            );
-            if super::judge::confidence_of(&other) > super::judge::confidence_of(&result) {
-                result = other;
+        if resume {
+            // Lost and searching on: also from where the last search ended when only its
+            // confidence failed. A frame judged lost on the target (a sudden blur) is then found
+            // again, where a search from the last good estimate alone falls behind a moving
+            // target for good.
+            if let Some(p) = self.lost_at {
+                let from = self.finest.ctx.corners(&p);
+                let other = self.search_from(input, p, &from, observer, started, &mut timing);
+                result = more_confident(result, other);
             }
-        }
-        // Tracking, and the search failed the checks: the second hypothesis from the same
-        // start, the more confident end kept.
-        if !resume
-            && self.second.is_some()
-            && !self.passes(&result, input.size())
-            && let Some(other) =
-                self.second_hypothesis(input, &from_corners, super::judge::iterations_of(&result))
-            && super::judge::confidence_of(&other) > super::judge::confidence_of(&result)
-        {
-            result = other;
-        }
-        // Lost and searching on: also from where the last search ended when only its
-        // confidence failed. A frame judged lost on the target (a sudden blur) is then found
-        // again, where a search from the last good estimate alone falls behind a moving target
-        // for good.
-        if resume && let Some(p) = self.lost_at {
-            let from = self.finest.ctx.corners(&p);
-            let other = self.search_from(input, p, &from, observer, started, &mut timing);
-            if super::judge::confidence_of(&other) > super::judge::confidence_of(&result) {
-                result = other;
+        } else {
+            // Tracking: each of these runs only while the frame's end fails the checks.
+            let size = input.size();
+            let mut passes = self.passes(&result, size);
+            // The prediction checked: a search from it that fails is done again from the last
+            // pose, and the more confident end is kept.
+            if predicted.is_some() && !passes {
+                let other = self.search_from(
+                    input,
+                    start_params,
+                    &start_corners,
+                    observer,
+                    started,
+                    &mut timing,
+                );
+                result = more_confident(result, other);
+                passes = self.passes(&result, size);
             }
-        }
-        // Tracking on, and only the confidence failing: allowing for the blur of a fast move.
-        if self.status == TrackStatus::Tracking
-            && !self.passes(&result, input.size())
-            && let Ok(out) = &mut result
-        {
-            self.allow_for_blur(input, out);
+            // The second hypothesis from the same start, the more confident end kept.
+            if !passes
+                && self.second.is_some()
+                && let Some(other) =
+                    self.second_hypothesis(input, &from_corners, iterations_of(&result))
+            {
+                result = more_confident(result, other);
+                passes = self.passes(&result, size);
+            }
+            // Only the confidence failing: allowing for the blur of a fast move.
+            if !passes && let Ok(out) = &mut result {
+                self.allow_for_blur(input, out);
+            }
         }
         let checked = self.judge(result, input.size());
         // Where a search that only failed the confidence checks ended: with `on_loss=continue`

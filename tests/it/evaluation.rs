@@ -129,14 +129,7 @@ fn loss_of_track_is_a_status_never_nan_corners() {
             let mut t = Tracker::new(&spec).unwrap();
             t.initialize(FrameInput::Gray8(&img), &start).unwrap();
             // A frame of pure noise, then a flat frame: the tracker may diverge; it must say so.
-            let mut rng = regtrack::rng::Rng::new(4);
-            let noise = GrayU8 {
-                width: img.width,
-                height: img.height,
-                data: (0..img.data.len())
-                    .map(|_| (rng.uniform() * 255.0) as u8)
-                    .collect(),
-            };
+            let noise = GrayU8::noise(img.width, img.height, &mut regtrack::rng::Rng::new(4));
             for frame in [&noise, &flat, &flat] {
                 let out = t.update(FrameInput::Gray8(frame), &mut NoObserver);
                 assert!(out.corners.is_finite(), "{sm} {am}: {:?}", out.corners);

@@ -8,7 +8,10 @@ use std::fmt::Write as _;
 
 /// The listing `regtrack list` prints.
 pub fn listing() -> String {
-    let mut out = String::new();
+    let mut out = format!(
+        "the default tracker (no --sm and no --am): {}\n",
+        crate::spec::default_tracker_text()
+    );
     let row = |out: &mut String, name: &str, al: &[&str], desc: &str| {
         let _ = writeln!(out, "  {:<12} {:<22} {}", name, aliases(al), desc);
     };

@@ -237,7 +237,8 @@ impl PyTracker {
 
 #[pymethods]
 impl PyTracker {
-    /// Builds a tracker. Without names, the default tracker (ICLK-ZNCC-homography). Keyword
+    /// Builds a tracker. Without `sm` and `am`, the default tracker (FCLK-SSD with the second
+    /// hypothesis `second=fclk_zncc`; `regtrack list` names it). Keyword
     /// arguments set parameters by name (`regtrack.list_methods()` lists them), checked against
     /// their definitions.
     #[new]
@@ -258,6 +259,9 @@ impl PyTracker {
                     )));
                 }
                 TrackerSpec::whole(name)
+            }
+            None if sm.is_none() && am.is_none() => {
+                crate::tracker::default_spec(ssm.unwrap_or(d[2]))
             }
             None => {
                 TrackerSpec::from_names(sm.unwrap_or(d[0]), am.unwrap_or(d[1]), ssm.unwrap_or(d[2]))
@@ -674,27 +678,20 @@ fn eval<'py>(
     jobs: usize,
     params: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let d = crate::spec::DEFAULT_TRACKER;
-    let only_whole = !trackers.is_empty() && sm.is_none() && am.is_none() && ssm.is_none();
-    let list = |v: Option<Vec<String>>, default: &str| match v {
-        _ if only_whole => Vec::new(),
-        Some(v) => v,
-        None => vec![default.to_string()],
-    };
-    let mut specs = crate::tracker::product(
-        &list(sm, d[0]),
-        &list(am, d[1]),
-        &list(ssm, d[2]),
-        &trackers,
-    )
-    .map_err(library_error)?;
     let mut assignments = Vec::new();
     if let Some(params) = params {
         for (k, v) in params.iter() {
             assignments.push((k.extract::<String>()?, param_text(&v)?));
         }
     }
-    crate::tracker::set_params(&mut specs, &assignments).map_err(library_error)?;
+    let specs = crate::tracker::select(
+        sm.as_deref(),
+        am.as_deref(),
+        ssm.as_deref(),
+        &trackers,
+        &assignments,
+    )
+    .map_err(library_error)?;
     let gt_ssm = match gt_ssm {
         Some(g) if g != crate::eval::OWN_SSM => {
             Some(crate::gt::ssm_key(&g).map_err(library_error)?)

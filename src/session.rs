@@ -197,14 +197,8 @@ pub const PALETTE: [[u8; 3]; 8] = [
 
 impl Default for State {
     fn default() -> Self {
-        let entry = |sm: &str, am: &str, color| TrackerEntry {
-            spec: TrackerSpec::Registration(RegistrationSpec {
-                sm: sm.into(),
-                am: am.into(),
-                ssm: crate::spec::DEFAULT_TRACKER[2].into(),
-                params: Default::default(),
-                method: Default::default(),
-            }),
+        let entry = |spec, color| TrackerEntry {
+            spec,
             color,
             enabled: true,
             init: InitSource::GroundTruth,
@@ -213,8 +207,17 @@ impl Default for State {
             sequence: SequenceSource::Demo,
             trackers: vec![
                 // The default tracker, and the paper's classic to compare it with.
-                entry(DEFAULT_TRACKER[0], DEFAULT_TRACKER[1], PALETTE[0]),
-                entry("esm", "ssd", PALETTE[1]),
+                entry(crate::spec::default_spec(DEFAULT_TRACKER[2]), PALETTE[0]),
+                entry(
+                    TrackerSpec::Registration(RegistrationSpec {
+                        sm: "esm".into(),
+                        am: "ssd".into(),
+                        ssm: DEFAULT_TRACKER[2].into(),
+                        params: Default::default(),
+                        method: Default::default(),
+                    }),
+                    PALETTE[1],
+                ),
             ],
             start_frame: 0,
             frame: 0,

@@ -291,6 +291,50 @@ pub fn product(
     Ok(out)
 }
 
+/// The default tracker ([`crate::spec::DEFAULT_TRACKER`] with [`crate::spec::default_params`])
+/// on the state space model `ssm`, its names checked.
+pub fn default_spec(ssm: &str) -> Result<TrackerSpec> {
+    let [sm, am, _] = crate::spec::DEFAULT_TRACKER;
+    let mut spec = TrackerSpec::from_names(sm, am, ssm)?;
+    set_default_params(std::slice::from_mut(&mut spec));
+    Ok(spec)
+}
+
+/// Gives every registration tracker of `specs` the default tracker's parameters
+/// ([`crate::spec::default_params`]): for a selection that names neither an SM nor an AM,
+/// before the parameters the user gives.
+pub fn set_default_params(specs: &mut [TrackerSpec]) {
+    for p in specs.iter_mut().filter_map(TrackerSpec::params_mut) {
+        *p = crate::spec::default_params();
+    }
+}
+
+/// The trackers of a selection: the product of the lists (`None`: the default's, none at all
+/// when only whole trackers are named), with the default tracker's own parameters when neither
+/// an SM nor an AM is named, then `assignments` (as [`set_params`]). `regtrack eval` and
+/// Python's `eval` select with it.
+pub fn select(
+    sms: Option<&[String]>,
+    ams: Option<&[String]>,
+    ssms: Option<&[String]>,
+    whole: &[String],
+    assignments: &[(String, String)],
+) -> Result<Vec<TrackerSpec>> {
+    let only_whole = !whole.is_empty() && sms.is_none() && ams.is_none() && ssms.is_none();
+    let d = crate::spec::DEFAULT_TRACKER;
+    let list = |v: Option<&[String]>, default: &str| match v {
+        _ if only_whole => Vec::new(),
+        Some(v) => v.to_vec(),
+        None => vec![default.to_string()],
+    };
+    let mut specs = product(&list(sms, d[0]), &list(ams, d[1]), &list(ssms, d[2]), whole)?;
+    if sms.is_none() && ams.is_none() {
+        set_default_params(&mut specs);
+    }
+    set_params(&mut specs, assignments)?;
+    Ok(specs)
+}
+
 /// Sets each `(name, value)` on every tracker of `specs` that has such a parameter (`seed`
 /// reaches the sampling search methods and the whole trackers that draw random numbers, `res`
 /// only the registration trackers), then checks each tracker. A parameter that none of them has
@@ -319,6 +363,35 @@ pub fn set_params(specs: &mut [TrackerSpec], assignments: &[(String, String)]) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A selection that names no SM and no AM is the default tracker with its own parameters;
+    /// naming either gives the plain combination; the user's parameters come last.
+    #[test]
+    fn the_default_tracker_has_its_parameters_only_when_no_method_is_named() {
+        use crate::spec::{DEFAULT_TRACKER, SecondHypothesis, default_params};
+        let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        let second = |specs: &[TrackerSpec]| -> Vec<SecondHypothesis> {
+            specs.iter().map(|t| t.params().unwrap().second).collect()
+        };
+        let d = select(None, None, Some(&s(&["homography", "affine"])), &[], &[]).unwrap();
+        assert_eq!(d.len(), 2);
+        assert_eq!(second(&d), vec![default_params().second; 2]);
+        assert_ne!(default_params().second, SecondHypothesis::None);
+        assert_eq!(d[0].columns().0, DEFAULT_TRACKER[0]);
+        assert_eq!(d[0], default_spec("homography").unwrap());
+        let plain = select(Some(&s(&[DEFAULT_TRACKER[0]])), None, None, &[], &[]).unwrap();
+        assert_eq!(second(&plain), vec![SecondHypothesis::None]);
+        let plain = select(None, Some(&s(&["zncc"])), None, &[], &[]).unwrap();
+        assert_eq!(second(&plain), vec![SecondHypothesis::None]);
+        let mine = [("second".to_string(), "none".to_string())];
+        let own = select(None, None, None, &[], &mine).unwrap();
+        assert_eq!(second(&own), vec![SecondHypothesis::None]);
+        // Whole trackers alone: no registration tracker, nothing to set.
+        let whole = select(None, None, None, &s(&["kcf"]), &[]).unwrap();
+        assert_eq!(whole.len(), 1);
+        assert!(whole[0].params().is_none());
+        assert!(crate::spec::default_tracker_text().ends_with("second=fclk_zncc"));
+    }
 
     #[test]
     fn am_parameter_names_are_not_taken_by_search_methods_or_the_tracker() {

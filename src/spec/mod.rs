@@ -13,9 +13,47 @@ pub use tracker_params::{
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the
-/// inspector's first tracker. Chosen by measurement over every kind of sequence measured, and
-/// fast enough live (docs/robustness.md, "The default tracker").
-pub const DEFAULT_TRACKER: [&str; 3] = ["iclk", "zncc", "homography"];
+/// inspector's first tracker, Python's `Tracker()`; with [`default_params`]. Chosen on the tune
+/// half of the held-out renders and reported on the other half (docs/robustness.md, "The default
+/// tracker, measured on held-out renders").
+pub const DEFAULT_TRACKER: [&str; 3] = ["fclk", "ssd", "homography"];
+
+/// The default tracker's parameters: each parameter's default but a second hypothesis of the
+/// other appearance model on the frames that fail the checks (FCLK-SSD holds fast motion and
+/// blur best, FCLK-ZNCC the light that SSD drifts under). The default tracker has them only
+/// when neither its SM nor its AM is named: `--sm fclk --am ssd` is the plain combination.
+pub fn default_params() -> TrackerParams {
+    TrackerParams {
+        second: SecondHypothesis::FclkZncc,
+        ..TrackerParams::default()
+    }
+}
+
+/// The default tracker as a person reads it: `fclk ssd homography, second=fclk_zncc` (its
+/// methods, then the parameters it sets apart from their defaults).
+pub fn default_tracker_text() -> String {
+    let (own, plain) = (default_params(), TrackerParams::default());
+    let mut text = DEFAULT_TRACKER.join(" ");
+    for d in TRACKER_PARAMS {
+        let v = own.value(d.name);
+        if v != plain.value(d.name) {
+            text.push_str(&format!(", {}={}", d.name, d.format(v)));
+        }
+    }
+    text
+}
+
+/// The default tracker ([`DEFAULT_TRACKER`] with [`default_params`]) on the state space model
+/// `ssm` (not looked up: the factory checks the names when it builds the tracker).
+pub fn default_spec(ssm: &str) -> TrackerSpec {
+    TrackerSpec::Registration(RegistrationSpec {
+        sm: DEFAULT_TRACKER[0].into(),
+        am: DEFAULT_TRACKER[1].into(),
+        ssm: ssm.into(),
+        params: default_params(),
+        method: MethodParams::default(),
+    })
+}
 
 use crate::params::MethodParams;
 use serde::{Deserialize, Serialize};

@@ -757,11 +757,17 @@ fn a_slip_to_a_look_alike_is_reported_lost() {
         reinit: true,
         ..EvalOptions::default()
     };
+    // The eight combinations and the default tracker (with its second hypothesis).
+    let mut specs: Vec<TrackerSpec> = PEER_COMBINATIONS
+        .iter()
+        .map(|(sm, am)| TrackerSpec::from_names(sm, am, "homography").unwrap())
+        .collect();
+    specs.push(regtrack::tracker::default_spec("homography").unwrap());
     let judge = |frame_check: bool| {
-        let runs: Vec<eval::RunResult> = PEER_COMBINATIONS
+        let runs: Vec<eval::RunResult> = specs
             .par_iter()
-            .map(|(sm, am)| {
-                let mut spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+            .map(|spec| {
+                let mut spec = spec.clone();
                 if !frame_check {
                     spec.set_param("min_frame_confidence", "-1").unwrap();
                 }
@@ -810,26 +816,26 @@ fn a_small_brick_wall_moving_5_px_a_frame_is_held() {
         ..SynthConfig::default()
     };
     let seq = render_sequence(&cfg, &d.path().join("b5"), "b5", &|_, _| {}).unwrap();
-    let [sm, am, ssm] = regtrack::spec::DEFAULT_TRACKER;
-    let mut trackers = vec![(sm, am)];
+    // The default tracker (with its second hypothesis), then the plain combinations.
+    let mut trackers = vec![regtrack::tracker::default_spec("homography").unwrap()];
     for sm in ["esm", "fclk", "iclk"] {
         for am in ["ssd", "zncc"] {
-            trackers.push((sm, am));
+            trackers.push(TrackerSpec::from_names(sm, am, "homography").unwrap());
         }
     }
     let sr: Vec<f64> = trackers
         .par_iter()
-        .map(|(sm, am)| {
-            let spec = TrackerSpec::from_names(sm, am, ssm).unwrap();
+        .map(|spec| {
             let run =
-                eval::run_sequence(&seq, &spec, &EvalOptions::default(), None, &mut NoObserver)
+                eval::run_sequence(&seq, spec, &EvalOptions::default(), None, &mut NoObserver)
                     .unwrap();
             eval::summarize("b5", &[&run]).sr5
         })
         .collect();
-    eprintln!("SR@5 on the small brick wall at 5 px a frame: {trackers:?} {sr:?}");
-    for (t, s) in trackers.iter().zip(&sr) {
-        assert!(*s >= 0.95, "{t:?}: SR@5 {s}");
+    let names: Vec<String> = trackers.iter().map(TrackerSpec::label).collect();
+    eprintln!("SR@5 on the small brick wall at 5 px a frame: {names:?} {sr:?}");
+    for (t, s) in names.iter().zip(&sr) {
+        assert!(*s >= 0.95, "{t}: SR@5 {s}");
     }
 }
 

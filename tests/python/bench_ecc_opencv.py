@@ -1,4 +1,4 @@
-"""The live path of a regtrack tracker (by default the default, ICLK-ZNCC) beside OpenCV's ECC
+"""The live path of a regtrack tracker (by default the default tracker) beside OpenCV's ECC
 (`findTransformECC`), in one run, like for like.
 
 Like for like: ECC's template is the first frame's target *rectified to 50 x 50*, the pixels
@@ -21,6 +21,9 @@ corners. OpenCV is not a dependency of regtrack: install it for this script only
 opencv-python-headless numpy`).
 
     python3 tests/python/bench_ecc_opencv.py --seq data/seq.txt [--frames 200] [--sm esm --am ssd]
+
+Without --sm and --am, the tracker is the default tracker as `regtrack list` names it on its
+first line (its methods and the parameters it sets).
 
 Not collected by pytest (its name does not start with `test_`).
 """
@@ -132,6 +135,21 @@ SETTINGS = {
 }
 
 
+def default_tracker(binary):
+    """The default tracker as `regtrack list`'s first line names it: `(sm, am, [flags])`."""
+    first = subprocess.run([binary, "list"], check=True, capture_output=True,
+                           text=True).stdout.splitlines()[0]
+    names, *params = first.split(": ", 1)[1].split(", ")
+    sm, am, _ssm = names.split()
+    flags = [f for p in params for f in ("--param", p)]
+    return sm, am, flags
+
+
+def tracker_flags(tracker):
+    sm, am, flags = tracker
+    return ["--sm", sm, "--am", am] + flags
+
+
 def regtrack_errors(binary, seq, tracker, settings, quads):
     """Per frame after the first with corners (not reported lost), the mean corner distance of
     `regtrack track`'s corners."""
@@ -141,7 +159,7 @@ def regtrack_errors(binary, seq, tracker, settings, quads):
 
     with tempfile.TemporaryDirectory() as d:
         out = os.path.join(d, "tracks.txt")
-        cmd = [binary, "track", "--seq", seq, "--sm", tracker[0], "--am", tracker[1], "--out", out]
+        cmd = [binary, "track", "--seq", seq, "--out", out] + tracker_flags(tracker)
         subprocess.run(cmd + settings, check=True, capture_output=True, text=True)
         with open(out) as f:
             rows = [line.split() for line in f.read().splitlines()[1:] if line.strip()]
@@ -164,10 +182,11 @@ def summary(errors):
 
 
 def regtrack_live_fps(binary, seq, frames, repeats, tracker, settings):
-    """`regtrack bench`'s live FPS, frames tracked and row for `tracker` (SM, AM), homography."""
-    sm, am = tracker
-    cmd = [binary, "bench", "--seq", seq, "--sm", sm, "--am", am, "--ssm", "homography",
-           "--repeats", str(repeats)] + settings
+    """`regtrack bench`'s live FPS, frames tracked and row for `tracker` (SM, AM, flags),
+    homography."""
+    sm, am, _ = tracker
+    cmd = [binary, "bench", "--seq", seq, "--ssm", "homography", "--repeats", str(repeats)]
+    cmd += tracker_flags(tracker) + settings
     if frames:
         cmd += ["--frames", str(frames)]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
@@ -184,8 +203,8 @@ def main():
     ap.add_argument("--seq", required=True)
     ap.add_argument("--frames", type=int, default=0)
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--sm", default="iclk", help="regtrack's search method (default: the default's)")
-    ap.add_argument("--am", default="zncc", help="regtrack's appearance model (default: the default's)")
+    ap.add_argument("--sm", help="regtrack's search method (default: the default tracker's)")
+    ap.add_argument("--am", help="regtrack's appearance model (default: the default tracker's)")
     ap.add_argument("--extra", action="append", default=[],
                     help="more regtrack settings to compare, e.g. --extra '--escalate on'")
     ap.add_argument("--regtrack", default=os.environ.get("REGTRACK_BIN", "target/release/regtrack"))
@@ -193,7 +212,11 @@ def main():
     settings = dict(SETTINGS)
     for extra in a.extra:
         settings[extra] = extra.split()
-    tracker = (a.sm, a.am)
+    if a.sm is None and a.am is None:
+        tracker = default_tracker(a.regtrack)
+    else:
+        d = default_tracker(a.regtrack)
+        tracker = (a.sm or d[0], a.am or d[1], [])
     images, quads = read_sequence(a.seq, a.frames)
     before = {k: regtrack_live_fps(a.regtrack, a.seq, a.frames, a.repeats, tracker, v)
               for k, v in settings.items()}
@@ -217,7 +240,8 @@ def main():
         reg_fps = (b + c) / 2
         errs = regtrack_errors(a.regtrack, a.seq, tracker, extra, quads)
         shown = name if name == " ".join(extra) else f"{name} {' '.join(extra)}"
-        print(f"regtrack {a.sm.upper()}-{a.am.upper()}, {shown}".rstrip())
+        name = f"{tracker[0].upper()}-{tracker[1].upper()} {' '.join(tracker[2])}".rstrip()
+        print(f"regtrack {name}, {shown}".rstrip())
         print(f"  bench rows:\n    {row}\n    {row2}")
         print(f"  live path: {reg_fps:,.0f} FPS, {summary(errs)} over the {len(errs)} of "
               f"{len(quads) - 1} frames not reported lost")

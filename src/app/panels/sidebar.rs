@@ -279,8 +279,7 @@ fn tracker_kind_combo(ui: &mut egui::Ui, i: usize, spec: &TrackerSpec) -> Option
         return None;
     }
     if chosen == REGISTRATION {
-        let [sm, am, ssm] = crate::spec::DEFAULT_TRACKER;
-        TrackerSpec::from_names(sm, am, ssm).ok()
+        crate::tracker::default_spec(crate::spec::DEFAULT_TRACKER[2]).ok()
     } else {
         TrackerSpec::whole(&chosen).ok()
     }

@@ -245,11 +245,15 @@ pub struct TrackerArgs {
     /// A whole tracker (instead of --sm/--am/--ssm).
     #[arg(long, conflicts_with_all = ["sm", "am", "ssm"])]
     pub tracker: Option<String>,
-    /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`.
-    #[arg(long, default_value = DEFAULT_TRACKER[0])]
-    pub sm: String,
-    #[arg(long, default_value = DEFAULT_TRACKER[1])]
-    pub am: String,
+    /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`
+    /// [default: the default tracker, FCLK-SSD with the second hypothesis `second=fclk_zncc`,
+    /// when neither --sm nor --am is given; `--sm fclk --am ssd` is the plain combination].
+    #[arg(long)]
+    pub sm: Option<String>,
+    /// Appearance model [default: the default tracker's].
+    #[arg(long)]
+    pub am: Option<String>,
+    /// State space model.
     #[arg(long, default_value = DEFAULT_TRACKER[2])]
     pub ssm: String,
     #[command(flatten)]
@@ -277,6 +281,18 @@ pub struct SelectArgs {
 }
 
 impl SelectArgs {
+    /// The trackers, the default tracker for the lists not given (with its own parameters when
+    /// neither --sm nor --am is given), with their parameters set.
+    pub fn default_specs(&self) -> Result<Vec<TrackerSpec>> {
+        tracker::select(
+            self.sm.as_deref(),
+            self.am.as_deref(),
+            self.ssm.as_deref(),
+            &self.tracker,
+            &self.params.assignments,
+        )
+    }
+
     /// The trackers, with `defaults` for the lists not given (none at all when only whole
     /// trackers are asked for), with their parameters set.
     pub fn specs(&self, defaults: [&str; 3]) -> Result<Vec<TrackerSpec>> {

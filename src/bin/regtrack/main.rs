@@ -139,7 +139,7 @@ fn run() -> Result<()> {
                 error: eval::ErrorKind::parse(&error)?,
                 ..EvalOptions::default()
             };
-            let specs = select.specs(regtrack::spec::DEFAULT_TRACKER)?;
+            let specs = select.default_specs()?;
             let sequences = dataset::discover(&dataset, seqs.as_deref())?;
             warn_about(&sequences);
             let batch = Batch {
@@ -272,7 +272,15 @@ fn load_demo(cache: Option<&Path>) -> Result<Sequence> {
 fn spec_of(t: &TrackerArgs) -> Result<TrackerSpec> {
     let mut spec = match &t.tracker {
         Some(name) => TrackerSpec::whole(name)?,
-        None => TrackerSpec::from_names(&t.sm, &t.am, &t.ssm)?,
+        None if t.sm.is_none() && t.am.is_none() => tracker::default_spec(&t.ssm)?,
+        None => {
+            let [sm, am, _] = regtrack::spec::DEFAULT_TRACKER;
+            TrackerSpec::from_names(
+                t.sm.as_deref().unwrap_or(sm),
+                t.am.as_deref().unwrap_or(am),
+                &t.ssm,
+            )?
+        }
     };
     tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
     Ok(spec)

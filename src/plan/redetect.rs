@@ -1,13 +1,14 @@
 //! The policy after a loss (tracker parameter `on_loss=redetect`, the default): when a lost
 //! tracker's searches from its last good estimate (and from where the rejected search ended)
 //! fail the checks again, the frame is searched for the template, within a budget. The last
-//! good quad is moved over the frame in steps of a sixth of its size, at [`REDETECT_SCALES`], in
-//! rings around where it was lost (nearest first: a target that comes back mostly comes back
-//! near); each candidate is ranked by its confidence on a quarter of the grid ([`Detector`]).
-//! A lost frame ranks at most [`REDETECT_BUDGET`] candidates, from where the last frame's search
-//! stopped ([`Scan`]), so that no update while lost takes long (the whole frame is covered in a
-//! few frames: the search goes on where it stopped, ring after ring, and starts again near once
-//! the frame is covered). The [`REDETECT_REFINED`] best of the frame's candidates are refined
+//! good quad is moved over the frame at [`REDETECT_SCALES`], in rings around where it was lost;
+//! each candidate is ranked by its confidence on the tracker's coarsest pyramid level
+//! ([`Detector`]), in steps of a sixth of the target's size in that level's pixels (at least
+//! two of them). Every lost frame ranks the [`NEAR_RINGS`] first (a target that comes back
+//! mostly comes back near), then the far rings from where the last lost frame stopped
+//! ([`Scan`]), reading at most [`REDETECT_SAMPLES`] samples, so that no update while lost takes
+//! long (the whole frame is covered in a few frames, then the far search starts again).
+//! The best candidate is refined, the next ones only when ranked at `min_confidence` or more. The [`REDETECT_REFINED`] best of the frame's candidates are refined
 //! by the plan in turn, and the first that passes the checks (the confidence's whatever the
 //! SSM) is the frame's end.
 
@@ -28,9 +29,11 @@ use std::time::Instant;
 pub const REDETECT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 /// The candidates of a frame's search that are refined.
 pub const REDETECT_REFINED: usize = 3;
-/// The most candidates a lost frame ranks (`regtrack bench`'s `lost ms` is the longest update
-/// while lost).
-pub const REDETECT_BUDGET: usize = 300;
+/// The most samples a lost frame's ranking reads, over its candidates (300 candidates of the
+/// finest level's 625 samples; `regtrack bench`'s `lost ms` is the longest update while lost).
+pub const REDETECT_SAMPLES: usize = 187_500;
+/// The rings around the last good position that every lost frame ranks first.
+pub const NEAR_RINGS: usize = 4;
 
 /// Where the frame search goes on: the ring around the last good position (in steps; 0 is the
 /// position itself) and the next of its candidates (positions times scales).
@@ -65,11 +68,17 @@ impl Scan {
     }
 }
 
-/// The grid samples the frame search ranks its candidates on (every other one per axis, a
-/// quarter of the work), the template there, and a buffer for a candidate's patch: made when
-/// the template is sampled, so that a lost frame does not allocate either.
+/// The grid samples the frame search ranks its candidates on, on the tracker's coarsest pyramid
+/// level (every `2^level`-th one per axis, at least every other one), the template there, and
+/// a buffer for a candidate's patch: made when the template is sampled, so that a lost frame
+/// does not allocate either. Ranked on the coarsest level, where the smoothing has widened the
+/// correlation's peak to several pixels, a candidate a few pixels off the target still ranks
+/// it: on the finest level fine texture (text, sparse marks) correlates with the template only
+/// within a pixel or two of it, which a search in steps of several pixels misses.
 #[derive(Debug, Default)]
 pub struct Detector {
+    /// The pyramid level the candidates are ranked on.
+    level: usize,
     /// The grid's points the detector samples (every other one per axis), normalised frame.
     xs: Vec<f32>,
     ys: Vec<f32>,
@@ -83,23 +92,42 @@ pub struct Detector {
 }
 
 impl Detector {
-    /// The detector of a `res x res` template sampled on the grid `(grid_x, grid_y)`.
-    pub fn new(res: usize, template: &[f32], (grid_x, grid_y): (&[f32], &[f32])) -> Self {
-        let side = res.div_ceil(2);
+    /// The detector of a `res x res` grid of `problem` ranking on pyramid level `level`, its
+    /// template sampled from `view` (that level of the first frame) where the problem's
+    /// parameters `p` put the grid.
+    pub fn new(problem: &Problem, res: usize, level: usize, view: &ImageView, p: &Params) -> Self {
+        let (grid_x, grid_y) = problem.grid();
+        let stride = (1usize << level.min(8)).max(2);
+        let side = res.div_ceil(stride);
         let picks: Vec<usize> = (0..side)
-            .flat_map(|j| (0..side).map(move |i| 2 * j * res + 2 * i))
+            .flat_map(|j| (0..side).map(move |i| stride * j * res + stride * i))
             .collect();
-        let picked: Vec<f32> = picks.iter().map(|&k| template[k]).collect();
         let n = picks.len();
-        Detector {
+        let mut d = Detector {
+            level,
             xs: picks.iter().map(|&k| grid_x[k]).collect(),
             ys: picks.iter().map(|&k| grid_y[k]).collect(),
             px: vec![0.0; n],
             py: vec![0.0; n],
             patch: vec![0.0; n],
-            confidence: BlockCorrelation::new(&picked, side, CONFIDENCE_BLOCKS),
+            confidence: BlockCorrelation::default(),
             scan: Scan::default(),
-        }
+        };
+        d.sample(problem, view, p);
+        d.confidence = BlockCorrelation::new(&d.patch, side, CONFIDENCE_BLOCKS);
+        d
+    }
+
+    /// The pyramid level the candidates are ranked on.
+    pub fn level(&self) -> usize {
+        self.level
+    }
+
+    /// Samples the detector's grid points of `view` under the parameters `p` into `patch`.
+    fn sample(&mut self, problem: &Problem, view: &ImageView, p: &Params) {
+        let m = problem.pixel_matrix(p);
+        warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
+        sample_values(view, &self.px, &self.py, &mut self.patch);
     }
 
     /// The confidence of the target at `q` (frame pixels) in `view`, on the detector's grid,
@@ -111,9 +139,7 @@ impl Detector {
         q: &Quad,
     ) -> Option<(f64, Params)> {
         let p = problem.fit(q)?;
-        let m = problem.pixel_matrix(&p);
-        warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
-        sample_values(view, &self.px, &self.py, &mut self.patch);
+        self.sample(problem, view, &p);
         Some((self.confidence.of(&self.patch), p))
     }
 }
@@ -130,11 +156,22 @@ impl RegistrationTracker {
         let (fw, fh) = input.size();
         let t0 = Instant::now();
         self.src.prepare(input, Rect::of_size(fw, fh));
+        let level = self.detector.level();
+        if level > 0 {
+            self.src.build_levels(input);
+        }
         timing.preprocess += t0.elapsed();
         let base = self.corners;
         let c = base.centroid();
         let b = base.bbox();
-        let step = (b.width().max(b.height()) / 6.0).max(4.0);
+        // A sixth of the target's size on the finest level; on a coarse level, whose smoothing
+        // widens the correlation's peak, as many of its pixels (at least two of them).
+        let unit = (1u32 << level.min(8)) as f64;
+        let step = if level == 0 {
+            (b.width().max(b.height()) / 6.0).max(4.0)
+        } else {
+            (b.width().max(b.height()) / (6.0 * unit)).max(2.0 * unit)
+        };
         // The rings that reach every corner of the frame.
         let reach = [
             (0.0, 0.0),
@@ -153,32 +190,15 @@ impl RegistrationTracker {
         };
         let t1 = Instant::now();
         {
-            let view = self.src.view(input, 0);
+            let view = self.src.view(input, level);
             let (problem, det) = (self.finest.ctx.problem(), &mut self.detector);
-            let (mut ranked, mut wrapped) = (0, false);
-            while ranked < REDETECT_BUDGET {
-                let Scan { ring, next } = det.scan;
-                if next >= Scan::size(ring) {
-                    det.scan = Scan {
-                        ring: if ring >= reach { 0 } else { ring + 1 },
-                        next: 0,
-                    };
-                    // Once round the frame in one frame (a small frame): enough.
-                    if ring >= reach {
-                        if wrapped {
-                            break;
-                        }
-                        wrapped = true;
-                    }
-                    continue;
-                }
-                det.scan.next += 1;
-                let ((i, j), scale) = Scan::at(ring, next);
+            let budget = REDETECT_SAMPLES / det.xs.len().max(1);
+            let mut scan = det.scan;
+            let mut rank = |(i, j): (i64, i64), scale: f64| {
                 let (cx, cy) = (c.x + i as f64 * step, c.y + j as f64 * step);
                 if cx < 0.0 || cy < 0.0 || cx >= fw as f64 || cy >= fh as f64 {
-                    continue;
+                    return false;
                 }
-                ranked += 1;
                 if let Some((conf, p)) = det.candidate(problem, &view, &place((cx, cy), scale)) {
                     // Keep the best few, best first.
                     if conf > best[REDETECT_REFINED - 1].0 {
@@ -186,11 +206,53 @@ impl RegistrationTracker {
                         best.sort_by(|a, b| b.0.total_cmp(&a.0));
                     }
                 }
+                true
+            };
+            // Near first, on every lost frame (a target that comes back mostly comes back
+            // near), then the far rings from where the last lost frame stopped.
+            let near = NEAR_RINGS.min(reach);
+            let mut ranked = 0;
+            for ring in 0..=near {
+                for next in 0..Scan::size(ring) {
+                    let (offset, scale) = Scan::at(ring, next);
+                    ranked += usize::from(rank(offset, scale));
+                }
             }
+            let mut wrapped = false;
+            while reach > near && ranked < budget {
+                let Scan { ring, next } = scan;
+                if ring <= near || next >= Scan::size(ring) {
+                    let around = ring >= reach;
+                    scan = Scan {
+                        ring: if around {
+                            near + 1
+                        } else {
+                            (ring + 1).max(near + 1)
+                        },
+                        next: 0,
+                    };
+                    // Once round the frame in one frame (a small frame): enough.
+                    if around {
+                        if wrapped {
+                            break;
+                        }
+                        wrapped = true;
+                    }
+                    continue;
+                }
+                scan.next += 1;
+                let (offset, scale) = Scan::at(ring, next);
+                ranked += usize::from(rank(offset, scale));
+            }
+            self.detector.scan = scan;
         }
         timing.search += t1.elapsed();
-        for (conf, p) in best {
-            if !conf.is_finite() {
+        // The best candidate is refined; the next ones only if they correlate with the template
+        // as much as a tracked frame must: a frame without the target (noise, another scene)
+        // costs its ranking and one refinement.
+        let floor = self.params.min_confidence;
+        for (k, (conf, p)) in best.into_iter().enumerate() {
+            if !conf.is_finite() || (k > 0 && conf < floor) {
                 break;
             }
             let from = self.finest.ctx.corners(&p);
@@ -249,9 +311,12 @@ mod tests {
             let input = FrameInput::Gray8(&gray[i]);
             t.src
                 .prepare(input, Rect::of_size(gray[i].width, gray[i].height));
+            t.src.build_levels(input);
         };
         view_of(&mut t, 0);
-        let view = t.src.view(FrameInput::Gray8(&gray[0]), 0);
+        // Ranked on the coarsest level of the tracker's pyramid.
+        assert_eq!(t.detector.level(), 2);
+        let view = t.src.view(FrameInput::Gray8(&gray[0]), 2);
         let problem = t.finest.ctx.problem();
         let (on, _) = t.detector.candidate(problem, &view, &quads[0]).unwrap();
         assert!(on > 0.95, "{on}");
@@ -263,12 +328,13 @@ mod tests {
             assert!(off < on - 0.2, "{dx} {dy}: {off} vs {on}");
         }
         // Lost far away: the searches from there fail, the frame search does not, once its
-        // rings reach the target (160 px right, 110 down: ring 7 of steps of 24 px, the 675th
-        // candidate, the third lost frame with a budget of 300).
+        // far rings reach the target (160 px right, 110 down: beyond the near rings, ring 20
+        // of steps of 8 px, about 4,000 candidates on, within the budget of the third to sixth
+        // lost frame: about 860 far candidates each).
         t.set_corners(&shifted(&quads[1], 160.0, 110.0)).unwrap();
         t.status = TrackStatus::Lost(crate::status::LossReason::LowConfidence);
         let mut found = None;
-        for k in 0..4 {
+        for k in 0..8 {
             let before = t.detector.scan;
             let out = t.update(FrameInput::Gray8(&gray[2]), &mut NoObserver);
             if out.status == TrackStatus::Tracking {
@@ -279,7 +345,7 @@ mod tests {
             assert_ne!(t.detector.scan, before);
         }
         let (k, corners) = found.expect("found again");
-        assert!((1..=3).contains(&k), "found on lost frame {k}");
+        assert!((2..=5).contains(&k), "found on lost frame {k}");
         assert!(
             error(&corners, &quads[2]) < 0.5,
             "{}",

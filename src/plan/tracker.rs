@@ -300,7 +300,10 @@ impl VisualTracker for RegistrationTracker {
         // Made here so that a frame's update does not allocate.
         self.judges.blurred = vec![0.0; res * res];
         self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
-        self.detector = Detector::new(res, template, ctx.problem().grid());
+        // The coarsest level made of this region (built above when the plan has levels).
+        let level = self.src.levels();
+        let view = self.src.view(input, level);
+        self.detector = Detector::new(ctx.problem(), res, level, &view, &ctx.params());
         self.loss.reset();
         self.lost_at = None;
         self.predictor.reset();

@@ -90,6 +90,11 @@ impl FrameSource {
         }
     }
 
+    /// The coarser pyramid levels made of each region.
+    pub fn levels(&self) -> usize {
+        self.levels
+    }
+
     /// The smoothing kernel of the finest level.
     pub fn kernel(&self) -> &GaussianKernel {
         self.pre.kernel()

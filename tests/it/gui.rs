@@ -725,7 +725,11 @@ fn each_iteration_keeps_its_patch_for_the_convergence_view() {
     // that level's first and last iterations differ. The last iteration is (to 8-bit
     // rounding) the tracker's final patch.
     let coarse = r.iterations[0].level;
-    let settled = r.iterations.iter().rposition(|it| it.level == coarse).unwrap();
+    let settled = r
+        .iterations
+        .iter()
+        .rposition(|it| it.level == coarse)
+        .unwrap();
     assert!(settled > 0);
     assert_ne!(r.iterations[0].patch, r.iterations[settled].patch);
     let fine = r.iterations.iter().position(|it| it.level == 0).unwrap();

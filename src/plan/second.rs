@@ -35,7 +35,7 @@ impl RegistrationTracker {
         let values = ctx.values();
         let mut e = Estimate::start(params, ctx.corners(&params));
         e.iterations = iterations + out.iterations;
-        e.converged = out.converged || out.status == crate::status::TrackStatus::Tracking;
+        e.converged = out.converged;
         e.similarity = out.similarity;
         e.confidence = Some(self.judges.template.of(values));
         e.frame_confidence = self.judges.previous().map(|p| p.of(values));
@@ -112,6 +112,8 @@ mod tests {
             e.corners
         );
         assert!(e.iterations > 7);
+        // Settled: the second tracker converged (its own stop test, not merely "tracking").
+        assert!(e.converged);
         let (c, f) = (e.confidence.unwrap(), e.frame_confidence.unwrap());
         assert!(c > 0.9 && f > 0.9, "{c} {f}");
         // The same measure as the first tracker's: its end on that frame, measured the same.

@@ -260,12 +260,7 @@ impl PyTracker {
                 }
                 TrackerSpec::whole(name)
             }
-            None if sm.is_none() && am.is_none() => {
-                crate::tracker::default_spec(ssm.unwrap_or(d[2]))
-            }
-            None => {
-                TrackerSpec::from_names(sm.unwrap_or(d[0]), am.unwrap_or(d[1]), ssm.unwrap_or(d[2]))
-            }
+            None => crate::tracker::one(sm, am, ssm.unwrap_or(d[2])),
         }
         .map_err(library_error)?;
         if let Some(params) = params {

@@ -291,13 +291,24 @@ pub fn product(
     Ok(out)
 }
 
-/// The default tracker ([`crate::spec::DEFAULT_TRACKER`] with [`crate::spec::default_params`])
-/// on the state space model `ssm`, its names checked.
+/// The default tracker ([`crate::spec::default_spec`]) on the state space model `ssm` (a name
+/// or an alias), checked.
 pub fn default_spec(ssm: &str) -> Result<TrackerSpec> {
-    let [sm, am, _] = crate::spec::DEFAULT_TRACKER;
-    let mut spec = TrackerSpec::from_names(sm, am, ssm)?;
-    set_default_params(std::slice::from_mut(&mut spec));
+    let ssm = registry::lookup(ssm::REGISTRY, "state space model", ssm)?.name;
+    let spec = crate::spec::default_spec(ssm);
+    spec.check()?;
     Ok(spec)
+}
+
+/// One registration tracker by its names, as `regtrack track` and Python's `Tracker()` take
+/// them: the default tracker (with its parameters) when neither `sm` nor `am` is named, else
+/// the plain combination, the default's method for the one not named.
+pub fn one(sm: Option<&str>, am: Option<&str>, ssm: &str) -> Result<TrackerSpec> {
+    let [default_sm, default_am, _] = crate::spec::DEFAULT_TRACKER;
+    match (sm, am) {
+        (None, None) => default_spec(ssm),
+        _ => TrackerSpec::from_names(sm.unwrap_or(default_sm), am.unwrap_or(default_am), ssm),
+    }
 }
 
 /// Gives every registration tracker of `specs` the default tracker's parameters

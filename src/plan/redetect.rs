@@ -8,9 +8,9 @@
 //! mostly comes back near), then the far rings from where the last lost frame stopped
 //! ([`Scan`]), reading at most [`REDETECT_SAMPLES`] samples, so that no update while lost takes
 //! long (the whole frame is covered in a few frames, then the far search starts again).
-//! The best candidate is refined, the next ones only when ranked at `min_confidence` or more. The [`REDETECT_REFINED`] best of the frame's candidates are refined
-//! by the plan in turn, and the first that passes the checks (the confidence's whatever the
-//! SSM) is the frame's end.
+//! Of the [`REDETECT_REFINED`] best candidates of the frame, the best is refined by the plan
+//! and the others only when ranked at `min_confidence` or more, in turn; the first that passes
+//! the checks (the confidence's whatever the SSM) is the frame's end.
 
 use super::judge::SearchResult;
 use super::tracker::CONFIDENCE_BLOCKS;
@@ -79,7 +79,8 @@ impl Scan {
 pub struct Detector {
     /// The pyramid level the candidates are ranked on.
     level: usize,
-    /// The grid's points the detector samples (every other one per axis), normalised frame.
+    /// The grid's points the detector samples (every `2^level`-th one per axis, at least every
+    /// other one), normalised frame.
     xs: Vec<f32>,
     ys: Vec<f32>,
     /// Where they are under a candidate (frame pixels), and the values there.
@@ -156,22 +157,17 @@ impl RegistrationTracker {
         let (fw, fh) = input.size();
         let t0 = Instant::now();
         self.src.prepare(input, Rect::of_size(fw, fh));
+        // The detector's level is the coarsest the source makes (none without a pyramid).
         let level = self.detector.level();
-        if level > 0 {
-            self.src.build_levels(input);
-        }
+        self.src.build_levels(input);
         timing.preprocess += t0.elapsed();
         let base = self.corners;
         let c = base.centroid();
         let b = base.bbox();
-        // A sixth of the target's size on the finest level; on a coarse level, whose smoothing
-        // widens the correlation's peak, as many of its pixels (at least two of them).
+        // A sixth of the target's size in the level's pixels (on a coarse level the smoothing
+        // widens the correlation's peak), at least two of them and 4 px.
         let unit = (1u32 << level.min(8)) as f64;
-        let step = if level == 0 {
-            (b.width().max(b.height()) / 6.0).max(4.0)
-        } else {
-            (b.width().max(b.height()) / (6.0 * unit)).max(2.0 * unit)
-        };
+        let step = (b.width().max(b.height()) / (6.0 * unit)).max((2.0 * unit).max(4.0));
         // The rings that reach every corner of the frame.
         let reach = [
             (0.0, 0.0),

@@ -272,15 +272,7 @@ fn load_demo(cache: Option<&Path>) -> Result<Sequence> {
 fn spec_of(t: &TrackerArgs) -> Result<TrackerSpec> {
     let mut spec = match &t.tracker {
         Some(name) => TrackerSpec::whole(name)?,
-        None if t.sm.is_none() && t.am.is_none() => tracker::default_spec(&t.ssm)?,
-        None => {
-            let [sm, am, _] = regtrack::spec::DEFAULT_TRACKER;
-            TrackerSpec::from_names(
-                t.sm.as_deref().unwrap_or(sm),
-                t.am.as_deref().unwrap_or(am),
-                &t.ssm,
-            )?
-        }
+        None => tracker::one(t.sm.as_deref(), t.am.as_deref(), &t.ssm)?,
     };
     tracker::set_params(std::slice::from_mut(&mut spec), &t.params.assignments)?;
     Ok(spec)

@@ -238,7 +238,7 @@ impl PyTracker {
 #[pymethods]
 impl PyTracker {
     /// Builds a tracker. Without `sm` and `am`, the default tracker (FCLK-SSD with the second
-    /// hypothesis `second=fclk_zncc`; `regtrack list` names it). Keyword
+    /// hypothesis `second=fclk_zncc` and `escalate=on`; `regtrack list` names it). Keyword
     /// arguments set parameters by name (`regtrack.list_methods()` lists them), checked against
     /// their definitions.
     #[new]

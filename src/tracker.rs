@@ -401,7 +401,10 @@ mod tests {
         let whole = select(None, None, None, &s(&["kcf"]), &[]).unwrap();
         assert_eq!(whole.len(), 1);
         assert!(whole[0].params().is_none());
-        assert!(crate::spec::default_tracker_text().ends_with("second=fclk_zncc"));
+        assert_eq!(
+            crate::spec::default_tracker_text(),
+            "fclk ssd homography, escalate=on, second=fclk_zncc"
+        );
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! frame is done. Otherwise the full stages (the pyramid, the search, the polish) run from
 //! where the frame started and their end is the frame's, as without the first attempt (the
 //! first attempt's end only when they fail). Until the track has recent frames to compare
-//! with, every frame runs the full stages.
+//! with, every frame runs the full stages alone.
 //!
 //! Keeping the more confident of the two ends instead was measured worse: on a periodic
 //! texture the first attempt's end one period over is often the more confident, and a slip
@@ -87,6 +87,12 @@ impl Stage for Escalate {
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
+        // Nothing to judge a first attempt by yet: the full stages alone.
+        if run.reference.is_none() {
+            run_stages(&mut self.stages.then, run)?;
+            run.finest.ctx.set_params(run.estimate.params);
+            return Ok(());
+        }
         let start = run.estimate;
         let tried = run_stages(&mut self.stages.first, run);
         let first = run.estimate;
@@ -169,12 +175,17 @@ mod tests {
         // Settled and as confident as the track: the frame ends after the first attempt.
         let out = run_with(escalate((true, first_good), full_better), Some(0.9));
         assert_eq!(out.unwrap().0..out.unwrap().2 as f64, 0.5..1.0);
-        // Not settled, less confident than the track, or no track yet: the full stages from
-        // the frame's start, their end kept, every iteration counted.
-        for (converged, reference) in [(false, Some(0.9)), (true, Some(0.99)), (true, None)] {
+        // Not settled, or less confident than the track: the full stages from the frame's
+        // start, their end kept, every iteration counted; no track yet: the full stages alone
+        // (nothing to judge a first attempt by).
+        for (converged, reference, n) in [
+            (false, Some(0.9), 2),
+            (true, Some(0.99), 2),
+            (true, None, 1),
+        ] {
             let out = run_with(escalate((converged, first_good), full_better), reference);
             let (moved, c, iterations, at) = out.unwrap();
-            assert_eq!((moved, c, iterations), (1.0, Some(0.95), 2));
+            assert_eq!((moved, c, iterations), (1.0, Some(0.95), n));
             assert_eq!(at, 1.0, "the problem left where the kept end is");
         }
         // The full stages' end even when less confident; the first end only when they fail.

@@ -20,11 +20,15 @@ pub const DEFAULT_TRACKER: [&str; 3] = ["fclk", "ssd", "homography"];
 
 /// The default tracker's parameters: each parameter's default but a second hypothesis of the
 /// other appearance model on the frames that fail the checks (FCLK-SSD holds fast motion and
-/// blur best, FCLK-ZNCC the light that SSD drifts under). The default tracker has them only
-/// when neither its SM nor its AM is named: `--sm fclk --am ssd` is the plain combination.
+/// blur best, FCLK-ZNCC the light that SSD drifts under) and `escalate` (a frame pays the
+/// pyramid and the polish only when a first search at the finest level did not settle
+/// confidently: 1.6 times the speed, the held-out half's SR@5 unchanged, 0.859; the tune
+/// half's 0.848 against 0.853). The default tracker has them only when neither its SM nor its
+/// AM is named: `--sm fclk --am ssd` is the plain combination.
 pub fn default_params() -> TrackerParams {
     TrackerParams {
         second: SecondHypothesis::FclkZncc,
+        escalate: true,
         ..TrackerParams::default()
     }
 }

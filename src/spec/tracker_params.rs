@@ -228,10 +228,11 @@ tracker_params! {
     /// The first attempt is the tracker's search at the finest level with the confidences;
     /// its end stands when it settled at least `plan::escalate::EASY` times as confident as
     /// the track's recent frames and at least `EASY_FRAME` like the last frame's patch
-    /// (`plan::escalate`). Off by default until the loss checks hold with it: on the tune half
-    /// of the held-out renders ICLK-ZNCC reports 0.842 of its frames more than 20 px off lost
-    /// with it, 0.859 without; on the slip test's brick wall 0.942, against 0.955
-    /// (docs/robustness.md).
+    /// (`plan::escalate`). Off for the plain combinations (on the tune half of the held-out
+    /// renders ICLK-ZNCC reports 0.842 of its frames more than 20 px off lost with it, 0.859
+    /// without; on the slip test's brick wall the eight combinations 0.939 against 0.950); on
+    /// in the default tracker's parameters (`spec::default_params`), whose losses it leaves as
+    /// they were (docs/robustness.md).
     escalate: bool = choice_default(OFF_ON, 0),
         "off (every frame runs the pyramid and the polish), or on: each frame is first searched at the finest level alone (at most 10 iterations), and the pyramid and the polish run only when that search did not settle as confidently as the recent frames";
     /// A frame whose search (from the prediction and from the last pose) fails the checks is

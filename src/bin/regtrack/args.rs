@@ -246,8 +246,8 @@ pub struct TrackerArgs {
     #[arg(long, conflicts_with_all = ["sm", "am", "ssm"])]
     pub tracker: Option<String>,
     /// Search method: a name, an alias, or a composite `cascade:nn+iclk`, `parallel:esm+fclk`
-    /// [default: the default tracker, FCLK-SSD with the second hypothesis `second=fclk_zncc`,
-    /// when neither --sm nor --am is given; `--sm fclk --am ssd` is the plain combination].
+    /// [default: the default tracker, FCLK-SSD with the second hypothesis `second=fclk_zncc`
+    /// and `escalate=on`, when neither --sm nor --am is given; `--sm fclk --am ssd` is the plain combination].
     #[arg(long)]
     pub sm: Option<String>,
     /// Appearance model [default: the default tracker's].

@@ -36,12 +36,19 @@ pub enum Error {
     /// An image that could not be decoded or encoded.
     #[error("cannot decode or encode image {}: {message}", path.display())]
     Image { path: PathBuf, message: String },
-    /// Any other I/O failure, with the path it concerns.
-    #[error("I/O error on {}: {source}", path.display())]
+    /// A path that names something other than a regular file where a file is read (a folder,
+    /// a FIFO, a device, a loop of symbolic links).
+    #[error("not a regular file: {} is {what}", path.display())]
+    NotAFile { path: PathBuf, what: &'static str },
+    /// A file larger than its format's bound (`crate::files`).
+    #[error("{} is larger than {limit} bytes, more than a file of its kind holds", path.display())]
+    TooLarge { path: PathBuf, limit: u64 },
+    /// Any other I/O failure, with the path it concerns. The cause is part of the message and
+    /// not a `source` (a caller that prints the chain would print it twice).
+    #[error("I/O error on {}: {cause}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// An initial region a tracker cannot start from (degenerate quad, outside the frame...).
     #[error("invalid region: {0}")]
@@ -75,7 +82,10 @@ impl Error {
         if source.kind() == std::io::ErrorKind::NotFound {
             Error::Missing { path }
         } else {
-            Error::Io { path, source }
+            Error::Io {
+                path,
+                cause: source,
+            }
         }
     }
 }

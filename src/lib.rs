@@ -49,6 +49,7 @@ pub mod crew;
 pub mod dataset;
 pub mod error;
 pub mod eval;
+pub mod files;
 pub mod geometry;
 pub mod gt;
 pub mod imaging;

@@ -31,12 +31,23 @@ pub enum InitSource {
     Quad(Quad),
 }
 
+/// An RGB colour of exactly three values (serde reads the first three of a longer list into
+/// an array and ignores the rest).
+fn three_values<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<[u8; 3], D::Error> {
+    let v: Vec<u8> = serde::Deserialize::deserialize(d)?;
+    let n = v.len();
+    <[u8; 3]>::try_from(v).map_err(|_| {
+        serde::de::Error::invalid_length(n, &"3 values (red, green, blue, each 0-255)")
+    })
+}
+
 /// One tracker of the session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrackerEntry {
     pub spec: TrackerSpec,
     /// Drawing colour (RGB).
+    #[serde(deserialize_with = "three_values")]
     pub color: [u8; 3],
     /// Whether it runs.
     pub enabled: bool,
@@ -233,7 +244,7 @@ impl Default for State {
 impl State {
     /// Reads a session file; relative sequence paths are taken relative to the session's folder.
     pub fn load(path: &Path) -> Result<State> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::files::read_text(path, crate::files::SETTINGS_LIMIT)?;
         let mut state: State = toml::from_str(&text).map_err(|e| Error::Parse {
             path: path.to_path_buf(),
             line: e

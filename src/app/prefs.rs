@@ -27,16 +27,15 @@ impl Prefs {
     /// Reads the preferences; a missing file is the defaults. A file that cannot be read or
     /// parsed is an error naming it (the inspector then starts with the defaults).
     pub fn load(path: &Path) -> crate::Result<Prefs> {
-        match std::fs::read_to_string(path) {
-            Ok(text) => toml::from_str(&text).map_err(|e| crate::Error::Parse {
+        match crate::files::read_text_optional(path, crate::files::SETTINGS_LIMIT)? {
+            Some(text) => toml::from_str(&text).map_err(|e| crate::Error::Parse {
                 path: path.to_path_buf(),
                 line: e
                     .span()
                     .map_or(0, |s| text[..s.start].matches('\n').count() + 1),
                 message: e.message().to_string(),
             }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Prefs::default()),
-            Err(e) => Err(crate::Error::io(path, e)),
+            None => Ok(Prefs::default()),
         }
     }
 

@@ -96,8 +96,9 @@ impl InspectorApp {
             }
             self.state.sequence = src;
         }
-        // Errors of an earlier attempt are stale now.
-        self.rt.msg.errors.clear();
+        // Errors of an earlier attempt are stale now; those raised since it was asked for stay.
+        let stale = std::mem::take(&mut self.rt.msg.before_open);
+        self.rt.msg.errors.retain(|e| !stale.contains(e));
         self.rt.seq.bad_frame = None;
         if let Some(w) = seq.warnings.first() {
             self.error(format!(

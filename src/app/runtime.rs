@@ -136,6 +136,9 @@ pub(super) struct DisplayRt {
 pub(super) struct MessagesRt {
     pub(super) status: String,
     pub(super) errors: Vec<String>,
+    /// The errors shown when the sequence being opened was asked for: stale once it opens
+    /// (an error raised meanwhile, such as a broken session loaded after it, stays).
+    pub(super) before_open: Vec<String>,
     pub(super) progress: Option<(String, usize, usize)>,
 }
 

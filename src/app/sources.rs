@@ -85,6 +85,7 @@ impl InspectorApp {
         self.rt.msg.progress = Some(("opening the sequence".into(), 0, 0));
         // The session and the recent list change once it opened (a failed open changes nothing).
         self.rt.seq.opening = Some(src.clone());
+        self.rt.msg.before_open = self.rt.msg.errors.clone();
         self.rt.worker.send(Job::Open(src));
     }
 

@@ -1,7 +1,8 @@
 //! Ground-truth and result files: four corners per frame.
 //!
-//! Accepted lines (blank lines and lines starting with `#` are skipped, separators are white
-//! space or commas):
+//! Accepted lines (lines starting with `#` are skipped, separators are white space or commas;
+//! blank lines are skipped too, except between the lines of a file of 8 numbers per line, where
+//! lines are frames by position: there a blank line is a frame not annotated):
 //! - `frame00001.jpg ulx uly urx ury lrx lry llx lly` (TMT/MTF, after a header line `frame ...`);
 //! - `ulx uly urx ury lrx lry llx lly` (8 numbers: folders of images, POT `_gt_points.txt`);
 //! - `frame00012.jpg lost` (a frame without corners: tracking results of a lost tracker; also
@@ -37,10 +38,15 @@ const NO_CORNERS: &[&str] = &[
 pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
     let mut out = Vec::new();
     let mut first_content = true;
+    // Whether the lines name their frames (decided by the first entry), and the blank lines
+    // since the last entry (frames not annotated, in a file without names, when an entry
+    // follows them).
+    let mut named: Option<bool> = None;
+    let mut blanks: Vec<usize> = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
         let line = raw.trim();
-        if line.is_empty() || line.starts_with('#') {
+        if line.starts_with('#') {
             continue;
         }
         let tokens: Vec<&str> = line
@@ -48,7 +54,10 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
             .filter(|t| !t.is_empty())
             .collect();
         if tokens.is_empty() {
-            // Only separators.
+            // Blank, or only separators.
+            if named == Some(false) {
+                blanks.push(line_no);
+            }
             continue;
         }
         let err = |message: String| Error::Parse {
@@ -73,6 +82,16 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
             } else {
                 (None, &tokens[..])
             };
+        if named.is_none() {
+            named = Some(frame.is_some());
+        }
+        for line in blanks.drain(..) {
+            out.push(GtEntry {
+                frame: None,
+                quad: None,
+                line,
+            });
+        }
         if nums.len() == 1 && NO_CORNERS.contains(&nums[0].to_ascii_lowercase().as_str()) {
             out.push(GtEntry {
                 frame,
@@ -115,6 +134,8 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
 
 /// Parses ground-truth bytes: text that is not UTF-8 is an error naming the line.
 pub fn parse_ground_truth_bytes(path: &Path, bytes: &[u8]) -> Result<Vec<GtEntry>> {
+    // A byte-order mark (some editors write one) is not part of the first line.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     match std::str::from_utf8(bytes) {
         Ok(text) => parse_ground_truth(path, text),
         Err(e) => Err(Error::Parse {
@@ -131,7 +152,7 @@ pub fn parse_ground_truth_bytes(path: &Path, bytes: &[u8]) -> Result<Vec<GtEntry
 
 /// Reads and parses a ground-truth file.
 pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::files::read_bounded(path, crate::files::TEXT_LIMIT)?;
     parse_ground_truth_bytes(path, &bytes)
 }
 

@@ -13,10 +13,35 @@ use std::io::Read;
 use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
 
-/// A frame size `WxH` (what is read; the range is the user's of it to check).
+/// A frame size `WxH` (what is read; [`check_size`] is the range a live source takes).
 pub fn parse_size(s: &str) -> Option<(usize, usize)> {
     let (w, h) = s.trim().split_once(['x', 'X'])?;
     Some((w.trim().parse().ok()?, h.trim().parse().ok()?))
+}
+
+/// How long a live source may send nothing before [`Live::newest`] gives up on it.
+pub const STALL: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// The widest and tallest frame a live source may have, in pixels.
+pub const MAX_SIDE: usize = 16384;
+
+/// Checks a live source's frame size: both sides 1..=[`MAX_SIDE`] and at most
+/// [`crate::imaging::MAX_PIXELS`] pixels (as a frame file may have), so that a frame's buffer
+/// can be allocated (a size of 10^9 x 10^9 aborted the process; 2^32 wrapped to 0).
+pub fn check_size(width: usize, height: usize) -> Result<()> {
+    let pixels = width as u128 * height as u128;
+    if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
+        return Err(Error::InvalidParameter(format!(
+            "live source size {width}x{height}: each side must be 1..={MAX_SIDE} px"
+        )));
+    }
+    if pixels > crate::imaging::MAX_PIXELS as u128 {
+        return Err(Error::InvalidParameter(format!(
+            "live source size {width}x{height}: {pixels} pixels, more than the {} a frame may have",
+            crate::imaging::MAX_PIXELS
+        )));
+    }
+    Ok(())
 }
 
 /// A live source: `/dev/videoN` (V4L2) or `lavfi:<graph>` (an FFmpeg test source).
@@ -28,6 +53,8 @@ pub struct Live {
     shared: Arc<(Mutex<Slot>, Condvar)>,
     /// The sequence number of the last frame handed out.
     taken: u64,
+    /// How long [`Live::newest`] waits for a frame ([`STALL`] unless set).
+    stall: std::time::Duration,
 }
 
 #[derive(Default)]
@@ -49,9 +76,7 @@ pub struct LiveFrame {
 impl Live {
     /// Opens `source` at `width x height` (the camera's mode, or the test source's size).
     pub fn open(source: &str, width: usize, height: usize) -> Result<Live> {
-        if width == 0 || height == 0 {
-            return Err(Error::InvalidParameter("a live source needs a size".into()));
-        }
+        check_size(width, height)?;
         let mut c = super::video::command("ffmpeg");
         c.args(["-v", "error", "-nostdin"]);
         match source.strip_prefix("lavfi:") {
@@ -127,16 +152,29 @@ impl Live {
             child,
             shared,
             taken: 0,
+            stall: STALL,
         })
     }
 
+    /// How long [`Live::newest`] waits for a frame before it reports the source stalled.
+    pub fn set_stall(&mut self, stall: std::time::Duration) {
+        self.stall = stall;
+    }
+
     /// The newest frame not handed out yet, waiting for one if needed; an error once the
-    /// source has stopped (naming it and how many frames it gave).
+    /// source has stopped (naming it and how many frames it gave) or has sent nothing for
+    /// [`STALL`] (an FFmpeg that stalls would otherwise hang its caller).
     pub fn newest(&mut self) -> Result<LiveFrame> {
-        loop {
-            if let Some(f) = self.newest_within(std::time::Duration::from_secs(3600))? {
-                return Ok(f);
-            }
+        match self.newest_within(self.stall)? {
+            Some(f) => Ok(f),
+            None => Err(Error::Live {
+                name: self.source.clone(),
+                message: format!(
+                    "no frame for {:.0} s after frame {} (the source stalled)",
+                    self.stall.as_secs_f64(),
+                    self.taken
+                ),
+            }),
         }
     }
 
@@ -333,6 +371,11 @@ impl LiveRun {
             taken: Default::default(),
             recording: None,
         })
+    }
+
+    /// How long a frame is waited for before the source is reported stalled ([`STALL`]).
+    pub fn set_stall(&mut self, stall: std::time::Duration) {
+        self.live.set_stall(stall);
     }
 
     /// The run so far.

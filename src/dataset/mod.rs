@@ -56,15 +56,53 @@ fn is_image(p: &Path) -> bool {
         .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
-/// The image files of a folder, sorted by name.
+/// The image files of a folder, in natural order ([`natural_cmp`]: `frame2` before `frame10`).
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut v: Vec<PathBuf> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && is_image(p))
         .collect();
-    v.sort();
+    sort_natural(&mut v);
     Ok(v)
+}
+
+/// Sorts paths in the natural order of their file names ([`natural_cmp`]).
+pub fn sort_natural(paths: &mut [PathBuf]) {
+    paths.sort_by(|a, b| {
+        let name = |p: &PathBuf| p.file_name().map(|n| n.to_string_lossy().into_owned());
+        natural_cmp(&name(a).unwrap_or_default(), &name(b).unwrap_or_default()).then(a.cmp(b))
+    });
+}
+
+/// The natural order of names: runs of digits compare by their value (`frame2` before
+/// `frame10`, `frame007` beside `frame7`), the rest character by character; names equal so
+/// compare by their text.
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    use std::cmp::Ordering;
+    let (mut x, mut y) = (a.as_bytes(), b.as_bytes());
+    let digits = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+    while let (Some(&c), Some(&d)) = (x.first(), y.first()) {
+        if c.is_ascii_digit() && d.is_ascii_digit() {
+            let (n, m) = (digits(x), digits(y));
+            let strip = |s: &[u8]| {
+                let z = s.iter().take_while(|&&c| c == b'0').count();
+                s[z.min(s.len().saturating_sub(1))..].to_vec()
+            };
+            let (u, v) = (strip(&x[..n]), strip(&y[..m]));
+            let by_value = u.len().cmp(&v.len()).then_with(|| u.cmp(&v));
+            if by_value != Ordering::Equal {
+                return by_value;
+            }
+            (x, y) = (&x[n..], &y[m..]);
+        } else {
+            if c != d {
+                return c.cmp(&d);
+            }
+            (x, y) = (&x[1..], &y[1..]);
+        }
+    }
+    x.len().cmp(&y.len()).then_with(|| a.cmp(b))
 }
 
 /// Frames [`Sequence::each_frame`] decodes ahead of the one being used, at most.
@@ -252,6 +290,18 @@ impl Sequence {
                 ));
                 entries.truncate(frames.len());
             }
+            if entries.len() < frames.len() {
+                warnings.push(format!(
+                    "{}: {} ground-truth lines for the {} frames of {}: frames {} to {} are not \
+                     annotated",
+                    gt.display(),
+                    entries.len(),
+                    frames.len(),
+                    path.display(),
+                    entries.len() + 1,
+                    frames.len()
+                ));
+            }
             warnings.extend(drop_unusable(&gt, &mut entries));
             let mut quads: Vec<Option<Quad>> = entries.iter().map(|e| e.quad).collect();
             quads.resize(frames.len(), None);
@@ -291,7 +341,7 @@ impl Sequence {
             });
         };
         let mut entries = read_ground_truth(gt)?;
-        let warnings = drop_unusable(gt, &mut entries);
+        let mut warnings = drop_unusable(gt, &mut entries);
         let named = entries.iter().all(|e| e.frame.is_some()) && !entries.is_empty();
         if named {
             let mut seen: std::collections::HashMap<&str, usize> = Default::default();
@@ -307,16 +357,11 @@ impl Sequence {
             }
         }
         let (frames, ground_truth) = if named {
-            // MTF: every named frame must exist.
-            let mut frames = Vec::with_capacity(entries.len());
-            for e in &entries {
-                let p = frames_dir.join(e.frame.as_deref().unwrap_or_default());
-                if !p.is_file() {
-                    return Err(Error::Missing { path: p });
-                }
-                frames.push(p);
-            }
-            (frames, entries.iter().map(|e| e.quad).collect())
+            // MTF: the frames are the folder's images; each line is matched to its image by
+            // name (a line without its image is an error, an image without a line a frame
+            // not annotated).
+            let gtv = match_by_name(gt, frames_dir, &listed, &entries, &mut warnings)?;
+            (listed, gtv)
         } else {
             let n = listed.len();
             let m = entries.len();
@@ -331,6 +376,15 @@ impl Sequence {
                 }
                 (listed, gtv)
             } else if m <= n {
+                if m < n {
+                    warnings.push(format!(
+                        "{}: {m} lines for {n} frames in {} (a line per frame, blank for a frame \
+                         not annotated): frames {} to {n} are not annotated",
+                        gt.display(),
+                        frames_dir.display(),
+                        m + 1
+                    ));
+                }
                 let mut gtv = quads;
                 gtv.resize(n, None);
                 (listed, gtv)
@@ -359,6 +413,17 @@ impl Sequence {
             video: None,
             first_size: Default::default(),
         })
+    }
+
+    /// The frames' names as result files list them: each image's file name (`frame%05d` by
+    /// index for a video's frames).
+    pub fn frame_names(&self) -> Vec<String> {
+        (0..self.frames.len())
+            .map(|i| match (&self.video, self.frames[i].file_name()) {
+                (None, Some(n)) => n.to_string_lossy().into_owned(),
+                _ => format!("frame{:05}", i + 1),
+            })
+            .collect()
     }
 
     /// Number of frames.
@@ -410,6 +475,74 @@ impl Sequence {
     }
 }
 
+/// The ground truth of each of the `frames` (images of `frames_dir`) from the lines of `gt`
+/// that name their frames: each line matched to its image by file name (or by stem, when the
+/// line names the frame without its extension or with another); a line without its image is
+/// an error naming the line; the frames without a line are not annotated, one warning for
+/// them all.
+fn match_by_name(
+    gt: &Path,
+    frames_dir: &Path,
+    frames: &[PathBuf],
+    entries: &[GtEntry],
+    warnings: &mut Vec<String>,
+) -> Result<Vec<Option<Quad>>> {
+    use std::collections::HashMap;
+    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+    let stem = |p: &Path| p.file_stem().map(|n| n.to_string_lossy().into_owned());
+    let by_name: HashMap<String, usize> = frames
+        .iter()
+        .enumerate()
+        .filter_map(|(i, p)| name(p).map(|n| (n, i)))
+        .collect();
+    // A stem two images share (`a.jpg`, `a.png`) matches neither.
+    let mut by_stem: HashMap<String, Option<usize>> = HashMap::new();
+    for (i, p) in frames.iter().enumerate() {
+        if let Some(s) = stem(p) {
+            by_stem
+                .entry(s)
+                .and_modify(|v| *v = None)
+                .or_insert(Some(i));
+        }
+    }
+    let mut gtv = vec![None; frames.len()];
+    let mut lined = vec![false; frames.len()];
+    for e in entries {
+        let f = e.frame.as_deref().unwrap_or_default();
+        let i = by_name
+            .get(f)
+            .copied()
+            .or_else(|| by_stem.get(&stem(Path::new(f))?).copied().flatten());
+        let Some(i) = i else {
+            return Err(Error::Parse {
+                path: gt.to_path_buf(),
+                line: e.line,
+                message: format!("missing frame {}", frames_dir.join(f).display()),
+            });
+        };
+        gtv[i] = e.quad;
+        lined[i] = true;
+    }
+    let without: Vec<usize> = (0..frames.len()).filter(|&i| !lined[i]).collect();
+    if !without.is_empty() {
+        let shown: Vec<String> = without
+            .iter()
+            .take(3)
+            .filter_map(|&i| name(&frames[i]))
+            .collect();
+        warnings.push(format!(
+            "{}: {} of the {} frames in {} have no line ({}{}): not annotated",
+            gt.display(),
+            without.len(),
+            frames.len(),
+            frames_dir.display(),
+            shown.join(", "),
+            if without.len() > 3 { ", ..." } else { "" }
+        ));
+    }
+    Ok(gtv)
+}
+
 /// Why ground-truth corners cannot be a target's, if they cannot ([`Quad::unusable`]).
 pub fn unusable_quad(q: &Quad) -> Option<String> {
     q.unusable()
@@ -417,7 +550,7 @@ pub fn unusable_quad(q: &Quad) -> Option<String> {
 
 /// Reads corners that cannot be a target's (folded, collinear, tiny, far beyond any frame) as
 /// not annotated; returns a warning for each, naming `gt` and the line.
-fn drop_unusable(gt: &Path, entries: &mut [GtEntry]) -> Vec<String> {
+pub fn drop_unusable(gt: &Path, entries: &mut [GtEntry]) -> Vec<String> {
     let mut warnings = Vec::new();
     for e in entries.iter_mut() {
         if let Some(why) = e.quad.and_then(|q| unusable_quad(&q)) {

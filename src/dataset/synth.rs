@@ -496,6 +496,18 @@ pub fn render_sequence(
     name: &str,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Sequence> {
+    // A name, not a path: `../../x` or `/tmp/x` would write outside `out_root`.
+    let plain = !name.is_empty()
+        && name != "."
+        && name != ".."
+        && !name.contains(['/', '\\'])
+        && !name.chars().any(char::is_control);
+    if !plain {
+        return Err(Error::InvalidParameter(format!(
+            "sequence name {name:?}: a name without path separators (it is written as \
+             OUT/NAME.txt and OUT/NAME/)"
+        )));
+    }
     let scene = Scene::new(cfg)?;
     let dir = out_root.join(name);
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;

@@ -28,6 +28,16 @@ pub fn is_video(p: &Path) -> bool {
         .is_some_and(|e| VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// A path as FFmpeg's programs must be given it to read or write that file and nothing else:
+/// `file:` and the absolute path. A bare path is a URL to them (`concat:a.mp4|b.mp4` reads
+/// other files, `pipe:0.mp4` standard input) or an option (`-h.mp4`).
+pub fn ffmpeg_path(path: &Path) -> std::ffi::OsString {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut s = std::ffi::OsString::from("file:");
+    s.push(abs.as_os_str());
+    s
+}
+
 /// A video file: its first video stream's size, frame rate and frame count, and the decoder.
 #[derive(Debug)]
 pub struct Video {
@@ -87,11 +97,7 @@ pub(super) fn missing(program: &str, e: std::io::Error) -> Error {
 impl Video {
     /// Probes a video file.
     pub fn open(path: &Path) -> Result<Video> {
-        if !path.is_file() {
-            return Err(Error::Missing {
-                path: path.to_path_buf(),
-            });
-        }
+        crate::files::check_regular(path)?;
         let out = command("ffprobe")
             .args([
                 "-v",
@@ -104,7 +110,7 @@ impl Video {
                 "-of",
                 "default=noprint_wrappers=1",
             ])
-            .arg(path)
+            .arg(ffmpeg_path(path))
             .output()
             .map_err(|e| missing("ffprobe", e))?;
         let bad = |message: String| Error::Sequence {
@@ -180,7 +186,7 @@ impl Video {
             c.args(["-ss", &format!("{t:.6}")]);
         }
         c.arg("-i")
-            .arg(&self.path)
+            .arg(ffmpeg_path(&self.path))
             .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray", "-"])
             .stdout(Stdio::piped())
             .stderr(Stdio::null());
@@ -318,6 +324,14 @@ pub fn render(
     if n == 0 {
         return Err(Error::InvalidParameter("no frame to render".into()));
     }
+    // A video container: FFmpeg writes an image format (`out.jpg`) as one image, cut short.
+    if !is_video(out) {
+        return Err(Error::InvalidParameter(format!(
+            "cannot render to {}: not a video file name (its extension must be one of {})",
+            out.display(),
+            VIDEO_EXTENSIONS.join(", ")
+        )));
+    }
     let first = seq.load_gray(0)?;
     let (w, h) = (first.width, first.height);
     let fps = seq.video.as_ref().map_or(30.0, |v| v.fps);
@@ -337,7 +351,7 @@ pub fn render(
             "-pix_fmt",
             "yuv420p",
         ])
-        .arg(out)
+        .arg(ffmpeg_path(out))
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -372,13 +386,18 @@ pub fn render(
     }
     drop(stdin);
     let done = child.wait_with_output().map_err(|e| Error::io(out, e))?;
-    if let Some(why) = failed.or_else(|| {
-        (!done.status.success()).then(|| {
-            String::from_utf8_lossy(&done.stderr)
-                .trim()
-                .replace('\n', "; ")
-        })
-    }) {
+    // FFmpeg's own reason first (a write to it fails only as a broken pipe once it has quit).
+    let said = String::from_utf8_lossy(&done.stderr)
+        .trim()
+        .replace('\n', "; ");
+    let why = match failed {
+        _ if !done.status.success() && !said.is_empty() => Some(said),
+        Some(f) => Some(f),
+        None => (!done.status.success()).then(|| format!("ffmpeg exited with {}", done.status)),
+    };
+    if let Some(why) = why {
+        // Nothing half-written is left behind.
+        let _ = std::fs::remove_file(out);
         return Err(Error::Image {
             path: out.to_path_buf(),
             message: format!("cannot write the annotated video: {why}"),

@@ -126,6 +126,46 @@ impl<'a> Batch<'a> {
         plan
     }
 
+    /// Refuses an output folder that holds runs of other settings this batch would leave beside
+    /// its own (another `--error`, `--gt-ssm` or re-initialisation, or a tracker of this batch
+    /// with other parameters): its summary and any report of the folder would mix them. The
+    /// runs this batch makes or resumes are its own.
+    fn check_out(&self, out: &Path, plan: &Plan) -> Result<()> {
+        let mine: std::collections::HashSet<(String, String)> = plan
+            .todo
+            .iter()
+            .map(|&(s, p)| (self.sequences[s].name.clone(), self.specs[p].label()))
+            .chain(
+                plan.finished
+                    .iter()
+                    .map(|r| (r.sequence.clone(), r.spec.label())),
+            )
+            .collect();
+        for r in files::readable_runs(out) {
+            if mine.contains(&(r.sequence.clone(), r.spec.label())) {
+                continue;
+            }
+            let mut d = files::differences(&files::json(&r.options), &files::json(&self.options));
+            if let Some(s) = self.specs.iter().find(|s| s.label() == r.spec.label()) {
+                d.extend(files::differences(&files::json(&r.spec), &files::json(s)));
+            }
+            if !d.is_empty() {
+                return Err(Error::report(
+                    out,
+                    format!(
+                        "holds the run of {} on {} made with other settings ({}); this batch \
+                         would leave it beside runs it cannot be pooled with: give another \
+                         --out, or remove that run",
+                        r.spec.label(),
+                        r.sequence,
+                        d.join(", ")
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Makes the runs `plan` has still to make, calling `progress(done, total)` after each.
     pub fn execute(
         &self,
@@ -135,6 +175,7 @@ impl<'a> Batch<'a> {
         // What a killed batch left half-written in the folder goes first.
         if let Some(out) = self.out {
             crate::dataset::remove_stale_temporaries(out);
+            self.check_out(out, &plan)?;
         }
         let total = plan.todo.len();
         let done = AtomicUsize::new(0);
@@ -193,7 +234,7 @@ impl<'a> Batch<'a> {
     fn run_one(&self, seq: &Sequence, spec: &TrackerSpec, ahead: bool) -> Result<RunResult> {
         let run = run_sequence_reading(seq, spec, &self.options, None, &mut NoObserver, ahead)?;
         if let Some(out) = self.out {
-            files::write_run_files(out, &run)?;
+            files::write_run_files(out, &run, &seq.frame_names())?;
         }
         Ok(run)
     }

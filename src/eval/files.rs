@@ -3,18 +3,19 @@
 //! `summary.csv` and `summary.json`. Shards of a batch (one `--out` each) merge into one summary.
 
 use super::{RunResult, Summary, success_curve, summary_rows};
-use crate::dataset::{write_atomic, write_corners};
+use crate::dataset::{write_atomic, write_corners_named};
 use crate::error::{Error, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Writes a run's files; returns the corners file.
-pub fn write_run_files(out: &Path, run: &RunResult) -> Result<PathBuf> {
+/// Writes a run's files, the corners named as the sequence names its frames (`names`,
+/// [`crate::dataset::Sequence::frame_names`]); returns the corners file.
+pub fn write_run_files(out: &Path, run: &RunResult, names: &[String]) -> Result<PathBuf> {
     let dir = out.join("tracking_data").join(&run.sequence);
     let label = run.spec.label();
     let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
     let corners_path = dir.join(format!("{label}.txt"));
-    write_corners(&corners_path, &corners, "jpg")?;
+    write_corners_named(&corners_path, &corners, names)?;
     let mut errors = String::from(
         "frame\talignment_error\tcenter_error\tiou_error\tstatus\titerations\tsearch_us\tupdate_us\n",
     );
@@ -66,7 +67,9 @@ pub fn finished_run(
     spec: &crate::spec::TrackerSpec,
     opts: &super::EvalOptions,
 ) -> Option<RunResult> {
-    let text = std::fs::read_to_string(run_file(out, &seq.name, spec)).ok()?;
+    let bytes =
+        crate::files::read_bounded(&run_file(out, &seq.name, spec), crate::files::RUN_LIMIT);
+    let text = String::from_utf8(bytes.ok()?).ok()?;
     let run: RunResult = serde_json::from_str(&text).ok()?;
     (run.error.is_none()
         && &run.spec == spec
@@ -146,13 +149,41 @@ pub fn input_stamp(seq: &crate::dataset::Sequence) -> String {
     low.sort();
     for p in low {
         h.write(p.as_os_str().as_encoded_bytes());
-        h.write(&std::fs::read(&p).unwrap_or_default());
+        h.write(&crate::files::read_bounded(&p, crate::files::TEXT_LIMIT).unwrap_or_default());
     }
     format!("{:016x}", h.0)
 }
 
 /// Every run saved under `dir/tracking_data` (sorted by sequence, then tracker).
 pub fn read_runs(dir: &Path) -> Result<Vec<RunResult>> {
+    run_paths(dir)?
+        .iter()
+        .map(|f| {
+            let text = crate::files::read_text(f, crate::files::RUN_LIMIT)?;
+            serde_json::from_str(&text).map_err(|e| Error::Parse {
+                path: f.clone(),
+                line: e.line(),
+                message: e.to_string(),
+            })
+        })
+        .collect()
+}
+
+/// The runs under `dir/tracking_data` that can be read (the others are skipped: a batch makes
+/// them again); none without the folder.
+pub fn readable_runs(dir: &Path) -> Vec<RunResult> {
+    run_paths(dir)
+        .unwrap_or_default()
+        .iter()
+        .filter_map(|f| {
+            let bytes = crate::files::read_bounded(f, crate::files::RUN_LIMIT).ok()?;
+            serde_json::from_slice(&bytes).ok()
+        })
+        .collect()
+}
+
+/// The run files under `dir/tracking_data`, sorted.
+fn run_paths(dir: &Path) -> Result<Vec<PathBuf>> {
     let data = dir.join("tracking_data");
     let mut files = Vec::new();
     for seq in std::fs::read_dir(&data).map_err(|e| Error::io(&data, e))? {
@@ -167,17 +198,7 @@ pub fn read_runs(dir: &Path) -> Result<Vec<RunResult>> {
         }
     }
     files.sort();
-    files
-        .iter()
-        .map(|f| {
-            let text = std::fs::read_to_string(f).map_err(|e| Error::io(f, e))?;
-            serde_json::from_str(&text).map_err(|e| Error::Parse {
-                path: f.clone(),
-                line: e.line(),
-                message: e.to_string(),
-            })
-        })
-        .collect()
+    Ok(files)
 }
 
 /// Every run saved under each of `dirs` (`DIR/tracking_data/<seq>/*_run.json`). A folder without
@@ -225,7 +246,82 @@ pub fn read_all_runs(dirs: &[PathBuf]) -> Result<Vec<RunResult>> {
         }
         all.extend(runs);
     }
+    check_one_setting(&all)?;
     Ok(all)
+}
+
+/// Where two values differ, as `path: a vs b` (at most three), from their JSON forms.
+pub(crate) fn differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        use serde_json::Value::Object;
+        match (a, b) {
+            (Object(x), Object(y)) => {
+                let keys: std::collections::BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+                for k in keys {
+                    let null = serde_json::Value::Null;
+                    let p = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
+                    walk(
+                        &p,
+                        x.get(k).unwrap_or(&null),
+                        y.get(k).unwrap_or(&null),
+                        out,
+                    );
+                }
+            }
+            _ if a != b => out.push(format!("{path}: {a} vs {b}")),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    walk("", a, b, &mut out);
+    out.truncate(3);
+    out
+}
+
+/// How run `b`'s settings differ from run `a`'s where they must be the same to be pooled or
+/// kept side by side (`None`: they do not): the evaluation's options (the error, the ground
+/// truth, the re-initialisation) for any two runs, and the whole spec (every parameter) for two
+/// runs of one tracker.
+pub fn settings_differ(a: &RunResult, b: &RunResult) -> Option<String> {
+    let mut d = differences(&json(&a.options), &json(&b.options));
+    if a.spec.label() == b.spec.label() {
+        d.extend(differences(&json(&a.spec), &json(&b.spec)));
+    }
+    (!d.is_empty()).then(|| d.join(", "))
+}
+
+/// What [`settings_differ`] compares, as JSON.
+pub(crate) fn json<T: serde::Serialize>(v: &T) -> serde_json::Value {
+    serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
+}
+
+/// Refuses runs of different settings pooled together ([`settings_differ`]): a different
+/// `--res`, `--error` or `--gt-ssm` averaged in with the rest would make every pooled row a mix.
+pub fn check_one_setting(runs: &[RunResult]) -> Result<()> {
+    let Some(first) = runs.first() else {
+        return Ok(());
+    };
+    let mut by_label: BTreeMap<String, &RunResult> = BTreeMap::new();
+    for r in runs {
+        let a = by_label.entry(r.spec.label()).or_insert(r);
+        for a in [first, *a] {
+            if let Some(d) = settings_differ(a, r) {
+                return Err(Error::InvalidParameter(format!(
+                    "runs of different settings cannot be pooled: {} on {} and {} on {} differ \
+                     ({d}); give the runs of one setting",
+                    a.spec.label(),
+                    a.sequence,
+                    r.spec.label(),
+                    r.sequence
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Merges the outputs of several shards of one evaluation: the summary rows of all their runs

@@ -452,17 +452,22 @@ pub fn run_sequence_reading(
         Some(OWN_SSM) => spec.registration().map(|r| r.ssm.as_str()),
         other => other,
     };
-    let gt: Vec<Option<Quad>> = match gt_ssm {
-        Some(ssm) => crate::gt::low_dof_ground_truth(seq, ssm)?.0,
-        None => seq.ground_truth.clone(),
+    let (gt, gt_file): (Vec<Option<Quad>>, _) = match gt_ssm {
+        Some(ssm) => {
+            let t = crate::gt::low_dof_ground_truth(seq, ssm)?;
+            (t.quads, t.path)
+        }
+        None => (seq.ground_truth.clone(), None),
     };
     let ground_truth = |i: usize| gt.get(i).copied().flatten();
     let first = init
         .or_else(|| ground_truth(0))
         .ok_or_else(|| Error::Sequence {
-            path: seq
-                .gt_path
+            // The file the first frame's corners were to come from (an OptGT file, when the
+            // run scores against one).
+            path: gt_file
                 .clone()
+                .or_else(|| seq.gt_path.clone())
                 .or_else(|| seq.frames.first().cloned())
                 .unwrap_or_default(),
             message: "no ground truth for the first frame: give the initial corners".into(),

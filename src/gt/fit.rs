@@ -191,18 +191,29 @@ pub fn write_opt_gt(
     Ok((path, res))
 }
 
+/// A sequence's ground truth for a low-DOF SSM ([`low_dof_ground_truth`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LowDofTruth {
+    /// Each frame's quad (`None`: not annotated).
+    pub quads: Vec<Option<Quad>>,
+    /// The OptGT file they were read from (`None`: fitted now, or the sequence's own).
+    pub path: Option<PathBuf>,
+    /// One for each quad of the file that cannot be a target's, naming the file and line.
+    pub warnings: Vec<String>,
+}
+
 /// The ground truth of `seq` for `ssm`: read from `<dir>/OptGT/<seq>_<ssm>.txt` when it exists
 /// (a file with another number of frames is an error naming it), fitted otherwise. Returns the
-/// quads and where they came from (`None`: fitted now). 8-DOF SSMs give the sequence's own
-/// ground truth unless an OptGT file (a corrected export) exists.
-pub fn low_dof_ground_truth(
-    seq: &Sequence,
-    ssm_name: &str,
-) -> Result<(Vec<Option<Quad>>, Option<PathBuf>)> {
+/// quads, where they came from (`None`: fitted now) and a warning naming the file and line for
+/// each quad that cannot be a target's (folded, collinear, tiny, far beyond any frame: read as
+/// not annotated, as the sequence's own ground truth reads them). 8-DOF SSMs give the
+/// sequence's own ground truth unless an OptGT file (a corrected export) exists.
+pub fn low_dof_ground_truth(seq: &Sequence, ssm_name: &str) -> Result<LowDofTruth> {
     let model = ssm::build(ssm_name)?;
     let path = opt_gt_path(&ground_truth_dir(seq), &seq.name, model.name());
-    if path.is_file() {
-        let entries = read_ground_truth(&path)?;
+    if path.exists() {
+        let mut entries = read_ground_truth(&path)?;
+        let warnings = crate::dataset::drop_unusable(&path, &mut entries);
         if entries.len() != seq.len() {
             return Err(Error::Sequence {
                 path,
@@ -214,15 +225,23 @@ pub fn low_dof_ground_truth(
                 ),
             });
         }
-        return Ok((entries.into_iter().map(|e| e.quad).collect(), Some(path)));
+        let quads = entries.into_iter().map(|e| e.quad).collect();
+        return Ok(LowDofTruth {
+            quads,
+            path: Some(path),
+            warnings,
+        });
     }
-    if model.dof() == 8 {
-        return Ok((seq.ground_truth.clone(), None));
-    }
-    Ok((
-        fit_ground_truth(model.name(), &seq.ground_truth)?.quads,
-        None,
-    ))
+    let quads = if model.dof() == 8 {
+        seq.ground_truth.clone()
+    } else {
+        fit_ground_truth(model.name(), &seq.ground_truth)?.quads
+    };
+    Ok(LowDofTruth {
+        quads,
+        path: None,
+        warnings: Vec::new(),
+    })
 }
 
 #[cfg(test)]

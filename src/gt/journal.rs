@@ -179,10 +179,9 @@ pub fn check_mark(m: &Mark) -> std::result::Result<(), String> {
 
 /// Reads a journal file (`Ok(None)` when there is none).
 pub fn read(path: &Path) -> Result<Option<Parsed>> {
-    match std::fs::read(path) {
-        Ok(bytes) => parse(path, &bytes).map(Some),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(Error::io(path, e)),
+    match crate::files::read_optional(path, crate::files::JOURNAL_LIMIT)? {
+        Some(bytes) => parse(path, &bytes).map(Some),
+        None => Ok(None),
     }
 }
 
@@ -233,25 +232,26 @@ enum Pending {
 impl Writer {
     /// Prepares appending to the journal at `path` (which may not exist yet); writes nothing.
     pub fn open(path: &Path, sequence: &str) -> Result<Writer> {
-        let (good_len, pending, needs_header) = match std::fs::read(path) {
-            Ok(b) if b.is_empty() => (0, Pending::Nothing, true),
-            Ok(b) => {
-                let tail_start = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
-                let (good_len, pending) = if tail_start == b.len() {
-                    (b.len(), Pending::Nothing)
-                } else if parse_record(&b[tail_start..]).is_ok_and(|r| r.is_some()) {
-                    (b.len(), Pending::Newline)
-                } else {
-                    (tail_start, Pending::Cut)
-                };
-                let header = b[..good_len]
-                    .split(|&c| c == b'\n')
-                    .any(|l| matches!(parse_record(l), Ok(Some(Record::Header { .. }))));
-                (good_len as u64, pending, !header)
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => (0, Pending::Nothing, true),
-            Err(e) => return Err(Error::io(path, e)),
-        };
+        let (good_len, pending, needs_header) =
+            match crate::files::read_optional(path, crate::files::JOURNAL_LIMIT) {
+                Ok(Some(b)) if b.is_empty() => (0, Pending::Nothing, true),
+                Ok(Some(b)) => {
+                    let tail_start = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
+                    let (good_len, pending) = if tail_start == b.len() {
+                        (b.len(), Pending::Nothing)
+                    } else if parse_record(&b[tail_start..]).is_ok_and(|r| r.is_some()) {
+                        (b.len(), Pending::Newline)
+                    } else {
+                        (tail_start, Pending::Cut)
+                    };
+                    let header = b[..good_len]
+                        .split(|&c| c == b'\n')
+                        .any(|l| matches!(parse_record(l), Ok(Some(Record::Header { .. }))));
+                    (good_len as u64, pending, !header)
+                }
+                Ok(None) => (0, Pending::Nothing, true),
+                Err(e) => return Err(e),
+            };
         Ok(Writer {
             path: path.to_path_buf(),
             sequence: sequence.to_string(),

@@ -15,8 +15,8 @@ pub mod journal;
 
 pub use edit::{Grab, drag, grab, move_corner, rectify};
 pub use fit::{
-    FitOutcome, LowDofGroundTruth, best_fit, fit_ground_truth, fit_sequences, ground_truth_dir,
-    low_dof_ground_truth, opt_gt_path, write_opt_gt,
+    FitOutcome, LowDofGroundTruth, LowDofTruth, best_fit, fit_ground_truth, fit_sequences,
+    ground_truth_dir, low_dof_ground_truth, opt_gt_path, write_opt_gt,
 };
 pub use journal::{Change, Mark};
 
@@ -140,8 +140,12 @@ impl Corrections {
     fn replay(&mut self, r: Record) -> std::result::Result<(), String> {
         match r {
             Record::Header { .. } => {}
-            Record::Edit { id, label, changes } => {
-                for ch in &changes {
+            Record::Edit {
+                id,
+                label,
+                mut changes,
+            } => {
+                for ch in &mut changes {
                     if ch.frame >= self.frames {
                         return Err(format!(
                             "frame {} is beyond the sequence's {} frames",
@@ -149,7 +153,9 @@ impl Corrections {
                             self.frames
                         ));
                     }
-                    ssm_key(&ch.ssm).map_err(|e| e.to_string())?;
+                    // Under the SSM's own key (an alias, `8` or `homography`, is one SSM),
+                    // where the views look for it.
+                    ch.ssm = ssm_key(&ch.ssm).map_err(|e| e.to_string())?;
                     for m in [&ch.before, &ch.after].into_iter().flatten() {
                         journal::check_mark(m)
                             .map_err(|e| format!("frame {}: {e}", ch.frame + 1))?;

@@ -408,3 +408,27 @@ fn interpolation_follows_the_ssm() {
         .unwrap();
     assert_eq!(rev, out);
 }
+
+/// An edit recorded under an SSM's alias (`"ssm":"8"`, written by hand or by another tool) is
+/// restored under the SSM's own key, where the views show it (it was counted as restored and
+/// shown nowhere).
+#[test]
+fn an_edit_under_an_ssm_alias_is_restored_where_it_is_shown() {
+    let d = tmp("alias");
+    let j = d.join("s_corrections.jsonl");
+    {
+        let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+        assert!(c.edit("a", &[set("homography", 2, 2.0)]).unwrap());
+    }
+    let text = std::fs::read_to_string(&j).unwrap();
+    assert!(text.contains("\"ssm\":\"homography\""), "{text}");
+    std::fs::write(&j, text.replace("\"ssm\":\"homography\"", "\"ssm\":\"8\"")).unwrap();
+    let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!(rec.edits, 1);
+    assert_eq!(
+        c.mark("homography", 2),
+        Some(Mark::Quad(quad(2.0).to_array()))
+    );
+    assert_eq!(c.corrected_frames("homography"), vec![2]);
+    let _ = std::fs::remove_dir_all(&d);
+}

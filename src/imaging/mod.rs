@@ -196,6 +196,7 @@ pub fn gray_from_dynamic(img: &image::DynamicImage) -> GrayU8 {
 
 /// The size of an image file, read from its header.
 pub fn image_size(path: &Path) -> Result<(usize, usize)> {
+    crate::files::check_regular(path)?;
     let (w, h) = image::ImageReader::open(path)
         .map_err(|e| Error::io(path, e))?
         .with_guessed_format()
@@ -257,11 +258,8 @@ pub const MAX_PIXELS: u64 = 64 << 20;
 /// more than [`MAX_PIXELS`] are refused before decoding, and a JPEG or PNG file cut short (no
 /// end marker) is refused rather than decoded in part.
 pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
-    if !path.exists() {
-        return Err(Error::Missing {
-            path: path.to_path_buf(),
-        });
-    }
+    // Missing, a folder, a device, a FIFO or a loop of links: each named as what it is.
+    crate::files::check_regular(path)?;
     let bad = |message: String| Error::Image {
         path: path.to_path_buf(),
         message,

@@ -91,7 +91,7 @@ pub enum PatchSeeds {
 /// Reads points, one `x,y` (or `x y`) per line; `#` starts a comment. A malformed line is an
 /// error naming the file and the line.
 pub fn read_points(path: &Path) -> Result<Vec<Point>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::files::read_text(path, crate::files::TEXT_LIMIT)?;
     let mut points = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
@@ -137,6 +137,11 @@ pub fn track_sequence_from(
     let first = seq.load_gray(start)?;
     let points = match seeds {
         PatchSeeds::Points(p) => p.clone(),
+        PatchSeeds::Corners(0) => {
+            return Err(Error::InvalidParameter(
+                "patches: track at least one patch (--patches 0 asks for none)".into(),
+            ));
+        }
         PatchSeeds::Corners(n) => {
             let region = seq.ground_truth(start);
             t.detect(&first, *n, region.as_ref())

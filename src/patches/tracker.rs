@@ -95,6 +95,9 @@ impl PatchTracker {
         let md2 = self.params.min_distance * self.params.min_distance;
         let mut kept: Vec<Point> = Vec::new();
         for k in found {
+            if kept.len() >= max {
+                break;
+            }
             let p = k.point();
             if let Some(q) = region {
                 let window = Quad::from_rect(p.x - half, p.y - half, 2.0 * half, 2.0 * half);
@@ -109,9 +112,6 @@ impl PatchTracker {
                 continue;
             }
             kept.push(p);
-            if kept.len() == max {
-                break;
-            }
         }
         kept
     }
@@ -128,6 +128,14 @@ impl PatchTracker {
             return Err(Error::InvalidParameter(format!(
                 "patches: a {}x{} frame is too small",
                 frame.width, frame.height
+            )));
+        }
+        if let Some(k) = points.iter().position(|p| !p.is_finite()) {
+            return Err(Error::InvalidParameter(format!(
+                "patches: point {} is ({}, {}), not a position in the frame",
+                k + 1,
+                points[k].x,
+                points[k].y
             )));
         }
         self.size = (frame.width, frame.height);

@@ -14,10 +14,7 @@ pub const TRACKS_HEADER: &str = "frame,patch,status,x,y,a00,a01,a10,a11,ncc";
 /// Writes `run` as CSV: one line per frame and patch, [`TRACKS_HEADER`]'s columns; the status
 /// is `tracking` or `lost:<reason>`.
 pub fn write_tracks(path: &Path, run: &PatchRun) -> Result<()> {
-    let io = |e: std::io::Error| Error::Io {
-        path: path.to_path_buf(),
-        source: e,
-    };
+    let io = |e: std::io::Error| Error::io(path, e);
     let file = std::fs::File::create(path).map_err(io)?;
     let mut out = std::io::BufWriter::new(file);
     writeln!(out, "{TRACKS_HEADER}").map_err(io)?;
@@ -108,10 +105,7 @@ pub(super) fn write_fixed(out: &mut String, v: f64, digits: u32) {
 /// benchmark scores OpenCV's tracks this way). A malformed line is an error naming the file
 /// and the line.
 pub fn read_tracks(path: &Path) -> Result<PatchRun> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
-        path: path.to_path_buf(),
-        source: e,
-    })?;
+    let text = crate::files::read_text(path, crate::files::TEXT_LIMIT)?;
     let bad = |line: usize, what: String| Error::Parse {
         path: path.to_path_buf(),
         line,

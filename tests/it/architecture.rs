@@ -9,6 +9,7 @@ use std::path::Path;
 /// The top-level modules of the library, bottom first: a module may import only those before it.
 const LAYERS: &[&str] = &[
     "error",
+    "files",
     "cpu",
     "geometry",
     "rng",

@@ -32,7 +32,7 @@ fn esm_ssd_homography_tracks_the_rendered_tmt_sequence() {
     // The observer saw the last frame's iterations, each with finite corners.
     assert!(!rec.iterations.is_empty() && rec.iterations.iter().all(|r| r.corners.is_finite()));
     // Result files.
-    eval::write_run_files(d.path(), &run).unwrap();
+    eval::write_run_files(d.path(), &run, &seq.frame_names()).unwrap();
     eval::write_summaries(d.path(), &[s]).unwrap();
     let sr = std::fs::read_to_string(
         d.path()

@@ -1,5 +1,6 @@
 //! Integration tests (one binary links faster).
 
+mod adversarial;
 mod alloc;
 mod architecture;
 mod cli;

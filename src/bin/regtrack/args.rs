@@ -370,6 +370,17 @@ impl FromArgMatches for ParamArgs {
         for a in m.get_many::<String>("param").into_iter().flatten() {
             let (name, v) = regtrack::params::split_assignment(a)
                 .map_err(|e| clap::Error::raw(clap::error::ErrorKind::ValueValidation, e))?;
+            // One value a parameter: `--res 20 --param res=10` would let one win unsaid.
+            if let Some((_, was)) = self
+                .assignments
+                .iter()
+                .find(|(n, w)| n == name && w.trim() != v.trim())
+            {
+                return Err(clap::Error::raw(
+                    clap::error::ErrorKind::ArgumentConflict,
+                    format!("{name} is given twice, as {was} and as {v}: give it once\n"),
+                ));
+            }
             self.assignments.push((name.to_string(), v.to_string()));
         }
         Ok(())

@@ -11,6 +11,7 @@ use regtrack::{bench, gt};
 use std::path::Path;
 
 pub fn run_eval(batch: &Batch, out: &Path, render: bool) -> Result<()> {
+    warn_about_low_dof(batch);
     let plan = batch.plan();
     if !plan.finished.is_empty() {
         println!(
@@ -46,6 +47,44 @@ pub fn run_eval(batch: &Batch, out: &Path, render: bool) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The warnings of the low-DOF ground truth a batch scores against (`--gt-ssm`): OptGT corners
+/// that cannot be a target's, read as not annotated (at most five a file).
+fn warn_about_low_dof(batch: &Batch) {
+    let Some(g) = batch.options.gt_ssm.as_deref() else {
+        return;
+    };
+    let mut ssms: Vec<&str> = if g == eval::OWN_SSM {
+        batch
+            .specs
+            .iter()
+            .filter_map(|s| s.registration().map(|r| r.ssm.as_str()))
+            .collect()
+    } else {
+        vec![g]
+    };
+    ssms.sort_unstable();
+    ssms.dedup();
+    const SHOWN: usize = 5;
+    for seq in batch.sequences {
+        for ssm in &ssms {
+            // An unreadable file is the runs' error, reported with them.
+            let Ok(gt::LowDofTruth { warnings, .. }) = gt::low_dof_ground_truth(seq, ssm) else {
+                continue;
+            };
+            for w in warnings.iter().take(SHOWN) {
+                eprintln!("warning: {w}");
+            }
+            if warnings.len() > SHOWN {
+                eprintln!(
+                    "warning: ... and {} more in the {ssm} ground truth of {}",
+                    warnings.len() - SHOWN,
+                    seq.name
+                );
+            }
+        }
+    }
 }
 
 pub fn run_gt_fit(

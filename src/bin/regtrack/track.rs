@@ -26,7 +26,7 @@ pub fn run_track(
     let options = EvalOptions::default();
     let run = eval::run_sequence_reading(&seq, &spec, &options, init, &mut NoObserver, spare)?;
     let corners: Vec<_> = run.frames.iter().map(|f| f.corners).collect();
-    dataset::write_corners(out, &corners, "jpg")?;
+    dataset::write_corners_named(out, &corners, &seq.frame_names())?;
     let lost = run.frames.iter().filter(|f| f.corners.is_none()).count();
     println!(
         "wrote {} ({} of {} frames, {} lost)",

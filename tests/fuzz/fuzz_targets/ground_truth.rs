@@ -48,7 +48,9 @@ fuzz_target!(|data: &[u8]| {
             assert!(unusable_quad(q).is_none(), "{q} was read as usable");
         }
         for ssm in ["translation", "similitude", "homography"] {
-            if let Ok((quads, _)) = regtrack::gt::low_dof_ground_truth(&seq, ssm) {
+            if let Ok(regtrack::gt::LowDofTruth { quads, .. }) =
+                regtrack::gt::low_dof_ground_truth(&seq, ssm)
+            {
                 // Per frame, or nothing without ground truth.
                 assert!(quads.len() == seq.frames.len() || seq.ground_truth.is_empty());
             }

@@ -90,6 +90,16 @@ impl Error {
     }
 }
 
+/// Text from a file or an argument as a message quotes it: at most 40 characters, then how
+/// long it was (a 1 MB token is not echoed whole).
+pub fn short_text(s: &str) -> String {
+    const SHOWN: usize = 40;
+    match s.char_indices().nth(SHOWN) {
+        None => s.to_string(),
+        Some((end, _)) => format!("{}... ({} bytes)", &s[..end], s.len()),
+    }
+}
+
 /// A number for a message: `decimals` places, or scientific notation when it is too large or
 /// too small to read that way (1e308 is not printed with 309 digits).
 pub fn short_number(x: f64, decimals: usize) -> String {

@@ -129,15 +129,17 @@ impl ParamDef {
                 .map(|i| i as f64)
                 .ok_or_else(|| {
                     Error::InvalidParameter(format!(
-                        "{owner}: {} must be one of {}, got '{s}'",
+                        "{owner}: {} must be one of {}, got '{}'",
                         self.name,
-                        names.join(", ")
+                        names.join(", "),
+                        crate::error::short_text(s)
                     ))
                 })?,
             _ => s.parse::<f64>().map_err(|_| {
                 Error::InvalidParameter(format!(
-                    "{owner}: {} must be a number, got '{s}'",
-                    self.name
+                    "{owner}: {} must be a number, got '{}'",
+                    self.name,
+                    crate::error::short_text(s)
                 ))
             })?,
         };
@@ -236,7 +238,12 @@ pub fn split_assignment(s: &str) -> Result<(&str, &str)> {
     s.split_once('=')
         .map(|(a, b)| (a.trim(), b.trim()))
         .filter(|(a, _)| !a.is_empty())
-        .ok_or_else(|| Error::InvalidParameter(format!("expected name=value, got '{s}'")))
+        .ok_or_else(|| {
+            Error::InvalidParameter(format!(
+                "expected name=value, got '{}'",
+                crate::error::short_text(s)
+            ))
+        })
 }
 
 #[cfg(test)]

@@ -37,7 +37,7 @@ pub fn lookup<'a, B>(
         .find(|e| e.matches(name))
         .ok_or_else(|| Error::UnknownMethod {
             kind,
-            name: name.to_string(),
+            name: crate::error::short_text(name),
             available: entries
                 .iter()
                 .map(|e| {

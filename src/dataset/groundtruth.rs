@@ -113,12 +113,17 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
         }
         let mut v = [0.0f64; 8];
         for (k, t) in nums.iter().enumerate() {
-            v[k] = t
-                .parse::<f64>()
-                .map_err(|_| err(format!("'{t}' is not a number (value {} of 8)", k + 1)))?;
+            v[k] = t.parse::<f64>().map_err(|_| {
+                err(format!(
+                    "'{}' is not a number (value {} of 8)",
+                    crate::error::short_text(t),
+                    k + 1
+                ))
+            })?;
             if !v[k].is_finite() {
                 return Err(err(format!(
-                    "'{t}' is not a finite number (value {} of 8)",
+                    "'{}' is not a finite number (value {} of 8)",
+                    crate::error::short_text(t),
                     k + 1
                 )));
             }

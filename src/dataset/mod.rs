@@ -351,7 +351,10 @@ impl Sequence {
                     return Err(Error::Parse {
                         path: gt.to_path_buf(),
                         line: e.line,
-                        message: format!("{f} is listed twice (also on line {first})"),
+                        message: format!(
+                            "{} is listed twice (also on line {first})",
+                            crate::error::short_text(f)
+                        ),
                     });
                 }
             }

@@ -147,6 +147,14 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed> {
                 format!("journal format {format} is newer than this regtrack reads ({FORMAT})"),
             ));
         }
+        // A damaged header (one flipped byte) before intact records: the records are kept,
+        // and the damage said (the journal's name still says whose it is).
+        Some((line, _)) if *line > 1 && first_bad.as_ref().is_some_and(|(l, _)| *l == 1) => {
+            out.skipped.push(format!(
+                "{}:1: the header is damaged; the records after it are kept",
+                path.display()
+            ));
+        }
         Some((line, _)) => {
             return Err(err(
                 *line,

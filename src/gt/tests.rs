@@ -432,3 +432,35 @@ fn an_edit_under_an_ssm_alias_is_restored_where_it_is_shown() {
     assert_eq!(c.corrected_frames("homography"), vec![2]);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// One flipped byte in the header refused the whole journal: the intact edits after it are
+/// kept, the damage said, and the journal goes on (a new header is written with the next edit).
+#[test]
+fn a_damaged_header_keeps_the_edits_after_it() {
+    let d = tmp("header");
+    let j = d.join("s_corrections.jsonl");
+    {
+        let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+        assert!(c.edit("a", &[set("homography", 2, 2.0)]).unwrap());
+        assert!(c.edit("b", &[set("similitude", 3, 3.0)]).unwrap());
+    }
+    let mut bytes = std::fs::read(&j).unwrap();
+    let at = bytes.iter().position(|&b| b == b':').unwrap();
+    bytes[at] = b';';
+    std::fs::write(&j, &bytes).unwrap();
+    let (mut c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!(rec.edits, 2);
+    assert!(
+        rec.skipped
+            .iter()
+            .any(|s| s.contains(":1: the header is damaged")),
+        "{:?}",
+        rec.skipped
+    );
+    assert!(c.edit("c", &[set("homography", 4, 4.0)]).unwrap());
+    drop(c);
+    let (c, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!(rec.edits, 3);
+    assert!(c.mark("similitude", 3).is_some() && c.mark("homography", 4).is_some());
+    let _ = std::fs::remove_dir_all(&d);
+}

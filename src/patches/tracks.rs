@@ -129,7 +129,11 @@ pub fn read_tracks(path: &Path) -> Result<PatchRun> {
             f[k].parse::<usize>().map_err(|_| {
                 bad(
                     line_no,
-                    format!("field {} is not a whole number: '{}'", k + 1, f[k]),
+                    format!(
+                        "field {} is not a whole number: '{}'",
+                        k + 1,
+                        crate::error::short_text(f[k])
+                    ),
                 )
             })
         };
@@ -140,7 +144,11 @@ pub fn read_tracks(path: &Path) -> Result<PatchRun> {
                 .ok_or_else(|| {
                     bad(
                         line_no,
-                        format!("field {} is not a finite number: '{}'", k + 1, f[k]),
+                        format!(
+                            "field {} is not a finite number: '{}'",
+                            k + 1,
+                            crate::error::short_text(f[k])
+                        ),
                     )
                 })
         };
@@ -152,7 +160,10 @@ pub fn read_tracks(path: &Path) -> Result<PatchRun> {
                 _ => {
                     return Err(bad(
                         line_no,
-                        format!("status '{s}' is neither 'tracking' nor 'lost:<reason>'"),
+                        format!(
+                            "status '{}' is neither 'tracking' nor 'lost:<reason>'",
+                            crate::error::short_text(s)
+                        ),
                     ));
                 }
             },
@@ -170,10 +181,28 @@ pub fn read_tracks(path: &Path) -> Result<PatchRun> {
                 format!("patch {patch} out of order (expected {})", states.len()),
             ));
         }
+        // A position, not merely a finite number (1e155 squared is infinite).
+        let coordinate = |k: usize| {
+            num(k).and_then(|v| {
+                if v.abs() <= crate::geometry::MAX_COORDINATE {
+                    Ok(v)
+                } else {
+                    Err(bad(
+                        line_no,
+                        format!(
+                            "field {} is {}, beyond any frame (more than {} px)",
+                            k + 1,
+                            f[k],
+                            crate::geometry::MAX_COORDINATE
+                        ),
+                    ))
+                }
+            })
+        };
         states.push(PatchState {
             centre: Point {
-                x: num(3)?,
-                y: num(4)?,
+                x: coordinate(3)?,
+                y: coordinate(4)?,
             },
             linear: [num(5)?, num(6)?, num(7)?, num(8)?],
             status,

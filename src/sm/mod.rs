@@ -142,6 +142,16 @@ fn build_checked(name: &str, cfg: &SmConfig) -> crate::Result<Box<dyn SearchMeth
                 .iter()
                 .map(|s| build_checked(s, cfg))
                 .collect::<crate::Result<Vec<_>>>()?;
+            // The damping is of a Newton step: a sampling method (NN, PF) has none to damp.
+            if kind == "lm"
+                && let Some(s) = built.iter().find(|s| !s.requires().derivatives)
+            {
+                return Err(crate::Error::Incompatible(format!(
+                    "'{name}': lm damps the Newton steps of a gradient search method (lm:iclk, \
+                     lm:esm ...); {} samples instead of descending a gradient",
+                    s.name()
+                )));
+            }
             Ok(match kind {
                 "cascade" => Box::new(cascade::Cascade::new(name.to_string(), built, cfg)),
                 "lm" => Box::new(cascade::LevenbergMarquardt::new(name.to_string(), built)),

@@ -577,3 +577,107 @@ fn patches_and_parameters_take_what_they_are_given() {
         "{e}"
     );
 }
+
+/// `lm:` damps a Newton step: on a sampling method (`lm:nn1k`, `lm:pf`) it was accepted and
+/// did nothing.
+#[test]
+fn lm_takes_a_gradient_method_only() {
+    use regtrack::tracker::{Tracker, TrackerSpec};
+    for sm in ["lm:nn1k", "lm:pf"] {
+        let e = TrackerSpec::from_names(sm, "ssd", "homography")
+            .and_then(|s| Tracker::new(&s).map(|_| ()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gradient"), "{sm}: {e}");
+    }
+    let ok = TrackerSpec::from_names("lm:iclk", "ssd", "homography").unwrap();
+    assert!(Tracker::new(&ok).is_ok());
+}
+
+/// `score-patches` says the sequence's warnings, refuses coordinates beyond any frame (1e155
+/// was counted as tracked and dropped from the mean as infinite), a tracks file of another
+/// length than the sequence, and an empty one (which was blamed on the ground truth).
+#[test]
+fn score_patches_refuses_tracks_that_are_not_the_sequences() {
+    use crate::cli::{regtrack, succeed, synth};
+    let d = TempDir::new("score");
+    let data = d.path().join("data");
+    succeed(synth("ucsb_bricks_rt.txt", &data, "p", &["--frames", "4"]));
+    let seq = data.join("p.txt");
+    let tracks = d.path().join("t.csv");
+    succeed(regtrack(&[
+        "track",
+        "--seq",
+        seq.to_str().unwrap(),
+        "--patches",
+        "5",
+        "--out",
+        tracks.to_str().unwrap(),
+    ]));
+    let score = |t: &std::path::Path| {
+        regtrack(&[
+            "score-patches",
+            "--seq",
+            seq.to_str().unwrap(),
+            "--tracks",
+            t.to_str().unwrap(),
+        ])
+    };
+    succeed(score(&tracks));
+    let text = std::fs::read_to_string(&tracks).unwrap();
+    let bad = d.path().join("bad.csv");
+    let check = |content: String, says: &str| {
+        std::fs::write(&bad, content).unwrap();
+        let out = score(&bad);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(says), "{says}: {e}");
+    };
+    // The last frame's lines cut off.
+    let short: Vec<&str> = text.lines().filter(|l| !l.starts_with("3,")).collect();
+    check(short.join("\n") + "\n", "tracks of 3 frames");
+    check(String::new(), "no tracks");
+    // A coordinate no frame has.
+    let mut far: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut f: Vec<String> = far[2].split(',').map(str::to_string).collect();
+    f[3] = "1e155".into();
+    far[2] = f.join(",");
+    check(far.join("\n") + "\n", "bad.csv:3");
+    // The sequence's warnings are said.
+    let gt = std::fs::read_to_string(&seq).unwrap();
+    let lines: Vec<&str> = gt.lines().collect();
+    let folded =
+        lines[3].split_whitespace().next().unwrap().to_string() + " 10 10 40 30 40 10 10 30";
+    let mut g: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
+    g[3] = folded;
+    std::fs::write(&seq, g.join("\n") + "\n").unwrap();
+    let out = score(&tracks);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("warning:"));
+}
+
+/// A 1 MB token is quoted short in the error that names it, not echoed whole.
+#[test]
+fn a_huge_token_is_quoted_short() {
+    let token = "x".repeat(1 << 20);
+    let p = std::path::Path::new("g.txt");
+    let e = regtrack::dataset::parse_ground_truth(p, &format!("1 2 3 4 5 6 7 {token}\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.len() < 300 && e.contains("1048576 bytes"),
+        "{}",
+        &e[..e.len().min(300)]
+    );
+    let e = regtrack::tracker::TrackerSpec::from_names(&token, "ssd", "homography")
+        .and_then(|s| regtrack::tracker::Tracker::new(&s).map(|_| ()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.len() < 2000 && e.contains("1048576 bytes"),
+        "{}",
+        &e[..e.len().min(300)]
+    );
+    let e = regtrack::params::split_assignment(&token)
+        .unwrap_err()
+        .to_string();
+    assert!(e.len() < 300, "{}", &e[..e.len().min(300)]);
+}

@@ -107,7 +107,23 @@ fn run() -> Result<()> {
         },
         Command::ScorePatches { seq, tracks } => {
             let seq = Sequence::open(&seq)?;
+            warn_about(std::slice::from_ref(&seq));
             let run = regtrack::patches::read_tracks(&tracks)?;
+            // Every frame of the sequence from the first tracked one, no more, no fewer.
+            let frames = run.frames.len();
+            if frames == 0 {
+                bail!("{}: no tracks in the file", tracks.display());
+            }
+            if run.first + frames != seq.len() {
+                bail!(
+                    "{}: tracks of {frames} frames from frame {}, but {} has {} frames: give \
+                     the tracks of this sequence",
+                    tracks.display(),
+                    run.first + 1,
+                    seq.name,
+                    seq.len()
+                );
+            }
             match regtrack::patches::accuracy(&run, &seq) {
                 Some(a) => {
                     print_patch_accuracy(&a);

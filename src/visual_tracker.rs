@@ -48,6 +48,100 @@ pub fn check_initial_region(quad: &Quad, width: usize, height: usize) -> Result<
     Ok(())
 }
 
+/// The part of `quad`'s area inside a `width x height` frame, 0 to 1 (the quad clipped to the
+/// frame's rectangle, one edge of the rectangle at a time).
+pub fn fraction_inside(quad: &Quad, width: usize, height: usize) -> f64 {
+    let mut poly: Vec<(f64, f64)> = quad.0.iter().map(|p| (p.x, p.y)).collect();
+    let (w, h) = (width as f64, height as f64);
+    // Each half-plane as (axis, bound, keep the side below the bound).
+    for (axis, bound, below) in [(0, 0.0, false), (0, w, true), (1, 0.0, false), (1, h, true)] {
+        let coord = |p: &(f64, f64)| if axis == 0 { p.0 } else { p.1 };
+        let inside = |p: &(f64, f64)| (coord(p) <= bound) == below || coord(p) == bound;
+        let mut out = Vec::with_capacity(poly.len() + 4);
+        for k in 0..poly.len() {
+            let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+            if inside(&a) {
+                out.push(a);
+            }
+            if inside(&a) != inside(&b) {
+                let t = (bound - coord(&a)) / (coord(&b) - coord(&a));
+                out.push((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)));
+            }
+        }
+        poly = out;
+        if poly.is_empty() {
+            return 0.0;
+        }
+    }
+    let area = |p: &[(f64, f64)]| {
+        (0..p.len())
+            .map(|k| {
+                let (a, b) = (p[k], p[(k + 1) % p.len()]);
+                a.0 * b.1 - b.0 * a.1
+            })
+            .sum::<f64>()
+            .abs()
+            / 2.0
+    };
+    let whole = quad.signed_area().abs();
+    if whole > 0.0 {
+        (area(&poly) / whole).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Why a region's template has no gradient, for the error that refuses it: the part of it
+/// outside the frame, and the frame's pixels there when they are all one value (a blank or
+/// damaged frame, such as the grey a decoder shows for a video cut short).
+pub fn why_flat(quad: &Quad, input: FrameInput<'_>) -> String {
+    let (w, h) = input.size();
+    let mut why = Vec::new();
+    let inside = fraction_inside(quad, w, h);
+    if inside < 1.0 - 1e-9 {
+        why.push(format!(
+            "{:.0} % of the region lies outside the {w}x{h} frame",
+            (1.0 - inside) * 100.0
+        ));
+    }
+    let b = quad.bbox();
+    let (x0, y0) = (
+        b.x0.max(0.0).floor() as usize,
+        b.y0.max(0.0).floor() as usize,
+    );
+    let (x1, y1) = (
+        (b.x1.ceil().max(0.0) as usize).min(w),
+        (b.y1.ceil().max(0.0) as usize).min(h),
+    );
+    let mut range: Option<(f32, f32)> = None;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let v = match input {
+                FrameInput::Gray8(i) => i.data[y * w + x] as f32,
+                FrameInput::View8(i) => i.data[y * w + x] as f32,
+                FrameInput::Gray32(i) | FrameInput::Smoothed(i) => i.data[y * w + x],
+            };
+            range = Some(range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
+        }
+    }
+    match range {
+        Some((lo, hi)) if lo == hi => why.push(format!(
+            "every pixel of the frame there is {lo}: a blank frame, or a damaged one (a video \
+             cut short decodes as one grey)"
+        )),
+        Some((lo, hi)) if hi - lo < 2.0 => why.push(format!(
+            "the frame's pixels there differ by {} at most",
+            hi - lo
+        )),
+        _ => {}
+    }
+    if why.is_empty() {
+        "its pixels barely vary".into()
+    } else {
+        why.join("; ")
+    }
+}
+
 impl<'a> From<&'a GrayU8> for FrameInput<'a> {
     fn from(i: &'a GrayU8) -> Self {
         FrameInput::Gray8(i)

@@ -137,28 +137,17 @@ pub fn parse_ground_truth(path: &Path, text: &str) -> Result<Vec<GtEntry>> {
     Ok(out)
 }
 
-/// Parses ground-truth bytes: text that is not UTF-8 is an error naming the line.
+/// Parses ground-truth bytes: text that is not UTF-8 is an error naming the line; a byte-order
+/// mark is not part of the first line.
 pub fn parse_ground_truth_bytes(path: &Path, bytes: &[u8]) -> Result<Vec<GtEntry>> {
-    // A byte-order mark (some editors write one) is not part of the first line.
-    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    match std::str::from_utf8(bytes) {
-        Ok(text) => parse_ground_truth(path, text),
-        Err(e) => Err(Error::Parse {
-            path: path.to_path_buf(),
-            line: bytes[..e.valid_up_to()]
-                .iter()
-                .filter(|&&b| b == b'\n')
-                .count()
-                + 1,
-            message: "not UTF-8 text".into(),
-        }),
-    }
+    let text = crate::files::text_of(path, bytes.to_vec())?;
+    parse_ground_truth(path, &text)
 }
 
 /// Reads and parses a ground-truth file.
 pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
-    let bytes = crate::files::read_bounded(path, crate::files::TEXT_LIMIT)?;
-    parse_ground_truth_bytes(path, &bytes)
+    let text = crate::files::read_text(path, crate::files::TEXT_LIMIT)?;
+    parse_ground_truth(path, &text)
 }
 
 /// Writes ground truth atomically: with `names`, in the MTF format (header, frame names); else

@@ -71,6 +71,27 @@ struct Decoder {
     out: ChildStdout,
     /// The frame the next read gives.
     next: usize,
+    /// The last lines FFmpeg wrote to its standard error (read on a thread of their own).
+    said: std::sync::Arc<Mutex<Vec<String>>>,
+}
+
+/// How many of FFmpeg's last error lines a decoder keeps.
+const SAID_LINES: usize = 4;
+
+impl Decoder {
+    /// FFmpeg's last error lines, joined; empty when it said nothing. `wait` gives it that long
+    /// to say something (its messages and the frame's bytes travel on different pipes).
+    fn said(&self, wait: std::time::Duration) -> String {
+        let until = std::time::Instant::now() + wait;
+        loop {
+            let lines = self.said.lock().unwrap_or_else(|e| e.into_inner());
+            if !lines.is_empty() || std::time::Instant::now() >= until {
+                return lines.join("; ");
+            }
+            drop(lines);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
 }
 
 impl Drop for Decoder {
@@ -189,13 +210,36 @@ impl Video {
             .arg(ffmpeg_path(&self.path))
             .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray", "-"])
             .stdout(Stdio::piped())
-            .stderr(Stdio::null());
+            .stderr(Stdio::piped());
         let mut child = c.spawn().map_err(|e| missing("ffmpeg", e))?;
         let out = child.stdout.take().expect("piped");
+        let err = child.stderr.take().expect("piped");
+        let said = std::sync::Arc::new(Mutex::new(Vec::new()));
+        let keep = said.clone();
+        // Drained always (a full pipe would stop FFmpeg); the thread ends with the process.
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(err).split(b'\n') {
+                let Ok(line) = line else { break };
+                let line = String::from_utf8_lossy(&line);
+                let line = line.trim();
+                if line.is_empty() {
+                    continue;
+                }
+                let mut lines = keep.lock().unwrap_or_else(|e| e.into_inner());
+                if lines.len() == SAID_LINES {
+                    lines.remove(0);
+                }
+                // At most 200 characters a line.
+                let end = line.char_indices().nth(200).map_or(line.len(), |(k, _)| k);
+                lines.push(line[..end].to_string());
+            }
+        });
         Ok(Decoder {
             child,
             out,
             next: i,
+            said,
         })
     }
 
@@ -234,14 +278,37 @@ impl Video {
         while d.next <= i {
             if let Err(e) = d.out.read_exact(&mut img.data) {
                 let at = d.next;
+                let said = d.said(std::time::Duration::from_millis(200));
                 *guard = None;
+                let why = if said.is_empty() {
+                    e.to_string()
+                } else {
+                    format!("FFmpeg: {said}")
+                };
                 return Err(Error::Sequence {
                     path: self.path.clone(),
                     message: format!(
-                        "frame {} could not be decoded (the video is cut short or corrupt: {e})",
+                        "frame {} could not be decoded (the video is cut short or corrupt: {why})",
                         at + 1
                     ),
                 });
+            }
+            // A frame of one value that FFmpeg complained about is what its decoder shows
+            // where the data is missing (a video cut short), not a picture.
+            if img.data.iter().all(|&v| v == img.data[0]) {
+                let said = d.said(std::time::Duration::from_millis(100));
+                if !said.is_empty() {
+                    let at = d.next;
+                    *guard = None;
+                    return Err(Error::Sequence {
+                        path: self.path.clone(),
+                        message: format!(
+                            "frame {} could not be decoded, FFmpeg shows it as one grey (the \
+                             video is cut short or corrupt: FFmpeg: {said})",
+                            at + 1
+                        ),
+                    });
+                }
             }
             d.next += 1;
             self.remember(d.next - 1, &img);

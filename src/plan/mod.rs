@@ -332,6 +332,8 @@ impl Plan {
             let first: Vec<Box<dyn Stage>> = vec![
                 Box::new(Search {
                     max_iters: Some(escalate::FIRST_ITERS),
+                    eps_times: Some(escalate::FIRST_EPS_TIMES),
+                    extrapolate: true,
                 }),
                 Box::new(Measure),
             ];

@@ -7,10 +7,15 @@ use crate::registration::{Limits, SearchMethod};
 use crate::status::LossReason;
 
 /// See the module's documentation: at most `max_iters` iterations when set (else the
-/// tracker's).
+/// tracker's), stopping once the corners move less than `eps_times` times the tracker's `eps`
+/// (1 when not set; the line search's end stays where the tracker's `eps` puts it), or, with
+/// `extrapolate`, once the next step extrapolated from the last two would
+/// ([`crate::registration::Limits::extrapolate`]).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Search {
     pub max_iters: Option<usize>,
+    pub eps_times: Option<f64>,
+    pub extrapolate: bool,
 }
 
 impl Stage for Search {
@@ -27,6 +32,10 @@ impl Stage for Search {
         if let Some(n) = self.max_iters {
             limits.max_iters = limits.max_iters.min(n);
         }
+        if let Some(k) = self.eps_times {
+            limits.eps *= k;
+        }
+        limits.extrapolate = self.extrapolate;
         let first = run.estimate.iterations;
         let from = run.estimate.params;
         let (finest, mut reader, exec) = run.finest();

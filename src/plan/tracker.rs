@@ -271,8 +271,8 @@ impl VisualTracker for RegistrationTracker {
             .sum();
         if energy.partial_cmp(&(1e-6 * ctx.len() as f64)) != Some(std::cmp::Ordering::Greater) {
             return Err(Error::InvalidRegion(format!(
-                "cannot track {quad}: the template is flat (no image gradient): {}",
-                LossReason::Singular
+                "cannot track {quad}: the template is flat, it has no image gradient ({})",
+                crate::visual_tracker::why_flat(quad, input),
             )));
         }
         self.finest

@@ -19,6 +19,13 @@ pub struct Limits {
     pub eps: f64,
     pub max_iters: usize,
     pub line_search: bool,
+    /// Below this (px, the corners' change) a step that lowered the similarity ends the frame
+    /// ([`super::line_search::SETTLED`] times the tracker's `eps`).
+    pub settled: f64,
+    /// Also stop when the next step, extrapolated from the last two (the search converging
+    /// geometrically), would move the corners less than `eps`: `step^2 / previous step < eps`,
+    /// on steps the line search kept.
+    pub extrapolate: bool,
 }
 
 impl Limits {
@@ -28,6 +35,8 @@ impl Limits {
             eps: params.eps,
             max_iters: params.max_iters,
             line_search: params.line_search,
+            settled: super::line_search::SETTLED * params.eps,
+            extrapolate: false,
         }
     }
 }
@@ -91,7 +100,9 @@ impl<'a> Executor<'a> {
         sm.start_frame(ctx);
         let budget = sm.max_iterations(limits.max_iters);
         let mut relearnt = 0;
-        let mut line = LineSearch::new(limits.line_search && sm.line_search(), limits.eps);
+        let mut line = LineSearch::new(limits.line_search && sm.line_search(), limits.settled);
+        // The last step the line search kept (NaN when it was not).
+        let mut kept = f64::NAN;
         for it in 0..budget {
             let iteration_started = Instant::now();
             let from = ctx.params();
@@ -110,6 +121,8 @@ impl<'a> Executor<'a> {
             reader.cover(&corners);
             let step = corners.change_norm(&prev);
             prev = corners;
+            let extrapolated = limits.extrapolate && line.kept() && step * step < limits.eps * kept;
+            kept = if line.kept() { step } else { f64::NAN };
             iterations = it + 1;
             similarity = f;
             self.report(
@@ -128,7 +141,7 @@ impl<'a> Executor<'a> {
                 || match s.control {
                     Control::Done => true,
                     Control::Continue => false,
-                    Control::Auto => step < limits.eps,
+                    Control::Auto => step < limits.eps || extrapolated,
                 };
             if stop {
                 // A model that follows the light (SCV's intensity map) was learnt on the
@@ -141,7 +154,7 @@ impl<'a> Executor<'a> {
                     relearnt += 1;
                     // The similarity changes with the model: values before and after do not
                     // compare.
-                    line = LineSearch::new(line.is_on(), limits.eps);
+                    line = LineSearch::new(line.is_on(), limits.settled);
                     ctx.learn_model(&reader.view());
                     sm.model_updated(ctx);
                     continue;
@@ -236,8 +249,9 @@ mod tests {
         }
     }
 
-    /// The loop stops when the corners move less than `eps`, after `max_iters`, or when the
-    /// method says it is done; the observer sees each iteration numbered from `first`.
+    /// The loop stops when the corners move less than `eps` (or, extrapolating, would at the
+    /// next step), after `max_iters`, or when the method says it is done; the observer sees each
+    /// iteration numbered from `first`.
     #[test]
     fn the_loop_stops_by_eps_iterations_or_the_method() {
         let img = GrayF32 {
@@ -264,6 +278,8 @@ mod tests {
             eps,
             max_iters,
             line_search: false,
+            settled: 0.0,
+            extrapolate: false,
         };
         let mut run = |limits: Limits, done_after| {
             let mut seen = Seen::default();
@@ -293,5 +309,14 @@ mod tests {
         assert_eq!((ran.iterations, ran.converged), (4, false));
         let (ran, _) = run(limits(0.7, 30), Some(2));
         assert_eq!((ran.iterations, ran.converged), (2, true));
+        // Extrapolated: after the step of 1 (the one before 2), the next would be 0.5 < 0.7.
+        let (ran, _) = run(
+            Limits {
+                extrapolate: true,
+                ..limits(0.7, 30)
+            },
+            None,
+        );
+        assert_eq!((ran.iterations, ran.converged), (5, true));
     }
 }

@@ -31,11 +31,12 @@ pub struct LineSearch {
 }
 
 impl LineSearch {
-    /// A line search that does something only when `on`, for a stop test at `eps` px.
-    pub fn new(on: bool, eps: f64) -> Self {
+    /// A line search that does something only when `on`, settled below `settled` px
+    /// ([`SETTLED`] times the stop test's `eps`, [`super::Limits::settled`]).
+    pub fn new(on: bool, settled: f64) -> Self {
         LineSearch {
             on,
-            settled: SETTLED * eps,
+            settled,
             best: None,
             halvings: 0,
         }
@@ -43,6 +44,11 @@ impl LineSearch {
 
     pub fn is_on(&self) -> bool {
         self.on
+    }
+
+    /// Whether the last iteration's step stands (no step of this frame is being halved).
+    pub fn kept(&self) -> bool {
+        self.halvings == 0
     }
 
     /// After an iteration from `from`, where the similarity was `f`, that took the context's
@@ -159,7 +165,7 @@ mod tests {
                 ctx.set_params([0.0; crate::linalg::MAX_DOF]);
                 moved
             };
-            let mut line = LineSearch::new(true, 0.001);
+            let mut line = LineSearch::new(true, SETTLED * 0.001);
             let start = ctx.params();
             let mut dp = [0.0; crate::linalg::MAX_DOF];
             dp[0] = size / unit;

@@ -681,3 +681,73 @@ fn a_huge_token_is_quoted_short() {
         .to_string();
     assert!(e.len() < 300, "{}", &e[..e.len().min(300)]);
 }
+
+/// A region partly outside the frame, on a blank frame, and a video cut short (its first frame
+/// decoded as one grey) were each refused as "the template is flat ... singular system": the
+/// errors now say what is outside and that the frame is blank or damaged.
+#[test]
+fn a_flat_start_says_why() {
+    use regtrack::visual_tracker::{FrameInput, fraction_inside};
+    let quad = |v: [f64; 8]| regtrack::geometry::Quad::from_array(v);
+    // Half of a 40x40 square over the left edge, all of one inside, none of one beyond.
+    let half = quad([-20.0, 10.0, 20.0, 10.0, 20.0, 50.0, -20.0, 50.0]);
+    assert!((fraction_inside(&half, 100, 80) - 0.5).abs() < 1e-9);
+    let whole = quad([10.0, 10.0, 50.0, 10.0, 50.0, 50.0, 10.0, 50.0]);
+    assert!((fraction_inside(&whole, 100, 80) - 1.0).abs() < 1e-9);
+    let beyond = quad([110.0, 10.0, 150.0, 10.0, 150.0, 50.0, 110.0, 50.0]);
+    assert_eq!(fraction_inside(&beyond, 100, 80), 0.0);
+    // A rotated square over a corner: the clipped area by hand (a triangle of legs 20).
+    let diamond = quad([0.0, -20.0, 20.0, 0.0, 0.0, 20.0, -20.0, 0.0]);
+    assert!((fraction_inside(&diamond, 100, 80) - 200.0 / 800.0).abs() < 1e-9);
+
+    let blank = regtrack::imaging::GrayU8 {
+        width: 100,
+        height: 80,
+        data: vec![130; 8000],
+    };
+    let spec = regtrack::tracker::default_spec("homography").unwrap();
+    let mut t = regtrack::tracker::Tracker::new(&spec).unwrap();
+    let e = t
+        .initialize(FrameInput::Gray8(&blank), &half)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("50 % of the region lies outside the 100x80 frame")
+            && e.contains("every pixel of the frame there is 130")
+            && !e.contains("singular"),
+        "{e}"
+    );
+
+    if !crate::dataset::have_ffmpeg() {
+        return;
+    }
+    let d = TempDir::new("cut-video");
+    let ok = std::process::Command::new("ffmpeg")
+        .current_dir(d.path())
+        .args(["-v", "error", "-y", "-f", "lavfi", "-i"])
+        .arg("testsrc=size=192x144:rate=10,trim=end_frame=20")
+        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p", "--", "v.ts"])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let bytes = std::fs::read(d.path().join("v.ts")).unwrap();
+    // The first packets only: the first frame's data is cut.
+    let cut = d.path().join("cut.ts");
+    std::fs::write(&cut, &bytes[..2000.min(bytes.len() / 4)]).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_regtrack"))
+        .args(["track", "--init", "40,30,120,30,120,100,40,100", "--out"])
+        .arg(d.path().join("out.txt"))
+        .arg("--seq")
+        .arg(&cut)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(
+        !e.contains("template is flat")
+            && e.contains("frame 1")
+            && e.contains("cut short or corrupt"),
+        "{e}"
+    );
+}

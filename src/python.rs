@@ -194,6 +194,8 @@ pub struct PyTracker {
     recorder: Option<Recorder>,
     /// The library's own time in the last `initialize` or `update` (µs).
     last_us: f64,
+    /// The size of the frame the tracker was initialised on: every frame it tracks has it.
+    size: Option<(usize, usize)>,
 }
 
 /// A C-ordered, non-empty grey `uint8` array as an image where it is (numpy's buffer, read
@@ -275,6 +277,7 @@ impl PyTracker {
             frames: FrameBuffers::default(),
             recorder: None,
             last_us: 0.0,
+            size: None,
         })
     }
 
@@ -286,9 +289,13 @@ impl PyTracker {
         corners: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
         let q = quad_from(corners)?;
-        let (r, us) = self.with_frame(py, frame, |t, input| t.initialize(input, &q))?;
+        let (r, us) = self.with_frame(py, frame, |t, input| {
+            t.initialize(input, &q).map(|()| input.size())
+        })?;
         self.last_us = us;
-        r.map_err(library_error)
+        self.size = None;
+        self.size = Some(r.map_err(library_error)?);
+        Ok(())
     }
 
     /// Tracks one frame; returns `(corners, status)`: the corners (4 x 2; when lost, the last
@@ -306,11 +313,27 @@ impl PyTracker {
         } else {
             None
         };
-        let (out, us) = self.with_frame(py, frame, |t, input| match rec.as_mut() {
-            Some(r) => t.update(input, r),
-            None => t.update(input, &mut NoObserver),
+        let expected = self.size;
+        let (out, us) = self.with_frame(py, frame, |t, input| {
+            // A frame of another size than the first: the corners would be read on another
+            // picture (a camera that changed its mode, a frame cropped by mistake).
+            if let Some(e) = expected
+                && input.size() != e
+            {
+                return Err((input.size(), e));
+            }
+            Ok(match rec.as_mut() {
+                Some(r) => t.update(input, r),
+                None => t.update(input, &mut NoObserver),
+            })
         })?;
         self.recorder = rec;
+        let out = out.map_err(|((w, h), (w0, h0))| {
+            PyValueError::new_err(format!(
+                "the frame is {w}x{h} and the tracker was initialised on a {w0}x{h0} frame: \
+                 initialize it again for frames of another size"
+            ))
+        })?;
         self.last_us = us;
         Ok((quad_to(py, &out.corners), status_text(&out.status)))
     }

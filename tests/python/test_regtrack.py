@@ -129,6 +129,18 @@ def test_errors_name_what_was_expected():
     # Not initialised: a status, not an exception.
     c, s = regtrack.Tracker().update(frame)
     assert s == "uninitialized"
+    # A frame of another size than the one it started on (a strided view, a crop): refused,
+    # naming both sizes (it was tracked, and reported lost).
+    t = regtrack.Tracker()
+    t.initialize(frame, quad)
+    for other in (frame[::2, ::2], frame[:, :50]):
+        with pytest.raises(ValueError, match="initialised on a 80x60 frame"):
+            t.update(other)
+    c, s = t.update(frame)
+    assert s == "tracking"
+    # A region partly outside a blank frame: refused with the reason.
+    with pytest.raises(regtrack.Error, match="outside the 80x60 frame.*every pixel"):
+        regtrack.Tracker().initialize(np.full((60, 80), 7, np.uint8), quad - [40, 0])
 
 
 def test_parameters_are_the_command_lines(rendered):

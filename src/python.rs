@@ -554,12 +554,15 @@ pub struct PyCamera {
 impl PyCamera {
     #[new]
     #[pyo3(signature = (source, size=(640, 480)))]
-    fn new(source: &str, size: (usize, usize)) -> PyResult<Self> {
+    fn new(source: &str, size: (i64, i64)) -> PyResult<Self> {
+        let (Ok(w), Ok(h)) = (usize::try_from(size.0), usize::try_from(size.1)) else {
+            return Err(PyValueError::new_err(format!(
+                "size must be (width, height) in pixels, got ({}, {})",
+                size.0, size.1
+            )));
+        };
         Ok(PyCamera {
-            live: Some(
-                crate::dataset::live::LiveRun::open(source, size.0, size.1)
-                    .map_err(library_error)?,
-            ),
+            live: Some(crate::dataset::live::LiveRun::open(source, w, h).map_err(library_error)?),
             dropped: 0,
             stopped: None,
             given: 0,

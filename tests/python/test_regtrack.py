@@ -302,6 +302,12 @@ def test_a_live_source_from_python():
     assert c.shape == (4, 2)
     with pytest.raises(regtrack.Error, match="cannot|not"):
         list(regtrack.Camera("/dev/nosuchcamera", size=(320, 240)))
+    # Sizes that cannot be a picture's: named, before anything is allocated (10**9 squared
+    # aborted the interpreter).
+    with pytest.raises(ValueError, match=r"size must be \(width, height\)"):
+        regtrack.Camera("lavfi:testsrc=size=320x240:rate=30", size=(-1, 5))
+    with pytest.raises(regtrack.Error, match="each side must be"):
+        regtrack.Camera("lavfi:testsrc=size=320x240:rate=30", size=(10**9, 10**9))
 
 
 def test_many_patches_from_python_match_the_command_line(rendered, tmp_path):

@@ -411,12 +411,23 @@ impl VisualTracker for RegistrationTracker {
             Err((LossReason::LowConfidence, Some(o))) => Some(o.params),
             _ => None,
         };
-        // Still lost with `on_loss=redetect`: search the whole frame.
+        // Failing the checks with `on_loss=redetect`: search the whole frame, also on the frame
+        // the loss happens on (a sudden acceleration, 8 then 15 px a frame, left the searches
+        // from the prediction and the last pose on a look-alike; by the next frame the target
+        // is further away). There a candidate must also be nearly as confident as the frames
+        // before ([`super::redetect::AT_LOSS`]).
         let checked = match checked {
-            Err(failed) if resume && self.params.on_loss == LossPolicy::Redetect => self
-                .redetect(input, observer, started, &mut timing)
-                .ok_or(failed)
-                .map_err(|(_, out)| (LossReason::NotFound, out)),
+            Err(failed) if self.params.on_loss == LossPolicy::Redetect => {
+                let bar = if resume {
+                    None
+                } else {
+                    // Before any frame was tracked, the template itself (confidence 1).
+                    Some(super::redetect::AT_LOSS * self.loss.reference().unwrap_or(1.0))
+                };
+                self.redetect(input, observer, started, &mut timing, bar)
+                    .ok_or(failed)
+                    .map_err(|(_, out)| (LossReason::NotFound, out))
+            }
             other => other,
         };
         let outcome = match checked {

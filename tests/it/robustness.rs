@@ -689,6 +689,43 @@ fn redetection_finds_a_target_that_comes_back_elsewhere() {
     }
 }
 
+#[test]
+fn a_sudden_jump_is_found_on_the_frame_it_happens() {
+    // The target moves 4 px a frame, then jumps 43 or 58 px (and half that down): the searches
+    // from the prediction and from the last pose (and the pyramid's basin) miss it. With
+    // `on_loss=redetect` the frame itself is searched for the template, so the jump costs no
+    // frame (before, the search began on the next frame, as with `continue`, which loses it).
+    for jump in [55.0, 70.0] {
+        let frames: Vec<(GrayU8, Quad)> = [0.0, 4.0, 8.0, 12.0, jump, jump + 4.0]
+            .iter()
+            .map(|&dx| pasted(100.0 + dx, 80.0 + dx / 2.0, 1.0))
+            .collect();
+        for policy in ["continue", "redetect"] {
+            let mut spec = regtrack::tracker::default_spec("homography").unwrap();
+            spec.set_param("on_loss", policy).unwrap();
+            let mut t = Tracker::new(&spec).unwrap();
+            t.initialize(FrameInput::Gray8(&frames[0].0), &frames[0].1)
+                .unwrap();
+            let mut tracked = Vec::new();
+            for (img, truth) in &frames[1..] {
+                let out = t.update(FrameInput::Gray8(img), &mut NoObserver);
+                tracked.push(
+                    out.status == TrackStatus::Tracking
+                        && alignment_error(&out.corners, truth) < 1.0,
+                );
+            }
+            if policy == "redetect" {
+                assert!(tracked.iter().all(|&t| t), "{jump} redetect: {tracked:?}");
+            } else {
+                assert!(
+                    tracked[..3].iter().all(|&t| t) && !tracked[3],
+                    "{jump} continue: {tracked:?}"
+                );
+            }
+        }
+    }
+}
+
 /// The eight combinations issue 17 holds to the peers: ESM, FCLK, FALK, ICLK x SSD, ZNCC.
 const PEER_COMBINATIONS: [(&str, &str); 8] = [
     ("esm", "ssd"),

@@ -20,7 +20,7 @@ pub struct Limits {
     pub max_iters: usize,
     pub line_search: bool,
     /// Below this (px, the corners' change) a step that lowered the similarity ends the frame
-    /// ([`super::line_search::SETTLED`] times the tracker's `eps`).
+    /// (the line search's `SETTLED` times the tracker's `eps`).
     pub settled: f64,
     /// Also stop when the next step, extrapolated from the last two (the search converging
     /// geometrically), would move the corners less than `eps`: `step^2 / previous step < eps`,

@@ -32,7 +32,7 @@ pub struct LineSearch {
 
 impl LineSearch {
     /// A line search that does something only when `on`, settled below `settled` px
-    /// ([`SETTLED`] times the stop test's `eps`, [`super::Limits::settled`]).
+    /// (`SETTLED` times the stop test's `eps`, [`super::Limits::settled`]).
     pub fn new(on: bool, settled: f64) -> Self {
         LineSearch {
             on,

@@ -48,48 +48,8 @@ pub fn check_initial_region(quad: &Quad, width: usize, height: usize) -> Result<
     Ok(())
 }
 
-/// The part of `quad`'s area inside a `width x height` frame, 0 to 1 (the quad clipped to the
-/// frame's rectangle, one edge of the rectangle at a time).
-pub fn fraction_inside(quad: &Quad, width: usize, height: usize) -> f64 {
-    let mut poly: Vec<(f64, f64)> = quad.0.iter().map(|p| (p.x, p.y)).collect();
-    let (w, h) = (width as f64, height as f64);
-    // Each half-plane as (axis, bound, keep the side below the bound).
-    for (axis, bound, below) in [(0, 0.0, false), (0, w, true), (1, 0.0, false), (1, h, true)] {
-        let coord = |p: &(f64, f64)| if axis == 0 { p.0 } else { p.1 };
-        let inside = |p: &(f64, f64)| (coord(p) <= bound) == below || coord(p) == bound;
-        let mut out = Vec::with_capacity(poly.len() + 4);
-        for k in 0..poly.len() {
-            let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
-            if inside(&a) {
-                out.push(a);
-            }
-            if inside(&a) != inside(&b) {
-                let t = (bound - coord(&a)) / (coord(&b) - coord(&a));
-                out.push((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)));
-            }
-        }
-        poly = out;
-        if poly.is_empty() {
-            return 0.0;
-        }
-    }
-    let area = |p: &[(f64, f64)]| {
-        (0..p.len())
-            .map(|k| {
-                let (a, b) = (p[k], p[(k + 1) % p.len()]);
-                a.0 * b.1 - b.0 * a.1
-            })
-            .sum::<f64>()
-            .abs()
-            / 2.0
-    };
-    let whole = quad.signed_area().abs();
-    if whole > 0.0 {
-        (area(&poly) / whole).clamp(0.0, 1.0)
-    } else {
-        0.0
-    }
-}
+/// Re-exported here beside [`why_flat`], which says it in its errors.
+pub use crate::geometry::fraction_inside;
 
 /// Why a region's template has no gradient, for the error that refuses it: the part of it
 /// outside the frame, and the frame's pixels there when they are all one value (a blank or

@@ -70,6 +70,21 @@ fn positively_wound(q: &Quad) -> Vec<Point> {
     v
 }
 
+/// The part of `quad`'s area inside a `width x height` frame, 0 to 1 (the quad clipped to the
+/// frame's rectangle; 0 for a quad without area).
+pub fn fraction_inside(quad: &Quad, width: usize, height: usize) -> f64 {
+    let whole = quad.signed_area().abs();
+    if whole.is_nan() || whole <= 0.0 {
+        return 0.0;
+    }
+    let frame = Quad::from_rect(0.0, 0.0, width as f64, height as f64);
+    let inside = polygon_area(&clip_convex(
+        &positively_wound(quad),
+        &positively_wound(&frame),
+    ));
+    (inside.abs() / whole).clamp(0.0, 1.0)
+}
+
 /// Intersection over union of two quads. Exact when at least one is convex; for two non-convex
 /// quads it falls back to their bounding boxes. Returns 0 for degenerate input.
 pub fn iou(a: &Quad, b: &Quad) -> f64 {

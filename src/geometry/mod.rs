@@ -3,7 +3,7 @@
 //! error, 1 - IoU).
 
 mod error;
-pub use error::{alignment_error, center_error, iou, polygon_area};
+pub use error::{alignment_error, center_error, fraction_inside, iou, polygon_area};
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};

@@ -1,17 +1,17 @@
 //! The policy after a loss (tracker parameter `on_loss=redetect`, the default): when a frame's
-//! searches fail the checks (a tracking frame's, and a lost tracker's from its last good
-//! estimate and from where the rejected search ended), the frame is searched for the template,
-//! within a budget; on the frame the loss happens on, a candidate must also reach [`AT_LOSS`]. The last
-//! good quad is moved over the frame at [`REDETECT_SCALES`], in rings around where it was lost;
-//! each candidate is ranked by its confidence on the tracker's coarsest pyramid level
-//! ([`Detector`]), in steps of a sixth of the target's size in that level's pixels (at least
-//! two of them). Every lost frame ranks the [`NEAR_RINGS`] first (a target that comes back
-//! mostly comes back near), then the far rings from where the last lost frame stopped
-//! ([`Scan`]), reading at most [`REDETECT_SAMPLES`] samples, so that no update while lost takes
-//! long (the whole frame is covered in a few frames, then the far search starts again).
-//! Of the [`REDETECT_REFINED`] best candidates of the frame, the best is refined by the plan
-//! and the others only when ranked at `min_confidence` or more, in turn; the first that passes
-//! the checks (the confidence's whatever the SSM) is the frame's end.
+//! searches fail the checks (a tracking frame's, and a lost tracker's from its last good estimate
+//! and from where the rejected search ended), the frame is searched for the template, within a
+//! budget; on the frame the loss happens on, a candidate must also reach [`AT_LOSS`]. The last good
+//! quad is moved over the frame at [`REDETECT_SCALES`], in rings around where it was lost; each
+//! candidate is ranked by its confidence on the tracker's coarsest pyramid level ([`Detector`]), in
+//! steps of a sixth of the target's size in that level's pixels (at least two of them). Every lost
+//! frame ranks the [`NEAR_RINGS`] first (a target that comes back mostly comes back near), then the
+//! far rings from where the last lost frame stopped ([`Scan`]), reading at most
+//! [`REDETECT_SAMPLES`] samples, so that no update while lost takes long (the whole frame is
+//! covered in a few frames, then the far search starts again). Of the [`REDETECT_REFINED`] best
+//! candidates of the frame, the best is refined by the plan and the others only when ranked at
+//! `min_confidence` or more, in turn; the first that passes the checks (the confidence's whatever
+//! the SSM) is the frame's end.
 
 use super::judge::SearchResult;
 use super::tracker::CONFIDENCE_BLOCKS;

@@ -141,6 +141,7 @@ pub fn write_results(
                 tracker: k.tracker.clone(),
                 mean_sr: k.mean(),
                 points: k.points.iter().map(|p| (p.0, p.1)).collect(),
+                ..Default::default()
             })
             .collect(),
     };

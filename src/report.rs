@@ -50,14 +50,20 @@ impl TrackerResult {
 }
 
 /// One curve of a figure.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Curve {
     /// The legend: what varies in the figure (the SM, the AM, the SSM, or the whole label).
     pub name: String,
     /// The tracker's label.
     pub tracker: String,
     pub mean_sr: f64,
+    /// The line; a non-finite point breaks it (a lost frame is a gap, not a bridge).
     pub points: Vec<(f64, f64)>,
+    /// Its colour and dash when the figure should match another view (the inspector's
+    /// trackers' colours); `None`: the figure's palette by rank.
+    pub style: Option<([u8; 3], bool)>,
+    /// Points marked with a cross (the frames reported lost), in the curve's colour.
+    pub marks: Vec<(f64, f64)>,
 }
 
 /// Which comparison a figure makes.
@@ -166,6 +172,7 @@ pub fn sr_figures(trackers: &[TrackerResult]) -> Vec<Figure> {
         tracker: t.summary.tracker.clone(),
         mean_sr: t.summary.mean_sr,
         points: t.curve.clone(),
+        ..Default::default()
     };
     let mut group = |kind: FigureKind, stem: String, title: String, members: Vec<Curve>| {
         if members.len() >= 2 {
@@ -544,6 +551,44 @@ enum Plot<'a> {
     /// Curves over other axes (the frequency of convergence).
     Curves(&'a Figure, &'a Axes),
     Speed(&'a [(String, f64)]),
+    Map(&'a MapFigure),
+}
+
+/// A map of values over a square of offsets (the inspector's 2-D cost landscape), with a path
+/// drawn over it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapFigure {
+    pub title: String,
+    pub x_desc: String,
+    pub y_desc: String,
+    /// `n x n` values, row `j` at the `j`-th offset of the second axis, non-finite left white.
+    pub values: Vec<f64>,
+    /// The offsets of both axes (ascending).
+    pub offsets: Vec<f64>,
+    /// A path over the map (the iterations), and a point to mark (the best sample).
+    pub path: Vec<(f64, f64)>,
+    pub best: Option<(f64, f64)>,
+}
+
+/// A perceptual colour map (dark blue through green to yellow) for `t` in 0..1 (the
+/// inspector's landscape map and its exported figure).
+pub fn colormap(t: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 5] = [
+        [68.0, 1.0, 84.0],
+        [59.0, 82.0, 139.0],
+        [33.0, 145.0, 140.0],
+        [94.0, 201.0, 98.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    } * 4.0;
+    let i = (t.floor() as usize).min(3);
+    let f = t - i as f64;
+    let c = |k: usize| (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f) as u8;
+    [c(0), c(1), c(2)]
 }
 
 /// The axes of a curve figure.
@@ -574,6 +619,7 @@ impl Plot<'_> {
             ),
             Plot::Curves(f, axes) => draw_sr(area, f, axes),
             Plot::Speed(rows) => draw_speed(area, rows),
+            Plot::Map(m) => draw_map(area, m),
         }
     }
 }
@@ -636,14 +682,30 @@ fn draw_sr<DB: DrawingBackend>(
         .light_line_style(RGBColor(245, 245, 245))
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
+    let style_of = |i: usize, c: &Curve| match c.style {
+        Some(([r, g, b], dashed)) => (RGBColor(r, g, b), dashed),
+        None => curve_style(i),
+    };
     for (i, c) in fig.curves.iter().enumerate() {
-        let (color, dashed) = curve_style(i);
+        let (color, dashed) = style_of(i, c);
         let style = Color::stroke_width(&color, 2);
-        if dashed {
-            chart.draw_series(DashedLineSeries::new(c.points.iter().copied(), 9, 5, style))?;
-        } else {
-            chart.draw_series(LineSeries::new(c.points.iter().copied(), style))?;
+        // Each finite run of points is a line of its own.
+        for run in c
+            .points
+            .split(|p| !(p.0.is_finite() && p.1.is_finite()))
+            .filter(|r| !r.is_empty())
+        {
+            if dashed {
+                chart.draw_series(DashedLineSeries::new(run.iter().copied(), 9, 5, style))?;
+            } else {
+                chart.draw_series(LineSeries::new(run.iter().copied(), style))?;
+            }
         }
+        chart.draw_series(
+            c.marks
+                .iter()
+                .map(|&p| Cross::new(p, 5, Color::stroke_width(&color, 2))),
+        )?;
     }
 
     let rows = entries.len() as u32 + 1;
@@ -654,9 +716,9 @@ fn draw_sr<DB: DrawingBackend>(
         (44, top),
         legend_font.clone().pos(Pos::new(HPos::Left, VPos::Center)),
     ))?;
-    for (i, e) in entries.iter().enumerate() {
+    for (i, (e, c)) in entries.iter().zip(&fig.curves).enumerate() {
         let y = top + row_h * (i as i32 + 1);
-        let (color, dashed) = curve_style(i);
+        let (color, dashed) = style_of(i, c);
         let style = Color::stroke_width(&color, 3);
         if dashed {
             legend.draw(&PathElement::new(vec![(4, y), (16, y)], style))?;
@@ -671,6 +733,104 @@ fn draw_sr<DB: DrawingBackend>(
         ))?;
     }
     Ok(())
+}
+
+fn draw_map<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, m: &MapFigure) -> DrawResult<DB> {
+    root.fill(&WHITE)?;
+    let root = root.titled(&m.title, (FAMILY, 22).into_font().color(&BLACK))?;
+    let n = m.offsets.len();
+    let (w, _) = root.dim_in_pixel();
+    // The colour bar at the right, with the values at its ends and middle.
+    let (plot, bar) = root.split_horizontally(w.saturating_sub(120));
+    let (r0, r1) = (
+        m.offsets.first().copied().unwrap_or(-1.0),
+        m.offsets.last().copied().unwrap_or(1.0),
+    );
+    let cell = if n > 1 {
+        (r1 - r0) / (n - 1) as f64
+    } else {
+        1.0
+    };
+    let (lo, hi) = (r0 - cell / 2.0, r1 + cell / 2.0);
+    let mut chart = ChartBuilder::on(&plot)
+        .margin(12)
+        .x_label_area_size(50)
+        .y_label_area_size(62)
+        .build_cartesian_2d(lo..hi, lo..hi)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(m.x_desc.as_str())
+        .y_desc(m.y_desc.as_str())
+        .axis_desc_style((FAMILY, 17))
+        .label_style((FAMILY, 14))
+        .x_label_formatter(&|v| format!("{v:.1}"))
+        .y_label_formatter(&|v| format!("{v:.1}"))
+        .draw()?;
+    let finite = m.values.iter().copied().filter(|v| v.is_finite());
+    let (vlo, vhi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let span = (vhi - vlo).max(1e-12);
+    let rgb = |t: f64| {
+        let [r, g, b] = colormap(t);
+        RGBColor(r, g, b)
+    };
+    chart.draw_series((0..n * n).filter_map(|k| {
+        let v = *m.values.get(k)?;
+        let (x, y) = (m.offsets[k % n], m.offsets[k / n]);
+        v.is_finite().then(|| {
+            Rectangle::new(
+                [
+                    (x - cell / 2.0, y - cell / 2.0),
+                    (x + cell / 2.0, y + cell / 2.0),
+                ],
+                rgb((v - vlo) / span).filled(),
+            )
+        })
+    }))?;
+    if !m.path.is_empty() {
+        chart.draw_series(LineSeries::new(
+            m.path.iter().copied(),
+            Color::stroke_width(&WHITE, 2),
+        ))?;
+        chart.draw_series(m.path.iter().map(|&p| Circle::new(p, 3, WHITE.filled())))?;
+    }
+    if let Some(b) = m.best {
+        chart.draw_series(std::iter::once(Circle::new(
+            b,
+            5,
+            RGBColor(255, 80, 80).filled(),
+        )))?;
+    }
+    // The colour bar: top the largest f.
+    let (_, bh) = bar.dim_in_pixel();
+    let (top, bottom) = (40i32, bh as i32 - 70);
+    let steps = 64;
+    for k in 0..steps {
+        let t = k as f64 / (steps - 1) as f64;
+        let y0 = bottom - ((bottom - top) as f64 * (k + 1) as f64 / steps as f64) as i32;
+        let y1 = bottom - ((bottom - top) as f64 * k as f64 / steps as f64) as i32;
+        bar.draw(&Rectangle::new([(10, y0), (34, y1)], rgb(t).filled()))?;
+    }
+    let font = (FAMILY, 13)
+        .into_font()
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Left, VPos::Center));
+    for (v, y) in [
+        (vhi, top),
+        (0.5 * (vlo + vhi), (top + bottom) / 2),
+        (vlo, bottom),
+    ] {
+        bar.draw(&Text::new(format!("{v:.4}"), (40, y), font.clone()))?;
+    }
+    bar.draw(&Text::new("f", (14, top - 16), font.clone()))?;
+    Ok(())
+}
+
+/// Draws a map figure (the 2-D cost landscape) to `path` (`.png` or `.svg`).
+pub fn draw_map_figure(path: &Path, map: &MapFigure, size: (u32, u32)) -> Result<()> {
+    save(path, size, &Plot::Map(map))
 }
 
 /// `x` rounded down (`up = false`) or up to a power of ten.

@@ -89,6 +89,8 @@ pub enum Command {
     /// Write the plots shown (success rates, errors per frame, a landscape curve) as SVG and
     /// PNG into the folder, with `report`'s figure code.
     ExportPlots(PathBuf),
+    /// Show a folder in the desktop's file manager (where the plots went).
+    OpenFolder(PathBuf),
 }
 
 /// The actions of the ground-truth mode ([`Command::Gt`]).
@@ -213,6 +215,7 @@ impl InspectorApp {
             Command::Perturb => self.perturb(),
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
             Command::ExportPlots(dir) => self.export_plots(dir),
+            Command::OpenFolder(dir) => self.open_folder(&dir),
             Command::ConvergenceFrequency(starts) => self.convergence_frequency(starts),
             Command::TrackPatches => self.track_patches(),
             Command::SetPatchSettings(p) => self.state.patches = p,

@@ -2,7 +2,7 @@
 
 use super::worker::Reply;
 use super::{InspectorApp, runtime};
-use crate::report::{Axes, Curve, Figure, FigureKind};
+use crate::report::{Axes, Curve, Figure, FigureKind, MapFigure};
 use std::path::PathBuf;
 
 impl InspectorApp {
@@ -16,16 +16,26 @@ impl InspectorApp {
         let mut figures = self.tracking_figures(&name);
         figures.extend(self.landscape_figure(&name));
         figures.extend(self.convergence_figure(&name));
-        if figures.is_empty() {
+        let map = self.landscape_map_figure(&name);
+        if figures.is_empty() && map.is_none() {
             self.error("nothing to export: track some frames first".into());
             return;
         }
+        // Relative folders are the session's working folder's: say where, in full.
+        let dir = std::path::absolute(&dir).unwrap_or(dir);
         let spawned = self.rt.worker.spawn_task("export-plots", move || {
             let mut files = Vec::new();
-            for (stem, fig, axes) in &figures {
-                for ext in ["svg", "png"] {
+            for ext in ["svg", "png"] {
+                for (stem, fig, axes) in &figures {
                     let p = dir.join(format!("{stem}.{ext}"));
                     if let Err(e) = crate::report::draw_curve_figure(&p, fig, axes, (900, 560)) {
+                        return Reply::Exported(Err(e.to_string()));
+                    }
+                    files.push(p);
+                }
+                if let Some(m) = &map {
+                    let p = dir.join(format!("landscape_map.{ext}"));
+                    if let Err(e) = crate::report::draw_map_figure(&p, m, (760, 640)) {
                         return Reply::Exported(Err(e.to_string()));
                     }
                     files.push(p);
@@ -38,14 +48,45 @@ impl InspectorApp {
         }
     }
 
-    /// The success rates and the errors per frame of every tracker.
+    /// Shows `dir` in the desktop's file manager (`xdg-open`, `open` on macOS, `explorer` on
+    /// Windows); an error says so when none is there.
+    pub(super) fn open_folder(&mut self, dir: &std::path::Path) {
+        let opener = if cfg!(target_os = "macos") {
+            "open"
+        } else if cfg!(windows) {
+            "explorer"
+        } else {
+            "xdg-open"
+        };
+        let spawned = std::process::Command::new(opener)
+            .arg(dir)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn();
+        match spawned {
+            Ok(_) => self.rt.msg.status = format!("opened {}", dir.display()),
+            Err(e) => self.error(format!(
+                "cannot show {} in a file manager ({opener}: {e}); the figures are there",
+                dir.display()
+            )),
+        }
+    }
+
+    /// The success rates and the errors per frame of every tracker, drawn as the window draws
+    /// them: each tracker in its colour, the confidence dashed (scaled to 0..20 px), the
+    /// frames reported lost as crosses on it and a gap in the error.
     fn tracking_figures(&self, name: &str) -> Vec<ExportedFigure> {
         let mut sr = Vec::new();
         let mut errors = Vec::new();
-        let mut worst: f64 = 5.0;
+        let mut worst: f64 = CONFIDENCE_SCALE;
         let mut last = 1.0f64;
         for (i, t) in self.state.trackers.iter().enumerate() {
+            if self.state.view.ab.is_some_and(|(a, b)| i != a && i != b) {
+                continue;
+            }
             let label = t.spec.label();
+            let colour = Some((t.color, false));
             let curve = self.success_curve(i);
             if !curve.is_empty() {
                 let mean = curve.iter().map(|p| p.1).sum::<f64>() / curve.len() as f64;
@@ -54,24 +95,54 @@ impl InspectorApp {
                     tracker: label.clone(),
                     mean_sr: mean,
                     points: curve,
+                    style: colour,
+                    ..Default::default()
                 });
             }
-            let e: Vec<(f64, f64)> = self
-                .errors(i)
-                .into_iter()
-                .filter(|(_, e)| e.is_finite())
-                .map(|(f, e)| ((f + 1) as f64, e.min(50.0)))
+            let all = self.errors(i);
+            let e: Vec<(f64, f64)> = all
+                .iter()
+                .map(|&(f, e)| {
+                    (
+                        (f + 1) as f64,
+                        if e.is_finite() { e.min(50.0) } else { f64::NAN },
+                    )
+                })
                 .collect();
-            if !e.is_empty() {
-                worst = e.iter().map(|p| p.1).fold(worst, f64::max);
+            let finite: Vec<f64> = e.iter().map(|p| p.1).filter(|v| v.is_finite()).collect();
+            if !finite.is_empty() {
+                worst = finite.iter().copied().fold(worst, f64::max);
                 last = e.iter().map(|p| p.0).fold(last, f64::max);
-                let mean = e.iter().map(|p| p.1).sum::<f64>() / e.len() as f64;
+                let mean = finite.iter().sum::<f64>() / finite.len() as f64;
                 errors.push(Curve {
                     name: format!("{} {label}", i + 1),
-                    tracker: label,
+                    tracker: label.clone(),
                     mean_sr: mean,
                     points: e,
+                    style: colour,
+                    ..Default::default()
                 });
+                let conf = self.confidences(i);
+                let scaled = |c: f64| c.clamp(0.0, 1.0) * CONFIDENCE_SCALE;
+                if !conf.is_empty() {
+                    let points: Vec<(f64, f64)> = conf
+                        .iter()
+                        .map(|(f, c, _)| ((f + 1) as f64, scaled(*c)))
+                        .collect();
+                    let mean_c = conf.iter().map(|c| c.1).sum::<f64>() / conf.len() as f64;
+                    errors.push(Curve {
+                        name: format!("{} confidence x {CONFIDENCE_SCALE:.0}", i + 1),
+                        tracker: label,
+                        mean_sr: mean_c,
+                        points,
+                        style: Some((t.color, true)),
+                        marks: conf
+                            .iter()
+                            .filter(|c| c.2)
+                            .map(|(f, c, _)| ((f + 1) as f64, scaled(*c)))
+                            .collect(),
+                    });
+                }
             }
         }
         sr.sort_by(|a, b| b.mean_sr.total_cmp(&a.mean_sr));
@@ -105,7 +176,8 @@ impl InspectorApp {
                 },
                 Axes {
                     x_desc: "frame".into(),
-                    y_desc: "alignment error (px, at most 50)".into(),
+                    y_desc: "alignment error (px, at most 50); dashed: confidence x 20, x: lost"
+                        .into(),
                     x_range: (1.0, last.max(2.0)),
                     y_range: (0.0, worst * 1.05),
                     legend_header: "mean px".into(),
@@ -154,6 +226,12 @@ impl InspectorApp {
                             tracker: String::new(),
                             mean_sr: l.center_value,
                             points,
+                            style: self
+                                .state
+                                .trackers
+                                .get(self.state.selected_tracker)
+                                .map(|t| (t.color, false)),
+                            ..Default::default()
                         }],
                     },
                     Axes {
@@ -167,6 +245,44 @@ impl InspectorApp {
             }
         }
         None
+    }
+
+    /// The cost landscape's map, when one over two parameters is shown.
+    fn landscape_map_figure(&self, name: &str) -> Option<MapFigure> {
+        let Some((_, Ok(l))) = &self.rt.ui.landscape.result else {
+            return None;
+        };
+        if l.axes.len() != 2 {
+            return None;
+        }
+        let names = self.inspected_param_names();
+        let axis = |k: usize| names.get(l.axes[k]).copied().unwrap_or("?");
+        let path = self
+            .result(self.state.selected_tracker, self.state.frame)
+            .map(|r| {
+                r.iterations
+                    .iter()
+                    .map(|it| l.offsets_of(&it.params))
+                    .filter(|o| o.len() == 2)
+                    .map(|o| (o[0], o[1]))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let best = l.best();
+        Some(MapFigure {
+            title: format!(
+                "Cost landscape over {} and {}: {name}, frame {}",
+                axis(0),
+                axis(1),
+                self.state.frame + 1
+            ),
+            x_desc: format!("{} offset (px)", axis(0)),
+            y_desc: format!("{} offset (px)", axis(1)),
+            values: l.values.clone(),
+            offsets: l.offsets.clone(),
+            path,
+            best: Some((best[0], best[1])),
+        })
     }
 
     /// The frequency of convergence, when it ran.
@@ -196,6 +312,8 @@ impl InspectorApp {
                             tracker: c.tracker.clone(),
                             mean_sr: c.mean(),
                             points: c.points.iter().map(|p| (p.0, p.1)).collect(),
+                            style: self.state.trackers.get(*i).map(|t| (t.color, false)),
+                            ..Default::default()
                         })
                         .collect(),
                 },
@@ -210,6 +328,9 @@ impl InspectorApp {
         }
     }
 }
+
+/// The error figure draws the confidence (0..1) scaled to 0..this px, as the window does.
+const CONFIDENCE_SCALE: f64 = 20.0;
 
 /// A figure to write: its file stem, its curves and its axes.
 type ExportedFigure = (&'static str, Figure, Axes);

@@ -4,7 +4,7 @@
 use super::command::Command;
 use super::state::{InitSource, SequenceSource};
 use super::worker::{Job, Reply};
-use super::{InspectorApp, PATCH_FRAMES, list_paths};
+use super::{InspectorApp, PATCH_FRAMES};
 
 impl InspectorApp {
     /// Handles the worker's replies, each once.
@@ -63,7 +63,25 @@ impl InspectorApp {
                 Reply::Patches { from, result } => self.patches_done(from, result),
                 Reply::Frequency { frame, result } => self.frequency_done(frame, result),
                 Reply::Exported(result) => match result {
-                    Ok(files) => self.rt.msg.status = format!("wrote {}", list_paths(&files)),
+                    Ok(files) => {
+                        let dir = files
+                            .first()
+                            .and_then(|f| f.parent())
+                            .map(|d| d.to_path_buf())
+                            .unwrap_or_default();
+                        let stems: std::collections::BTreeSet<String> = files
+                            .iter()
+                            .filter_map(|f| f.file_stem())
+                            .map(|s| s.to_string_lossy().into_owned())
+                            .collect();
+                        self.rt.msg.status = format!(
+                            "wrote {} figures (SVG and PNG) to {}: {}",
+                            stems.len(),
+                            dir.display(),
+                            stems.into_iter().collect::<Vec<_>>().join(", ")
+                        );
+                        self.rt.ui.exported = Some(dir);
+                    }
                     Err(e) => self.error(format!("cannot export the plots: {e}")),
                 },
                 Reply::RecordingEnded { path, frames } => {
@@ -109,6 +127,12 @@ impl InspectorApp {
                 }
             ));
         }
+        // What was measured on the old sequence's frames is not this one's (a late answer
+        // of a request in flight finds nothing to fill and is dropped).
+        self.rt.ui.frequency = None;
+        self.rt.ui.patches = None;
+        self.rt.ui.landscape.requested = None;
+        self.rt.ui.landscape.result = None;
         self.open_corrections(&seq);
         let restore = self.rt.seq.restore_frame.take();
         let n = seq.len();

@@ -213,6 +213,8 @@ pub(super) struct UiRt {
     pub(super) patches: Option<Patches>,
     pub(super) perturb_sigma: f64,
     pub(super) perturbations: u64,
+    /// The folder the plots were last exported to (absolute).
+    pub(super) exported: Option<PathBuf>,
 }
 
 impl Default for UiRt {
@@ -234,6 +236,7 @@ impl Default for UiRt {
             patches: None,
             perturb_sigma: 5.0,
             perturbations: 0,
+            exported: None,
         }
     }
 }

@@ -826,9 +826,27 @@ fn the_cost_landscape_view_sweeps_the_inspected_tracker() {
         "its window"
     );
     assert!(h.query_by_label("shown in its own window").is_some());
-    // (At the bottom of the scrolled panel, under its scroll bar: through accesskit, as a
-    // screen reader would; the real window was clicked by hand.)
-    h.get_by_label("Back into the panel").click_accesskit();
+    // The map exports too, as a figure of its own.
+    let plots = d.path().join("plots");
+    h.state_mut().send(Command::ExportPlots(plots.clone()));
+    step_until(&mut h, "the files", |a| a.status().starts_with("wrote"));
+    for f in ["landscape_map.svg", "landscape_map.png"] {
+        let p = plots.join(f);
+        assert!(
+            p.is_file() && std::fs::metadata(&p).unwrap().len() > 1000,
+            "{f}"
+        );
+    }
+    assert!(
+        h.state().status().contains("landscape_map"),
+        "{}",
+        h.state().status()
+    );
+    // At the bottom of the scrolled panel: a pointer's click reaches it (a horizontal scroll
+    // bar over it took the click).
+    h.get_by_label("Back into the panel").scroll_to_me();
+    h.run_steps(3);
+    h.get_by_label("Back into the panel").click();
     h.run_steps(3);
     assert!(!h.state().landscape_enlarged());
     assert!(
@@ -1357,6 +1375,12 @@ fn the_plots_export_as_svg_and_png() {
     let out = d.path().join("plots");
     h.state_mut().send(Command::ExportPlots(out.clone()));
     step_until(&mut h, "the files", |a| a.status().starts_with("wrote"));
+    // Where they went, in full.
+    assert!(
+        h.state().status().contains(&out.display().to_string()),
+        "{}",
+        h.state().status()
+    );
     for f in [
         "sr.svg",
         "sr.png",
@@ -1376,6 +1400,23 @@ fn the_plots_export_as_svg_and_png() {
         svg.contains("success rate") && svg.contains("esm_ssd_homography"),
         "sr.svg"
     );
+    // Each tracker in the window's colour, in every figure.
+    for t in &h.state().state.trackers {
+        let [r, g, b] = t.color;
+        let hex = format!("#{r:02X}{g:02X}{b:02X}");
+        for f in ["sr.svg", "errors.svg", "convergence.svg"] {
+            let svg = std::fs::read_to_string(out.join(f)).unwrap();
+            assert!(svg.to_uppercase().contains(&hex), "{f} lacks {hex}");
+        }
+    }
+    // Another sequence: the old frame's frequency of convergence is not shown on it.
+    let other = small_sequence(&d.path().join("other"), 4);
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(other)));
+    step_until(&mut h, "the other sequence", |a| a.frame_count() == 4);
+    h.run_steps(2);
+    assert!(h.state().frequency().is_none());
+    assert!(h.query_by_label_contains("starts per σ").is_none());
 }
 
 /// The annotator's timeline: a proposal accepted on a selected range only (the rest stays

@@ -353,3 +353,67 @@ fn learning_trackers_are_drawn_beside_the_best_translation_trackers() {
                 .all(|c| !["kcf", "dsst", "tld"].contains(&c.name.as_str())))
     );
 }
+
+/// A curve figure draws a non-finite point as a gap (two lines, not one bridging it), each
+/// curve in its own colour and dash when given, its marks as crosses; a map figure draws its
+/// cells in the colour map.
+#[test]
+fn curves_break_at_gaps_keep_their_colours_and_maps_draw() {
+    let d = TempDir::new("report-gaps");
+    let fig = report::Figure {
+        kind: FigureKind::Others,
+        stem: "errors".into(),
+        title: "errors".into(),
+        curves: vec![report::Curve {
+            name: "1 a".into(),
+            tracker: "a".into(),
+            mean_sr: 1.0,
+            points: vec![
+                (1.0, 1.0),
+                (2.0, 2.0),
+                (3.0, f64::NAN),
+                (4.0, 1.0),
+                (5.0, 2.0),
+            ],
+            style: Some(([12, 34, 56], false)),
+            marks: vec![(3.0, 4.0)],
+        }],
+    };
+    let axes = report::Axes {
+        x_desc: "frame".into(),
+        y_desc: "px".into(),
+        x_range: (1.0, 5.0),
+        y_range: (0.0, 5.0),
+        legend_header: "mean".into(),
+    };
+    let p = d.path().join("errors.svg");
+    report::draw_curve_figure(&p, &fig, &axes, (600, 400)).unwrap();
+    let svg = std::fs::read_to_string(&p).unwrap();
+    let count = |tag: &str| {
+        svg.lines()
+            .filter(|l| l.contains(tag) && l.contains("#0C2238"))
+            .count()
+    };
+    // Two runs of the curve and the legend's sample; the cross's two strokes.
+    assert_eq!((count("<polyline"), count("<line")), (3, 2), "{svg}");
+    let map = report::MapFigure {
+        title: "map".into(),
+        x_desc: "x".into(),
+        y_desc: "y".into(),
+        values: (0..9).map(|k| k as f64).collect(),
+        offsets: vec![-1.0, 0.0, 1.0],
+        path: vec![(0.5, 0.5), (0.0, 0.0)],
+        best: Some((1.0, 1.0)),
+    };
+    for ext in ["svg", "png"] {
+        let p = d.path().join(format!("map.{ext}"));
+        report::draw_map_figure(&p, &map, (500, 400)).unwrap();
+        assert!(std::fs::metadata(&p).unwrap().len() > 1000);
+    }
+    let svg = std::fs::read_to_string(d.path().join("map.svg")).unwrap();
+    let [r, g, b] = report::colormap(1.0);
+    assert!(
+        svg.to_uppercase()
+            .contains(&format!("#{r:02X}{g:02X}{b:02X}"))
+    );
+}

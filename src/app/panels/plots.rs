@@ -16,19 +16,60 @@ use egui_plot::{
 const CONFIDENCE_SCALE: f64 = 20.0;
 
 /// Axes whose tick labels show even on short plots (egui_plot's defaults hide every label of a
-/// 150 px plot but the extremes).
+/// 150 px plot but the extremes), in few digits whatever the range (a live similarity of
+/// -4e-13 read "-0.0000000000004" and squeezed the plot).
 fn axes(plot: Plot<'static>, x: &str, y: &str) -> Plot<'static> {
     plot.custom_x_axes(vec![
         AxisHints::new_x()
             .label(x.to_string())
-            .label_spacing(22.0..=36.0),
+            .label_spacing(30.0..=44.0)
+            .formatter(tick),
     ])
-    .custom_y_axes(vec![
-        AxisHints::new_y()
-            .label(y.to_string())
-            .label_spacing(14.0..=22.0),
-    ])
+    .custom_y_axes(vec![y_axis(y)])
     .grid_spacing(6.0..=200.0)
+}
+
+/// A y axis of [`axes`]: compact ticks, room for its label.
+fn y_axis(label: &str) -> AxisHints<'static> {
+    AxisHints::new_y()
+        .label(label.to_string())
+        .label_spacing(14.0..=22.0)
+        .formatter(tick)
+}
+
+/// A frame-number axis: whole frames only (an empty plot read 0.5 0.6 ... 1.4), spaced so
+/// that four-digit frames do not run together.
+fn frame_axis(label: &str) -> AxisHints<'static> {
+    AxisHints::new_x()
+        .label(label.to_string())
+        .label_spacing(40.0..=56.0)
+        .formatter(|m, _| {
+            if m.value.fract() == 0.0 && m.step_size >= 1.0 {
+                format!("{:.0}", m.value)
+            } else {
+                String::new()
+            }
+        })
+}
+
+/// A tick label in at most four significant digits: plain in 0.001..100 000, else in
+/// scientific notation.
+pub(crate) fn tick(m: egui_plot::GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
+    compact(m.value, m.step_size)
+}
+
+/// `v` on an axis whose ticks are `step` apart, in few characters.
+pub(crate) fn compact(v: f64, step: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return if v == 0.0 { "0".into() } else { String::new() };
+    }
+    let a = v.abs().max(step.abs());
+    if !(1e-3..1e5).contains(&a) {
+        let s = format!("{v:.1e}");
+        return s.replace(".0e", "e");
+    }
+    let decimals = (-step.abs().log10().floor()).clamp(0.0, 4.0) as usize;
+    format!("{v:.decimals$}")
 }
 
 pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
@@ -37,42 +78,54 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
     }
     let ctx = ui.ctx().clone();
     let w = ctx.content_rect().width();
-    let most = if w < 1200.0 { 0.28 } else { 0.38 };
+    let most = if w < 1200.0 { 0.4 } else { 0.6 };
     let panel = super::follow_window(
         &ctx,
         "plots",
         egui::Panel::right("plots"),
-        (430.0f32.min(w * 0.28), most, 200.0),
+        (430.0f32.min(w * 0.3), most, 220.0),
     );
     let shown = panel.show(ui, |ui| {
-        egui::ScrollArea::both()
+        // Vertical only: every plot, image and table fits the panel's width (a horizontal
+        // scroll let them grow past it, and its bar covered the buttons under it); a margin
+        // for the axes' rotated labels and the floating scroll bar.
+        egui::ScrollArea::vertical()
             .auto_shrink([false, true])
             .show(ui, |ui| {
-                export_row(ui, out);
-                success_plot(app, ui);
-                ui.heading("Alignment error and confidence per frame");
-                error_legend(app, ui);
-                error_plot(app, ui, out);
-                if let Some((a, b)) = app.state.view.ab {
-                    disagreement(app, ui, out, a, b);
-                }
-                speed_table(app, ui);
-                ui.separator();
-                convergence(app, ui, out);
-                ui.separator();
-                frequency(app, ui, out);
-                ui.separator();
-                landscape(app, ui, out);
+                egui::Frame::new()
+                    .inner_margin(egui::Margin {
+                        left: 4,
+                        right: 12,
+                        top: 0,
+                        bottom: 0,
+                    })
+                    .show(ui, |ui| {
+                        export_row(app, ui, out);
+                        success_plot(app, ui);
+                        ui.heading("Alignment error and confidence per frame");
+                        error_legend(app, ui);
+                        error_plot(app, ui, out);
+                        if let Some((a, b)) = app.state.view.ab {
+                            disagreement(app, ui, out, a, b);
+                        }
+                        speed_table(app, ui);
+                        ui.separator();
+                        convergence(app, ui, out);
+                        ui.separator();
+                        frequency(app, ui, out);
+                        ui.separator();
+                        landscape(app, ui, out);
+                    });
             });
     });
     super::remember_share(&ctx, "plots", shown.response.rect.width());
 }
 
 /// The success-rate heading with the export button and its folder.
-fn export_row(ui: &mut egui::Ui, out: &mut Vec<Command>) {
+fn export_row(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     ui.horizontal_wrapped(|ui| {
         ui.heading("Success rate");
-        let id = ui.make_persistent_id("export_folder");
+        let id = egui::Id::new("export_folder");
         let mut folder = super::remembered_text(ui, id);
         if folder.is_empty() {
             folder = "plots".into();
@@ -94,6 +147,34 @@ fn export_row(ui: &mut egui::Ui, out: &mut Vec<Command>) {
             .on_hover_text("The folder the plots are written to");
         super::remember_text(ui, id, folder);
     });
+    // Where that is, in full (a relative folder is the one the app was started from), and
+    // the folder of the last export to open.
+    let target = std::path::absolute(folder_of(ui)).unwrap_or_default();
+    ui.horizontal_wrapped(|ui| {
+        ui.label(
+            egui::RichText::new(format!("into {}", target.display()))
+                .small()
+                .weak(),
+        );
+        if let Some(dir) = &app.rt.ui.exported
+            && ui
+                .small_button("Open folder")
+                .on_hover_text(format!("Show {} in the file manager", dir.display()))
+                .clicked()
+        {
+            out.push(Command::OpenFolder(dir.clone()));
+        }
+    });
+}
+
+/// The export folder as typed (`plots` when empty).
+fn folder_of(ui: &egui::Ui) -> std::path::PathBuf {
+    let typed = super::remembered_text(ui, egui::Id::new("export_folder"));
+    std::path::PathBuf::from(if typed.trim().is_empty() {
+        "plots"
+    } else {
+        typed.trim()
+    })
 }
 
 /// The success rate of every tracker shown (A and B only in A/B mode).
@@ -133,10 +214,9 @@ fn success_plot(app: &InspectorApp, ui: &mut egui::Ui) {
 fn error_plot(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let shown = app.state.frame;
     let r = axes(Plot::new("error_plot"), "frame", "E_AL (px)")
+        .custom_x_axes(vec![frame_axis("frame")])
         .custom_y_axes(vec![
-            AxisHints::new_y()
-                .label("E_AL (px)")
-                .label_spacing(14.0..=22.0),
+            y_axis("E_AL (px)"),
             AxisHints::new_y()
                 .label("confidence (dashed)")
                 .placement(HPlacement::Right)
@@ -152,6 +232,9 @@ fn error_plot(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         ])
         .height(170.0)
         .include_y(0.0)
+        // Frames 1..10 before any is tracked: whole frame numbers.
+        .include_x(1.0)
+        .include_x(10.0f64.min(app.frame_count().max(2) as f64))
         .allow_scroll(false)
         .allow_drag(false)
         .show(ui, |p| {
@@ -239,36 +322,44 @@ fn error_legend(app: &InspectorApp, ui: &mut egui::Ui) {
 fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
     ui.heading("Speed");
     // The figures first: in a narrow panel the names are what is cut off.
-    egui::Grid::new("speed").striped(true).show(ui, |ui| {
-        ui.label("");
-        ui.label("tracker FPS")
-            .on_hover_text("Frames per second of the tracker alone");
-        ui.label("live FPS")
-            .on_hover_text("Frames per second with the pre-processing of the frame");
-        ui.label("it/frame");
-        ui.label("tracker");
-        ui.end_row();
-        for (i, t) in app.state.trackers.iter().enumerate() {
-            let (n, s, u, it) = app.speed(i);
-            ui.colored_label(color(t.color), format!("{}", i + 1));
-            let fps = |us: f64| {
-                if us > 0.0 {
-                    format!("{:.0}", n as f64 / (us * 1e-6))
+    egui::Grid::new("speed")
+        .striped(true)
+        .max_col_width((ui.available_width() - 230.0).max(60.0))
+        .show(ui, |ui| {
+            ui.label("");
+            ui.label("tracker FPS")
+                .on_hover_text("Frames per second of the tracker alone");
+            ui.label("live FPS")
+                .on_hover_text("Frames per second with the pre-processing of the frame");
+            ui.label("it/frame");
+            ui.label("tracker");
+            ui.end_row();
+            for (i, t) in app.state.trackers.iter().enumerate() {
+                let (n, s, u, it) = app.speed(i);
+                ui.colored_label(color(t.color), format!("{}", i + 1));
+                let fps = |us: f64| {
+                    if us > 0.0 {
+                        format!("{:.0}", n as f64 / (us * 1e-6))
+                    } else {
+                        "-".into()
+                    }
+                };
+                ui.label(fps(s));
+                ui.label(fps(u));
+                ui.label(if n > 0 {
+                    format!("{:.2}", it as f64 / n as f64)
                 } else {
                     "-".into()
-                }
-            };
-            ui.label(fps(s));
-            ui.label(fps(u));
-            ui.label(if n > 0 {
-                format!("{:.2}", it as f64 / n as f64)
-            } else {
-                "-".into()
-            });
-            ui.colored_label(color(t.color), t.spec.label());
-            ui.end_row();
-        }
-    });
+                });
+                // The name wraps at its parts in what the panel leaves (it was cut off).
+                let name = t.spec.label().replace('_', " ");
+                ui.add(
+                    egui::Label::new(egui::RichText::new(name).color(color(t.color)))
+                        .wrap_mode(egui::TextWrapMode::Wrap),
+                );
+                ui.end_row();
+            }
+        });
 }
 
 /// A whole tracker makes one update per frame: what it did.
@@ -321,19 +412,15 @@ fn iteration_plots(
                     p.vline(m);
                 }
             });
-        axes(
-            Plot::new("step_plot"),
-            "iteration",
-            "log10 corner change (px)",
-        )
-        .height(130.0)
-        .allow_scroll(false)
-        .show(&mut cols[1], |p| {
-            p.line(Line::new("step", PlotPoints::from(step)).color(c));
-            if let Some(m) = marker.clone() {
-                p.vline(m);
-            }
-        });
+        axes(Plot::new("step_plot"), "iteration", "log10 step (px)")
+            .height(130.0)
+            .allow_scroll(false)
+            .show(&mut cols[1], |p| {
+                p.line(Line::new("step", PlotPoints::from(step)).color(c));
+                if let Some(m) = marker.clone() {
+                    p.vline(m);
+                }
+            });
     });
     let mut sel = app.rt.ui.selected_iteration.map_or(0, |s| s + 1);
     let changed = ui
@@ -635,39 +722,39 @@ fn patches(
             .small(),
         );
     }
+    let error = if coarse.is_some() {
+        "|error|: finest level only".to_string()
+    } else {
+        "|error| x4".to_string()
+    };
+    // Three columns that fit the panel (at 1280x800 the third was squeezed to 10 px and its
+    // label wrapped a letter a line): the labels wrap within their image's width, in a row
+    // of their own so that the images line up.
+    let gap = ui.spacing().item_spacing.x;
+    let side = ((ui.available_width() - 2.0 * gap) / 3.0).clamp(48.0, 160.0);
+    ui.horizontal_top(|ui| {
+        for label in ["template".to_string(), at, error] {
+            ui.allocate_ui_with_layout(
+                egui::vec2(side, 0.0),
+                egui::Layout::top_down(egui::Align::Min),
+                |ui| {
+                    ui.set_width(side);
+                    ui.add(egui::Label::new(egui::RichText::new(label).small()).wrap());
+                },
+            );
+        }
+    });
     ui.horizontal(|ui| {
-        let error = if coarse.is_some() {
-            "|error|: finest level only".to_string()
-        } else {
-            "|error| x4".to_string()
-        };
-        for (h, label) in handles.iter().zip(["template".to_string(), at, error]) {
-            ui.vertical(|ui| {
-                ui.label(label);
-                ui.image((h.id(), egui::Vec2::splat(120.0)));
-            });
+        for h in &handles {
+            ui.image((h.id(), egui::Vec2::splat(side)));
         }
     });
 }
 
-/// A perceptual colour map (dark blue to yellow) for `t` in 0..1.
+/// The landscape's colour map (the exported figure's, [`crate::report::colormap`]).
 fn colormap(t: f64) -> egui::Color32 {
-    const STOPS: [[f64; 3]; 5] = [
-        [68.0, 1.0, 84.0],
-        [59.0, 82.0, 139.0],
-        [33.0, 145.0, 140.0],
-        [94.0, 201.0, 98.0],
-        [253.0, 231.0, 37.0],
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    } * 4.0;
-    let i = (t.floor() as usize).min(3);
-    let f = t - i as f64;
-    let c = |k: usize| (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f) as u8;
-    egui::Color32::from_rgb(c(0), c(1), c(2))
+    let [r, g, b] = crate::report::colormap(t);
+    egui::Color32::from_rgb(r, g, b)
 }
 
 /// The cost landscape of the inspected tracker on the shown frame: the similarity swept along

@@ -125,7 +125,7 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
 fn export_row(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     ui.horizontal_wrapped(|ui| {
         ui.heading("Success rate");
-        let id = egui::Id::new("export_folder");
+        let id = egui::Id::unique("export_folder");
         let mut folder = super::remembered_text(ui, id);
         if folder.is_empty() {
             folder = "plots".into();
@@ -169,7 +169,7 @@ fn export_row(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
 
 /// The export folder as typed (`plots` when empty).
 fn folder_of(ui: &egui::Ui) -> std::path::PathBuf {
-    let typed = super::remembered_text(ui, egui::Id::new("export_folder"));
+    let typed = super::remembered_text(ui, egui::Id::unique("export_folder"));
     std::path::PathBuf::from(if typed.trim().is_empty() {
         "plots"
     } else {

@@ -665,7 +665,26 @@ pub fn propagate(
                 });
             }
         };
-        let out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+        // The first frame from where the old ground truth went (the tracker has no motion of
+        // its own to predict yet).
+        if frames.is_empty()
+            && let Some(moved) = moved_as_before(old, f, &start)
+        {
+            tracker.set_corners(&moved)?;
+        }
+        let mut out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+        // Lost: once more from where the old ground truth says the target went (its motion
+        // from the frame before, applied to the last proposed corners). A tracker started on
+        // the selection has no motion to predict yet: on a brick wall moving 5 px a frame the
+        // search from the last pose settled a brick off on the second frame, which a whole
+        // track (predicting by then) did not.
+        let last = frames.last().map_or(start, |&(_, q)| q);
+        if out.status != TrackStatus::Tracking
+            && let Some(moved) = moved_as_before(old, f, &last)
+            && tracker.set_corners(&moved).is_ok()
+        {
+            out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+        }
         if out.status != TrackStatus::Tracking {
             return Ok(Proposal {
                 frames,
@@ -710,4 +729,13 @@ pub fn propagate(
         frames,
         stop: PropagateStop::End,
     })
+}
+
+/// `last` (the corners proposed for frame `f - 1`) moved as the old ground truth moved from
+/// frame `f - 1` to `f` (`None` where either is missing or the motion is degenerate).
+fn moved_as_before(old: &[Option<Quad>], f: usize, last: &Quad) -> Option<Quad> {
+    let (a, b) = (old.get(f.checked_sub(1)?)?.as_ref()?, old.get(f)?.as_ref()?);
+    let h = crate::geometry::homography_between(a, b)?;
+    let q = last.map(|p| crate::geometry::apply_homography(&h, p));
+    (q.is_finite() && q.validate().is_ok()).then_some(q)
 }

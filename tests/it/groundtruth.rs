@@ -537,3 +537,63 @@ fn propagation_stops_where_the_old_ground_truth_is_right_again() {
         assert!(alignment_error(q, &truth[*f]) < 1.0, "frame {}", f + 1);
     }
 }
+
+/// Propagating over a selection on a brick wall moving 5 px a frame, in similitude, goes
+/// through the selection: started cold, the tracker has no motion to predict, and its search
+/// from the last pose settled a brick off on the second frame ("proposal for 1 frame(s); the
+/// tracker lost the target at frame 63"); the old ground truth's motion gives the start of the
+/// first frame and of a frame the tracker lost.
+#[test]
+fn propagation_over_a_moving_brick_wall_goes_through_the_selection() {
+    use regtrack::dataset::synth::{SynthConfig, render_sequence};
+    let d = TempDir::new("gt-propagate-bricks");
+    let a = crate::common::root().join("assets");
+    let cfg = SynthConfig {
+        texture: a.join("textures/skimage_brick.png"),
+        background: Some(a.join("textures/skimage_grass.png")),
+        motion: a.join("motion/ucsb_bricks_m1.txt"),
+        max_frames: Some(76),
+        // JPEG frames, as the bundled renders (the PNG ones did not show it).
+        jpeg_quality: 95,
+        ..SynthConfig::default()
+    };
+    let seq = render_sequence(&cfg, d.path(), "bricks", &|_, _| {}).unwrap();
+    let c = Corrections::in_memory(seq.len());
+    let (frames, _) = gt::ground_truth_in(&seq, &c, "similitude").unwrap();
+    let old: Vec<Option<Quad>> = frames.iter().map(|g| g.quad()).collect();
+    let spec = regtrack::tracker::TrackerSpec::from_names("fclk", "ssd", "similitude").unwrap();
+    let limits = gt::PropagateLimits {
+        max_frames: 15,
+        agree_frames: 0,
+        ..Default::default()
+    };
+    // Selections starting every fourth frame.
+    for from in (0..=60).step_by(4) {
+        let p = gt::propagate(
+            &seq,
+            &spec,
+            (from, old[from].unwrap()),
+            &old,
+            &|_| false,
+            limits,
+        )
+        .unwrap();
+        assert_eq!(
+            p.stop,
+            gt::PropagateStop::End,
+            "from frame {}: {}",
+            from + 1,
+            p.stop
+        );
+        assert_eq!(p.frames.len(), 15);
+        for (f, q) in &p.frames {
+            let e = alignment_error(q, &old[*f].unwrap());
+            assert!(
+                e < 1.0,
+                "from frame {}, frame {}: {e:.2} px",
+                from + 1,
+                f + 1
+            );
+        }
+    }
+}

@@ -312,6 +312,16 @@ impl InspectorApp {
     /// Tracker `i` starts on the shown frame from `init`; the others keep their results.
     fn init_tracker(&mut self, i: usize, init: InitSource) {
         if let Some(t) = self.state.trackers.get_mut(i) {
+            // Said where it happened (a "drag a box ... to start a tracker" stayed after it).
+            let how = match &init {
+                InitSource::GroundTruth => "the ground truth",
+                _ => "the drawn corners",
+            };
+            self.rt.msg.status = format!(
+                "tracker {} started on frame {} from {how}",
+                i + 1,
+                self.state.frame + 1
+            );
             t.init = init;
             if let Some(s) = self.rt.run.starts.get_mut(i) {
                 *s = self.state.frame;

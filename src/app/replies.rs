@@ -4,7 +4,7 @@
 use super::command::Command;
 use super::state::{InitSource, SequenceSource};
 use super::worker::{Job, Reply};
-use super::{InspectorApp, PATCH_FRAMES};
+use super::{InspectorApp, PATCH_FRAMES, Tool};
 
 impl InspectorApp {
     /// Handles the worker's replies, each once.
@@ -87,6 +87,10 @@ impl InspectorApp {
                 Reply::RecordingEnded { path, frames } => {
                     self.rt.msg.status =
                         format!("recorded {frames} frames as a sequence: {}", path.display());
+                    // In the Recent list too: it stays at hand once another sequence opens.
+                    if frames > 0 {
+                        self.add_recent(&path);
+                    }
                     self.rt.live.last_recording = Some((path, frames));
                 }
                 Reply::Picked(path) => self.picked(path),
@@ -111,6 +115,12 @@ impl InspectorApp {
         if let Some(src) = self.rt.seq.opening.take() {
             if let SequenceSource::Path(p) = &src {
                 self.add_recent(&p.clone());
+            }
+            // Another sequence: the recording's button goes (it is in the Recent list).
+            if !matches!(&src, SequenceSource::Path(p)
+                if self.rt.live.last_recording.as_ref().is_some_and(|(r, _)| r == p))
+            {
+                self.rt.live.last_recording = None;
             }
             self.state.sequence = src;
         }
@@ -220,6 +230,11 @@ impl InspectorApp {
     /// The live source ended (with why, if it failed).
     fn live_ended(&mut self, error: Option<String>) {
         let source = self.rt.live.info.take().map(|i| i.source);
+        // Nothing of the live run is shown any more: no "1 of 0 ... tracked to frame 1403".
+        self.rt.run.tracked_until = None;
+        self.rt.run.playing = false;
+        self.state.frame = 0;
+        self.rt.ui.tool = Tool::Navigate;
         if error.is_some() {
             self.rt.msg.status = "the live source stopped".into();
         }

@@ -1162,6 +1162,12 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
     let start = h.state().result(0, held).unwrap().corners;
     assert!(start.0[0].dist(Point::new(60.0, 40.0)) < 1.0, "{start}");
     assert!(start.0[2].dist(Point::new(200.0, 150.0)) < 1.0, "{start}");
+    // The status says so (the hint to drag a box does not stay).
+    assert!(
+        h.state().status().starts_with("tracker 1 started on frame"),
+        "{}",
+        h.state().status()
+    );
     // It follows the newest frames.
     step_until(&mut h, "tracked live frames", |a| {
         a.tracked_until()
@@ -1194,6 +1200,11 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
         "{errors}"
     );
     assert!(errors.contains("recording of"), "{errors}");
+    // Nothing of the live run is left in the bottom bar ("1 of 0 ... tracked to frame 1403").
+    h.run_steps(2);
+    assert_eq!(h.state().tracked_until(), None);
+    assert!(h.query_by_label("no sequence open").is_some());
+    assert!(h.query_by_label_contains("tracked to frame").is_none());
     let (path, n) = h.state().last_recording().cloned().expect("a recording");
     assert_eq!(path, rec.join("live.txt"));
     let recorded = regtrack::dataset::Sequence::open(&path).unwrap();
@@ -1212,6 +1223,13 @@ fn live_mode_tracks_a_dragged_box_records_and_keeps_the_recording_when_the_sourc
     step_until(&mut h, "the recording", |a| {
         a.frame_count() == n && a.tracked_until() == Some(0)
     });
+    // Another sequence opened: the recording's button goes; it stays in the Recent list.
+    h.state_mut()
+        .send(Command::OpenSequence(SequenceSource::Path(seq.clone())));
+    step_until(&mut h, "the other sequence", |a| a.frame_count() == 3);
+    h.run_steps(2);
+    assert!(h.query_by_label_contains("Open the recording").is_none());
+    assert!(h.state().recent().contains(&path));
 }
 
 /// What the second day of use found in the window's small things: a failed open keeps the

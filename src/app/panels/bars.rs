@@ -112,6 +112,41 @@ fn session_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
     }
 }
 
+/// How long a status message is shown (s), and over how much of its end it fades.
+pub const STATUS_SECONDS: f64 = 12.0;
+const STATUS_FADE: f64 = 3.0;
+
+/// The status line: a message shows for [`STATUS_SECONDS`] after it last changed, then fades
+/// out ("tracker 3 added" stayed until the next message, long after it was news). Hovering
+/// the line's place brings the last one back.
+fn status_line(ui: &mut egui::Ui, status: &str) {
+    let id = egui::Id::unique("status_since");
+    let now = ui.input(|i| i.time);
+    let since: Option<(String, f64)> = ui.data(|d| d.get_temp(id));
+    let since = match since {
+        Some((s, t)) if s == status => t,
+        _ => {
+            ui.data_mut(|d| d.insert_temp(id, (status.to_string(), now)));
+            now
+        }
+    };
+    let age = now - since;
+    let alpha = ((STATUS_SECONDS - age) / STATUS_FADE).clamp(0.0, 1.0) as f32;
+    if alpha < 1.0 && alpha > 0.0 {
+        ui.ctx().request_repaint();
+    } else if alpha >= 1.0 {
+        ui.ctx()
+            .request_repaint_after(std::time::Duration::from_secs_f64(
+                (STATUS_SECONDS - STATUS_FADE - age).max(0.05),
+            ));
+    }
+    let colour = ui.visuals().text_color().gamma_multiply(alpha.max(0.0));
+    let r = ui.label(egui::RichText::new(status).color(colour));
+    if alpha <= 0.0 && !status.is_empty() {
+        r.on_hover_text(status);
+    }
+}
+
 /// The progress, the status line and the errors (each dismissable).
 fn messages(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     ui.horizontal(|ui| {
@@ -127,7 +162,7 @@ fn messages(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 ui.label(what.as_str());
             }
         }
-        ui.label(app.rt.msg.status.as_str());
+        status_line(ui, &app.rt.msg.status);
     });
     let mut dismiss = None;
     for (i, e) in app.rt.msg.errors.iter().enumerate() {
@@ -312,13 +347,14 @@ pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
             {
                 out.push(Command::Step);
             }
-            let mut frame = app.state.frame + 1;
-            let slider = ui.add_enabled(
-                n > 0,
-                egui::Slider::new(&mut frame, 1..=n.max(1)).text(format!("of {n}")),
-            );
-            if slider.changed() {
-                out.push(Command::Seek(frame.saturating_sub(1)));
+            if n == 0 {
+                ui.label(egui::RichText::new("no sequence open").weak());
+            } else {
+                let mut frame = app.state.frame + 1;
+                let slider = ui.add(egui::Slider::new(&mut frame, 1..=n).text(format!("of {n}")));
+                if slider.changed() {
+                    out.push(Command::Seek(frame.saturating_sub(1)));
+                }
             }
             if ui
                 .add_enabled(n > 0, egui::Button::new("Re-run from here"))
@@ -343,7 +379,7 @@ pub fn playback_bar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
             {
                 out.push(Command::SetPlaybackFps(fps));
             }
-            if let Some(f) = app.rt.run.tracked_until {
+            if let Some(f) = app.rt.run.tracked_until.filter(|_| n > 0) {
                 ui.label(format!("tracked to frame {}", f + 1));
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {

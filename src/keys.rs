@@ -7,7 +7,11 @@ pub const SHORTCUTS: &[(&str, &str)] = &[
     ("Space", "play / pause"),
     (
         "Right / Left",
-        "next frame (tracks it if needed) / previous frame",
+        "next frame (tracks it if needed) / previous frame, in every mode",
+    ),
+    (
+        "Page Down / Up",
+        "next / previous frame (shown, not tracked)",
     ),
     ("Home / End", "start frame / last tracked frame"),
     (
@@ -26,10 +30,9 @@ pub const SHORTCUTS: &[(&str, &str)] = &[
     ),
     ("ground-truth mode: 1-4, 0", "pick a corner, the whole quad"),
     (
-        "ground-truth mode: arrows, + / -",
+        "ground-truth mode: Shift+arrows, + / -",
         "nudge by the step, double / halve the step",
     ),
-    ("ground-truth mode: N / P", "next / previous frame"),
     (
         "ground-truth mode: J, O",
         "jump to the worst frame, mark occluded",

@@ -592,15 +592,6 @@ impl InspectorApp {
                 return;
             }
             self.corner_keys(i, &mut cmds);
-            let (n, frame) = (self.frame_count(), self.state.frame);
-            let next = i.num_presses(egui::Key::N) + i.num_presses(egui::Key::PageDown);
-            if next > 0 && frame + 1 < n {
-                cmds.push(Command::Seek((frame + next).min(n - 1)));
-            }
-            let previous = i.num_presses(egui::Key::P) + i.num_presses(egui::Key::PageUp);
-            if previous > 0 && frame > 0 {
-                cmds.push(Command::Seek(frame.saturating_sub(previous)));
-            }
             if i.key_pressed(egui::Key::J) {
                 cmds.push(Command::Gt(GtCommand::JumpWorst));
             }
@@ -638,6 +629,8 @@ impl InspectorApp {
             cmds.push(Command::Gt(GtCommand::PickCorner(None)));
         }
         let s = self.rt.gt.step;
+        // Shift+arrows: the plain arrows change the frame, as in every mode (pressing Right to
+        // go on made an edit).
         for (key, dx, dy) in [
             (egui::Key::ArrowLeft, -s, 0.0),
             (egui::Key::ArrowRight, s, 0.0),
@@ -645,7 +638,7 @@ impl InspectorApp {
             (egui::Key::ArrowDown, 0.0, s),
         ] {
             // Every press counts, also several within one frame of the window.
-            let k = i.num_presses(key) as f64;
+            let k = super::presses(i, key, true) as f64;
             if k > 0.0 {
                 cmds.push(Command::Gt(GtCommand::Nudge {
                     dx: dx * k,

@@ -249,6 +249,18 @@ fn shortcut(i: &egui::InputState, key: egui::Key) -> Option<egui::Modifiers> {
     })
 }
 
+/// How many times `key` was pressed this frame with Shift held (`shift`) or not, other
+/// modifiers aside: every press counts, also several within one frame of the window.
+fn presses(i: &egui::InputState, key: egui::Key, shift: bool) -> usize {
+    i.events
+        .iter()
+        .filter(|e| {
+            matches!(e, egui::Event::Key { key: k, pressed: true, modifiers, .. }
+                if *k == key && modifiers.shift == shift)
+        })
+        .count()
+}
+
 /// Per tracker, the iterations' patches are kept for this many of the newest tracked frames.
 pub const PATCH_FRAMES: usize = 300;
 

@@ -84,17 +84,32 @@ impl InspectorApp {
             if i.key_pressed(egui::Key::Escape) && self.rt.ui.experiment.is_some() {
                 cmds.push(Command::ClearExperiment);
             }
-            if i.key_pressed(egui::Key::ArrowRight) {
-                match self.rt.run.tracked_until {
-                    Some(t) if frame < t => cmds.push(Command::Seek(frame + 1)),
-                    _ if frame + 1 < n => cmds.push(Command::Step),
-                    _ => {}
+        }
+        // The frame keys, the same in every mode (Shift+arrows nudge in the ground-truth
+        // mode). Right tracks the next frame when it is not tracked yet.
+        let on = super::presses(i, egui::Key::ArrowRight, false);
+        if on > 0 {
+            // Through the tracked frames, then a step per press left.
+            let target = (frame + on).min(n - 1);
+            // Beyond the tracked frames (a frame sought past them), the next is shown only.
+            match self.rt.run.tracked_until {
+                Some(t) if frame <= t && target > t => {
+                    if frame < t {
+                        cmds.push(Command::Seek(t));
+                    }
+                    cmds.extend((t..target).map(|_| Command::Step));
                 }
+                _ => cmds.push(Command::Seek(target)),
             }
-            let back = i.num_presses(egui::Key::ArrowLeft);
-            if back > 0 && frame > 0 {
-                cmds.push(Command::Seek(frame.saturating_sub(back)));
-            }
+        }
+        let back = super::presses(i, egui::Key::ArrowLeft, false)
+            + super::presses(i, egui::Key::PageUp, false);
+        if back > 0 && frame > 0 {
+            cmds.push(Command::Seek(frame.saturating_sub(back)));
+        }
+        let on = super::presses(i, egui::Key::PageDown, false);
+        if on > 0 && frame + 1 < n {
+            cmds.push(Command::Seek((frame + on).min(n - 1)));
         }
         if i.key_pressed(egui::Key::Home) {
             cmds.push(Command::Seek(self.state.start_frame));

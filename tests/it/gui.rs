@@ -245,7 +245,7 @@ fn the_ground_truth_correction_flow() {
     press(&mut h, egui::Key::Num2, egui::Modifiers::NONE);
     assert_eq!(h.state().gt_cursor().0, Some(1));
     for _ in 0..3 {
-        press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+        press(&mut h, egui::Key::ArrowRight, egui::Modifiers::SHIFT);
     }
     let nudged = h.state().ground_truth(0).unwrap();
     assert!(
@@ -314,8 +314,10 @@ fn the_ground_truth_correction_flow() {
 
     // The next frame is occluded (undo showed the frames it changed).
     let f0 = h.state().state.frame;
-    press(&mut h, egui::Key::N, egui::Modifiers::NONE);
-    press(&mut h, egui::Key::N, egui::Modifiers::NONE);
+    // The frame keys are those of every mode: Right, and Page Down.
+    press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+    step_until(&mut h, "the next frame", |a| a.state.frame == f0 + 1);
+    press(&mut h, egui::Key::PageDown, egui::Modifiers::NONE);
     let occluded = f0 + 2;
     assert_eq!(h.state().state.frame, occluded);
     press(&mut h, egui::Key::O, egui::Modifiers::NONE);
@@ -982,7 +984,7 @@ fn several_presses_within_one_frame_of_the_window_all_count() {
     let before = h.state().ground_truth(0).unwrap();
     press(&mut h, egui::Key::Num2, egui::Modifiers::NONE);
     for _ in 0..3 {
-        h.key_press_modifiers(egui::Modifiers::NONE, egui::Key::ArrowRight);
+        h.key_press_modifiers(egui::Modifiers::SHIFT, egui::Key::ArrowRight);
     }
     h.run_steps(2);
     let after = h.state().ground_truth(0).unwrap();
@@ -991,10 +993,13 @@ fn several_presses_within_one_frame_of_the_window_all_count() {
         "three presses, three steps: {before} -> {after}"
     );
     for _ in 0..2 {
-        h.key_press_modifiers(egui::Modifiers::NONE, egui::Key::N);
+        h.key_press_modifiers(egui::Modifiers::NONE, egui::Key::ArrowRight);
     }
     h.run_steps(2);
-    assert_eq!(h.state().state.frame, 2);
+    // Two presses within a frame of the window: two frames on (tracked on the way), and no
+    // edit made by them.
+    step_until(&mut h, "frame 3", |a| a.state.frame == 2);
+    assert_eq!(h.state().ground_truth(0).unwrap(), after);
 }
 
 /// Every value read from a session is checked against the widgets' ranges, and unknown keys are

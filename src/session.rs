@@ -82,6 +82,13 @@ pub struct View {
     pub show_landscape: bool,
     #[serde(default)]
     pub landscape: LandscapeSettings,
+    /// Zoomed in, the view follows the target from frame to frame: in the ground-truth mode
+    /// its ground truth (on by default: stepping frames while annotating, it drifted off
+    /// screen), otherwise the inspected tracker.
+    #[serde(default = "yes")]
+    pub follow_in_gt_mode: bool,
+    #[serde(default)]
+    pub follow_tracker: bool,
 }
 
 /// What the cost-landscape view sweeps.
@@ -128,6 +135,8 @@ impl Default for View {
             ab: None,
             show_landscape: false,
             landscape: LandscapeSettings::default(),
+            follow_in_gt_mode: true,
+            follow_tracker: false,
         }
     }
 }

@@ -147,8 +147,19 @@ impl InspectorApp {
                     }
                     let per: Vec<String> =
                         per_ssm.iter().map(|(s, n)| format!("{s}: {n}")).collect();
+                    // Shown in the mode the corrections were made in (reopened in the
+                    // homography mode, similitude corrections were invisible until the
+                    // dropdown changed): the SSM with the most, when the shown one has none.
+                    let shown = self.gt_key();
+                    let mut switched = String::new();
+                    if c.corrected_frames(&shown).is_empty()
+                        && let Some((s, _)) = per_ssm.iter().max_by_key(|(_, n)| **n)
+                    {
+                        self.state.gt_ssm = (*s).to_string();
+                        switched = format!("; shown in {s}, the SSM they were made in");
+                    }
                     self.rt.msg.status = format!(
-                        "{}: {} frames; restored {} correction(s) ({}) from {}{}",
+                        "{}: {} frames; restored {} correction(s) ({}) from {}{}{switched}",
                         seq.name,
                         seq.len(),
                         rec.corrected,

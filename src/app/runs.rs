@@ -181,7 +181,22 @@ impl InspectorApp {
     pub(super) fn play(&mut self) {
         let n = self.frame_count();
         let until = self.rt.run.tracked_until;
+        let start = self.state.start_frame;
+        // Nothing tracked past the start frame and a later frame shown (a video sought to
+        // frame 199): the trackers start on the shown frame (they started from frame 1).
+        let fresh = until.is_none_or(|u| u <= start)
+            && self.state.frame > start
+            && self
+                .state
+                .trackers
+                .iter()
+                .all(|t| t.init == InitSource::GroundTruth);
         if n == 0 {
+        } else if fresh {
+            let frame = self.state.frame;
+            self.restart_from(frame, false);
+            self.rt.run.play_after_start = true;
+            self.rt.msg.status = format!("tracking from frame {}, the one shown", frame + 1);
         } else if until.is_some_and(|u| self.state.frame < u) {
             self.rt.run.replaying = Some(std::time::Instant::now());
         } else if until.is_some_and(|u| u + 1 >= n) {

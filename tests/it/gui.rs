@@ -289,6 +289,8 @@ fn the_ground_truth_correction_flow() {
     assert!(h.state().ground_truth(0).unwrap().0[1].dist(nudged.0[1]) < 1e-6);
 
     // Propagate from the corrected frame, then accept the proposal as one edit.
+    h.get_by_label("Propagate").scroll_to_me();
+    h.run_steps(10);
     h.get_by_label("Propagate").click();
     step_until(&mut h, "the proposal", |a| a.gt_proposal().is_some());
     let proposal = h.state().gt_proposal().unwrap().clone();
@@ -1465,6 +1467,8 @@ fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
         label: "move".into(),
     }));
     h.step();
+    h.get_by_label("Propagate").scroll_to_me();
+    h.run_steps(10);
     h.get_by_label("Propagate").click();
     step_until(&mut h, "the proposal", |a| a.gt_proposal().is_some());
     let proposed: Vec<usize> = h
@@ -1696,4 +1700,64 @@ fn patches_are_tracked_from_the_shown_frame_and_drawn() {
     h.state_mut().send(Command::ClearPatches);
     h.step();
     assert!(h.state().patches().is_none());
+}
+
+/// Where a new user got stuck (issue 45): Play on a frame past the tracked ones starts there
+/// (not on frame 1); zoomed in, the ground-truth mode follows the target from frame to frame;
+/// a sequence corrected in similitude reopens in similitude.
+#[test]
+fn play_starts_on_the_shown_frame_the_view_follows_and_corrections_reopen_in_their_mode() {
+    let d = TempDir::new("gui-newuser");
+    let seq = small_sequence(d.path(), 12);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence", |a| a.tracked_until() == Some(0));
+    h.state_mut().send(Command::Seek(6));
+    h.run_steps(2);
+    h.state_mut().send(Command::Play);
+    step_until(&mut h, "the end", |a| {
+        a.tracked_until() == Some(11) && !a.is_playing()
+    });
+    assert_eq!(h.state().state.start_frame, 6);
+    assert!(h.state().result(0, 3).is_none(), "tracked from frame 1");
+    assert!(h.state().result(0, 7).is_some());
+
+    // Zoomed in far from the target, in the ground-truth mode: the next frame is centred on it.
+    h.get_by_label("Edit ground-truth corners").click();
+    h.state_mut().send(Command::Seek(6));
+    h.run_steps(3);
+    let mut view = h.state().state.view.clone();
+    assert!(view.follow_in_gt_mode, "on by default");
+    view.zoom = 6.0;
+    view.center = [1.0, 1.0];
+    h.state_mut().send(Command::SetView(view));
+    h.run_steps(2);
+    press(&mut h, egui::Key::ArrowRight, egui::Modifiers::NONE);
+    step_until(&mut h, "the next frame", |a| a.state.frame == 7);
+    h.run_steps(3);
+    let c = h.state().ground_truth(7).unwrap().centroid();
+    let at = h.state().state.view.center;
+    assert!(
+        (at[0] as f64 - c.x).abs() < 1.0 && (at[1] as f64 - c.y).abs() < 1.0,
+        "{at:?} vs {c:?}"
+    );
+
+    // A correction in similitude; reopened with the homography shown, it shows in similitude.
+    h.state_mut().send(Command::SetGtSsm("similitude".into()));
+    h.run_steps(2);
+    press(&mut h, egui::Key::ArrowRight, egui::Modifiers::SHIFT);
+    assert_eq!(
+        h.state().corrections().corrected_frames("similitude"),
+        vec![7]
+    );
+    drop(h);
+    let mut h = harness(state_on(&seq));
+    step_until(&mut h, "the sequence again", |a| {
+        a.tracked_until() == Some(0)
+    });
+    assert_eq!(h.state().state.gt_ssm, "similitude");
+    assert!(
+        h.state().status().contains("similitude"),
+        "{}",
+        h.state().status()
+    );
 }

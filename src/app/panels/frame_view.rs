@@ -238,15 +238,35 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 0.0, Color32::from_gray(24));
     let Some(texture) = app.rt.display.texture.clone() else {
+        // What is under way (the first start renders the demo for a while), else what to do.
+        let text = match &app.rt.msg.progress {
+            Some((what, d, t)) if *t > 0 => format!("{what}: {d} of {t}…"),
+            Some((what, _, _)) => format!("{what}…"),
+            None => "open a sequence (or drop a folder here)".into(),
+        };
         painter.text(
             rect.center(),
             egui::Align2::CENTER_CENTER,
-            "open a sequence (or drop a folder here)",
+            text,
             egui::FontId::proportional(18.0),
             Color32::GRAY,
         );
+        if let Some((_, d, t)) = &app.rt.msg.progress
+            && *t > 0
+        {
+            let w = (rect.width() * 0.5).min(360.0);
+            let bar =
+                Rect::from_center_size(rect.center() + Vec2::new(0.0, 30.0), Vec2::new(w, 8.0));
+            painter.rect_filled(bar, 3.0, Color32::from_gray(60));
+            let done = Rect::from_min_size(
+                bar.min,
+                Vec2::new(w * (*d as f32 / *t as f32).clamp(0.0, 1.0), 8.0),
+            );
+            painter.rect_filled(done, 3.0, Color32::from_rgb(90, 150, 230));
+        }
         return None;
     };
+    follow_target(app, ui, out, rect);
     let t = Transform::new(rect, app.rt.display.image_size, &app.state.view);
     draw_image(app, &painter, &t, &texture);
     let frame = app.state.frame;
@@ -258,6 +278,46 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
     draw_iteration_and_experiment(app, &painter, &t, frame);
     interact(app, ui, out, &response, &t, &painter);
     Some(t)
+}
+
+/// Zoomed in with "follow the target" on, a newly shown frame is centred on the target (its
+/// ground truth in the ground-truth mode, the inspected tracker's corners otherwise), once per
+/// frame so that the view can still be panned.
+fn follow_target(app: &InspectorApp, ui: &egui::Ui, out: &mut Commands, rect: Rect) {
+    let view = &app.state.view;
+    let gt_mode = app.rt.ui.tool == Tool::EditGroundTruth;
+    let on = if gt_mode {
+        view.follow_in_gt_mode
+    } else {
+        view.follow_tracker
+    };
+    let frame = app.state.frame;
+    let id = egui::Id::unique("followed_frame");
+    let last: Option<(usize, bool)> = ui.data(|d| d.get_temp(id));
+    if !on || view.zoom <= 0.0 || last == Some((frame, gt_mode)) {
+        return;
+    }
+    let target = if gt_mode {
+        app.ground_truth(frame)
+    } else {
+        app.result(app.state.selected_tracker, frame)
+            .map(|r| r.corners)
+            .or_else(|| app.ground_truth(frame))
+    };
+    let Some(q) = target else {
+        return;
+    };
+    ui.data_mut(|d| d.insert_temp(id, (frame, gt_mode)));
+    let c = q.centroid();
+    // Only when it left the middle of the view (a small move keeps the view still).
+    let t = Transform::new(rect, app.rt.display.image_size, view);
+    let at = t.to_screen(c);
+    if rect.shrink2(rect.size() * 0.2).contains(at) {
+        return;
+    }
+    let mut v = view.clone();
+    v.center = [c.x as f32, c.y as f32];
+    out.push(Command::SetView(v));
 }
 
 /// The frame's image, or why it could not be read (instead of the previous image under this
@@ -707,7 +767,7 @@ fn edit_ground_truth(
         t.rect.left_top() + Vec2::new(8.0, 8.0),
         egui::Align2::LEFT_TOP,
         format!(
-            "GT {}: {} · step {step} px · keys 1-4/0 arrows +/- N/P J O Ctrl+Z",
+            "GT {}: {} · step {step} px · corner 1-4/0 · nudge Shift+arrows +/- · frames Right/Left · J O Ctrl+Z",
             app.state.gt_ssm,
             match picked {
                 Some(k) => format!("corner {}", k + 1),

@@ -144,10 +144,23 @@ fn tracker_group(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, 
 fn ground_truth_section(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     ui.heading("Ground truth");
     let mut view = app.state.view.clone();
+    // Side by side where the panel is wide enough (the ground-truth mode's tools below stay
+    // on the first screen).
+    ui.horizontal_wrapped(|ui| {
     ui.checkbox(&mut view.show_ground_truth, "show ground truth");
     ui.checkbox(&mut view.show_corner_numbers, "number the corners");
     ui.checkbox(&mut view.show_samples, "show method internals")
         .on_hover_text("On the newest frame: where NN and PF looked (brighter = more similar), KCF's and DSST's response map, TLD's detections and flow points, CMT's keypoints (inliers bright), RCT's candidates");
+    // One toggle, for the mode shown: the ground truth in the ground-truth mode, the
+    // inspected tracker otherwise.
+    let (follow, what) = if app.rt.ui.tool == Tool::EditGroundTruth {
+        (&mut view.follow_in_gt_mode, "the ground truth")
+    } else {
+        (&mut view.follow_tracker, "the inspected tracker")
+    };
+    ui.checkbox(follow, "follow the target")
+        .on_hover_text(format!("Zoomed in, each frame is centred on {what}"));
+    });
     if view != app.state.view {
         out.push(Command::SetView(view));
     }
@@ -159,7 +172,7 @@ fn ground_truth_section(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Com
     if ui
         .selectable_label(editing, "Edit ground-truth corners")
         .on_hover_text(
-            "Ground-truth mode: drag a corner or the quad; keys 1-4/0, arrows, +/-, N/P, J, O",
+            "Ground-truth mode: drag a corner or the quad; keys 1-4/0, Shift+arrows, +/-, Right/Left, J, O",
         )
         .clicked()
     {

@@ -33,10 +33,21 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameIma
             seq.len()
         ))
     })?;
-    if seq.video.is_some() {
-        // A video's frames are decoded grey; they are shown grey.
+    if let Some(video) = &seq.video {
+        // The trackers' grey, and the colour for display (grey when it cannot be had).
         let gray = seq.load_gray(i)?;
-        let image = gray_image(i, &gray);
+        let image = match video.frame_rgb(i) {
+            Ok(rgb) if rgb.len() == gray.width * gray.height * 3 => FrameImage {
+                index: i,
+                width: gray.width,
+                height: gray.height,
+                rgba: rgb
+                    .chunks_exact(3)
+                    .flat_map(|c| [c[0], c[1], c[2], 255])
+                    .collect(),
+            },
+            _ => gray_image(i, &gray),
+        };
         return Ok((gray, image));
     }
     let img = load_dynamic(path)?;

@@ -51,6 +51,9 @@ pub struct Video {
     /// The stream's first timestamp, seconds.
     start: f64,
     decoder: Mutex<Option<Decoder>>,
+    /// A second decoder, in colour, for display ([`Video::frame_rgb`]): the trackers read
+    /// FFmpeg's grey as before.
+    colour: Mutex<Option<Decoder>>,
     /// The frames decoded last (newest at the back), at most [`CACHE_BYTES`] of them: stepping
     /// back a little, as the inspector does, decodes nothing.
     cache: Mutex<std::collections::VecDeque<(usize, GrayU8)>>,
@@ -193,12 +196,55 @@ impl Video {
             frames,
             start,
             decoder: Mutex::new(None),
+            colour: Mutex::new(None),
             cache: Mutex::new(Default::default()),
         })
     }
 
-    /// Starts decoding at frame `i`.
+    /// Starts decoding at frame `i`, in grey.
     fn spawn(&self, i: usize) -> Result<Decoder> {
+        self.spawn_as(i, "gray")
+    }
+
+    /// Frame `i` (0-based) in colour, 8-bit RGB rows, for display (the inspector showed a
+    /// video grey where the same frames as JPEGs showed in colour). Decoded by a process of
+    /// its own, forward from the last frame asked for; not cached.
+    pub fn frame_rgb(&self, i: usize) -> Result<Vec<u8>> {
+        if i >= self.frames {
+            return Err(Error::Sequence {
+                path: self.path.clone(),
+                message: format!(
+                    "frame {} is beyond the video's {} frames",
+                    i + 1,
+                    self.frames
+                ),
+            });
+        }
+        let mut guard = self.colour.lock().unwrap_or_else(|e| e.into_inner());
+        let reuse = guard
+            .as_ref()
+            .is_some_and(|d| d.next <= i && i < d.next + 2 * self.fps.max(1.0) as usize);
+        if !reuse {
+            *guard = Some(self.spawn_as(i, "rgb24")?);
+        }
+        let d = guard.as_mut().expect("set above");
+        let mut rgb = vec![0u8; self.width * self.height * 3];
+        while d.next <= i {
+            if let Err(e) = d.out.read_exact(&mut rgb) {
+                let at = d.next;
+                *guard = None;
+                return Err(Error::Sequence {
+                    path: self.path.clone(),
+                    message: format!("frame {} could not be decoded in colour: {e}", at + 1),
+                });
+            }
+            d.next += 1;
+        }
+        Ok(rgb)
+    }
+
+    /// Starts decoding at frame `i` in FFmpeg's pixel format `pix_fmt`.
+    fn spawn_as(&self, i: usize, pix_fmt: &str) -> Result<Decoder> {
         let mut c = command("ffmpeg");
         c.args(["-v", "error", "-nostdin"]);
         if i > 0 {
@@ -208,7 +254,7 @@ impl Video {
         }
         c.arg("-i")
             .arg(ffmpeg_path(&self.path))
-            .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray", "-"])
+            .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", pix_fmt, "-"])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
         let mut child = c.spawn().map_err(|e| missing("ffmpeg", e))?;

@@ -337,6 +337,29 @@ fn a_video_is_a_sequence() {
             / g.data.len() as f64;
         assert!(mean < 3.0, "frame {}: mean difference {mean}", i + 1);
     }
+    // In colour for display (the coffee is red-brown), as the PNG frames are, within the
+    // codec's loss; the trackers' grey is unchanged.
+    let video = seq.video.as_ref().unwrap();
+    for i in [7, 3, 20] {
+        let rgb = video.frame_rgb(i).unwrap();
+        let png = image::open(data.join(format!("rt/frame{:05}.png", i + 1)))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(rgb.len(), png.as_raw().len());
+        let mean = rgb
+            .iter()
+            .zip(png.as_raw())
+            .map(|(&a, &b)| (a as f64 - b as f64).abs())
+            .sum::<f64>()
+            / rgb.len() as f64;
+        assert!(mean < 4.0, "frame {} in colour: mean difference {mean}", i + 1);
+        let coloured = rgb
+            .chunks_exact(3)
+            .filter(|c| (c[0] as i32 - c[2] as i32).abs() > 30)
+            .count();
+        assert!(coloured > 100, "frame {}: {coloured} coloured pixels", i + 1);
+    }
+    assert_eq!(seq.load_gray(7).unwrap().data, in_order[7].data);
     // `eval` over a dataset of videos gives the frames' success rates.
     let res = |root: &Path, out: &str| {
         let out = d.path().join(out);

@@ -33,9 +33,13 @@ pub enum Error {
     /// A file that should exist but does not.
     #[error("missing file: {}", path.display())]
     Missing { path: PathBuf },
-    /// An image that could not be decoded or encoded.
-    #[error("cannot decode or encode image {}: {message}", path.display())]
+    /// An image that could not be read (decoded), or a frame that is not what the sequence
+    /// needs.
+    #[error("cannot read the image {}: {message}", path.display())]
     Image { path: PathBuf, message: String },
+    /// An image or video that could not be written.
+    #[error("cannot write {}: {message}", path.display())]
+    ImageWrite { path: PathBuf, message: String },
     /// A path that names something other than a regular file where a file is read (a folder,
     /// a FIFO, a device, a loop of symbolic links).
     #[error("not a regular file: {} is {what}", path.display())]

@@ -967,7 +967,7 @@ fn save(path: &Path, (w, h): (u32, u32), plot: &Plot) -> Result<()> {
                 h,
                 image::ExtendedColorType::Rgb8,
             )
-            .map_err(|e| Error::Image {
+            .map_err(|e| Error::ImageWrite {
                 path: path.to_path_buf(),
                 message: e.to_string(),
             })?;

@@ -250,23 +250,68 @@ impl Default for State {
     }
 }
 
+/// A TOML or serde message in the words of the settings it is about: "invalid value: integer
+/// `-7`, expected usize" reads "frame: -7 is not a whole number of 0 or more".
+pub fn plain_message(message: &str, key: Option<&str>) -> String {
+    let what = |expected: &str| -> Option<&'static str> {
+        Some(match expected.trim().trim_end_matches('.') {
+            "usize" | "u64" | "u32" | "u16" => "a whole number of 0 or more",
+            "u8" => "a whole number from 0 to 255",
+            "i64" | "i32" | "isize" => "a whole number",
+            "f32" | "f64" => "a number",
+            "a boolean" | "bool" => "true or false",
+            "a string" | "string" => "text in quotes",
+            "a sequence" | "an array" => "a list in [ ]",
+            _ => return None,
+        })
+    };
+    let at = key.map_or(String::new(), |k| format!("{k}: "));
+    // "invalid value: integer `-7`, expected usize" / "invalid type: string \"fast\",
+    // expected f32".
+    for head in ["invalid value: ", "invalid type: "] {
+        if let Some(rest) = message.strip_prefix(head)
+            && let Some((got, expected)) = rest.rsplit_once(", expected ")
+            && let Some(want) = what(expected)
+        {
+            let got = got
+                .trim_start_matches("integer ")
+                .trim_start_matches("floating point ")
+                .trim_start_matches("string ")
+                .trim_start_matches("boolean ")
+                .trim_matches('`');
+            return format!("{at}{got} is not {want}");
+        }
+    }
+    format!("{at}{}", message.trim_end())
+}
+
 impl State {
     /// Reads a session file; relative sequence paths are taken relative to the session's folder.
     pub fn load(path: &Path) -> Result<State> {
         let text = crate::files::read_text(path, crate::files::SETTINGS_LIMIT)?;
-        let mut state: State = toml::from_str(&text).map_err(|e| Error::Parse {
-            path: path.to_path_buf(),
-            line: e
+        let mut state: State = toml::from_str(&text).map_err(|e| {
+            let line = e
                 .span()
                 .map(|s| {
-                    text.as_bytes()[..s.start]
+                    text.as_bytes()[..s.start.min(text.len())]
                         .iter()
                         .filter(|&&b| b == b'\n')
                         .count()
                         + 1
                 })
-                .unwrap_or(0),
-            message: e.message().to_string(),
+                .unwrap_or(0);
+            // The key the error is at, from the line itself (`frame = -7`).
+            let key = text
+                .lines()
+                .nth(line.saturating_sub(1))
+                .and_then(|l| l.split_once('='))
+                .map(|(k, _)| k.trim().to_string())
+                .filter(|k| !k.is_empty() && !k.starts_with('['));
+            Error::Parse {
+                path: path.to_path_buf(),
+                line,
+                message: plain_message(e.message(), key.as_deref()),
+            }
         })?;
         if let SequenceSource::Path(p) = &state.sequence
             && p.is_relative()
@@ -427,4 +472,34 @@ fn tracker_line(text: &str, i: usize) -> usize {
         .filter(|(_, l)| l.trim() == "[[trackers]]")
         .nth(i)
         .map_or(1, |(n, _)| n + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plain_message;
+
+    /// A settings error reads as what the user wrote and what the setting takes.
+    #[test]
+    fn settings_errors_are_in_the_users_words() {
+        assert_eq!(
+            plain_message("invalid value: integer `-7`, expected usize", Some("frame")),
+            "frame: -7 is not a whole number of 0 or more"
+        );
+        assert_eq!(
+            plain_message(
+                "invalid type: string \"fast\", expected f32",
+                Some("playback_fps")
+            ),
+            "playback_fps: \"fast\" is not a number"
+        );
+        assert_eq!(
+            plain_message("invalid type: integer `1`, expected a boolean", None),
+            "1 is not true or false"
+        );
+        // Anything else as it was, at its key.
+        assert_eq!(
+            plain_message("unknown field `zoomx`", Some("zoomx")),
+            "zoomx: unknown field `zoomx`"
+        );
+    }
 }

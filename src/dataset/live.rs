@@ -289,7 +289,7 @@ impl Recording {
             image.height as u32,
             image::ExtendedColorType::L8,
         )
-        .map_err(|e| Error::Image {
+        .map_err(|e| Error::ImageWrite {
             path: path.clone(),
             message: e.to_string(),
         })?;

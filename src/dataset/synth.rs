@@ -519,12 +519,12 @@ pub fn render_sequence(
         let path = dir.join(format!("frame{:05}.{ext}", i + 1));
         let img =
             image::RgbImage::from_raw(scene.w as u32, scene.h as u32, rgb).ok_or_else(|| {
-                Error::Image {
+                Error::ImageWrite {
                     path: path.clone(),
                     message: "frame buffer of the wrong size".into(),
                 }
             })?;
-        let enc_err = |e: image::ImageError| Error::Image {
+        let enc_err = |e: image::ImageError| Error::ImageWrite {
             path: path.clone(),
             message: e.to_string(),
         };

@@ -511,9 +511,9 @@ pub fn render(
     if let Some(why) = why {
         // Nothing half-written is left behind.
         let _ = std::fs::remove_file(out);
-        return Err(Error::Image {
+        return Err(Error::ImageWrite {
             path: out.to_path_buf(),
-            message: format!("cannot write the annotated video: {why}"),
+            message: format!("the annotated video: {why}"),
         });
     }
     Ok(())

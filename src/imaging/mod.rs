@@ -204,7 +204,7 @@ pub fn image_size(path: &Path) -> Result<(usize, usize)> {
         .into_dimensions()
         .map_err(|e| Error::Image {
             path: path.to_path_buf(),
-            message: e.to_string(),
+            message: read_message(&e),
         })?;
     Ok((w as usize, h as usize))
 }
@@ -254,6 +254,27 @@ pub fn load_gray(path: &Path) -> Result<GrayU8> {
 /// type: larger images are refused before they are decoded.
 pub const MAX_PIXELS: u64 = 64 << 20;
 
+/// Why an image could not be read, in the user's terms (the image crate's "Format error
+/// decoding Png: ..." or "The image format could not be determined" alone read like a
+/// programmer's note).
+pub fn read_message(e: &image::ImageError) -> String {
+    use image::ImageError as E;
+    match e {
+        E::Unsupported(u) => match u.format_hint() {
+            image::error::ImageFormatHint::Unknown => {
+                "not an image regtrack reads (PNG, JPEG, BMP, TIFF, PNM, WebP...): its \
+                 contents are of no image format"
+                    .to_string()
+            }
+            hint => format!("a {hint} image regtrack cannot read ({u})"),
+        },
+        E::Decoding(d) => format!("the file is damaged or not the image its name says ({d})"),
+        E::Limits(l) => format!("too large to read ({l})"),
+        E::IoError(io) => format!("the file could not be read ({io})"),
+        other => other.to_string(),
+    }
+}
+
 /// Reads an image file as decoded by the `image` crate; the error names the path. Images of
 /// more than [`MAX_PIXELS`] are refused before decoding, and a JPEG or PNG file cut short (no
 /// end marker) is refused rather than decoded in part.
@@ -270,7 +291,9 @@ pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
             .with_guessed_format()
             .map_err(|e| Error::io(path, e))
     };
-    let (w, h) = open()?.into_dimensions().map_err(|e| bad(e.to_string()))?;
+    let (w, h) = open()?
+        .into_dimensions()
+        .map_err(|e| bad(read_message(&e)))?;
     if w as u64 * h as u64 > MAX_PIXELS {
         return Err(bad(format!(
             "{w}x{h} is more than the {} megapixels a frame may have",
@@ -296,6 +319,6 @@ pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage> {
         })
         .map_err(|e| Error::Image {
             path: path.to_path_buf(),
-            message: e.to_string(),
+            message: read_message(&e),
         })
 }

@@ -352,12 +352,20 @@ fn a_video_is_a_sequence() {
             .map(|(&a, &b)| (a as f64 - b as f64).abs())
             .sum::<f64>()
             / rgb.len() as f64;
-        assert!(mean < 4.0, "frame {} in colour: mean difference {mean}", i + 1);
+        assert!(
+            mean < 4.0,
+            "frame {} in colour: mean difference {mean}",
+            i + 1
+        );
         let coloured = rgb
             .chunks_exact(3)
             .filter(|c| (c[0] as i32 - c[2] as i32).abs() > 30)
             .count();
-        assert!(coloured > 100, "frame {}: {coloured} coloured pixels", i + 1);
+        assert!(
+            coloured > 100,
+            "frame {}: {coloured} coloured pixels",
+            i + 1
+        );
     }
     assert_eq!(seq.load_gray(7).unwrap().data, in_order[7].data);
     // `eval` over a dataset of videos gives the frames' success rates.
@@ -607,4 +615,26 @@ fn a_live_source_is_tracked_dropped_recorded_and_its_end_reported() {
     );
     let kept = read_ground_truth(&out).unwrap().len();
     assert!((5..30).contains(&kept), "{kept} frames kept");
+}
+
+/// A frame that is not an image says so in the user's terms, naming the file (not "cannot
+/// decode or encode image").
+#[test]
+fn a_frame_that_is_no_image_is_named_as_such() {
+    let d = TempDir::new("not-an-image");
+    let f = d.path().join("frame00001.jpg");
+    std::fs::write(&f, b"notanimage at all").unwrap();
+    let e = regtrack::imaging::load_gray(&f).unwrap_err().to_string();
+    assert!(e.starts_with("cannot read the image "), "{e}");
+    assert!(
+        e.contains("frame00001.jpg") && e.contains("damaged or not the image"),
+        "{e}"
+    );
+    let g = d.path().join("frame00002.png");
+    std::fs::write(&g, [0u8; 64]).unwrap();
+    let e = regtrack::imaging::load_gray(&g).unwrap_err().to_string();
+    assert!(
+        e.contains("cannot read the image") && e.contains("frame00002.png"),
+        "{e}"
+    );
 }

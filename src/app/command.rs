@@ -91,6 +91,8 @@ pub enum Command {
     ExportPlots(PathBuf),
     /// Show a folder in the desktop's file manager (where the plots went).
     OpenFolder(PathBuf),
+    /// A side panel was resized to this share of the window: kept between runs.
+    KeepPanelShare(String, f32),
 }
 
 /// The actions of the ground-truth mode ([`Command::Gt`]).
@@ -216,6 +218,10 @@ impl InspectorApp {
             Command::SetPerturbSigma(s) => self.rt.ui.perturb_sigma = s.clamp(0.0, 100.0),
             Command::ExportPlots(dir) => self.export_plots(dir),
             Command::OpenFolder(dir) => self.open_folder(&dir),
+            Command::KeepPanelShare(name, share) => {
+                self.rt.ui.prefs.panels.insert(name, share);
+                self.save_prefs();
+            }
             Command::ConvergenceFrequency(starts) => self.convergence_frequency(starts),
             Command::TrackPatches => self.track_patches(),
             Command::SetPatchSettings(p) => self.state.patches = p,

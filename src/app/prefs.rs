@@ -21,6 +21,10 @@ pub const RECENT: usize = 8;
 pub struct Prefs {
     /// Sequences opened, newest first.
     pub recent: Vec<PathBuf>,
+    /// Sessions loaded or saved, newest first.
+    pub recent_sessions: Vec<PathBuf>,
+    /// The side panels' widths as shares of the window (`trackers`, `plots`), as last dragged.
+    pub panels: std::collections::BTreeMap<String, f32>,
 }
 
 impl Prefs {
@@ -44,6 +48,41 @@ impl Prefs {
         let text = toml::to_string_pretty(self)
             .map_err(|e| crate::Error::InvalidParameter(e.to_string()))?;
         crate::dataset::write_atomic(path, text.as_bytes())
+    }
+
+    /// Puts session `p` first in the recent sessions (once), keeping the newest [`RECENT`].
+    pub fn add_recent_session(&mut self, p: &Path) {
+        self.recent_sessions.retain(|r| r != p);
+        self.recent_sessions.insert(0, p.to_path_buf());
+        self.recent_sessions.truncate(RECENT);
+    }
+
+    /// The sessions to offer: the recent ones, then those of the user's sessions folder and of
+    /// `./sessions` (the bundled ones, from a checkout), each once.
+    pub fn session_choices(&self) -> Vec<PathBuf> {
+        let mut out = self.recent_sessions.clone();
+        let folders = [
+            default_session_path().parent().map(Path::to_path_buf),
+            Some(PathBuf::from("sessions")),
+        ];
+        for dir in folders.into_iter().flatten() {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            let mut found: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "toml") && p.is_file())
+                .collect();
+            found.sort();
+            for p in found {
+                let p = std::path::absolute(&p).unwrap_or(p);
+                if !out.contains(&p) {
+                    out.push(p);
+                }
+            }
+        }
+        out.truncate(40);
+        out
     }
 
     /// Puts `p` first in the recent list (once), keeping the newest [`RECENT`].

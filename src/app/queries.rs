@@ -254,6 +254,19 @@ impl InspectorApp {
             })
     }
 
+    /// Per frame tracked by tracker `t` after its start frame: `(frame, update us,
+    /// iterations)` (the per-frame plots of speed and iterations).
+    pub fn per_frame_speed(&self, t: usize) -> Vec<(usize, f64, usize)> {
+        let Some(v) = self.rt.run.results.get(t) else {
+            return Vec::new();
+        };
+        v.iter()
+            .enumerate()
+            .filter(|(f, _)| *f > self.tracker_start(t))
+            .filter_map(|(f, r)| r.as_ref().map(|r| (f, r.update_us, r.iterations.len())))
+            .collect()
+    }
+
     /// The success curve of tracker `t` (from [`eval::success_curve`]).
     pub fn success_curve(&self, t: usize) -> Vec<(f64, f64)> {
         let e: Vec<f64> = self.errors(t).into_iter().map(|(_, e)| e).collect();

@@ -14,6 +14,33 @@ impl InspectorApp {
     pub fn set_session_path(&mut self, p: &std::path::Path) {
         self.rt.ui.session_path = p.display().to_string();
         self.rt.ui.session_file = Some(p.to_path_buf());
+        let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        self.rt.ui.prefs.add_recent_session(&p);
+        self.save_prefs();
+    }
+
+    /// Writes the preferences when they are kept (an error once, naming the file).
+    pub(super) fn save_prefs(&mut self) {
+        if let Some(path) = &self.rt.ui.prefs_path
+            && let Err(e) = self.rt.ui.prefs.save(path)
+        {
+            self.error(format!("cannot keep the preferences: {e}"));
+        }
+    }
+
+    /// The file this session was loaded from or last saved to.
+    pub fn session_file(&self) -> Option<&std::path::Path> {
+        self.rt.ui.session_file.as_deref()
+    }
+
+    /// The sessions to offer in the Sessions menu (recent first).
+    pub fn session_choices(&self) -> Vec<std::path::PathBuf> {
+        self.rt.ui.prefs.session_choices()
+    }
+
+    /// The saved share of the window of side panel `name`, if any.
+    pub fn panel_share(&self, name: &str) -> Option<f32> {
+        self.rt.ui.prefs.panels.get(name).copied()
     }
 
     /// Keeps the preferences (the recent sequences) in `path` between runs: reads them now
@@ -33,11 +60,7 @@ impl InspectorApp {
 
     pub(super) fn add_recent(&mut self, p: &std::path::Path) {
         self.rt.ui.prefs.add_recent(p);
-        if let Some(path) = &self.rt.ui.prefs_path
-            && let Err(e) = self.rt.ui.prefs.save(path)
-        {
-            self.error(format!("cannot keep the recent list: {e}"));
-        }
+        self.save_prefs();
     }
 
     /// Saves the session to `p`; over an existing file other than the session's own, only

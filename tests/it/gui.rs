@@ -1639,6 +1639,29 @@ fn the_recent_list_survives_a_restart_and_saving_over_another_file_asks() {
     h.state_mut().send(Command::SaveSession(other.clone()));
     h.step();
     assert!(h.state().overwrite_pending().is_none(), "its own file now");
+    // The plots panel dragged wider (here: its share kept as a drag keeps it).
+    h.state_mut()
+        .send(Command::KeepPanelShare("plots".into(), 0.45));
+    h.step();
+    drop(h);
+
+    // The next run: the sessions saved are offered in the Sessions menu, and the plots panel
+    // has the width it was given.
+    let mut h = harness(State::default());
+    h.state_mut().use_prefs(prefs.clone());
+    h.run_steps(3);
+    let choices = h.state().session_choices();
+    assert_eq!(&choices[..2], &[other.clone(), own.clone()], "{choices:?}");
+    h.get_by_label("Sessions").click();
+    h.run_steps(2);
+    h.get_by_label(&own.display().to_string()).click();
+    h.run_steps(2);
+    assert_eq!(h.state().session_file(), Some(own.as_path()));
+    let left = h.get_by_label("Success rate").rect().left();
+    assert!(
+        (left - 1400.0 * 0.55).abs() < 20.0,
+        "the plots panel starts at {left}"
+    );
 }
 
 /// Panels keep their share of the window: squeezed by a small window, they grow back with it.

@@ -110,6 +110,20 @@ fn session_controls(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command
             app.rt.ui.session_path.trim(),
         )));
     }
+    // Browsing without a desktop portal: the recent sessions and those of the sessions folders.
+    let choices = app.session_choices();
+    if !choices.is_empty() {
+        ui.menu_button("Sessions", |ui| {
+            for p in choices {
+                if ui.button(p.display().to_string()).clicked() {
+                    out.push(Command::LoadSession(p));
+                    ui.close();
+                }
+            }
+        })
+        .response
+        .on_hover_text("Load a recent session, or one of the sessions folders'");
+    }
 }
 
 /// How long a status message is shown (s), and over how much of its end it fades.

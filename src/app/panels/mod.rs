@@ -52,13 +52,14 @@ pub fn cached_texture(
 
 /// A resizable side panel that keeps its share of the window: egui keeps a panel's width in
 /// pixels, so one squeezed by a small window stayed narrow after the window grew again. `size`
-/// is (default width in px, largest share of the window, smallest width in px). Pair with
-/// [`remember_share`] after the panel is shown.
+/// is (default width in px, largest share of the window, smallest width in px); `saved` the
+/// share kept from the last run. Pair with [`remember_share`] after the panel is shown.
 pub fn follow_window(
     ctx: &egui::Context,
     name: &str,
     panel: egui::Panel,
     (default, most, least): (f32, f32, f32),
+    saved: Option<f32>,
 ) -> egui::Panel {
     let w = ctx.content_rect().width();
     let max = (w * most).max(least);
@@ -67,6 +68,15 @@ pub fn follow_window(
         .default_size(default.min(max))
         .max_size(max);
     let stored: Option<(f32, f32)> = ctx.data(|d| d.get_temp(share_id(name)));
+    // The share kept from the last run, once (when the preferences are read).
+    let applied_id = egui::Id::unique(("panel_share_applied", name));
+    let applied: Option<f32> = ctx.data(|d| d.get_temp(applied_id));
+    if let Some(share) = saved
+        && applied != Some(share)
+    {
+        ctx.data_mut(|d| d.insert_temp(applied_id, share));
+        return panel.exact_size((share * w).clamp(least.min(max), max));
+    }
     match stored {
         // The window changed size: the panel takes the share it had.
         Some((last, share)) if (last - w).abs() > 0.5 => {
@@ -76,11 +86,25 @@ pub fn follow_window(
     }
 }
 
-/// Records the width a [`follow_window`] panel was given, as a share of the window.
-pub fn remember_share(ctx: &egui::Context, name: &str, width: f32) {
+/// Records the width a [`follow_window`] panel was given, as a share of the window; once the
+/// pointer is released after a change from the `saved` share, asks to keep it between runs.
+pub fn remember_share(
+    ctx: &egui::Context,
+    name: &str,
+    width: f32,
+    saved: Option<f32>,
+    out: &mut Commands,
+) {
     let w = ctx.content_rect().width();
     if w > 0.0 {
-        ctx.data_mut(|d| d.insert_temp(share_id(name), (w, width / w)));
+        let share = width / w;
+        ctx.data_mut(|d| d.insert_temp(share_id(name), (w, share)));
+        let moved = saved.is_none_or(|s| (s - share).abs() > 0.005);
+        // Only a drag of the panel's edge changes it (not a window resized, which keeps it).
+        let dragged = ctx.input(|i| i.pointer.any_released());
+        if moved && dragged {
+            out.push(Command::KeepPanelShare(name.to_string(), share));
+        }
     }
 }
 

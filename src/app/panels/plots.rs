@@ -84,6 +84,7 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
         "plots",
         egui::Panel::right("plots"),
         (430.0f32.min(w * 0.3), most, 220.0),
+        app.panel_share("plots"),
     );
     let shown = panel.show(ui, |ui| {
         // Vertical only: every plot, image and table fits the panel's width (a horizontal
@@ -109,6 +110,7 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                             disagreement(app, ui, out, a, b);
                         }
                         speed_table(app, ui);
+                        speed_plots(app, ui, out);
                         ui.separator();
                         convergence(app, ui, out);
                         ui.separator();
@@ -118,7 +120,13 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                     });
             });
     });
-    super::remember_share(&ctx, "plots", shown.response.rect.width());
+    super::remember_share(
+        &ctx,
+        "plots",
+        shown.response.rect.width(),
+        app.panel_share("plots"),
+        out,
+    );
 }
 
 /// The success-rate heading with the export button and its folder.
@@ -358,6 +366,67 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
                         .wrap_mode(egui::TextWrapMode::Wrap),
                 );
                 ui.end_row();
+            }
+        });
+}
+
+/// A frame's speed: (frame, update us, iterations).
+type FrameSpeed = (usize, f64, usize);
+
+/// Per frame, each tracker's update time and its iterations (a click seeks), in a collapsing
+/// section under the speed table.
+fn speed_plots(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
+    egui::CollapsingHeader::new("Speed and iterations per frame")
+        .id_salt("speed_plots")
+        .show(ui, |ui| {
+            let ab = app.state.view.ab;
+            let shown: Vec<(usize, egui::Color32, Vec<FrameSpeed>)> = app
+                .state
+                .trackers
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !ab.is_some_and(|(a, b)| *i != a && *i != b))
+                .map(|(i, t)| (i, color(t.color), app.per_frame_speed(i)))
+                .collect();
+            if shown.iter().all(|s| s.2.is_empty()) {
+                ui.label(egui::RichText::new("no frame tracked yet").small().weak());
+                return;
+            }
+            let frame = app.state.frame;
+            let ms = |s: &FrameSpeed| s.1 / 1000.0;
+            let its = |s: &FrameSpeed| s.2 as f64;
+            let plots: [(&str, &str, &dyn Fn(&FrameSpeed) -> f64); 2] = [
+                ("update_plot", "update (ms)", &ms),
+                ("iterations_plot", "iterations", &its),
+            ];
+            for (id, y, value) in plots {
+                let r = axes(Plot::new(id), "frame", y)
+                    .custom_x_axes(vec![frame_axis("frame")])
+                    .height(110.0)
+                    .include_y(0.0)
+                    .allow_scroll(false)
+                    .allow_drag(false)
+                    .show(ui, |p| {
+                        for (i, c, pts) in &shown {
+                            let line: Vec<[f64; 2]> =
+                                pts.iter().map(|s| [(s.0 + 1) as f64, value(s)]).collect();
+                            p.line(
+                                Line::new(format!("{}", i + 1), PlotPoints::from(line)).color(*c),
+                            );
+                        }
+                        p.vline(
+                            VLine::new("shown frame", (frame + 1) as f64)
+                                .color(egui::Color32::from_gray(160)),
+                        );
+                        p.pointer_coordinate()
+                    });
+                if r.response.clicked()
+                    && let Some(pt) = r.inner
+                    && app.frame_count() > 0
+                {
+                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
+                    out.push(Command::Seek(f));
+                }
             }
         });
 }

@@ -43,6 +43,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         "trackers",
         egui::Panel::left("trackers"),
         (300.0f32.min(w * 0.22), most, 170.0),
+        app.panel_share("trackers"),
     );
     let shown = panel.show(ui, |ui| {
         egui::ScrollArea::vertical().show(ui, |ui| {
@@ -60,7 +61,13 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             ground_truth_section(app, ui, out);
         });
     });
-    super::remember_share(&ctx, "trackers", shown.response.rect.width());
+    super::remember_share(
+        &ctx,
+        "trackers",
+        shown.response.rect.width(),
+        app.panel_share("trackers"),
+        out,
+    );
 }
 
 /// Tracker `i`'s group: its colour, enabling, kind and methods, parameters, how it starts, and

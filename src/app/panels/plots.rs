@@ -393,11 +393,11 @@ fn speed_plots(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                 return;
             }
             let frame = app.state.frame;
-            let ms = |s: &FrameSpeed| s.1 / 1000.0;
-            let its = |s: &FrameSpeed| s.2 as f64;
-            let plots: [(&str, &str, &dyn Fn(&FrameSpeed) -> f64); 2] = [
-                ("update_plot", "update (ms)", &ms),
-                ("iterations_plot", "iterations", &its),
+            let ms: fn(&FrameSpeed) -> f64 = |s| s.1 / 1000.0;
+            let its: fn(&FrameSpeed) -> f64 = |s| s.2 as f64;
+            let plots = [
+                ("update_plot", "update (ms)", ms),
+                ("iterations_plot", "iterations", its),
             ];
             for (id, y, value) in plots {
                 let r = axes(Plot::new(id), "frame", y)

@@ -25,6 +25,10 @@ pub const SHORTCUTS: &[(&str, &str)] = &[
     ("F1 or ?", "this help"),
     ("F2 / F3", "hide or show the trackers / plots panel"),
     (
+        "F4",
+        "presentation scale: the frame's labels and quads, the plots' text and lines x2, and back",
+    ),
+    (
         "Ctrl+Z / Ctrl+Shift+Z",
         "undo / redo a ground-truth correction",
     ),

@@ -89,7 +89,18 @@ pub struct View {
     pub follow_in_gt_mode: bool,
     #[serde(default)]
     pub follow_tracker: bool,
+    /// The presentation scale (1 = normal): the frame's labels and quads and the plots' text
+    /// and lines, for a class at the back of a room (F4 toggles 1 and 2).
+    #[serde(default = "one")]
+    pub label_scale: f32,
 }
+
+fn one() -> f32 {
+    1.0
+}
+
+/// The presentation scales [`View::label_scale`] takes.
+pub const LABEL_SCALE: std::ops::RangeInclusive<f32> = 0.75..=4.0;
 
 /// What the cost-landscape view sweeps.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -137,6 +148,7 @@ impl Default for View {
             landscape: LandscapeSettings::default(),
             follow_in_gt_mode: true,
             follow_tracker: false,
+            label_scale: 1.0,
         }
     }
 }
@@ -354,6 +366,18 @@ impl State {
                     crate::error::short_number(fps as f64, 2),
                     PLAYBACK_FPS.start(),
                     PLAYBACK_FPS.end()
+                ),
+            ));
+        }
+        let scale = self.view.label_scale;
+        if !LABEL_SCALE.contains(&scale) {
+            return Err((
+                "label_scale".into(),
+                format!(
+                    "label_scale = {} must be in {}..={}",
+                    crate::error::short_number(scale as f64, 2),
+                    LABEL_SCALE.start(),
+                    LABEL_SCALE.end()
                 ),
             ));
         }

@@ -25,6 +25,12 @@ impl InspectorApp {
                     cmds.push(Command::ConfirmOverwrite(false));
                 }
             }
+            if i.key_pressed(egui::Key::F4) {
+                // The presentation scale, for a class: 2 and back.
+                let mut view = self.state.view.clone();
+                view.label_scale = if view.label_scale == 1.0 { 2.0 } else { 1.0 };
+                cmds.push(Command::SetView(view));
+            }
             if i.key_pressed(egui::Key::F2) || i.key_pressed(egui::Key::F3) {
                 let mut view = self.state.view.clone();
                 if i.key_pressed(egui::Key::F2) {

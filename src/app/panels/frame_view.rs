@@ -17,6 +17,8 @@ pub struct Transform {
     rect: Rect,
     scale: f32,
     center: [f32; 2],
+    /// The presentation scale of labels and lines ([`View::label_scale`]).
+    pub label_scale: f32,
 }
 
 impl Transform {
@@ -27,12 +29,14 @@ impl Transform {
                 rect,
                 scale: (rect.width() / w).min(rect.height() / h),
                 center: [w / 2.0 - 0.5, h / 2.0 - 0.5],
+                label_scale: view.label_scale,
             }
         } else {
             Transform {
                 rect,
                 scale: view.zoom,
                 center: view.center,
+                label_scale: view.label_scale,
             }
         }
     }
@@ -70,24 +74,69 @@ fn draw_quad(
     numbers: bool,
 ) {
     let pts = quad_points(t, q);
+    let k = t.label_scale;
     if dashed {
         let mut closed = pts.clone();
         closed.push(pts[0]);
-        painter.extend(Shape::dashed_line(&closed, Stroke::new(2.0, c), 7.0, 4.0));
+        painter.extend(Shape::dashed_line(
+            &closed,
+            Stroke::new(2.0 * k, c),
+            7.0 * k,
+            4.0 * k,
+        ));
     } else {
-        painter.add(Shape::closed_line(pts.clone(), Stroke::new(2.0, c)));
+        painter.add(Shape::closed_line(pts.clone(), Stroke::new(2.0 * k, c)));
     }
-    for (k, p) in pts.iter().enumerate() {
-        painter.circle_filled(*p, 3.5, c);
+    for (n, p) in pts.iter().enumerate() {
+        painter.circle_filled(*p, 3.5 * k, c);
         if numbers {
             painter.text(
-                *p + Vec2::new(5.0, -5.0),
+                *p + Vec2::new(5.0, -5.0) * k,
                 egui::Align2::LEFT_BOTTOM,
-                (k + 1).to_string(),
-                egui::FontId::monospace(12.0),
+                (n + 1).to_string(),
+                egui::FontId::monospace(12.0 * k),
                 c,
             );
         }
+    }
+}
+
+/// A label of a quad on the frame, placed beside it by [`place_labels`].
+pub struct QuadLabel {
+    pub quad: Quad,
+    pub text: String,
+    pub color: Color32,
+}
+
+/// Draws the labels beside their quads (right of each quad's box, else left of it), at the
+/// presentation scale, each on a dark backing and moved down past those already placed: on
+/// the target they hid it and each other ("start 2", "iteration 7", "3 lost").
+fn place_labels(painter: &egui::Painter, t: &Transform, labels: &[QuadLabel]) {
+    let font = egui::FontId::proportional(14.0 * t.label_scale);
+    let pad = Vec2::new(4.0, 2.0) * t.label_scale;
+    let mut placed: Vec<Rect> = Vec::new();
+    for l in labels {
+        let pts = quad_points(t, &l.quad);
+        let bbox = Rect::from_points(&pts);
+        let galley = painter.layout_no_wrap(l.text.clone(), font.clone(), l.color);
+        let size = galley.size() + 2.0 * pad;
+        let gap = 6.0 * t.label_scale;
+        let right = bbox.right() + gap + size.x <= t.rect.right();
+        let x = if right {
+            bbox.right() + gap
+        } else {
+            (bbox.left() - gap - size.x).max(t.rect.left())
+        };
+        let mut r = Rect::from_min_size(egui::pos2(x, bbox.top().max(t.rect.top())), size);
+        for _ in 0..32 {
+            match placed.iter().find(|p| p.intersects(r)) {
+                Some(p) => r = r.translate(Vec2::new(0.0, p.bottom() - r.top() + 2.0)),
+                None => break,
+            }
+        }
+        painter.rect_filled(r, 3.0, Color32::from_black_alpha(170));
+        painter.galley(r.min + pad, galley, l.color);
+        placed.push(r);
     }
 }
 
@@ -270,12 +319,14 @@ pub fn frame_view(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Commands) -> 
     let t = Transform::new(rect, app.rt.display.image_size, &app.state.view);
     draw_image(app, &painter, &t, &texture);
     let frame = app.state.frame;
-    draw_truth_and_proposal(app, &painter, &t, frame);
+    let mut labels = Vec::new();
+    draw_truth_and_proposal(app, &painter, &t, frame, &mut labels);
     if let Some((states, half)) = app.patches_on(frame) {
         draw_patches(&painter, &t, states, half);
     }
-    draw_trackers(app, &painter, &t, frame);
-    draw_iteration_and_experiment(app, &painter, &t, frame);
+    draw_trackers(app, &painter, &t, frame, &mut labels);
+    draw_iteration_and_experiment(app, &painter, &t, frame, &mut labels);
+    place_labels(&painter, &t, &labels);
     interact(app, ui, out, &response, &t, &painter);
     Some(t)
 }
@@ -365,6 +416,7 @@ fn draw_truth_and_proposal(
     painter: &egui::Painter,
     t: &Transform,
     frame: usize,
+    labels: &mut Vec<QuadLabel>,
 ) {
     let numbers = app.state.view.show_corner_numbers;
     if app.state.view.show_ground_truth {
@@ -389,18 +441,22 @@ fn draw_truth_and_proposal(
         .map(|(_, q)| *q)
     {
         draw_quad(painter, t, &q, PROPOSAL_COLOR, true, false);
-        painter.text(
-            t.to_screen(q.0[0]) + Vec2::new(0.0, -14.0),
-            egui::Align2::LEFT_BOTTOM,
-            "proposal",
-            egui::FontId::proportional(13.0),
-            PROPOSAL_COLOR,
-        );
+        labels.push(QuadLabel {
+            quad: q,
+            text: "proposal".into(),
+            color: PROPOSAL_COLOR,
+        });
     }
 }
 
 /// Each tracker's quad and label, and what the methods show of themselves.
-fn draw_trackers(app: &InspectorApp, painter: &egui::Painter, t: &Transform, frame: usize) {
+fn draw_trackers(
+    app: &InspectorApp,
+    painter: &egui::Painter,
+    t: &Transform,
+    frame: usize,
+    labels: &mut Vec<QuadLabel>,
+) {
     let numbers = app.state.view.show_corner_numbers;
     if app.state.view.show_samples {
         for (i, entry) in app.state.trackers.iter().enumerate() {
@@ -417,13 +473,11 @@ fn draw_trackers(app: &InspectorApp, painter: &egui::Painter, t: &Transform, fra
                 TrackStatus::Lost(reason) => format!("{} lost: {reason}", i + 1),
                 _ => format!("{}", i + 1),
             };
-            painter.text(
-                t.to_screen(r.corners.centroid()),
-                egui::Align2::CENTER_CENTER,
-                label,
-                egui::FontId::proportional(14.0),
-                c,
-            );
+            labels.push(QuadLabel {
+                quad: r.corners,
+                text: label,
+                color: c,
+            });
         }
     }
 }
@@ -434,6 +488,7 @@ fn draw_iteration_and_experiment(
     painter: &egui::Painter,
     t: &Transform,
     frame: usize,
+    labels: &mut Vec<QuadLabel>,
 ) {
     // The selected iteration of the inspected tracker.
     if let (Some(it), Some(r)) = (
@@ -453,32 +508,29 @@ fn draw_iteration_and_experiment(
             c.b().saturating_add(90),
         );
         draw_quad(painter, t, &rec.corners, light, true, false);
-        painter.text(
-            t.to_screen(rec.corners.0[0]) + Vec2::new(0.0, -16.0),
-            egui::Align2::LEFT_BOTTOM,
-            format!("iteration {}", it + 1),
-            egui::FontId::proportional(13.0),
-            light,
-        );
+        labels.push(QuadLabel {
+            quad: rec.corners,
+            text: format!("iteration {}", it + 1),
+            color: light,
+        });
     }
     // The convergence experiment's start, dashed white.
     if let Some(e) = app.experiment_on(frame) {
         let pts = quad_points(t, &e.start);
         let mut closed = pts.clone();
         closed.push(pts[0]);
+        let k = t.label_scale;
         painter.add(Shape::dashed_line(
             &closed,
-            Stroke::new(1.5, Color32::WHITE),
-            6.0,
-            4.0,
+            Stroke::new(1.5 * k, Color32::WHITE),
+            6.0 * k,
+            4.0 * k,
         ));
-        painter.text(
-            t.to_screen(e.start.0[3]) + Vec2::new(0.0, 4.0),
-            egui::Align2::LEFT_TOP,
-            format!("start {} (σ {} px)", e.number, e.sigma),
-            egui::FontId::proportional(13.0),
-            Color32::WHITE,
-        );
+        labels.push(QuadLabel {
+            quad: e.start,
+            text: format!("start {} (σ {} px)", e.number, e.sigma),
+            color: Color32::WHITE,
+        });
     }
 }
 

@@ -101,6 +101,15 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                         bottom: 0,
                     })
                     .show(ui, |ui| {
+                        // The presentation scale: the plots' text (and their lines, below),
+                        // half as much as the frame's labels (at x2 the panel's tables took
+                        // the frame's room).
+                        let k = 1.0 + (app.state.view.label_scale - 1.0) / 2.0;
+                        if k != 1.0 {
+                            for f in ui.style_mut().text_styles.values_mut() {
+                                f.size *= k;
+                            }
+                        }
                         export_row(app, ui, out);
                         success_plot(app, ui);
                         ui.heading("Alignment error and confidence per frame");
@@ -211,7 +220,8 @@ fn success_plot(app: &InspectorApp, ui: &mut egui::Ui) {
                             format!("{} {}", i + 1, t.spec.label()),
                             PlotPoints::from(pts),
                         )
-                        .color(color(t.color)),
+                        .color(color(t.color))
+                        .width(line_width(app)),
                     );
                 }
             }
@@ -278,7 +288,11 @@ fn tracker_errors(app: &InspectorApp, p: &mut egui_plot::PlotUi<'_>, i: usize, c
         .map(|(f, e)| [(f + 1) as f64, e.min(50.0)])
         .collect();
     if !pts.is_empty() {
-        p.line(Line::new(format!("{}", i + 1), PlotPoints::from(pts)).color(c));
+        p.line(
+            Line::new(format!("{}", i + 1), PlotPoints::from(pts))
+                .color(c)
+                .width(line_width(app)),
+        );
     }
     // The confidence, dashed, and the frames reported lost (under the
     // tracker's legend entry, which shows and hides all three).
@@ -292,6 +306,7 @@ fn tracker_errors(app: &InspectorApp, p: &mut egui_plot::PlotUi<'_>, i: usize, c
         p.line(
             Line::new(format!("{}", i + 1), PlotPoints::from(line))
                 .color(c.gamma_multiply(0.7))
+                .width(line_width(app))
                 .style(LineStyle::dashed_loose()),
         );
     }
@@ -304,7 +319,7 @@ fn tracker_errors(app: &InspectorApp, p: &mut egui_plot::PlotUi<'_>, i: usize, c
         p.points(
             Points::new(format!("{}", i + 1), PlotPoints::from(lost))
                 .shape(MarkerShape::Cross)
-                .radius(3.0)
+                .radius(3.0 * app.state.view.label_scale)
                 .color(egui::Color32::from_rgb(230, 60, 60)),
         );
     }
@@ -368,6 +383,11 @@ fn speed_table(app: &InspectorApp, ui: &mut egui::Ui) {
                 ui.end_row();
             }
         });
+}
+
+/// The width of the plots' curves at the presentation scale.
+fn line_width(app: &InspectorApp) -> f32 {
+    1.5 * app.state.view.label_scale
 }
 
 /// A frame's speed: (frame, update us, iterations).

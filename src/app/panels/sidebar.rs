@@ -167,6 +167,16 @@ fn ground_truth_section(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Com
     };
     ui.checkbox(follow, "follow the target")
         .on_hover_text(format!("Zoomed in, each frame is centred on {what}"));
+    ui.add(
+        egui::DragValue::new(&mut view.label_scale)
+            .range(crate::session::LABEL_SCALE)
+            .speed(0.05)
+            .prefix("labels x "),
+    )
+    .on_hover_text(
+        "Presentation scale (F4 toggles 1 and 2): the frame's labels and quads, the plots' \
+         text and lines",
+    );
     });
     if view != app.state.view {
         out.push(Command::SetView(view));

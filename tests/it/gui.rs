@@ -1784,3 +1784,107 @@ fn play_starts_on_the_shown_frame_the_view_follows_and_corrections_reopen_in_the
         h.state().status()
     );
 }
+
+/// The first screen at the window's default size (1280x800) and at 1000x700, tracked a few
+/// frames, an iteration selected: no widget reaches past the window's edge or from the plots
+/// panel into the frame, and no two labels of the top bar, the bottom bar or the plots panel
+/// overlap (at 1280x800 the plots panel cut its plots and squeezed a column of images to 10
+/// px, its label one letter a line).
+#[test]
+fn at_the_default_size_and_at_1000x700_nothing_is_cut_and_no_labels_overlap() {
+    use egui::accesskit::Role;
+    use egui_kittest::kittest::NodeT;
+    let d = TempDir::new("gui-layout");
+    let seq = small_sequence(d.path(), 8);
+    for (w, h_px) in [(1280.0f32, 800.0f32), (1000.0, 700.0)] {
+        let app = InspectorApp::new(state_on(&seq), wake);
+        let mut h = Harness::builder()
+            .with_size(egui::Vec2::new(w, h_px))
+            .with_max_steps(10_000)
+            .build_ui_state(|ui, app: &mut InspectorApp| app.ui(ui), app);
+        step_until(&mut h, "the frame", |a| {
+            a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+        });
+        h.state_mut().send(Command::Play);
+        step_until(&mut h, "the end", |a| {
+            a.tracked_until() == Some(7) && !a.is_playing()
+        });
+        h.state_mut().send(Command::Seek(4));
+        h.state_mut().send(Command::SelectIteration(Some(1)));
+        h.run_steps(4);
+        let plots_left = h.get_by_label("Success rate").rect().left() - 14.0;
+        let mut shown = Vec::new();
+        for role in [
+            Role::Label,
+            Role::Button,
+            Role::CheckBox,
+            Role::TextInput,
+            Role::Slider,
+            Role::ComboBox,
+            Role::SpinButton,
+        ] {
+            for n in h.query_all_by_role(role) {
+                let r = n.rect();
+                // Scrolled out of view (reachable by scrolling): not on the screen.
+                if r.bottom() <= 0.0 || r.top() >= h_px || r.width() <= 0.0 {
+                    continue;
+                }
+                let name = n.accesskit_node().label().unwrap_or_default();
+                shown.push((name, role, r));
+            }
+        }
+        assert!(shown.len() > 40, "{} widgets", shown.len());
+        for (name, role, r) in &shown {
+            assert!(
+                r.left() >= -1.0 && r.right() <= w + 1.0,
+                "{w}x{h_px}: {role:?} {name:?} at {r:?} is cut by the window"
+            );
+            if r.center().x > plots_left {
+                assert!(
+                    r.left() >= plots_left - 1.0,
+                    "{w}x{h_px}: {role:?} {name:?} at {r:?} reaches out of the plots panel"
+                );
+            }
+        }
+        // The convergence view's three images share the panel's width: none squeezed.
+        let panel = w - plots_left;
+        h.get_by_label_contains("|error|").scroll_to_me();
+        h.run_steps(3);
+        let left = |label: &str| h.get_by_label_contains(label).rect().left();
+        let cols = [left("template"), left("warped patch"), left("|error|")];
+        for k in 0..2 {
+            let col = cols[k + 1] - cols[k];
+            assert!(
+                col >= 0.25 * panel,
+                "{w}x{h_px}: a column of the images is {col} px of a {panel} px panel"
+            );
+        }
+        assert!(
+            cols[2] + 0.2 * panel <= w,
+            "{w}x{h_px}: the third column at {}",
+            cols[2]
+        );
+        // Labels of the bars and of the plots panel.
+        let labels: Vec<_> = shown
+            .iter()
+            .filter(|(name, role, r)| {
+                *role == Role::Label
+                    && !name.is_empty()
+                    && (r.left() >= plots_left || r.top() < 60.0 || r.bottom() > h_px - 40.0)
+            })
+            .collect();
+        for (i, a) in labels.iter().enumerate() {
+            for b in &labels[i + 1..] {
+                let overlap = a.2.intersect(b.2);
+                assert!(
+                    overlap.width() <= 1.0 || overlap.height() <= 1.0,
+                    "{w}x{h_px}: {:?} at {:?} overlaps {:?} at {:?}",
+                    a.0,
+                    a.2,
+                    b.0,
+                    b.2
+                );
+            }
+        }
+    }
+}

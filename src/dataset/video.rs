@@ -210,21 +210,9 @@ impl Video {
     /// video grey where the same frames as JPEGs showed in colour). Decoded by a process of
     /// its own, forward from the last frame asked for; not cached.
     pub fn frame_rgb(&self, i: usize) -> Result<Vec<u8>> {
-        if i >= self.frames {
-            return Err(Error::Sequence {
-                path: self.path.clone(),
-                message: format!(
-                    "frame {} is beyond the video's {} frames",
-                    i + 1,
-                    self.frames
-                ),
-            });
-        }
+        self.check_frame(i)?;
         let mut guard = self.colour.lock().unwrap_or_else(|e| e.into_inner());
-        let reuse = guard
-            .as_ref()
-            .is_some_and(|d| d.next <= i && i < d.next + 2 * self.fps.max(1.0) as usize);
-        if !reuse {
+        if !self.reusable(guard.as_ref(), i) {
             *guard = Some(self.spawn_as(i, "rgb24")?);
         }
         let d = guard.as_mut().expect("set above");
@@ -289,8 +277,8 @@ impl Video {
         })
     }
 
-    /// Frame `i` (0-based) as 8-bit grey. The error names the file and the frame.
-    pub fn frame(&self, i: usize) -> Result<GrayU8> {
+    /// An error naming frame `i` when the video has no such frame.
+    fn check_frame(&self, i: usize) -> Result<()> {
         if i >= self.frames {
             return Err(Error::Sequence {
                 path: self.path.clone(),
@@ -301,6 +289,18 @@ impl Video {
                 ),
             });
         }
+        Ok(())
+    }
+
+    /// Whether decoder `d` reaches frame `i` by decoding on (close frames ahead; anything else
+    /// restarts at the frame).
+    fn reusable(&self, d: Option<&Decoder>, i: usize) -> bool {
+        d.is_some_and(|d| d.next <= i && i < d.next + 2 * self.fps.max(1.0) as usize)
+    }
+
+    /// Frame `i` (0-based) as 8-bit grey. The error names the file and the frame.
+    pub fn frame(&self, i: usize) -> Result<GrayU8> {
+        self.check_frame(i)?;
         {
             let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
             if let Some((_, img)) = cache.iter().find(|(k, _)| *k == i) {
@@ -308,11 +308,7 @@ impl Video {
             }
         }
         let mut guard = self.decoder.lock().unwrap_or_else(|e| e.into_inner());
-        // Close frames ahead are decoded through; anything else restarts at the frame.
-        let reuse = guard
-            .as_ref()
-            .is_some_and(|d| d.next <= i && i < d.next + 2 * self.fps.max(1.0) as usize);
-        if !reuse {
+        if !self.reusable(guard.as_ref(), i) {
             *guard = Some(self.spawn(i)?);
         }
         let d = guard.as_mut().expect("set above");

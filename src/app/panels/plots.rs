@@ -269,6 +269,15 @@ fn error_plot(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             p.set_auto_bounds(true);
             p.pointer_coordinate()
         });
+    seek_on_click(app, &r, out);
+}
+
+/// A click on a per-frame plot shows the frame under the pointer.
+fn seek_on_click(
+    app: &InspectorApp,
+    r: &egui_plot::PlotResponse<Option<PlotPoint>>,
+    out: &mut Vec<Command>,
+) {
     if r.response.clicked()
         && let Some(pt) = r.inner
         && app.frame_count() > 0
@@ -440,13 +449,7 @@ fn speed_plots(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
                         );
                         p.pointer_coordinate()
                     });
-                if r.response.clicked()
-                    && let Some(pt) = r.inner
-                    && app.frame_count() > 0
-                {
-                    let f = (pt.x.round().max(1.0) as usize - 1).min(app.frame_count() - 1);
-                    out.push(Command::Seek(f));
-                }
+                seek_on_click(app, &r, out);
             }
         });
 }

@@ -1744,6 +1744,20 @@ fn play_starts_on_the_shown_frame_the_view_follows_and_corrections_reopen_in_the
     assert!(h.state().result(0, 3).is_none(), "tracked from frame 1");
     assert!(h.state().result(0, 7).is_some());
 
+    // The per-frame plots of speed and iterations, under the speed table.
+    h.get_by_label("Speed and iterations per frame")
+        .scroll_to_me();
+    h.run_steps(10);
+    h.get_by_label("Speed and iterations per frame").click();
+    h.run_steps(3);
+    assert!(h.query_by_label("no frame tracked yet").is_none());
+    assert_eq!(h.state().per_frame_speed(0).len(), 5, "frames 8..12");
+    // F4: the presentation scale, and back.
+    press(&mut h, egui::Key::F4, egui::Modifiers::NONE);
+    assert_eq!(h.state().state.view.label_scale, 2.0);
+    press(&mut h, egui::Key::F4, egui::Modifiers::NONE);
+    assert_eq!(h.state().state.view.label_scale, 1.0);
+
     // Zoomed in far from the target, in the ground-truth mode: the next frame is centred on it.
     h.get_by_label("Edit ground-truth corners").click();
     h.state_mut().send(Command::Seek(6));

@@ -1232,3 +1232,21 @@ fn disagreement(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, a
         }
     });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::compact;
+
+    /// Tick labels in few characters whatever the range: a live similarity of -4e-13 read
+    /// "-0.0000000000004" and squeezed its plot.
+    #[test]
+    fn tick_labels_are_compact() {
+        assert_eq!(compact(-4e-13, 1e-13), "-4e-13");
+        assert_eq!(compact(0.0, 1e-13), "0");
+        assert_eq!(compact(-30000.0, 10000.0), "-30000");
+        assert_eq!(compact(2.5e6, 5e5), "2.5e6");
+        assert_eq!(compact(0.25, 0.05), "0.25");
+        assert_eq!(compact(12.0, 2.0), "12");
+        assert!(compact(f64::NAN, 1.0).is_empty());
+    }
+}

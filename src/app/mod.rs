@@ -26,6 +26,7 @@ pub use crate::session as state;
 mod window;
 pub mod worker;
 
+pub use panels::panel_rect;
 pub use queries::{Disagreement, rank_disagreements};
 use runtime::{DisplayRt, LiveRt, MessagesRt, RunRt, SequenceRt, UiRt};
 pub use runtime::{Experiment, Frequency, LandscapeView, Patches, Runtime, Tool, Versioned};

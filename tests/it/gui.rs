@@ -1826,7 +1826,10 @@ fn at_the_default_size_and_at_1000x700_nothing_is_cut_and_no_labels_overlap() {
         h.state_mut().send(Command::Seek(4));
         h.state_mut().send(Command::SelectIteration(Some(1)));
         h.run_steps(4);
-        let plots_left = h.get_by_label("Success rate").rect().left() - 14.0;
+        let panel = |name: &str| regtrack::app::panel_rect(&h.ctx, name).expect(name);
+        let (trackers, plots) = (panel("trackers"), panel("plots"));
+        let plots_left = plots.left();
+        let trackers_right = trackers.right();
         let mut shown = Vec::new();
         for role in [
             Role::Label,
@@ -1859,9 +1862,20 @@ fn at_the_default_size_and_at_1000x700_nothing_is_cut_and_no_labels_overlap() {
                     "{w}x{h_px}: {role:?} {name:?} at {r:?} reaches out of the plots panel"
                 );
             }
+            // The trackers panel, below the top bar and above the playback bar.
+            if r.center().x < trackers_right
+                && r.top() > trackers.top()
+                && r.bottom() < trackers.bottom()
+            {
+                assert!(
+                    r.right() <= trackers_right + 1.0,
+                    "{w}x{h_px}: {role:?} {name:?} at {r:?} reaches out of the trackers panel \
+                     (its right edge at {trackers_right})"
+                );
+            }
         }
         // The convergence view's three images share the panel's width: none squeezed.
-        let panel = w - plots_left;
+        let panel = plots.width();
         h.get_by_label_contains("|error|").scroll_to_me();
         h.run_steps(3);
         let left = |label: &str| h.get_by_label_contains(label).rect().left();

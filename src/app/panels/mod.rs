@@ -91,11 +91,13 @@ pub fn follow_window(
 pub fn remember_share(
     ctx: &egui::Context,
     name: &str,
-    width: f32,
+    rect: egui::Rect,
     saved: Option<f32>,
     out: &mut Commands,
 ) {
-    let w = ctx.content_rect().width();
+    let (w, width) = (ctx.content_rect().width(), rect.width());
+    // Where it is, for the layout tests ([`panel_rect`]).
+    ctx.data_mut(|d| d.insert_temp(egui::Id::unique(("panel_rect", name)), rect));
     if w > 0.0 {
         let share = width / w;
         ctx.data_mut(|d| d.insert_temp(share_id(name), (w, share)));
@@ -106,6 +108,11 @@ pub fn remember_share(
             out.push(Command::KeepPanelShare(name.to_string(), share));
         }
     }
+}
+
+/// Where side panel `name` (`trackers`, `plots`) was last drawn.
+pub fn panel_rect(ctx: &egui::Context, name: &str) -> Option<egui::Rect> {
+    ctx.data(|d| d.get_temp(egui::Id::unique(("panel_rect", name))))
 }
 
 fn share_id(name: &str) -> egui::Id {

@@ -132,7 +132,7 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
     super::remember_share(
         &ctx,
         "plots",
-        shown.response.rect.width(),
+        shown.response.rect,
         app.panel_share("plots"),
         out,
     );

@@ -64,7 +64,7 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     super::remember_share(
         &ctx,
         "trackers",
-        shown.response.rect.width(),
+        shown.response.rect,
         app.panel_share("trackers"),
         out,
     );

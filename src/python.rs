@@ -736,7 +736,7 @@ fn eval<'py>(
                 ..crate::eval::Batch::new(&sequences, &specs)
             };
             let plan = batch.plan();
-            let outcome = batch.execute(plan, &|_, _| {})?;
+            let outcome = batch.execute(plan, &|_| {})?;
             let rows = outcome.rows();
             if let Some(out) = out.as_deref() {
                 crate::eval::write_summaries(out, &rows)?;

@@ -63,6 +63,29 @@ pub struct Plan {
     pub selected: usize,
 }
 
+/// A run of a batch that has just finished, for the progress (a bar on a terminal, a line a
+/// run in a cluster job's log).
+#[derive(Clone, Debug)]
+pub struct Finished<'a> {
+    /// Runs finished so far in this execution, of `total`.
+    pub done: usize,
+    pub total: usize,
+    pub sequence: &'a str,
+    pub tracker: String,
+    /// How it went: its frames and SR@5, or why it failed.
+    pub what: String,
+}
+
+impl std::fmt::Display for Finished<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "run {} of {}: {} on {}: {}",
+            self.done, self.total, self.tracker, self.sequence, self.what
+        )
+    }
+}
+
 /// What a batch did.
 #[derive(Debug)]
 pub struct BatchOutcome {
@@ -170,7 +193,7 @@ impl<'a> Batch<'a> {
     pub fn execute(
         &self,
         plan: Plan,
-        progress: &(dyn Fn(usize, usize) + Sync),
+        progress: &(dyn Fn(Finished<'_>) + Sync),
     ) -> Result<BatchOutcome> {
         // What a killed batch left half-written in the folder goes first.
         if let Some(out) = self.out {
@@ -193,8 +216,29 @@ impl<'a> Batch<'a> {
             plan.todo
                 .par_iter()
                 .map(|&(s, p)| {
-                    let r = self.run_one(&self.sequences[s], &self.specs[p], ahead);
-                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                    let (seq, spec) = (&self.sequences[s], &self.specs[p]);
+                    let r = self.run_one(seq, spec, ahead);
+                    let what = match &r {
+                        Ok(run) => {
+                            let e = run.sr_errors();
+                            let sr = super::success_rate(&e, 5.0);
+                            match &run.error {
+                                Some(why) => format!(
+                                    "{} frames, SR@5 {sr:.3}; stopped: {why}",
+                                    run.frames.len()
+                                ),
+                                None => format!("{} frames, SR@5 {sr:.3}", run.frames.len()),
+                            }
+                        }
+                        Err(e) => format!("failed: {e}"),
+                    };
+                    progress(Finished {
+                        done: done.fetch_add(1, Ordering::Relaxed) + 1,
+                        total,
+                        sequence: &seq.name,
+                        tracker: spec.label(),
+                        what,
+                    });
                     r
                 })
                 .collect()
@@ -226,7 +270,7 @@ impl<'a> Batch<'a> {
     }
 
     /// [`Batch::plan`], then [`Batch::execute`].
-    pub fn run(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<BatchOutcome> {
+    pub fn run(&self, progress: &(dyn Fn(Finished<'_>) + Sync)) -> Result<BatchOutcome> {
         self.execute(self.plan(), progress)
     }
 

@@ -6,7 +6,7 @@
 mod batch;
 mod files;
 
-pub use batch::{Batch, BatchOutcome, POOLED, Plan, Shard, by_tracker, summary_rows};
+pub use batch::{Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, summary_rows};
 pub use files::{
     finished_run, input_stamp, merge_shards, read_all_runs, read_runs, run_file, summary_table,
     write_run_files, write_summaries,

@@ -89,7 +89,7 @@ fn synth_track_and_eval_end_to_end() {
     assert_eq!(text.lines().count(), 13, "header + 12 frames");
 
     let res = d.path().join("res");
-    succeed(regtrack(&[
+    let out = regtrack(&[
         "eval",
         "--dataset",
         data.to_str().unwrap(),
@@ -103,7 +103,18 @@ fn synth_track_and_eval_end_to_end() {
         res.to_str().unwrap(),
         "--jobs",
         "2",
-    ]));
+    ]);
+    // Not on a terminal (a cluster job's log): a line a finished run, where the bar is hidden.
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("run ")).collect();
+    assert_eq!(lines.len(), 4, "{err}");
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("run 4 of 4: ") && l.contains(" on rt: 12 frames, SR@5 ")),
+        "{err}"
+    );
+    succeed(out);
     let csv = std::fs::read_to_string(res.join("summary.csv")).unwrap();
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(

@@ -209,8 +209,9 @@ fn a_batch_shards_resumes_reports_progress_and_pools() {
     .unwrap();
     let out = d.path().join("out");
     let calls = AtomicUsize::new(0);
-    let progress = |done: usize, total: usize| {
-        assert!(done <= total);
+    let progress = |f: eval::Finished<'_>| {
+        assert!(f.done <= f.total);
+        assert!(f.what.contains("frames, SR@5"), "{f}");
         calls.fetch_add(1, Ordering::Relaxed);
     };
     let batch = Batch {
@@ -260,7 +261,7 @@ fn a_batch_shards_resumes_reports_progress_and_pools() {
             shard: Some(Shard { index, count: 2 }),
             ..Batch::new(&sequences, &specs)
         }
-        .run(&|_, _| {})
+        .run(&|_| {})
         .unwrap()
     };
     let (s0, s1) = (shard(0), shard(1));

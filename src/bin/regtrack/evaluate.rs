@@ -22,7 +22,14 @@ pub fn run_eval(batch: &Batch, out: &Path, render: bool) -> Result<()> {
         );
     }
     let pb = bar(plan.todo.len(), "evaluating");
-    let outcome = batch.execute(plan, &|d, _| pb.set_position(d as u64))?;
+    // Not on a terminal (a Slurm job's log, a pipe), where the bar does not show: a line a run.
+    let lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let outcome = batch.execute(plan, &|f| {
+        if lines {
+            eprintln!("{f}");
+        }
+        pb.set_position(f.done as u64)
+    })?;
     pb.finish_and_clear();
     let rows = outcome.rows();
     eval::write_summaries(out, &rows)?;
@@ -232,7 +239,7 @@ pub fn run_demo(cache: Option<&Path>) -> Result<()> {
         jobs: 1,
         ..Batch::new(&sequences, &specs)
     }
-    .run(&|d, _| pb.set_position(d as u64))?;
+    .run(&|f| pb.set_position(f.done as u64))?;
     pb.finish_and_clear();
     if let Some(e) = outcome.failures.first() {
         bail!("{e}");

@@ -231,7 +231,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    // By pid and host: on a shared file system another node's job has pids of its own.
+    let tmp = dir.join(format!(".{name}.tmp{}@{}", std::process::id(), host_name()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -244,9 +245,47 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// This machine's name, as temporaries and locks on a shared file system name their owner
+/// (`/proc/sys/kernel/hostname`, else `$HOSTNAME` or `$COMPUTERNAME`, else `localhost`), with
+/// only letters, digits, `-` and `.` kept.
+pub fn host_name() -> String {
+    let raw = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .or_else(|| std::env::var("COMPUTERNAME").ok())
+        .unwrap_or_default();
+    let name: String = raw
+        .trim()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || *c == '-' || *c == '.')
+        .collect();
+    if name.is_empty() {
+        "localhost".into()
+    } else {
+        name
+    }
+}
+
+/// Whether process `pid` of host `host` (`None`: this one, a name from before temporaries
+/// named their host) may still run: on this host, `/proc/<pid>` (elsewhere than Linux, a file
+/// younger than an hour); on another host nothing can be checked from here, and a file younger
+/// than a day is taken as live.
+pub fn owner_may_run(pid: u32, host: Option<&str>, age: Option<std::time::Duration>) -> bool {
+    let local = host.is_none_or(|h| h == host_name());
+    if local && pid == std::process::id() {
+        return true;
+    }
+    if local && Path::new("/proc/self").exists() {
+        return Path::new("/proc").join(pid.to_string()).exists();
+    }
+    let limit = if local { 3600 } else { 24 * 3600 };
+    age.is_none_or(|a| a.as_secs() <= limit)
+}
+
 /// Removes the temporary files [`write_atomic`] leaves when its process is killed
-/// (`.<name>.tmp<pid>`) under `dir`, recursively, when that process is gone (on Linux: no
-/// `/proc/<pid>`; elsewhere: older than an hour). Returns how many were removed.
+/// (`.<name>.tmp<pid>@<host>`) under `dir`, recursively, when that process is gone
+/// ([`owner_may_run`]: a live job on another node sharing the folder keeps its files). Returns
+/// how many were removed.
 pub fn remove_stale_temporaries(dir: &Path) -> usize {
     let Ok(rd) = std::fs::read_dir(dir) else {
         return 0;
@@ -260,24 +299,25 @@ pub fn remove_stale_temporaries(dir: &Path) -> usize {
             continue;
         }
         let name = e.file_name().to_string_lossy().into_owned();
-        let Some(pid) = name
+        let Some((pid, host)) = name
             .strip_prefix('.')
             .and_then(|n| n.rsplit_once(".tmp"))
-            .and_then(|(_, pid)| pid.parse::<u32>().ok())
+            .and_then(|(_, owner)| {
+                let (pid, host) = match owner.split_once('@') {
+                    Some((p, h)) => (p, Some(h)),
+                    None => (owner, None),
+                };
+                Some((pid.parse::<u32>().ok()?, host))
+            })
         else {
             continue;
         };
-        let gone = if pid == std::process::id() {
-            false
-        } else if Path::new("/proc/self").exists() {
-            !Path::new("/proc").join(pid.to_string()).exists()
-        } else {
-            e.metadata()
-                .and_then(|m| m.modified())
-                .ok()
-                .and_then(|t| t.elapsed().ok())
-                .is_some_and(|age| age.as_secs() > 3600)
-        };
+        let age = e
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok());
+        let gone = !owner_may_run(pid, host, age);
         if gone && std::fs::remove_file(&p).is_ok() {
             removed += 1;
         }

@@ -17,8 +17,9 @@ pub mod synth;
 pub mod video;
 
 pub use groundtruth::{
-    GtEntry, parse_ground_truth, parse_ground_truth_bytes, read_ground_truth,
-    remove_stale_temporaries, write_atomic, write_corners, write_corners_named, write_ground_truth,
+    GtEntry, host_name, owner_may_run, parse_ground_truth, parse_ground_truth_bytes,
+    read_ground_truth, remove_stale_temporaries, write_atomic, write_corners, write_corners_named,
+    write_ground_truth,
 };
 
 use crate::error::{Error, Result};

@@ -63,6 +63,85 @@ pub struct Plan {
     pub selected: usize,
 }
 
+/// The lock of an evaluation's output folder (`.regtrack-eval.lock`: host, pid and start),
+/// held while a batch runs and removed when it ends. A second batch into the folder is refused
+/// while its holder may run ([`crate::dataset::owner_may_run`]: on this host while its
+/// process lives; on another host for a day, since its processes cannot be seen from here),
+/// saying who holds it; a stale lock is taken over.
+#[derive(Debug)]
+pub struct OutLock {
+    path: std::path::PathBuf,
+}
+
+/// The lock file's name in an output folder.
+pub const LOCK_FILE: &str = ".regtrack-eval.lock";
+
+impl OutLock {
+    /// Takes the lock of `out` (made if missing).
+    pub fn take(out: &Path) -> Result<OutLock> {
+        std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        let path = out.join(LOCK_FILE);
+        let me = format!(
+            "host {}\npid {}\nstarted {}\n",
+            crate::dataset::host_name(),
+            std::process::id(),
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs())
+        );
+        for _ in 0..2 {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
+                Ok(mut f) => {
+                    use std::io::Write as _;
+                    f.write_all(me.as_bytes())
+                        .map_err(|e| Error::io(&path, e))?;
+                    return Ok(OutLock { path });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let text = std::fs::read_to_string(&path).unwrap_or_default();
+                    let field = |k: &str| {
+                        text.lines()
+                            .find_map(|l| l.strip_prefix(k).map(|v| v.trim().to_string()))
+                    };
+                    let (host, pid) = (field("host "), field("pid ").and_then(|p| p.parse().ok()));
+                    let age = std::fs::metadata(&path)
+                        .and_then(|m| m.modified())
+                        .ok()
+                        .and_then(|t| t.elapsed().ok());
+                    let live = pid.is_some_and(|pid| {
+                        crate::dataset::owner_may_run(pid, host.as_deref(), age)
+                    });
+                    if live {
+                        return Err(Error::report(
+                            out,
+                            format!(
+                                "another evaluation writes into this folder: pid {} on host {}                                  (its lock {}); give this one another --out, or remove the                                  lock if that job is gone",
+                                pid.map_or("?".into(), |p: u32| p.to_string()),
+                                host.as_deref().unwrap_or("?"),
+                                path.display()
+                            ),
+                        ));
+                    }
+                    // Its holder is gone: the lock is stale.
+                    let _ = std::fs::remove_file(&path);
+                }
+                Err(e) => return Err(Error::io(&path, e)),
+            }
+        }
+        Err(Error::report(out, "cannot take the folder's lock"))
+    }
+}
+
+impl Drop for OutLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
 /// A run of a batch that has just finished, for the progress (a bar on a terminal, a line a
 /// run in a cluster job's log).
 #[derive(Clone, Debug)]
@@ -195,11 +274,17 @@ impl<'a> Batch<'a> {
         plan: Plan,
         progress: &(dyn Fn(Finished<'_>) + Sync),
     ) -> Result<BatchOutcome> {
-        // What a killed batch left half-written in the folder goes first.
-        if let Some(out) = self.out {
-            crate::dataset::remove_stale_temporaries(out);
-            self.check_out(out, &plan)?;
-        }
+        // One batch at a time in a folder (two jobs given one --out both did all the work);
+        // then what a killed batch left half-written goes.
+        let _lock = match self.out {
+            Some(out) => {
+                let lock = OutLock::take(out)?;
+                crate::dataset::remove_stale_temporaries(out);
+                self.check_out(out, &plan)?;
+                Some(lock)
+            }
+            None => None,
+        };
         let total = plan.todo.len();
         let done = AtomicUsize::new(0);
         let pool = rayon::ThreadPoolBuilder::new()

@@ -482,12 +482,63 @@ fn stale_temporaries_of_a_killed_batch_are_removed() {
     let sub = d.path().join("tracking_data/s");
     std::fs::create_dir_all(&sub).unwrap();
     // A process id that is not running (beyond Linux's pid_max), and this process's own.
+    let host = regtrack::dataset::host_name();
     let dead = sub.join(".esm_ssd_homography_run.json.tmp4194999");
-    let live = sub.join(format!(".x.txt.tmp{}", std::process::id()));
+    let dead_here = sub.join(format!(".y.txt.tmp4194998@{host}"));
+    let live = sub.join(format!(".x.txt.tmp{}@{host}", std::process::id()));
+    // Another node's job on a shared file system: its pid means nothing here, its file stays.
+    let elsewhere = sub.join(".z.txt.tmp4194997@another-node");
     let other = sub.join("notes.tmp123");
-    for p in [&dead, &live, &other] {
+    for p in [&dead, &dead_here, &live, &elsewhere, &other] {
         std::fs::write(p, b"partial").unwrap();
     }
-    assert_eq!(regtrack::dataset::remove_stale_temporaries(d.path()), 1);
-    assert!(!dead.exists() && live.exists() && other.exists());
+    assert_eq!(regtrack::dataset::remove_stale_temporaries(d.path()), 2);
+    assert!(!dead.exists() && !dead_here.exists());
+    assert!(live.exists() && elsewhere.exists() && other.exists());
+}
+
+/// Two batches into one --out: the second is refused while the first holds the folder's lock,
+/// naming its host and pid; a lock whose process is gone is taken over, and a finished batch
+/// leaves no lock.
+#[test]
+fn a_second_batch_into_a_held_folder_is_refused_and_a_stale_lock_taken_over() {
+    let d = TempDir::new("lock");
+    let data = d.path().join("data");
+    succeed(synth("ucsb_bricks_rt.txt", &data, "rt", &["--frames", "6"]));
+    let out = d.path().join("res");
+    let eval = |out: &std::path::Path| {
+        regtrack(&[
+            "eval",
+            "--dataset",
+            data.to_str().unwrap(),
+            "--sm",
+            "fclk",
+            "--am",
+            "ssd",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    // Held by a live process of this host (this test's own).
+    std::fs::create_dir_all(&out).unwrap();
+    let lock = out.join(".regtrack-eval.lock");
+    let host = regtrack::dataset::host_name();
+    std::fs::write(
+        &lock,
+        format!("host {host}\npid {}\nstarted 0\n", std::process::id()),
+    )
+    .unwrap();
+    let o = eval(&out);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("another evaluation writes into this folder")
+            && err.contains(&format!("pid {} on host {host}", std::process::id())),
+        "{err}"
+    );
+    assert!(!out.join("summary.csv").exists());
+    // Its process gone: taken over, and removed at the end.
+    std::fs::write(&lock, format!("host {host}\npid 4194999\nstarted 0\n")).unwrap();
+    succeed(eval(&out));
+    assert!(out.join("summary.csv").is_file() && !lock.exists());
 }

@@ -819,7 +819,7 @@ fn edit_ground_truth(
         t.rect.left_top() + Vec2::new(8.0, 8.0),
         egui::Align2::LEFT_TOP,
         format!(
-            "GT {}: {} · step {step} px · corner 1-4/0 · nudge Shift+arrows +/- · frames Right/Left · J O Ctrl+Z",
+            "GT {}: {} · step {step} px · Shift+arrows nudge · F1: keys",
             app.state.gt_ssm,
             match picked {
                 Some(k) => format!("corner {}", k + 1),

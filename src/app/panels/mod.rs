@@ -54,7 +54,7 @@ pub fn cached_texture(
 /// pixels, so one squeezed by a small window stayed narrow after the window grew again. `size`
 /// is (default width in px, largest share of the window, smallest width in px); `saved` the
 /// share kept from the last run. Pair with [`remember_share`] after the panel is shown.
-pub fn follow_window(
+fn follow_window(
     ctx: &egui::Context,
     name: &str,
     panel: egui::Panel,
@@ -88,7 +88,7 @@ pub fn follow_window(
 
 /// Records the width a [`follow_window`] panel was given, as a share of the window; once the
 /// pointer is released after a change from the `saved` share, asks to keep it between runs.
-pub fn remember_share(
+fn remember_share(
     ctx: &egui::Context,
     name: &str,
     rect: egui::Rect,
@@ -108,6 +108,21 @@ pub fn remember_share(
             out.push(Command::KeepPanelShare(name.to_string(), share));
         }
     }
+}
+
+/// A side panel `name` that keeps its share of the window and the share kept from the last
+/// run ([`follow_window`], [`remember_share`]), showing `contents`.
+pub fn side_panel(
+    app: &crate::app::InspectorApp,
+    ui: &mut egui::Ui,
+    out: &mut Commands,
+    (name, panel, size): (&str, egui::Panel, (f32, f32, f32)),
+    contents: impl FnOnce(&mut egui::Ui, &mut Commands),
+) {
+    let ctx = ui.ctx().clone();
+    let saved = app.panel_share(name);
+    let shown = follow_window(&ctx, name, panel, size, saved).show(ui, |ui| contents(ui, out));
+    remember_share(&ctx, name, shown.response.rect, saved, out);
 }
 
 /// Where side panel `name` (`trackers`, `plots`) was last drawn.

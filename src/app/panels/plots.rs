@@ -76,17 +76,11 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
     if !app.state.view.show_plots_panel {
         return;
     }
-    let ctx = ui.ctx().clone();
-    let w = ctx.content_rect().width();
+    let w = ui.ctx().content_rect().width();
     let most = if w < 1200.0 { 0.4 } else { 0.6 };
-    let panel = super::follow_window(
-        &ctx,
-        "plots",
-        egui::Panel::right("plots"),
-        (430.0f32.min(w * 0.3), most, 220.0),
-        app.panel_share("plots"),
-    );
-    let shown = panel.show(ui, |ui| {
+    let size = (430.0f32.min(w * 0.3), most, 220.0);
+    let panel = ("plots", egui::Panel::right("plots"), size);
+    super::side_panel(app, ui, out, panel, |ui, out| {
         // Vertical only: every plot, image and table fits the panel's width (a horizontal
         // scroll let them grow past it, and its bar covered the buttons under it); a margin
         // for the axes' rotated labels and the floating scroll bar.
@@ -129,13 +123,6 @@ pub fn plots_panel(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>
                     });
             });
     });
-    super::remember_share(
-        &ctx,
-        "plots",
-        shown.response.rect,
-        app.panel_share("plots"),
-        out,
-    );
 }
 
 /// The success-rate heading with the export button and its folder.

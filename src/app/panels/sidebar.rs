@@ -35,17 +35,11 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
         return;
     }
     // A small part of a small window, so that the frame keeps most of it (F2 hides the panel).
-    let ctx = ui.ctx().clone();
-    let w = ctx.content_rect().width();
+    let w = ui.ctx().content_rect().width();
     let most = if w < 1200.0 { 0.22 } else { 0.3 };
-    let panel = super::follow_window(
-        &ctx,
-        "trackers",
-        egui::Panel::left("trackers"),
-        (300.0f32.min(w * 0.22), most, 170.0),
-        app.panel_share("trackers"),
-    );
-    let shown = panel.show(ui, |ui| {
+    let size = (300.0f32.min(w * 0.22), most, 170.0);
+    let panel = ("trackers", egui::Panel::left("trackers"), size);
+    super::side_panel(app, ui, out, panel, |ui, out| {
         egui::ScrollArea::vertical().show(ui, |ui| {
             ui.heading("Trackers");
             let n = app.state.trackers.len();
@@ -61,13 +55,6 @@ pub fn sidebar(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
             ground_truth_section(app, ui, out);
         });
     });
-    super::remember_share(
-        &ctx,
-        "trackers",
-        shown.response.rect,
-        app.panel_share("trackers"),
-        out,
-    );
 }
 
 /// Tracker `i`'s group: its colour, enabling, kind and methods, parameters, how it starts, and

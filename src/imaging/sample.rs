@@ -96,6 +96,10 @@ impl<'a> ImageView<'a> {
         self
     }
 
+    /// The window's pixels, row by row (`width x height`).
+    pub fn pixels(&self) -> &'a [f32] {
+        self.data
+    }
     /// Width of the window in pixels.
     pub fn width(&self) -> usize {
         self.width

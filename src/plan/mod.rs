@@ -20,9 +20,9 @@
 //!
 //! Around the plan, the tracker's policies: a search that leaves the pre-processed region is
 //! redone on a larger one ([`regrow`]); a frame is judged by the loss checks ([`judge`]), its
-//! confidence allowing for motion blur when it moved fast (`blur.rs`); a
-//! lost tracker searches also from where the rejected search ended, then the whole frame
-//! ([`redetect`]).
+//! confidence allowing for motion blur when it moved fast (`blur.rs`), a periodic template's
+//! frame checked against its look-alikes one period over (`periodic.rs`); a lost tracker
+//! searches also from where the rejected search ended, then the whole frame ([`redetect`]).
 //!
 //! To add a stage: a file here with a type implementing [`Stage`] (its own test beside it),
 //! and a line in [`Plan::standard`]. `plan::tests::every_stage_of_the_standard_plans_runs`
@@ -34,6 +34,7 @@ mod escalate;
 mod hierarchy;
 pub mod judge;
 mod measure;
+mod periodic;
 mod polish;
 pub mod predict;
 mod pyramid;

@@ -37,6 +37,8 @@ pub struct RegistrationTracker {
     pub(super) frame: usize,
     pub(super) corners: Quad,
     pub(super) initial_area: f64,
+    /// The quad the tracker was initialised on (the view the template was taken from).
+    pub(super) initial: Quad,
     /// The recent confidences the loss checks compare a frame's with.
     pub(super) loss: LossCheck,
     /// Where the last search ended when only its confidence failed (see `update`).
@@ -58,6 +60,8 @@ pub struct RegistrationTracker {
     pub(super) last_tracked: usize,
     /// The second hypothesis on frames that fail the checks (`second`, `plan/second.rs`).
     pub(super) second: Option<Box<RegistrationTracker>>,
+    /// The template's periods, if it looks like itself shifted (`plan/periodic.rs`).
+    pub(super) periods: Vec<(f64, f64)>,
 }
 
 impl RegistrationTracker {
@@ -78,6 +82,7 @@ impl RegistrationTracker {
             frame: 0,
             corners: Quad::default(),
             initial_area: 0.0,
+            initial: Quad::default(),
             loss: LossCheck::default(),
             lost_at: None,
             judges: Judges::default(),
@@ -87,6 +92,7 @@ impl RegistrationTracker {
             predictor: Predictor::default(),
             last_tracked: 0,
             second: None,
+            periods: Vec::new(),
         }
     }
 
@@ -295,8 +301,10 @@ impl VisualTracker for RegistrationTracker {
         let ctx = &self.finest.ctx;
         self.corners = ctx.corners(&ctx.params());
         self.initial_area = quad.signed_area().abs();
+        self.initial = self.corners;
         let template = ctx.problem().template();
         self.judges.template = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
+        self.periods = super::periodic::periods(template, res);
         // Made here so that a frame's update does not allocate.
         self.judges.blurred = vec![0.0; res * res];
         self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
@@ -403,6 +411,10 @@ impl VisualTracker for RegistrationTracker {
             if !passes && let Ok(out) = &mut result {
                 self.allow_for_blur(input, out);
             }
+            // A periodic template: not a look-alike one period over.
+            if passes && let Ok(out) = result {
+                result = Ok(self.periodic_check(input, out, observer, started, &mut timing));
+            }
         }
         let checked = self.judge(result, input.size());
         // Where a search that only failed the confidence checks ended: with `on_loss=continue`
@@ -421,8 +433,13 @@ impl VisualTracker for RegistrationTracker {
                 let bar = if resume {
                     None
                 } else {
-                    // Before any frame was tracked, the template itself (confidence 1).
-                    Some(super::redetect::AT_LOSS * self.loss.reference().unwrap_or(1.0))
+                    // Before any frame was tracked, a bar of its own: nothing says yet how
+                    // confident this target's frames are.
+                    Some(
+                        self.loss
+                            .reference()
+                            .map_or(super::redetect::AT_FIRST, |m| super::redetect::AT_LOSS * m),
+                    )
                 };
                 self.redetect(input, observer, started, &mut timing, bar)
                     .ok_or(failed)

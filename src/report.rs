@@ -1107,10 +1107,18 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
 
 /// Reads every run under `dirs`, pools them per tracker, and writes to `out` the success-rate
 /// figures and the speed chart (PNG and SVG) and `report.md`.
-pub fn write_report(dirs: &[PathBuf], out: &Path) -> Result<Report> {
+pub fn write_report(dirs: &[PathBuf], out: &Path, partial: bool) -> Result<Report> {
+    eval::check_plans(dirs)?;
     let runs = eval::read_all_runs(dirs)?;
+    // An incomplete set of shards is refused, or (`partial`) labelled in every title.
+    let missing = eval::require_complete(dirs, &runs, partial)?;
     let trackers = pool(&runs);
-    let figures = sr_figures(&trackers);
+    let mut figures = sr_figures(&trackers);
+    if missing.is_some() {
+        for f in &mut figures {
+            f.title.push_str(" (partial)");
+        }
+    }
     let mut files = Vec::new();
     for f in &figures {
         for ext in ["png", "svg"] {
@@ -1121,11 +1129,28 @@ pub fn write_report(dirs: &[PathBuf], out: &Path) -> Result<Report> {
     }
     for ext in ["png", "svg"] {
         let p = out.join(format!("speed.{ext}"));
-        draw_speed_chart(&p, &trackers, FIGURE_SIZE)?;
+        if missing.is_some() {
+            // Each bar says the result is partial.
+            let mut labelled = trackers.clone();
+            for t in &mut labelled {
+                t.summary.tracker.push_str(" (partial)");
+            }
+            draw_speed_chart(&p, &labelled, FIGURE_SIZE)?;
+        } else {
+            draw_speed_chart(&p, &trackers, FIGURE_SIZE)?;
+        }
         files.push(p);
     }
     let md = out.join("report.md");
-    write_atomic(&md, markdown(dirs, &trackers, &figures).as_bytes())?;
+    let mut text = markdown(dirs, &trackers, &figures);
+    if let Some(inc) = &missing {
+        let at = text.find("\n\n").map_or(text.len(), |i| i + 2);
+        text.insert_str(
+            at,
+            &format!("**Partial result** (`--partial`): {inc}. Every figure and row below pools only the runs there are.\n\n"),
+        );
+    }
+    write_atomic(&md, text.as_bytes())?;
     files.push(md);
     Ok(Report {
         trackers,

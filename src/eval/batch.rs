@@ -281,6 +281,10 @@ impl<'a> Batch<'a> {
                 let lock = OutLock::take(out)?;
                 crate::dataset::remove_stale_temporaries(out);
                 self.check_out(out, &plan)?;
+                // What the whole evaluation is, for `merge` and `report` to check the shards
+                // against.
+                let shard = self.shard.map(|s| (s.index, s.count));
+                super::PlanFile::of(self.sequences, self.specs, &self.options, shard).write(out)?;
                 Some(lock)
             }
             None => None,

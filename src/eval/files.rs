@@ -79,11 +79,20 @@ pub fn finished_run(
     .then_some(run)
 }
 
-/// 64-bit FNV-1a, for [`input_stamp`] (stable across builds and platforms).
-struct Fnv(u64);
+/// 64-bit FNV-1a, for [`input_stamp`] and the plan file's stamp (stable across builds and
+/// platforms).
+pub(super) struct Fnv(u64);
 
 impl Fnv {
-    fn write(&mut self, bytes: &[u8]) {
+    pub(super) fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+
+    pub(super) fn finish(&self) -> u64 {
+        self.0
+    }
+
+    pub(super) fn write(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.0 = (self.0 ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
         }
@@ -223,11 +232,17 @@ pub fn read_all_runs(dirs: &[PathBuf]) -> Result<Vec<RunResult>> {
                  give an output folder of `regtrack eval`",
             )
         };
+        // A folder an evaluation planned but finished no run in (a task cancelled before its
+        // first run ended) is an empty shard: what it lacks is said by the plan's check.
+        let planned = dir.join(super::PLAN_FILE).is_file();
         if !dir.join("tracking_data").is_dir() {
+            if planned {
+                continue;
+            }
             return Err(no_runs());
         }
         let runs = read_runs(dir)?;
-        if runs.is_empty() {
+        if runs.is_empty() && !planned {
             return Err(no_runs());
         }
         for r in &runs {
@@ -325,13 +340,42 @@ pub fn check_one_setting(runs: &[RunResult]) -> Result<()> {
 }
 
 /// Merges the outputs of several shards of one evaluation: the summary rows of all their runs
-/// ([`summary_rows`]), written to `out`. A run found in two shards is an error. Returns the rows.
-pub fn merge_shards(shards: &[PathBuf], out: &Path) -> Result<Vec<Summary>> {
+/// ([`summary_rows`]), written to `out`. A run found in two shards, folders of different
+/// evaluations or a shard given twice are errors; so is an incomplete set (a shard or a run
+/// missing), unless `partial`, when the pooled rows are named [`POOLED_PARTIAL`] and
+/// `PARTIAL.txt` in `out` says what is missing. Returns the rows and what is missing.
+pub fn merge_shards(
+    shards: &[PathBuf],
+    out: &Path,
+    partial: bool,
+) -> Result<(Vec<Summary>, Option<super::Incomplete>)> {
+    // Folders of other evaluations or a shard twice, said as such (before the runs they share).
+    super::plan_file::check_plans(shards)?;
     let runs = read_all_runs(shards)?;
-    let rows = summary_rows(&runs);
+    let missing = super::plan_file::require_complete(shards, &runs, partial)?;
+    let mut rows = summary_rows(&runs);
+    let note = out.join(PARTIAL_FILE);
+    match &missing {
+        Some(inc) => {
+            for r in rows.iter_mut().filter(|r| r.sequence == super::POOLED) {
+                r.sequence = POOLED_PARTIAL.to_string();
+            }
+            std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+            write_atomic(&note, format!("partial result: {inc}\n").as_bytes())?;
+        }
+        None => {
+            // A complete merge into a folder a partial one wrote: no longer partial.
+            let _ = std::fs::remove_file(&note);
+        }
+    }
     write_summaries(out, &rows)?;
-    Ok(rows)
+    Ok((rows, missing))
 }
+
+/// The sequence name of the pooled rows of a partial result (`merge --partial`).
+pub const POOLED_PARTIAL: &str = "ALL-partial";
+/// The file a partial merge writes beside its summary, saying what is missing.
+pub const PARTIAL_FILE: &str = "PARTIAL.txt";
 
 fn serde_plain<T: serde::Serialize>(v: &T) -> String {
     match serde_json::to_value(v) {

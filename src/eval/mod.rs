@@ -5,12 +5,14 @@
 
 mod batch;
 mod files;
+mod plan_file;
 
 pub use batch::{Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, summary_rows};
 pub use files::{
-    finished_run, input_stamp, merge_shards, read_all_runs, read_runs, run_file, summary_table,
-    write_run_files, write_summaries,
+    PARTIAL_FILE, POOLED_PARTIAL, finished_run, input_stamp, merge_shards, read_all_runs,
+    read_runs, run_file, summary_table, write_run_files, write_summaries,
 };
+pub use plan_file::{Incomplete, PLAN_FILE, PlanFile, check_plans, completeness, require_complete};
 
 /// JSON has no infinity: errors of frames without corners are written as `null`.
 mod infinite_as_null {

@@ -200,6 +200,114 @@ fn synth_track_and_eval_end_to_end() {
     assert_eq!(w, m);
     assert!(w.iter().any(|r| r.0 == "ALL" && r.2 == 20));
 
+    // Each shard knows the whole evaluation (its eval-plan.json): a set with a shard missing,
+    // a shard given twice, a shard of another evaluation or a shard cut short is refused,
+    // naming what is missing; `--partial` merges it labelled.
+    let merge_of = |dirs: &[&std::path::Path], extra: &[&str]| {
+        let out = d.path().join("merged2");
+        let mut a: Vec<String> = vec!["merge".into(), "--out".into(), out.display().to_string()];
+        a.extend(dirs.iter().map(|p| p.display().to_string()));
+        a.extend(extra.iter().map(|s| s.to_string()));
+        let o = Command::new(env!("CARGO_BIN_EXE_regtrack"))
+            .args(&a)
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let text = |o: &std::process::Output| {
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        )
+    };
+    let (o, _) = merge_of(&[&shards[0], &shards[1]], &[]);
+    assert!(!o.status.success());
+    let msg = text(&o);
+    assert!(
+        msg.contains("incomplete evaluation")
+            && msg.contains("shard 2/3 missing")
+            && msg.contains("1 of 4 runs missing")
+            && msg.contains("--partial")
+            && !msg.contains("panicked"),
+        "{msg}"
+    );
+    let (o, out) = merge_of(&[&shards[0], &shards[1]], &["--partial"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("PARTIAL"), "{}", text(&o));
+    let partial = rows(&out);
+    assert!(partial.iter().any(|r| r.0 == "ALL-partial"), "{partial:?}");
+    assert!(!partial.iter().any(|r| r.0 == "ALL"), "{partial:?}");
+    assert!(out.join("PARTIAL.txt").is_file());
+    // ... and the report of that set, refused, then labelled.
+    let report_of = |extra: &[&str]| {
+        let mut a: Vec<String> = vec!["report".into()];
+        a.extend(
+            [&shards[0], &shards[1]]
+                .iter()
+                .map(|p| p.display().to_string()),
+        );
+        a.extend(["--out".into(), d.path().join("rep").display().to_string()]);
+        a.extend(extra.iter().map(|s| s.to_string()));
+        Command::new(env!("CARGO_BIN_EXE_regtrack"))
+            .args(&a)
+            .output()
+            .unwrap()
+    };
+    let o = report_of(&[]);
+    assert!(
+        !o.status.success() && text(&o).contains("shard 2/3 missing"),
+        "{}",
+        text(&o)
+    );
+    succeed(report_of(&["--partial"]));
+    let md = std::fs::read_to_string(d.path().join("rep/report.md")).unwrap();
+    assert!(
+        md.contains("**Partial result**") && md.contains("(partial)"),
+        "{md}"
+    );
+    // The same shard twice.
+    let (o, _) = merge_of(&[&shards[0], &shards[1], &shards[1]], &[]);
+    assert!(
+        !o.status.success() && text(&o).contains("given twice"),
+        "{}",
+        text(&o)
+    );
+    // A shard of another evaluation (other trackers).
+    let other = d.path().join("other");
+    let mut a = args(&other);
+    a[4] = "fclk".into();
+    a.extend(["--shard".to_string(), "2/3".to_string()]);
+    run(a);
+    let (o, _) = merge_of(&[&shards[0], &shards[1], &other], &[]);
+    assert!(
+        !o.status.success() && text(&o).contains("different evaluations"),
+        "{}",
+        text(&o)
+    );
+    // A shard cut short (a task cancelled after some runs: one run's file missing) is named;
+    // the task submitted again resumes and the set is whole again.
+    let cut = std::fs::read_dir(shards[1].join("tracking_data"))
+        .unwrap()
+        .flat_map(|e| std::fs::read_dir(e.unwrap().path()).unwrap())
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with("_run.json"))
+        .unwrap();
+    std::fs::remove_file(&cut).unwrap();
+    let (o, _) = merge_of(&[&shards[0], &shards[1], &shards[2]], &[]);
+    assert!(
+        !o.status.success() && text(&o).contains("1 of 4 runs missing"),
+        "{}",
+        text(&o)
+    );
+    let mut a = args(&shards[1]);
+    a.extend(["--shard".to_string(), "1/3".to_string()]);
+    run(a);
+    let (o, out) = merge_of(&[&shards[0], &shards[1], &shards[2]], &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(rows(&out), w);
+    assert!(!out.join("PARTIAL.txt").exists());
+
     // A shard runs only its share.
     let shard = d.path().join("shard");
     succeed(regtrack(&[

@@ -174,6 +174,10 @@ pub enum Command {
         /// The shards' output folders.
         #[arg(required = true)]
         shards: Vec<PathBuf>,
+        /// Merge an incomplete set (a shard or runs missing): the pooled rows are then
+        /// `ALL-partial` and PARTIAL.txt says what is missing. Without it, refused.
+        #[arg(long)]
+        partial: bool,
     },
     /// Success-rate and speed figures (PNG, SVG) and a markdown table (`report.md`) of `eval`
     /// output folders, each tracker pooled over every sequence (shards: give all their folders).
@@ -184,6 +188,10 @@ pub enum Command {
         /// Output folder (default: `report` in the first folder).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Report an incomplete set of shards, every figure and the table labelled partial.
+        /// Without it, refused.
+        #[arg(long)]
+        partial: bool,
     },
     /// List every appearance model, state space model and search method with its aliases.
     List,

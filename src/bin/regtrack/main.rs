@@ -174,16 +174,27 @@ fn run() -> Result<()> {
             ssm,
             force,
         } => run_gt_fit(&dataset, seqs, &ssm, force),
-        Command::Merge { out, shards } => {
-            let rows = eval::merge_shards(&shards, &out)?;
+        Command::Merge {
+            out,
+            shards,
+            partial,
+        } => {
+            let (rows, missing) = eval::merge_shards(&shards, &out, partial)?;
             print!("{}", eval::summary_table(&rows));
+            if let Some(inc) = missing {
+                println!(
+                    "PARTIAL: {inc} (the pooled rows are `{}`; {} says so)",
+                    eval::POOLED_PARTIAL,
+                    out.join(eval::PARTIAL_FILE).display()
+                );
+            }
             println!("wrote {}", out.join("summary.csv").display());
             Ok(())
         }
-        Command::Report { dirs, out } => {
+        Command::Report { dirs, out, partial } => {
             let out =
                 out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));
-            let report = regtrack::report::write_report(&dirs, &out)?;
+            let report = regtrack::report::write_report(&dirs, &out, partial)?;
             println!(
                 "wrote {} ({} trackers, {} figures)",
                 out.join("report.md").display(),

@@ -36,25 +36,29 @@ sinfo
 
 cd "$WORK"
 mkdir -p data logs
-for m in ucsb_bricks_m1 ucsb_bricks_zm; do
+for m in ucsb_bricks_uc ucsb_bricks_zm; do
     "$REGTRACK" synth --texture "$ROOT/assets/textures/skimage_coffee.png" \
-        --motion "$ROOT/assets/motion/$m.txt" --frames 60 --out data --name "$m" >/dev/null
+        --motion "$ROOT/assets/motion/$m.txt" --out data --name "$m" >/dev/null
 done
-export DATASET=$WORK/data RESULTS=$WORK/results REGTRACK
+# Runs of a few seconds each (nearest neighbour over 50,000 indexed warps), two a shard, so
+# that a task can be cancelled between its runs.
+export DATASET=$WORK/data RESULTS=$WORK/results REGTRACK SM=nn AM=ssd,zncc,ncc,sad
+export EXTRA="--param samples=50000"
+EVAL=(eval --dataset data --sm "$SM" --am "$AM" --ssm homography --param samples=50000)
 # 4 shards of the sbatch script (its SHARDS set to 4, its trackers kept).
 sed -e 's/^SHARDS=8/SHARDS=4/' -e 's/^#SBATCH --array=0-7/#SBATCH --array=0-3/' \
     "$HERE/eval-array.sbatch" > eval4.sbatch
 job=$(sbatch --parsable eval4.sbatch)
 echo "submitted job $job (4 shards)"
-# Cancel shard 2 once it has started, then let the rest finish.
-for _ in $(seq 60); do
-    squeue -h -j "${job}_2" -o %T 2>/dev/null | grep -q RUNNING && break; sleep 0.5
+# Cancel shard 2 once it has finished its first run (its second is under way).
+for _ in $(seq 600); do
+    compgen -G "results/shard2/tracking_data/*/*_run.json" >/dev/null && break; sleep 0.1
 done
-sleep 1
 scancel "${job}_2" || true
+echo "cancelled shard 2 with $(compgen -G 'results/shard2/tracking_data/*/*_run.json' | wc -l) of its 2 runs finished"
 while squeue -h -j "$job" 2>/dev/null | grep -q .; do sleep 1; done
 echo "--- merge with shard 2 cancelled (must be refused):"
-if "$REGTRACK" merge --out results/all results/shard*; then
+if "$REGTRACK" merge --out results/all results/shard* 2>&1; then
     echo "ERROR: an incomplete set was merged" >&2
     exit 1
 fi
@@ -66,8 +70,7 @@ echo "--- merge and report:"
 "$REGTRACK" merge --out results/all results/shard*
 "$REGTRACK" report results/shard* --out results/all/report
 echo "--- the same evaluation unsharded:"
-"$REGTRACK" eval --dataset data --sm iclk,fclk,esm --am ssd,zncc --ssm homography --jobs 2 \
-    --out results/whole >/dev/null
+"$REGTRACK" "${EVAL[@]}" --jobs 2 --out results/whole >/dev/null 2>&1
 cut -d, -f1-10 results/all/summary.csv | sort > merged.csv
 cut -d, -f1-10 results/whole/summary.csv | sort > whole.csv
 if diff merged.csv whole.csv; then

@@ -592,6 +592,17 @@ pub(crate) mod harness {
     use crate::visual_tracker::VisualTracker;
     use std::time::Instant;
 
+    /// The spec `sm`-`am`-`ssm` with the default parameters.
+    pub fn spec(sm: &str, am: &str, ssm: &str) -> RegistrationSpec {
+        RegistrationSpec {
+            sm: sm.into(),
+            am: am.into(),
+            ssm: ssm.into(),
+            params: TrackerParams::default(),
+            method: Default::default(),
+        }
+    }
+
     /// A tracker `sm`-`am`-`ssm` (its parameters as `tweak` leaves them) initialised on the
     /// first of `n` frames of the demo's motion taken every `step`-th, with the frames and the
     /// true quads.
@@ -606,13 +617,7 @@ pub(crate) mod harness {
             ..demo_config()
         })
         .unwrap();
-        let mut spec = RegistrationSpec {
-            sm: sm.into(),
-            am: am.into(),
-            ssm: ssm.into(),
-            params: TrackerParams::default(),
-            method: Default::default(),
-        };
+        let mut spec = spec(sm, am, ssm);
         tweak(&mut spec.params);
         let mut t = RegistrationTracker::new(&spec).unwrap();
         t.initialize(FrameInput::Gray8(&gray[0]), &quads[0])

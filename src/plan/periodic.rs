@@ -222,8 +222,6 @@ mod check {
     use crate::imaging::GrayU8;
     use crate::observe::NoObserver;
     use crate::rng::Rng;
-    use crate::spec::RegistrationSpec;
-    use crate::spec::TrackerParams;
     use crate::status::FrameTiming;
     use crate::visual_tracker::VisualTracker;
 
@@ -263,13 +261,7 @@ mod check {
     fn a_look_alike_one_period_over_is_moved_back() {
         let frame = tiles(480, 360);
         let truth = Quad::from_rect(150.0, 100.0, 150.0, 120.0);
-        let spec = RegistrationSpec {
-            sm: "fclk".into(),
-            am: "ssd".into(),
-            ssm: "homography".into(),
-            params: TrackerParams::default(),
-            method: Default::default(),
-        };
+        let spec = crate::plan::harness::spec("fclk", "ssd", "homography");
         let mut t = RegistrationTracker::new(&spec).unwrap();
         let input = FrameInput::Gray8(&frame);
         t.initialize(input, &truth).unwrap();

@@ -541,8 +541,6 @@ mod fine_texture {
     use crate::imaging::GrayU8;
     use crate::observe::NoObserver;
     use crate::rng::Rng;
-    use crate::spec::RegistrationSpec;
-    use crate::spec::TrackerParams;
     use crate::status::{LossReason, TrackStatus};
     use crate::visual_tracker::VisualTracker;
 
@@ -593,13 +591,7 @@ mod fine_texture {
     fn a_text_target_is_found_again_off_the_steps() {
         let (w, h) = (640, 480);
         let truth = Quad::from_rect(230.0, 170.0, 150.0, 100.0);
-        let spec = RegistrationSpec {
-            sm: "fclk".into(),
-            am: "ssd".into(),
-            ssm: "homography".into(),
-            params: TrackerParams::default(),
-            method: Default::default(),
-        };
+        let spec = crate::plan::harness::spec("fclk", "ssd", "homography");
         let first = page(w, h, (0, 0));
         let mut found = 0;
         // The search's steps are 8 px here (two pixels of level 2); the target ends half a step

@@ -379,7 +379,6 @@ mod tests {
     use crate::geometry::Quad;
     use crate::imaging::GrayU8;
     use crate::observe::{Iteration, NoObserver, Observer};
-    use crate::spec::RegistrationSpec;
     use crate::status::TrackStatus;
     use crate::visual_tracker::VisualTracker;
 
@@ -392,15 +391,7 @@ mod tests {
         .unwrap()
     }
 
-    fn spec(sm: &str, am: &str, ssm: &str) -> RegistrationSpec {
-        RegistrationSpec {
-            sm: sm.into(),
-            am: am.into(),
-            ssm: ssm.into(),
-            params: TrackerParams::default(),
-            method: Default::default(),
-        }
-    }
+    use super::harness::spec;
 
     /// The levels at which an observer saw iterations.
     #[derive(Default)]

@@ -1108,10 +1108,10 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
 /// Reads every run under `dirs`, pools them per tracker, and writes to `out` the success-rate
 /// figures and the speed chart (PNG and SVG) and `report.md`.
 pub fn write_report(dirs: &[PathBuf], out: &Path, partial: bool) -> Result<Report> {
-    eval::check_plans(dirs)?;
+    let plans = eval::check_plans(dirs)?;
     let runs = eval::read_all_runs(dirs)?;
     // An incomplete set of shards is refused, or (`partial`) labelled in every title.
-    let missing = eval::require_complete(dirs, &runs, partial)?;
+    let missing = eval::require_complete(dirs, &plans, &runs, partial)?;
     let trackers = pool(&runs);
     let mut figures = sr_figures(&trackers);
     if missing.is_some() {

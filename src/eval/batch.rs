@@ -119,7 +119,8 @@ impl OutLock {
                         return Err(Error::report(
                             out,
                             format!(
-                                "another evaluation writes into this folder: pid {} on host {}                                  (its lock {}); give this one another --out, or remove the                                  lock if that job is gone",
+                                "another evaluation writes into this folder: pid {} on host {} (its lock {}); give \
+                                 this one another --out, or remove the lock if that job is gone",
                                 pid.map_or("?".into(), |p: u32| p.to_string()),
                                 host.as_deref().unwrap_or("?"),
                                 path.display()

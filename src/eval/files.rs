@@ -350,9 +350,9 @@ pub fn merge_shards(
     partial: bool,
 ) -> Result<(Vec<Summary>, Option<super::Incomplete>)> {
     // Folders of other evaluations or a shard twice, said as such (before the runs they share).
-    super::plan_file::check_plans(shards)?;
+    let plans = super::plan_file::check_plans(shards)?;
     let runs = read_all_runs(shards)?;
-    let missing = super::plan_file::require_complete(shards, &runs, partial)?;
+    let missing = super::plan_file::require_complete(shards, &plans, &runs, partial)?;
     let mut rows = summary_rows(&runs);
     let note = out.join(PARTIAL_FILE);
     match &missing {

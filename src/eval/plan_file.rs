@@ -178,14 +178,17 @@ fn check_one_evaluation(dirs: &[PathBuf], plans: &[Option<PlanFile>]) -> Result<
     Ok(())
 }
 
-/// Checks the folders `dirs` (their runs `runs`) against their plan files ([`check_plans`],
-/// then that they are of one evaluation); what they lack of the whole evaluation (`None` when
-/// nothing).
-pub fn completeness(dirs: &[PathBuf], runs: &[RunResult]) -> Result<Option<Incomplete>> {
-    let plans = check_plans(dirs)?;
-    check_one_evaluation(dirs, &plans)?;
+/// Checks the folders `dirs` (their runs `runs`) against their plan files `plans` (as
+/// [`check_plans`] read them): that they are of one evaluation; what they lack of the whole
+/// evaluation (`None` when nothing).
+pub fn completeness(
+    dirs: &[PathBuf],
+    plans: &[Option<PlanFile>],
+    runs: &[RunResult],
+) -> Result<Option<Incomplete>> {
+    check_one_evaluation(dirs, plans)?;
     let mut inc = Incomplete::default();
-    for (d, p) in dirs.iter().zip(&plans) {
+    for (d, p) in dirs.iter().zip(plans) {
         if p.is_none() {
             inc.unplanned.push(d.clone());
         }
@@ -220,10 +223,11 @@ pub fn completeness(dirs: &[PathBuf], runs: &[RunResult]) -> Result<Option<Incom
 /// what is missing, unless `partial`, when it is returned to be labelled.
 pub fn require_complete(
     dirs: &[PathBuf],
+    plans: &[Option<PlanFile>],
     runs: &[RunResult],
     partial: bool,
 ) -> Result<Option<Incomplete>> {
-    match completeness(dirs, runs)? {
+    match completeness(dirs, plans, runs)? {
         Some(inc) if !partial => Err(Error::InvalidParameter(format!(
             "incomplete evaluation: {inc}. Give every shard's folder (a cancelled task \
              submitted again resumes where it stopped), or --partial for a result labelled \

@@ -727,7 +727,7 @@ fn eval<'py>(
     };
     let rows = py
         .detach(|| -> crate::Result<Vec<crate::eval::Summary>> {
-            let sequences = crate::dataset::discover(&dataset, seqs.as_deref())?;
+            let sequences = crate::dataset::open_or_discover(&dataset, seqs.as_deref())?;
             let batch = crate::eval::Batch {
                 options,
                 jobs,

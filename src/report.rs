@@ -40,6 +40,14 @@ pub struct TrackerResult {
     pub sequences: Vec<String>,
     /// SR(t) over [`eval::thresholds`], of all its frames.
     pub curve: Vec<(f64, f64)>,
+    /// The benchmarks' curves ([`eval::benchmark`]): precision P@t (t = 0..20 px), success by
+    /// homography discrepancy (t = 0..200; empty for runs made before it was recorded) and by
+    /// IoU (t = 0..1).
+    pub precision: Vec<(f64, f64)>,
+    pub discrepancy: Vec<(f64, f64)>,
+    pub iou: Vec<(f64, f64)>,
+    /// Pooled per challenge factor of its sequences (`ALL:<factor>` rows).
+    pub factors: Vec<Summary>,
 }
 
 impl TrackerResult {
@@ -111,10 +119,33 @@ pub fn pool(runs: &[RunResult]) -> Vec<TrackerResult> {
         .map(|mine| {
             let errors: Vec<f64> = mine.iter().flat_map(|r| r.sr_errors()).collect();
             let sequences: BTreeSet<String> = mine.iter().map(|r| r.sequence.clone()).collect();
+            use eval::benchmark as b;
+            let mut factors: Vec<&str> = Vec::new();
+            for f in mine.iter().flat_map(|r| r.factors.iter()) {
+                if !factors.contains(&f.as_str()) {
+                    factors.push(f);
+                }
+            }
             TrackerResult {
                 summary: eval::summarize(eval::POOLED, mine),
                 sequences: sequences.into_iter().collect(),
                 curve: eval::success_curve(&errors),
+                precision: b::precision_curve(&b::precision_errors(mine)),
+                discrepancy: b::discrepancies(mine)
+                    .map(|d| b::discrepancy_curve(&d))
+                    .unwrap_or_default(),
+                iou: b::iou_curve(&b::ious(mine)),
+                factors: factors
+                    .into_iter()
+                    .map(|f| {
+                        let of: Vec<&RunResult> = mine
+                            .iter()
+                            .copied()
+                            .filter(|r| r.factors.iter().any(|x| x == f))
+                            .collect();
+                        eval::summarize(&eval::factor_label(eval::POOLED, f), &of)
+                    })
+                    .collect(),
             }
         })
         .collect();
@@ -1016,6 +1047,77 @@ fn fmt_num(v: f64, decimals: usize) -> String {
     }
 }
 
+/// The benchmarks' figures of each tracker (P@5, P@15, success by homography discrepancy and
+/// by IoU), then the same per challenge factor when the sequences have factors.
+fn benchmark_tables(trackers: &[TrackerResult]) -> String {
+    let mut md = String::from(
+        "\n## As the planar-tracking benchmarks publish\n\nP@t is the fraction of frames whose \
+         RMS corner error (POT's and PlanarTrack's alignment error) is at most t px; S(H) the \
+         mean over t = 0, 10, ..., 200 of the fraction whose homography discrepancy (the corners \
+         (+-1, +-1) through H* H^-1) is at most t; S(IoU) the mean over t = 0, 0.05, ..., 1 of \
+         the fraction whose IoU is above t. The curves are in `benchmark_curves.csv`.\n\n\
+         | tracker | frames | P@5 | P@15 | S(H) | S(IoU) |\n|---|---:|---:|---:|---:|---:|\n",
+    );
+    let row = |s: &Summary, first: &str| {
+        format!(
+            "| {first} | {} | {} | {} | {} | {} |\n",
+            s.frames,
+            fmt_num(s.p5, 4),
+            fmt_num(s.p15, 4),
+            fmt_num(s.success_h, 4),
+            fmt_num(s.success_iou, 4),
+        )
+    };
+    for t in trackers {
+        md.push_str(&row(&t.summary, &t.summary.tracker));
+    }
+    let mut factors: Vec<&str> = Vec::new();
+    for s in trackers.iter().flat_map(|t| t.factors.iter()) {
+        if !factors.contains(&s.sequence.as_str()) {
+            factors.push(&s.sequence);
+        }
+    }
+    if !factors.is_empty() {
+        md.push_str(
+            "\n### Per challenge factor\n\nEach tracker's runs on the sequences of a factor, \
+             pooled (the `ALL:<factor>` rows of `summary.csv`).\n\n\
+             | factor | tracker | frames | P@5 | P@15 | S(H) | S(IoU) |\n\
+             |---|---|---:|---:|---:|---:|---:|\n",
+        );
+        for f in factors {
+            let name = f.split_once(':').map_or(f, |x| x.1);
+            for t in trackers {
+                if let Some(s) = t.factors.iter().find(|s| s.sequence == f) {
+                    md.push_str(&row(s, &format!("{name} | {}", t.summary.tracker)));
+                }
+            }
+        }
+    }
+    md
+}
+
+/// The benchmarks' curves of every tracker as CSV: `tracker,curve,t,value` (`precision`,
+/// `success_h`, `success_iou`).
+pub fn benchmark_curves_csv(trackers: &[TrackerResult]) -> String {
+    let mut csv = String::from("tracker,curve,t,value\n");
+    for t in trackers {
+        for (name, c) in [
+            ("precision", &t.precision),
+            ("success_h", &t.discrepancy),
+            ("success_iou", &t.iou),
+        ] {
+            for (x, y) in c {
+                csv.push_str(&format!(
+                    "{},{name},{x},{}\n",
+                    t.summary.tracker,
+                    fmt_num(*y, 4)
+                ));
+            }
+        }
+    }
+    csv
+}
+
 /// The markdown report: how the runs were pooled, the table (best mean SR first), the figures.
 pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]) -> String {
     let mut md = String::from("# Evaluation report\n\n");
@@ -1071,6 +1173,7 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
             fmt_num(s.live_fps, 1),
         ));
     }
+    md.push_str(&benchmark_tables(trackers));
     md.push_str("\n## Success rates\n");
     let sections = [
         (
@@ -1141,6 +1244,9 @@ pub fn write_report(dirs: &[PathBuf], out: &Path, partial: bool) -> Result<Repor
         }
         files.push(p);
     }
+    let curves = out.join("benchmark_curves.csv");
+    write_atomic(&curves, benchmark_curves_csv(&trackers).as_bytes())?;
+    files.push(curves);
     let md = out.join("report.md");
     let mut text = markdown(dirs, &trackers, &figures);
     if let Some(inc) = &missing {

@@ -12,7 +12,9 @@
 
 pub mod demo;
 mod groundtruth;
+pub mod layouts;
 pub mod live;
+pub mod regions;
 pub mod synth;
 pub mod video;
 
@@ -21,6 +23,7 @@ pub use groundtruth::{
     read_ground_truth, remove_stale_temporaries, write_atomic, write_corners, write_corners_named,
     write_ground_truth,
 };
+pub use layouts::{Entry, Layout};
 
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
@@ -47,6 +50,14 @@ pub struct Sequence {
     pub warnings: Vec<String>,
     /// The video the frames are decoded from (`frames` then names them `<video>#<n>`).
     pub video: Option<std::sync::Arc<video::Video>>,
+    /// The layout it was read in.
+    pub layout: Layout,
+    /// Its challenge factors (attributes) as its benchmark names them (POT's from the name,
+    /// PlanarTrack's from its attribute file); results are also pooled by each.
+    pub factors: Vec<String>,
+    /// The benchmark's ground-truth homographies from the first frame to each frame (POT,
+    /// PlanarTrack), where given (`None` where a frame is not annotated); empty otherwise.
+    pub homographies: Vec<Option<nalgebra::Matrix3<f64>>>,
     /// The first frame's size, read once (every frame must have it).
     first_size: std::sync::OnceLock<(usize, usize)>,
 }
@@ -174,6 +185,10 @@ impl Sequence {
             if sibling.is_file() {
                 return Self::open_gt_file(&sibling);
             }
+            // VOT, GOT-10k, LaSOT or a folder with its `groundtruth.txt`.
+            if dir.join("groundtruth.txt").is_file() {
+                return layouts::open_folder(dir);
+            }
             let gt = [
                 "groundtruth.txt",
                 "gt.txt",
@@ -192,6 +207,11 @@ impl Sequence {
         } else if path.is_file() && video::is_video(path) {
             Self::from_video(path)
         } else if path.is_file() {
+            // A benchmark's annotation file (POT, PlanarTrack, UCSB): opened as its dataset
+            // root lays it out, flags and homographies with it.
+            if let Some(e) = layouts::entry_of_file(path)? {
+                return e.open();
+            }
             Self::open_gt_file(path)
         } else if path.exists() {
             Err(Error::Sequence {
@@ -317,6 +337,9 @@ impl Sequence {
             gt_path,
             warnings,
             video: Some(std::sync::Arc::new(v)),
+            layout: Layout::Video,
+            factors: Vec::new(),
+            homographies: Vec::new(),
             first_size: Default::default(),
         })
     }
@@ -338,10 +361,23 @@ impl Sequence {
                 gt_path: None,
                 warnings: Vec::new(),
                 video: None,
+                layout: Layout::Folder,
+                factors: Vec::new(),
+                homographies: Vec::new(),
                 first_size: Default::default(),
             });
         };
         let mut entries = read_ground_truth(gt)?;
+        if is_pot(gt) {
+            // POT's rows of zeros are frames not annotated.
+            for e in entries.iter_mut() {
+                if e.quad
+                    .is_some_and(|q| regions::is_unlabelled(&q.to_array()))
+                {
+                    e.quad = None;
+                }
+            }
+        }
         let mut warnings = drop_unusable(gt, &mut entries);
         let named = entries.iter().all(|e| e.frame.is_some()) && !entries.is_empty();
         if named {
@@ -415,6 +451,92 @@ impl Sequence {
             gt_path: Some(gt.to_path_buf()),
             warnings,
             video: None,
+            layout: Layout::Mtf,
+            factors: Vec::new(),
+            homographies: Vec::new(),
+            first_size: Default::default(),
+        })
+    }
+
+    /// A sequence of a benchmark's layout from its frames and the corners read from `gt` (a
+    /// line each, `None` where a frame is not annotated): fewer lines than frames leave the
+    /// last frames not annotated (POT's files of the annotated frames only, half as many, are
+    /// the first, third, ... frames); more are an error, or cut at a video's end with a warning.
+    pub fn from_quads(
+        name: &str,
+        frames: layouts::Frames,
+        mut quads: Vec<Option<Quad>>,
+        gt: &Path,
+        layout: Layout,
+    ) -> Result<Self> {
+        let (frame_paths, video) = match frames {
+            layouts::Frames::Dir(d) => (list_images(&d)?, None),
+            layouts::Frames::Video(p) => {
+                let v = video::Video::open(&p)?;
+                let f: Vec<PathBuf> = (1..=v.frames)
+                    .map(|k| PathBuf::from(format!("{}#{k:05}", p.display())))
+                    .collect();
+                (f, Some(std::sync::Arc::new(v)))
+            }
+        };
+        let (n, m) = (frame_paths.len(), quads.len());
+        if n == 0 {
+            return Err(Error::Sequence {
+                path: gt.to_path_buf(),
+                message: format!("the sequence '{name}' has no frames"),
+            });
+        }
+        let mut warnings = Vec::new();
+        for (k, q) in quads.iter_mut().enumerate() {
+            if let Some(why) = q.as_ref().and_then(unusable_quad) {
+                warnings.push(format!(
+                    "{}:{}: {why}: the frame is read as not annotated",
+                    gt.display(),
+                    k + 1
+                ));
+                *q = None;
+            }
+        }
+        let quads = if layout == Layout::Pot && m > 1 && m < n && (2 * m == n || 2 * m == n + 1) {
+            let mut v = vec![None; n];
+            for (k, q) in quads.into_iter().enumerate() {
+                v[2 * k] = q;
+            }
+            v
+        } else if m > n && video.is_some() {
+            warnings.push(format!(
+                "{}: {m} ground-truth lines but the video has {n} frames (cut short?): the \
+                 sequence ends there",
+                gt.display()
+            ));
+            quads.truncate(n);
+            quads
+        } else if m > n {
+            return Err(Error::Sequence {
+                path: gt.to_path_buf(),
+                message: format!("{m} ground-truth lines but only {n} frames for '{name}'"),
+            });
+        } else {
+            if m < n {
+                warnings.push(format!(
+                    "{}: {m} lines for {n} frames: frames {} to {n} are not annotated",
+                    gt.display(),
+                    m + 1
+                ));
+            }
+            quads.resize(n, None);
+            quads
+        };
+        Ok(Sequence {
+            name: name.to_string(),
+            frames: frame_paths,
+            ground_truth: quads,
+            gt_path: Some(gt.to_path_buf()),
+            warnings,
+            video,
+            layout,
+            factors: Vec::new(),
+            homographies: Vec::new(),
             first_size: Default::default(),
         })
     }
@@ -592,10 +714,10 @@ fn file_name(p: &Path) -> String {
 /// One sequence (a ground-truth file, or a folder that is not a dataset root) or the sequences
 /// of a dataset root ([`discover`]).
 pub fn open_or_discover(path: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
-    // A folder is a dataset root when it holds `<seq>.txt` beside `<seq>/`: then its
-    // sequences' own errors are reported, not "no image here".
-    let single =
-        path.is_file() || (path.is_dir() && names.is_none() && dataset_entries(path)?.is_empty());
+    // A folder is a dataset root when it holds sequences of a layout ([`layouts::scan`]):
+    // then its sequences' own errors are reported, not "no image here".
+    let single = path.is_file()
+        || (path.is_dir() && names.is_none() && layouts::scan(path)?.entries.is_empty());
     if single {
         Ok(vec![Sequence::open(path)?])
     } else {
@@ -603,53 +725,28 @@ pub fn open_or_discover(path: &Path, names: Option<&[String]>) -> Result<Vec<Seq
     }
 }
 
-/// The `(name, ground-truth file)` of every sequence of a dataset root in the MTF layout (every
-/// `<root>/<seq>.txt` with a folder `<root>/<seq>/` beside it), sorted by name.
-fn dataset_entries(root: &Path) -> Result<Vec<(String, PathBuf)>> {
-    let rd = std::fs::read_dir(root).map_err(|e| Error::io(root, e))?;
-    let mut found: Vec<(String, PathBuf)> = rd
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension().is_some_and(|e| e == "txt")
-                && (p.with_extension("").is_dir()
-                    || p.file_stem()
-                        .and_then(|s| s.to_str())
-                        .and_then(|s| video_beside(p.parent().unwrap_or(Path::new(".")), s))
-                        .is_some())
-        })
-        .map(|p| {
-            (
-                p.file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default(),
-                p,
-            )
-        })
-        .collect();
-    found.sort();
-    Ok(found)
-}
-
-/// The sequences of a dataset root in the MTF layout: every `<root>/<seq>.txt` with a folder
-/// `<root>/<seq>/` beside it, sorted by name; with `names`, only those (in that order; an unknown
-/// name is an error listing what exists).
+/// The sequences of a dataset root in any of the layouts of [`layouts`] (MTF, POT,
+/// PlanarTrack, UCSB, VOT, GOT-10k, LaSOT, folders with `groundtruth.txt`), sorted by name
+/// (folders in `list.txt`'s order); with `names`, only those (in that order; an unknown name is
+/// an error listing what exists). Without `names`, an annotation file no layout could place is
+/// an error naming it.
 pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> {
-    let found = dataset_entries(root)?;
-    let chosen: Vec<&(String, PathBuf)> = match names {
+    let found = layouts::entries(root, names)?;
+    let chosen: Vec<&Entry> = match names {
         None => found.iter().collect(),
         Some(names) => names
             .iter()
             .map(|n| {
                 found
                     .iter()
-                    .find(|(s, _)| s == n)
+                    .find(|e| &e.name == n)
                     .ok_or_else(|| Error::Sequence {
                         path: root.to_path_buf(),
                         message: format!(
                             "no sequence '{n}'; available: {}",
                             found
                                 .iter()
-                                .map(|(s, _)| s.as_str())
+                                .map(|e| e.name.as_str())
                                 .collect::<Vec<_>>()
                                 .join(", ")
                         ),
@@ -660,9 +757,12 @@ pub fn discover(root: &Path, names: Option<&[String]>) -> Result<Vec<Sequence>> 
     if chosen.is_empty() {
         return Err(Error::Sequence {
             path: root.to_path_buf(),
-            message: "no sequence found (expected <root>/<seq>.txt with frames in <root>/<seq>/)"
-                .into(),
+            message:
+                "no sequence found (expected MTF <root>/<seq>.txt with frames in <root>/<seq>/, \
+                      POT <seq>_gt_points.txt, PlanarTrack Seq_<n>.txt, UCSB <seq>.warps, or \
+                      folders holding groundtruth.txt: see docs/benchmarks.md)"
+                    .into(),
         });
     }
-    chosen.iter().map(|(_, p)| Sequence::open(p)).collect()
+    chosen.iter().map(|e| e.open()).collect()
 }

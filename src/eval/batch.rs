@@ -388,16 +388,39 @@ pub fn by_tracker(runs: &[RunResult]) -> Vec<Vec<&RunResult>> {
 }
 
 /// The rows of a summary: one per run, then, for each tracker with runs on more than one
-/// sequence, one pooled over them (sequence `ALL`: its frames counted together).
+/// sequence, one pooled over them (sequence `ALL`: its frames counted together), then one per
+/// challenge factor of its sequences ([`factor_label`]: `ALL:<factor>`, its runs on the
+/// sequences of that factor pooled), factors in the order they first appear.
 pub fn summary_rows(runs: &[RunResult]) -> Vec<Summary> {
     let mut rows: Vec<Summary> = runs.iter().map(RunResult::summary).collect();
-    rows.extend(
-        by_tracker(runs)
-            .into_iter()
-            .filter(|g| g.len() > 1)
-            .map(|g| summarize(POOLED, &g)),
-    );
+    let groups: Vec<Vec<&RunResult>> = by_tracker(runs)
+        .into_iter()
+        .filter(|g| g.len() > 1)
+        .collect();
+    rows.extend(groups.iter().map(|g| summarize(POOLED, g)));
+    for g in &groups {
+        let mut factors: Vec<&str> = Vec::new();
+        for f in g.iter().flat_map(|r| r.factors.iter()) {
+            if !factors.contains(&f.as_str()) {
+                factors.push(f);
+            }
+        }
+        for f in factors {
+            let mine: Vec<&RunResult> = g
+                .iter()
+                .copied()
+                .filter(|r| r.factors.iter().any(|x| x == f))
+                .collect();
+            rows.push(summarize(&factor_label(POOLED, f), &mine));
+        }
+    }
     rows
+}
+
+/// The sequence name of the rows pooled over the sequences of a challenge factor:
+/// `<pooled>:<factor>` (`ALL:blur`).
+pub fn factor_label(pooled: &str, factor: &str) -> String {
+    format!("{pooled}:{factor}")
 }
 
 /// The sequence name of the pooled rows.

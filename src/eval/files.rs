@@ -142,6 +142,18 @@ pub fn input_stamp(seq: &crate::dataset::Sequence) -> String {
             None => h.write(b"none"),
         }
     }
+    // The benchmark's own homographies score the discrepancy (none: nothing written, the
+    // stamps of the layouts without them unchanged).
+    for m in &seq.homographies {
+        match m {
+            Some(m) => {
+                for v in m.iter() {
+                    h.write(&v.to_bits().to_le_bytes());
+                }
+            }
+            None => h.write(b"no homography"),
+        }
+    }
     let opt = crate::gt::ground_truth_dir(seq).join("OptGT");
     let prefix = format!("{}_", seq.name);
     let mut low: Vec<PathBuf> = std::fs::read_dir(&opt)
@@ -357,8 +369,12 @@ pub fn merge_shards(
     let note = out.join(PARTIAL_FILE);
     match &missing {
         Some(inc) => {
-            for r in rows.iter_mut().filter(|r| r.sequence == super::POOLED) {
-                r.sequence = POOLED_PARTIAL.to_string();
+            for r in rows.iter_mut() {
+                if r.sequence == super::POOLED {
+                    r.sequence = POOLED_PARTIAL.to_string();
+                } else if let Some(f) = r.sequence.strip_prefix(&format!("{}:", super::POOLED)) {
+                    r.sequence = super::factor_label(POOLED_PARTIAL, f);
+                }
             }
             std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
             write_atomic(&note, format!("partial result: {inc}\n").as_bytes())?;
@@ -393,11 +409,11 @@ fn serde_plain<T: serde::Serialize>(v: &T) -> String {
 /// Writes `summary.csv` and `summary.json` in `out`.
 pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
     let mut csv = String::from(
-        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt,lost_when_off,lost_when_on,stopped\n",
+        "sequence,tracker,sm,am,ssm,frames,sr5,sr10,sr20,mean_sr,mean_error,failures,iterations_per_frame,tracker_fps,live_fps,error_type,gt,lost_when_off,lost_when_on,stopped,p5,p15,success_h,success_iou\n",
     );
     for r in rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.2},{:.1},{:.1},{},{},{},{},{},{},{},{},{}\n",
             r.sequence,
             r.tracker,
             r.sm,
@@ -417,7 +433,11 @@ pub fn write_summaries(out: &Path, rows: &[Summary]) -> Result<()> {
             r.gt,
             fraction(r.lost_when_off, 4, ""),
             fraction(r.lost_when_on, 4, ""),
-            r.stopped
+            r.stopped,
+            fraction(r.p5, 4, ""),
+            fraction(r.p15, 4, ""),
+            fraction(r.success_h, 4, ""),
+            fraction(r.success_iou, 4, ""),
         ));
     }
     write_atomic(&out.join("summary.csv"), csv.as_bytes())?;
@@ -438,12 +458,16 @@ fn fraction(v: f64, decimals: usize, missing: &str) -> String {
 /// The summary rows as the command line prints them: a header, then a line per row.
 pub fn summary_table(rows: &[Summary]) -> String {
     let mut out = format!(
-        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9} {:>7} {:>7} {:>7}\n",
+        "{:<12} {:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>8} {:>5} {:>6} {:>11} {:>9} {:>7} {:>7} {:>7}\n",
         "sequence",
         "tracker",
         "frames",
         "SR@5",
         "SR@20",
+        "P@5",
+        "P@15",
+        "S(H)",
+        "S(IoU)",
         "mean err",
         "fail",
         "it/fr",
@@ -455,12 +479,16 @@ pub fn summary_table(rows: &[Summary]) -> String {
     );
     for r in rows {
         out.push_str(&format!(
-            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0} {:>7} {:>7} {:>7}\n",
+            "{:<12} {:<22} {:>6} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>8.3} {:>5} {:>6.2} {:>11.0} {:>9.0} {:>7} {:>7} {:>7}\n",
             r.sequence,
             r.tracker,
             r.frames,
             r.sr5,
             r.sr20,
+            fraction(r.p5, 3, "-"),
+            fraction(r.p15, 3, "-"),
+            fraction(r.success_h, 3, "-"),
+            fraction(r.success_iou, 3, "-"),
             r.mean_error,
             r.failures,
             r.iterations_per_frame,

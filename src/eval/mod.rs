@@ -4,15 +4,20 @@
 //! path (from an 8-bit frame in memory, pre-processing included). Batches of runs go in parallel.
 
 mod batch;
+pub mod benchmark;
 mod files;
 mod plan_file;
+mod results_formats;
 
-pub use batch::{Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, summary_rows};
+pub use batch::{
+    Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, factor_label, summary_rows,
+};
 pub use files::{
     PARTIAL_FILE, POOLED_PARTIAL, finished_run, input_stamp, merge_shards, read_all_runs,
     read_runs, run_file, summary_table, write_run_files, write_summaries,
 };
 pub use plan_file::{Incomplete, PLAN_FILE, PlanFile, check_plans, completeness, require_complete};
+pub use results_formats::{ResultsFormat, write_results};
 
 /// JSON has no infinity: errors of frames without corners are written as `null`.
 mod infinite_as_null {
@@ -207,6 +212,10 @@ pub struct FrameRecord {
     /// The tracker's confidence in the frame (see [`crate::status::FrameOutcome::confidence`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub confidence: Option<f64>,
+    /// The homography discrepancy ([`benchmark::frame_discrepancy`]; infinite without corners
+    /// or ground truth).
+    #[serde(with = "infinite_as_null", default = "infinite")]
+    pub homography_error: f64,
 }
 
 fn infinite() -> f64 {
@@ -233,6 +242,14 @@ pub struct RunResult {
     /// run only while they are unchanged.
     #[serde(default)]
     pub inputs: Option<String>,
+    /// The sequence's challenge factors ([`crate::dataset::Sequence::factors`]): the summary
+    /// pools the runs of each too.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub factors: Vec<String>,
+    /// Whether the frames' homography discrepancies were recorded (not in runs written before
+    /// they were).
+    #[serde(default)]
+    pub discrepancy: bool,
 }
 
 fn default_threshold() -> f64 {
@@ -280,6 +297,16 @@ pub struct Summary {
     /// be read: their rates are over the frames before it only.
     #[serde(default)]
     pub stopped: usize,
+    /// The benchmarks' figures ([`benchmark`]): precision P@5 and P@15 (RMS corner error), the
+    /// success by homography discrepancy and by IoU (the means of their curves).
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub p5: f64,
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub p15: f64,
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub success_h: f64,
+    #[serde(with = "nan_as_null", default = "not_a_number")]
+    pub success_iou: f64,
 }
 
 fn not_a_number() -> f64 {
@@ -356,6 +383,7 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     let spec = runs.first().map(|r| r.spec.clone());
     let cols = spec.as_ref().map(|s| s.columns()).unwrap_or_default();
     let (lost_when_off, lost_when_on) = loss_detection(runs.iter().flat_map(|r| r.frames.iter()));
+    let bench = benchmark::figures(runs);
     Summary {
         sequence: name.to_string(),
         tracker: spec.as_ref().map(|s| s.label()).unwrap_or_default(),
@@ -398,6 +426,10 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
         lost_when_off,
         lost_when_on,
         stopped: runs.iter().filter(|r| r.error.is_some()).count(),
+        p5: bench.p5,
+        p15: bench.p15,
+        success_h: bench.success_h,
+        success_iou: bench.success_iou,
     }
 }
 
@@ -461,6 +493,14 @@ pub fn run_sequence_reading(
         }
         None => (seq.ground_truth.clone(), None),
     };
+    // The benchmark's own homographies score the sequence's own ground truth only.
+    let gt_h = |i: usize| {
+        if gt_ssm.is_none() {
+            seq.homographies.get(i).copied().flatten()
+        } else {
+            None
+        }
+    };
     let ground_truth = |i: usize| gt.get(i).copied().flatten();
     let first = init
         .or_else(|| ground_truth(0))
@@ -489,6 +529,12 @@ pub fn run_sequence_reading(
                 ),
                 _ => (f64::INFINITY, f64::INFINITY, 1.0),
             };
+            let h = match gt {
+                Some(g) => {
+                    benchmark::frame_discrepancy(&first, corners.as_ref(), &g, gt_h(i).as_ref())
+                }
+                None => f64::INFINITY,
+            };
             FrameRecord {
                 frame: i,
                 corners,
@@ -504,6 +550,7 @@ pub fn run_sequence_reading(
                 searched: false,
                 estimate_error: f64::INFINITY,
                 confidence: None,
+                homography_error: h,
             }
         };
     // With `ahead`, each frame decoded while the tracker works on the one before.
@@ -590,5 +637,7 @@ pub fn run_sequence_reading(
         options: opts.clone(),
         error: stopped,
         inputs: Some(inputs),
+        factors: seq.factors.clone(),
+        discrepancy: true,
     })
 }

@@ -3,6 +3,7 @@
 mod adversarial;
 mod alloc;
 mod architecture;
+mod benchmarks;
 mod cli;
 mod common;
 mod dataset;

@@ -13,8 +13,12 @@ fn s(p: &Path) -> &str {
 
 /// The rows of report.md's table, split into cells.
 fn table(md: &str) -> Vec<Vec<String>> {
+    // The first table (the benchmarks' figures follow in tables of their own).
     md.lines()
-        .filter(|l| l.starts_with("| ") && !l.starts_with("| tracker |"))
+        .skip_while(|l| !l.starts_with("| tracker |"))
+        .skip(1)
+        .take_while(|l| l.starts_with('|'))
+        .filter(|l| l.starts_with("| "))
         .map(|l| {
             l.trim_matches('|')
                 .split('|')
@@ -239,8 +243,16 @@ fn tracker(sm: &str, am: &str, ssm: &str, mean_sr: f64) -> TrackerResult {
             lost_when_off: 1.0,
             lost_when_on: 0.0,
             stopped: 0,
+            p5: mean_sr,
+            p15: mean_sr,
+            success_h: mean_sr,
+            success_iou: mean_sr,
         },
         sequences: vec!["a".into()],
+        precision: Vec::new(),
+        discrepancy: Vec::new(),
+        iou: Vec::new(),
+        factors: Vec::new(),
         curve: regtrack::eval::thresholds()
             .into_iter()
             .map(|t| (t, (t / 10.0).min(1.0) * mean_sr))

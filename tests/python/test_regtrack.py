@@ -257,6 +257,28 @@ def test_synth_and_eval_give_the_command_lines_rows(tmp_path):
         regtrack.eval(tmp_path / "data", seqs=["nosuch"])
 
 
+def test_eval_reads_pot_as_downloaded_and_gives_the_benchmarks_figures(tmp_path):
+    import shutil
+    regtrack.synth(ROOT / "assets/textures/skimage_coffee.png",
+                   ROOT / "assets/motion/ucsb_bricks_rt.txt", tmp_path / "mtf", "rt",
+                   max_frames=8, noise=1.0)
+    rows = [l.split()[1:] for l in (tmp_path / "mtf/rt.txt").read_text().splitlines()[1:]]
+    pot = tmp_path / "pot"
+    (pot / "annotation").mkdir(parents=True)
+    for name in ["V01_3", "V02_3"]:
+        shutil.copytree(tmp_path / "mtf/rt", pot / name)
+        # CRLF, the frames not annotated as zeros.
+        lines = [" ".join(r) if k % 2 == 0 else " ".join(["0"] * 8) for k, r in enumerate(rows)]
+        (pot / "annotation" / f"{name}_gt_points.txt").write_bytes(("\r\n".join(lines) + "\r\n").encode())
+    got = regtrack.eval(pot, sm=["esm"], am=["ssd"], ssm=["homography"], res=40)
+    by_seq = {r["sequence"]: r for r in got}
+    assert set(by_seq) == {"V01_3", "V02_3", "ALL", "ALL:perspective"}
+    assert by_seq["V01_3"]["frames"] == 3
+    for r in got:
+        assert r["p5"] == 1.0 and r["p15"] == 1.0
+        assert r["success_h"] > 0.9 and r["success_iou"] > 0.8
+
+
 def test_a_video_tracks_from_python(rendered, tmp_path):
     import shutil
     if shutil.which("ffmpeg") is None:

@@ -102,9 +102,11 @@ pub enum Command {
         #[arg(long)]
         tracks: PathBuf,
     },
-    /// Evaluate every (sequence, SM, AM, SSM) of a dataset in the MTF layout.
+    /// Evaluate every (sequence, SM, AM, SSM) of a dataset (MTF, POT, PlanarTrack, UCSB, VOT,
+    /// GOT-10k, LaSOT layouts, detected from the folder: docs/benchmarks.md).
     Eval {
-        /// Dataset root: `<root>/<seq>.txt` with frames in `<root>/<seq>/`.
+        /// Dataset root (MTF `<root>/<seq>.txt` with frames in `<root>/<seq>/`, or any layout
+        /// of docs/benchmarks.md), or one sequence.
         #[arg(long)]
         dataset: PathBuf,
         /// Sequences (default: all).
@@ -192,6 +194,20 @@ pub enum Command {
         /// Without it, refused.
         #[arg(long)]
         partial: bool,
+    },
+    /// Write the runs of `eval` output folders as a benchmark's toolkit reads them
+    /// (PlanarTrack/POT `<seq>_<tracker>.txt` and `_homography.txt`, VOT region files, GOT-10k
+    /// and LaSOT boxes), so that its own evaluation runs on them.
+    Export {
+        /// The format: planartrack, pot, vot, got10k, lasot.
+        #[arg(long)]
+        format: String,
+        /// Output folder (the tracker folders are made in it).
+        #[arg(long)]
+        out: PathBuf,
+        /// `eval` output folders.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
     },
     /// List every appearance model, state space model and search method with its aliases.
     List,

@@ -191,6 +191,27 @@ fn run() -> Result<()> {
             println!("wrote {}", out.join("summary.csv").display());
             Ok(())
         }
+        Command::Export { format, out, dirs } => {
+            let format = eval::ResultsFormat::parse(&format)?;
+            let runs = eval::read_all_runs(&dirs)?;
+            if runs.is_empty() {
+                bail!(
+                    "no runs in {} (give the folders `eval --out` wrote)",
+                    dirs.iter()
+                        .map(|d| d.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+            let files = eval::write_results(&runs, format, &out)?;
+            println!(
+                "wrote {} files of {} runs under {}",
+                files.len(),
+                runs.len(),
+                out.display()
+            );
+            Ok(())
+        }
         Command::Report { dirs, out, partial } => {
             let out =
                 out.unwrap_or_else(|| dirs.first().cloned().unwrap_or_default().join("report"));

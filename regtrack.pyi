@@ -95,7 +95,10 @@ def eval(
     jobs: int = 0,
     **params: Any,
 ) -> list[dict[str, Any]]:
-    """Evaluates trackers on an MTF-layout dataset as ``regtrack eval`` does: the summary rows."""
+    """Evaluates trackers on a dataset (MTF, POT, PlanarTrack, UCSB, VOT, GOT-10k, LaSOT layouts,
+    or one sequence) as ``regtrack eval`` does: the summary rows, with the benchmarks' figures
+    (``p5``, ``p15``, ``success_h``, ``success_iou``) and ``ALL:<factor>`` rows per challenge
+    factor."""
 
 def synth(
     texture: Union[str, PathLike[str]],

@@ -676,9 +676,11 @@ fn to_python<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound
     py.import("json")?.call_method1("loads", (text,))
 }
 
-/// Evaluates trackers on a dataset in the MTF layout, as `regtrack eval` does, and returns the
-/// summary rows (a list of dicts, one per run and, for trackers on several sequences, one pooled
-/// row `sequence="ALL"`; `pandas.DataFrame(rows)` takes them as they are). Without `sm`, `am`,
+/// Evaluates trackers on a dataset in any of the benchmarks' layouts (docs/benchmarks.md) or on
+/// one sequence, as `regtrack eval` does, and returns the summary rows (a list of dicts, one per
+/// run and, for trackers on several sequences, one pooled row `sequence="ALL"` and one per
+/// challenge factor `"ALL:<factor>"`; the benchmarks' figures `p5`, `p15`, `success_h`,
+/// `success_iou` beside SR; `pandas.DataFrame(rows)` takes them as they are). Without `sm`, `am`,
 /// `ssm` or `trackers`, the default tracker. With `out`, the run files and summaries are written
 /// there (and a later call resumes the runs it finished). Keyword arguments set parameters.
 #[pyfunction]

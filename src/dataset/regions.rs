@@ -1,5 +1,5 @@
 //! The annotation files of the benchmarks' own layouts, beside the corner files of
-//! [`super::groundtruth`]: VOT region files (read and written), `x, y, w, h` boxes (GOT-10k,
+//! [`super::read_ground_truth`]: VOT region files (read and written), `x, y, w, h` boxes (GOT-10k,
 //! LaSOT), homographies of 9 numbers a line (POT, PlanarTrack), flags of one integer a line,
 //! and UCSB's `.warps`.
 //!

@@ -219,7 +219,14 @@ impl<'a> Batch<'a> {
             let done = self.out.filter(|_| self.resume).and_then(|out| {
                 let seq = &self.sequences[s];
                 let stamp = stamps[s].get_or_insert_with(|| files::input_stamp(seq));
+                // A run from before the homography discrepancy was recorded is made again (its
+                // benchmark figures would be missing); the factors are the sequence's today.
                 files::finished_run(out, seq, stamp, &self.specs[p], &self.options)
+                    .filter(|r| r.discrepancy)
+                    .map(|mut r| {
+                        r.factors = seq.factors.clone();
+                        r
+                    })
             });
             match done {
                 Some(r) => plan.finished.push(r),

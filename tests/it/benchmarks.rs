@@ -554,3 +554,55 @@ fn eval_and_export_on_the_command_line() {
     let curves = std::fs::read_to_string(rep.join("benchmark_curves.csv")).unwrap();
     assert!(curves.contains(",precision,5,") && curves.contains(",success_h,200,"));
 }
+
+/// POT as its videos are downloaded (`V04/V04_6.avi`, MJPEG here), the annotations apart: the
+/// sequence is the video's frames, scored as the extracted frames are.
+#[test]
+fn pot_videos_as_downloaded_are_sequences() {
+    if !crate::dataset::have_ffmpeg() {
+        return;
+    }
+    let d = TempDir::new("pot-video");
+    let root = d.path().join("POT");
+    let frames = d.path().join("frames");
+    let q = write_frames(&frames, 9, |k| format!("{:04}.png", k + 1));
+    std::fs::create_dir_all(root.join("V04")).unwrap();
+    let made = std::process::Command::new("ffmpeg")
+        .args([
+            "-v",
+            "error",
+            "-framerate",
+            "25",
+            "-start_number",
+            "1",
+            "-i",
+        ])
+        .arg(frames.join("%04d.png"))
+        .args(["-c:v", "mjpeg", "-q:v", "1", "-pix_fmt", "yuvj420p"])
+        .arg(root.join("V04").join("V04_6.avi"))
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let points: String = q.iter().map(|q| format!("{}\n", row(q))).collect();
+    write(
+        &root
+            .join("annotation")
+            .join("annotation")
+            .join("V04_6_gt_points.txt"),
+        &points,
+    );
+    let seqs = discover(&root, None).unwrap();
+    assert_eq!(seqs.len(), 1);
+    let s = &seqs[0];
+    assert!(s.video.is_some() && s.len() == 9, "{:?}", s.frames.first());
+    assert_eq!(
+        (s.layout, s.factors.as_slice()),
+        (Layout::Pot, &["out_of_view".to_string()][..])
+    );
+    let rows = eval::summary_rows(&runs(&seqs, false));
+    assert!(
+        rows[0].p5 == 1.0 && rows[0].success_h > 0.9,
+        "{:?}",
+        rows[0]
+    );
+}

@@ -1,5 +1,6 @@
 //! Whole trackers: the learning-based trackers the paper compares the registration trackers with
-//! (KCF, DSST, RCT, TLD, CMT), each one file and one entry of [`REGISTRY`]. They track a box (and
+//! (KCF, DSST, RCT, TLD, CMT), and more of those MTF bundles (DFT, FragTrack), each one file and
+//! one entry of [`REGISTRY`]. They track a box (and
 //! CMT a rotated one): the output quad is the initial quad moved by a similarity (translation,
 //! scale, rotation about its centre), so they are compared with the registration trackers
 //! against translation ground truth, as in the paper.
@@ -18,7 +19,9 @@ macro_rules! base_field {
 
 pub(crate) mod cf;
 pub mod cmt;
+pub mod dft;
 pub mod dsst;
+pub mod fragtrack;
 pub mod kcf;
 pub mod rct;
 pub mod tld;
@@ -56,8 +59,15 @@ pub enum Motion {
 }
 
 /// The whole trackers: one entry per file.
-pub const REGISTRY: &[Entry<WholeDef>] =
-    &[kcf::ENTRY, dsst::ENTRY, rct::ENTRY, tld::ENTRY, cmt::ENTRY];
+pub const REGISTRY: &[Entry<WholeDef>] = &[
+    kcf::ENTRY,
+    dsst::ENTRY,
+    rct::ENTRY,
+    tld::ENTRY,
+    cmt::ENTRY,
+    dft::ENTRY,
+    fragtrack::ENTRY,
+];
 
 /// Where a whole tracker puts its target: the initial quad moved by a similarity about its
 /// centre.

@@ -1,0 +1,419 @@
+//! FragTrack, fragments-based tracking (Adam, Rivlin and Shimshoni, CVPR 2006): the target is
+//! covered by overlapping fragments (horizontal and vertical strips here), each described by
+//! its intensity histogram, learned on the first frame. Every candidate position within the
+//! search radius is scored by each fragment (the earth mover's distance between the fragment's
+//! histogram there and its template's, in 1-D the L1 distance of their cumulative histograms),
+//! and the fragments' scores are combined robustly: a candidate's score is a low quantile of
+//! them (the paper's 25%), so that fragments hidden by an occluder do not move the target. The
+//! histograms come from integral histograms of the search region (one summed-area table per
+//! bin), so a fragment's histogram costs four reads a bin whatever its size. Translation only.
+
+use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
+use crate::error::Result;
+use crate::geometry::Quad;
+use crate::imaging::GrayF32;
+use crate::observe::{MethodVisual, Observer};
+use crate::params::ParamDef;
+use crate::registry::Entry;
+use crate::spec::WholeSpec;
+use crate::status::{FrameOutcome, LossReason, TrackStatus};
+use crate::visual_tracker::{FrameInput, VisualTracker};
+
+/// FragTrack's parameters (the paper's values by default).
+pub const PARAMS: &[ParamDef] = &[
+    ParamDef::int(
+        "bins",
+        "intensity bins of a fragment's histogram",
+        2.0,
+        64.0,
+        16.0,
+    ),
+    ParamDef::int(
+        "strips",
+        "horizontal strips, and as many vertical ones, each overlapping the next by half",
+        1.0,
+        32.0,
+        12.0,
+    ),
+    ParamDef::float(
+        "quantile",
+        "a candidate's score is this quantile of its fragments' distances (robust to occlusion)",
+        0.0,
+        1.0,
+        0.25,
+    ),
+    ParamDef::float(
+        "search_radius",
+        "candidates are the positions within this many pixels of the last one",
+        2.0,
+        200.0,
+        25.0,
+    ),
+    ParamDef::int(
+        "coarse_step",
+        "the search first visits every this many pixels, then every pixel around the best (1: exhaustive)",
+        1.0,
+        10.0,
+        2.0,
+    ),
+];
+
+/// The registry entry.
+pub const ENTRY: Entry<WholeDef> = Entry {
+    name: "fragtrack",
+    aliases: &["frag"],
+    description: "fragments-based tracking (Adam et al. 2006): strip histograms from integral histograms, robust quantile vote, translation",
+    build: WholeDef {
+        params: PARAMS,
+        motion: Motion::Translation,
+        build,
+    },
+};
+
+/// Builds a FragTrack tracker.
+pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
+    let g = |name: &str| super::param(spec, PARAMS, name);
+    Ok(Box::new(FragTrack {
+        base: Base::new(spec),
+        bins: g("bins") as usize,
+        strips: g("strips") as usize,
+        quantile: g("quantile"),
+        radius: g("search_radius"),
+        coarse_step: g("coarse_step") as i64,
+        model: None,
+        hist: IntegralHistogram::default(),
+        scores: Vec::new(),
+        vis: Vec::new(),
+    }))
+}
+
+/// Summed-area tables of the bins of a region: `bins` tables of `(w + 1) x (h + 1)` counts.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct IntegralHistogram {
+    pub w: usize,
+    pub h: usize,
+    pub bins: usize,
+    pub data: Vec<f32>,
+}
+
+impl IntegralHistogram {
+    /// The integral histogram of the `w x h` region of `img` whose top-left is `(x0, y0)`
+    /// (pixels beyond the frame replicate its border).
+    pub fn build(
+        &mut self,
+        img: &GrayF32,
+        (x0, y0): (i64, i64),
+        (w, h): (usize, usize),
+        bins: usize,
+    ) {
+        self.w = w;
+        self.h = h;
+        self.bins = bins;
+        let stride = (w + 1) * (h + 1);
+        self.data.clear();
+        self.data.resize(bins * stride, 0.0);
+        let (iw, ih) = (img.width as i64, img.height as i64);
+        let mut row = vec![0f32; bins];
+        let width = 256.0 / bins as f32;
+        for y in 0..h {
+            row.iter_mut().for_each(|c| *c = 0.0);
+            let py = (y0 + y as i64).clamp(0, ih - 1) as usize;
+            for x in 0..w {
+                let px = (x0 + x as i64).clamp(0, iw - 1) as usize;
+                // Shared by the two nearest bins by distance to their centres (a pixel's
+                // weight moves smoothly between bins as its value does).
+                let t = (img.data[py * img.width + px].clamp(0.0, 255.0) / width - 0.5)
+                    .clamp(0.0, (bins - 1) as f32);
+                let b = (t.floor() as usize).min(bins - 1);
+                let f = t - b as f32;
+                row[b] += 1.0 - f;
+                if b + 1 < bins {
+                    row[b + 1] += f;
+                }
+                for (b, count) in row.iter().enumerate() {
+                    let t = &mut self.data[b * stride..(b + 1) * stride];
+                    t[(y + 1) * (w + 1) + x + 1] = t[y * (w + 1) + x + 1] + count;
+                }
+            }
+        }
+    }
+
+    /// The count of bin `b` in the rectangle `[x0, x1) x [y0, y1)` of the region.
+    #[inline]
+    pub fn count(&self, b: usize, x0: usize, y0: usize, x1: usize, y1: usize) -> f32 {
+        let t = &self.data[b * (self.w + 1) * (self.h + 1)..];
+        let at = |x: usize, y: usize| t[y * (self.w + 1) + x];
+        at(x1, y1) + at(x0, y0) - at(x1, y0) - at(x0, y1)
+    }
+}
+
+/// A fragment: a rectangle of the target box (offsets from its top-left, whole pixels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Fragment {
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
+}
+
+/// `n` horizontal strips and `n` vertical ones over a `w x h` box, each overlapping the next by
+/// half (a strip is `2 / (n + 1)` of the side).
+fn strips(w: usize, h: usize, n: usize) -> Vec<Fragment> {
+    let span = |side: usize, k: usize| {
+        let a = side * k / (n + 1);
+        let b = (side * (k + 2) / (n + 1)).max(a + 1).min(side);
+        (a, b)
+    };
+    let mut out = Vec::with_capacity(2 * n);
+    for k in 0..n {
+        let (y0, y1) = span(h, k);
+        out.push(Fragment {
+            x0: 0,
+            y0,
+            x1: w,
+            y1,
+        });
+    }
+    for k in 0..n {
+        let (x0, x1) = span(w, k);
+        out.push(Fragment {
+            x0,
+            y0: 0,
+            x1,
+            y1: h,
+        });
+    }
+    out
+}
+
+/// The cumulative normalised histogram of a fragment placed at `(ox, oy)` in the region.
+fn cumulative(ih: &IntegralHistogram, f: &Fragment, ox: usize, oy: usize, out: &mut [f32]) {
+    let area = ((f.x1 - f.x0) * (f.y1 - f.y0)) as f32;
+    let mut c = 0.0;
+    for (b, o) in out.iter_mut().enumerate() {
+        c += ih.count(b, ox + f.x0, oy + f.y0, ox + f.x1, oy + f.y1);
+        *o = c / area;
+    }
+}
+
+/// The 1-D earth mover's distance of two histograms: the L1 distance of their cumulatives.
+pub(crate) fn emd(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs() as f64).sum()
+}
+
+/// The value at quantile `q` of `v` (sorted in place; `q` = 0: the smallest).
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let i = ((v.len() as f64 - 1.0) * q).round() as usize;
+    v[i.min(v.len() - 1)]
+}
+
+#[derive(Debug)]
+struct Model {
+    bw: usize,
+    bh: usize,
+    fragments: Vec<Fragment>,
+    /// Each fragment's template cumulative histogram (`bins` values).
+    templates: Vec<Vec<f32>>,
+    /// The centre's offset from the whole-pixel box's centre, fixed at the start.
+    offset: (f64, f64),
+}
+
+/// A FragTrack tracker.
+#[derive(Debug)]
+pub struct FragTrack {
+    base: Base,
+    bins: usize,
+    strips: usize,
+    quantile: f64,
+    radius: f64,
+    coarse_step: i64,
+    model: Option<Model>,
+    hist: IntegralHistogram,
+    scores: Vec<f64>,
+    vis: Vec<Quad>,
+}
+
+impl FragTrack {
+    fn top_left(m: &Model, pose: &Pose) -> (i64, i64) {
+        (
+            (pose.cx - m.offset.0 - 0.5 * m.bw as f64).round() as i64,
+            (pose.cy - m.offset.1 - 0.5 * m.bh as f64).round() as i64,
+        )
+    }
+
+    /// The robust score of the candidate at `(ox, oy)` of the region (lower is better).
+    fn score(&mut self, m: &Model, ox: usize, oy: usize, cdf: &mut [f32]) -> f64 {
+        self.scores.clear();
+        for (f, t) in m.fragments.iter().zip(&m.templates) {
+            cumulative(&self.hist, f, ox, oy, cdf);
+            self.scores.push(emd(cdf, t));
+        }
+        quantile(&mut self.scores, self.quantile)
+    }
+}
+
+impl WholeTracker for FragTrack {
+    const MIN_SIDE: f64 = 6.0;
+
+    base_field!();
+
+    fn start(&mut self, input: FrameInput<'_>, _quad: &Quad) -> Result<()> {
+        let (tw, th) = self.base.size0;
+        let (bw, bh) = (tw.round().max(2.0) as usize, th.round().max(2.0) as usize);
+        let n = self.strips.min(bw.min(bh) / 2).max(1);
+        let mut m = Model {
+            bw,
+            bh,
+            fragments: strips(bw, bh, n),
+            templates: Vec::new(),
+            offset: (0.0, 0.0),
+        };
+        let (x, y) = Self::top_left(&m, &self.base.pose);
+        m.offset = (
+            self.base.pose.cx - (x as f64 + 0.5 * bw as f64),
+            self.base.pose.cy - (y as f64 + 0.5 * bh as f64),
+        );
+        let img = frame_f32(input);
+        self.hist.build(&img, (x, y), (bw, bh), self.bins);
+        let mut cdf = vec![0f32; self.bins];
+        m.templates = m
+            .fragments
+            .iter()
+            .map(|f| {
+                cumulative(&self.hist, f, 0, 0, &mut cdf);
+                cdf.clone()
+            })
+            .collect();
+        self.model = Some(m);
+        Ok(())
+    }
+
+    fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
+        if self.base.status != TrackStatus::Tracking {
+            return self.base.idle();
+        }
+        let Some(m) = self.model.take() else {
+            return self.base.idle();
+        };
+        let started = self.base.begin(observer);
+        let img = frame_f32(input);
+        let r = self.radius.ceil() as usize;
+        let (x0, y0) = Self::top_left(&m, &self.base.pose);
+        let origin = (x0 - r as i64, y0 - r as i64);
+        self.hist
+            .build(&img, origin, (m.bw + 2 * r, m.bh + 2 * r), self.bins);
+        let preprocess = started.elapsed();
+        let mut cdf = vec![0f32; self.bins];
+        let mut best = ((r, r), f64::INFINITY);
+        let within =
+            |dx: i64, dy: i64, radius: f64| ((dx * dx + dy * dy) as f64) <= radius * radius;
+        let mut visit = |t: &mut Self,
+                         cx: usize,
+                         cy: usize,
+                         radius: f64,
+                         step: i64,
+                         best: &mut ((usize, usize), f64)| {
+            let k = radius.floor() as i64;
+            let mut dy = -k - (-k).rem_euclid(step);
+            while dy <= k {
+                let mut dx = -k - (-k).rem_euclid(step);
+                while dx <= k {
+                    let (x, y) = (cx as i64 + dx, cy as i64 + dy);
+                    if within(dx, dy, radius)
+                        && x >= 0
+                        && y >= 0
+                        && x <= 2 * r as i64
+                        && y <= 2 * r as i64
+                    {
+                        let s = t.score(&m, x as usize, y as usize, &mut cdf);
+                        if s < best.1 {
+                            *best = ((x as usize, y as usize), s);
+                        }
+                    }
+                    dx += step;
+                }
+                dy += step;
+            }
+        };
+        if self.coarse_step > 1 {
+            visit(self, r, r, self.radius, self.coarse_step, &mut best);
+            let (bx, by) = best.0;
+            visit(self, bx, by, self.coarse_step as f64 * 1.5, 1, &mut best);
+        } else {
+            visit(self, r, r, self.radius, 1, &mut best);
+        }
+        let (at, s) = best;
+        let pose = Pose {
+            cx: self.base.pose.cx + at.0 as f64 - r as f64,
+            cy: self.base.pose.cy + at.1 as f64 - r as f64,
+            ..self.base.pose
+        };
+        // The similarity reported: 1 minus the robust distance over its largest (the bins).
+        let found = if s.is_finite() {
+            Ok((pose, 1.0 - s / self.bins as f64))
+        } else {
+            Err(LossReason::NonFinite)
+        };
+        let want = observer.wants_method_visuals();
+        self.vis.clear();
+        if want {
+            let (tx, ty) = (origin.0 + at.0 as i64, origin.1 + at.1 as i64);
+            self.vis.extend(m.fragments.iter().map(|f| {
+                Quad::from_rect(
+                    (tx + f.x0 as i64) as f64,
+                    (ty + f.y0 as i64) as f64,
+                    (f.x1 - f.x0) as f64,
+                    (f.y1 - f.y0) as f64,
+                )
+            }));
+        }
+        self.model = Some(m);
+        let weights = vec![0.5f32; self.vis.len()];
+        let visual = want.then(|| MethodVisual::quads("fragments", &self.vis, &weights, None));
+        self.base
+            .finish(found, input.size(), started, preprocess, observer, visual)
+    }
+
+    fn corners_set(&mut self) -> Result<()> {
+        self.base.pose.scale = 1.0;
+        self.base.pose.angle = 0.0;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integral_histograms_count_each_rectangle_and_strips_overlap_by_half() {
+        // Values at the bins' centres (32, 96, 160, 224 for 4 bins) fall in one bin each.
+        let centres = [32.0, 96.0, 160.0, 224.0];
+        let img = GrayF32 {
+            width: 6,
+            height: 4,
+            data: (0..24).map(|i| centres[i % 4]).collect(),
+        };
+        let mut ih = IntegralHistogram::default();
+        ih.build(&img, (0, 0), (6, 4), 4);
+        assert_eq!(ih.count(0, 0, 0, 6, 4), 6.0);
+        assert_eq!(ih.count(1, 0, 0, 2, 1), 1.0, "pixels 0 and 1: one in bin 1");
+        // Between two centres a pixel is shared by its two bins; the mass is kept.
+        let img = GrayF32 {
+            width: 6,
+            height: 4,
+            data: (0..24).map(|i| (i * 10) as f32).collect(),
+        };
+        ih.build(&img, (0, 0), (6, 4), 4);
+        let total: f32 = (0..4).map(|b| ih.count(b, 0, 0, 6, 4)).sum();
+        assert!((total - 24.0).abs() < 1e-4);
+        assert!((ih.count(0, 1, 0, 2, 1) - (1.0 - (10.0 / 64.0 - 0.5_f32).max(0.0))).abs() < 1e-6);
+        let s = strips(12, 9, 2);
+        assert_eq!(s.len(), 4);
+        assert_eq!((s[0].y0, s[0].y1, s[1].y0, s[1].y1), (0, 6, 3, 9));
+        assert_eq!((s[2].x0, s[2].x1, s[3].x0, s[3].x1), (0, 8, 4, 12));
+        assert_eq!(emd(&[0.5, 1.0], &[0.0, 1.0]), 0.5);
+        assert_eq!(quantile(&mut [4.0, 1.0, 3.0, 2.0, 9.0], 0.25), 2.0);
+    }
+}

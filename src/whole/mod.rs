@@ -1,5 +1,5 @@
 //! Whole trackers: the learning-based trackers the paper compares the registration trackers with
-//! (KCF, DSST, RCT, TLD, CMT), and more of those MTF bundles (DFT, FragTrack), each one file and
+//! (KCF, DSST, RCT, TLD, CMT), and more of those MTF bundles (DFT, FragTrack, MIL), each one file and
 //! one entry of [`REGISTRY`]. They track a box (and
 //! CMT a rotated one): the output quad is the initial quad moved by a similarity (translation,
 //! scale, rotation about its centre), so they are compared with the registration trackers
@@ -23,6 +23,7 @@ pub mod dft;
 pub mod dsst;
 pub mod fragtrack;
 pub mod kcf;
+pub mod mil;
 pub mod rct;
 pub mod tld;
 
@@ -67,6 +68,7 @@ pub const REGISTRY: &[Entry<WholeDef>] = &[
     cmt::ENTRY,
     dft::ENTRY,
     fragtrack::ENTRY,
+    mil::ENTRY,
 ];
 
 /// Where a whole tracker puts its target: the initial quad moved by a similarity about its

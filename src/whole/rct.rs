@@ -163,7 +163,7 @@ impl Gaussian {
     }
 
     /// The log-density at `v` (up to the shared constant).
-    fn log_density(&self, v: f64) -> f64 {
+    pub(crate) fn log_density(&self, v: f64) -> f64 {
         let s = self.sigma + 1e-6;
         -s.ln() - 0.5 * ((v - self.mu) / s).powi(2)
     }

@@ -1,5 +1,5 @@
 //! Whole trackers: the learning-based trackers the paper compares the registration trackers with
-//! (KCF, DSST, RCT, TLD, CMT), and more of those MTF bundles (DFT, FragTrack, MIL), each one file and
+//! (KCF, DSST, RCT, TLD, CMT), and more of those MTF bundles (DFT, FragTrack, MIL, Struck), each one file and
 //! one entry of [`REGISTRY`]. They track a box (and
 //! CMT a rotated one): the output quad is the initial quad moved by a similarity (translation,
 //! scale, rotation about its centre), so they are compared with the registration trackers
@@ -25,6 +25,7 @@ pub mod fragtrack;
 pub mod kcf;
 pub mod mil;
 pub mod rct;
+pub mod struck;
 pub mod tld;
 
 use crate::error::{Error, Result};
@@ -69,6 +70,7 @@ pub const REGISTRY: &[Entry<WholeDef>] = &[
     dft::ENTRY,
     fragtrack::ENTRY,
     mil::ENTRY,
+    struck::ENTRY,
 ];
 
 /// Where a whole tracker puts its target: the initial quad moved by a similarity about its

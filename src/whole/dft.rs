@@ -528,8 +528,7 @@ impl WholeTracker for Dft {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        self.base.pose.scale = 1.0;
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

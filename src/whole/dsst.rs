@@ -408,8 +408,7 @@ impl WholeTracker for Dsst {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        // DSST tracks translation and scale: it keeps no rotation.
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

@@ -305,44 +305,16 @@ impl WholeTracker for FragTrack {
             .build(&img, origin, (m.bw + 2 * r, m.bh + 2 * r), self.bins);
         let preprocess = started.elapsed();
         let mut cdf = vec![0f32; self.bins];
-        let mut best = ((r, r), f64::INFINITY);
-        let within =
-            |dx: i64, dy: i64, radius: f64| ((dx * dx + dy * dy) as f64) <= radius * radius;
-        let mut visit = |t: &mut Self,
-                         cx: usize,
-                         cy: usize,
-                         radius: f64,
-                         step: i64,
-                         best: &mut ((usize, usize), f64)| {
-            let k = radius.floor() as i64;
-            let mut dy = -k - (-k).rem_euclid(step);
-            while dy <= k {
-                let mut dx = -k - (-k).rem_euclid(step);
-                while dx <= k {
-                    let (x, y) = (cx as i64 + dx, cy as i64 + dy);
-                    if within(dx, dy, radius)
-                        && x >= 0
-                        && y >= 0
-                        && x <= 2 * r as i64
-                        && y <= 2 * r as i64
-                    {
-                        let s = t.score(&m, x as usize, y as usize, &mut cdf);
-                        if s < best.1 {
-                            *best = ((x as usize, y as usize), s);
-                        }
-                    }
-                    dx += step;
-                }
-                dy += step;
+        let lim = 2 * r as i64;
+        let (radius, step) = (self.radius, self.coarse_step);
+        // Lower distances are better: the search maximises their negative.
+        let (bx, by, neg) = super::search_disc((r as i64, r as i64), radius, step, |x, y| {
+            if x < 0 || y < 0 || x > lim || y > lim {
+                return f64::NEG_INFINITY;
             }
-        };
-        if self.coarse_step > 1 {
-            visit(self, r, r, self.radius, self.coarse_step, &mut best);
-            let (bx, by) = best.0;
-            visit(self, bx, by, self.coarse_step as f64 * 1.5, 1, &mut best);
-        } else {
-            visit(self, r, r, self.radius, 1, &mut best);
-        }
+            -self.score(&m, x as usize, y as usize, &mut cdf)
+        });
+        let best = ((bx as usize, by as usize), -neg);
         let (at, s) = best;
         let pose = Pose {
             cx: self.base.pose.cx + at.0 as f64 - r as f64,
@@ -376,8 +348,7 @@ impl WholeTracker for FragTrack {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        self.base.pose.scale = 1.0;
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

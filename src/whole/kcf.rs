@@ -264,9 +264,7 @@ impl WholeTracker for Kcf {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        // KCF tracks translation only: it keeps its scale and rotation.
-        self.base.pose.scale = 1.0;
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

@@ -374,31 +374,7 @@ impl WholeTracker for Mil {
                 })
                 .sum()
         };
-        let search = |cx: i64, cy: i64, radius: f64, step: i64, best: &mut (i64, i64, f64)| {
-            let r = radius.floor() as i64;
-            let mut dy = -r - (-r).rem_euclid(step);
-            while dy <= r {
-                let mut dx = -r - (-r).rem_euclid(step);
-                while dx <= r {
-                    if ((dx * dx + dy * dy) as f64) <= radius * radius {
-                        let s = score(cx + dx, cy + dy);
-                        if s > best.2 {
-                            *best = (cx + dx, cy + dy, s);
-                        }
-                    }
-                    dx += step;
-                }
-                dy += step;
-            }
-        };
-        let mut best = (x0, y0, f64::NEG_INFINITY);
-        if self.coarse_step > 1 {
-            search(x0, y0, self.search_radius, self.coarse_step, &mut best);
-            let (bx, by) = (best.0, best.1);
-            search(bx, by, self.coarse_step as f64 * 1.5, 1, &mut best);
-        } else {
-            search(x0, y0, self.search_radius, 1, &mut best);
-        }
+        let best = super::search_disc((x0, y0), self.search_radius, self.coarse_step, score);
         let (bw, bh) = (m.bw as f64, m.bh as f64);
         let pose = Pose {
             cx: self.base.pose.cx + (best.0 - x0) as f64,
@@ -427,8 +403,7 @@ impl WholeTracker for Mil {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        self.base.pose.scale = 1.0;
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

@@ -228,6 +228,18 @@ impl Base {
         }
     }
 
+    /// Drops from the pose what a tracker of `motion` does not estimate (a translation tracker
+    /// keeps neither scale nor rotation, a translation-and-scale one no rotation): what its
+    /// [`WholeTracker::corners_set`] does with corners set by hand.
+    pub fn keep_only(&mut self, motion: Motion) {
+        if motion < Motion::Similarity {
+            self.pose.angle = 0.0;
+        }
+        if motion < Motion::TranslationScale {
+            self.pose.scale = 1.0;
+        }
+    }
+
     /// Moves to `quad` (checked) and resumes tracking.
     pub fn set_corners(&mut self, quad: &Quad) -> Result<()> {
         if self.status == TrackStatus::Uninitialized {
@@ -338,6 +350,45 @@ impl Base {
         observer.frame_finished(self.frame, &outcome);
         outcome
     }
+}
+
+/// The best of `score` (higher is better) over the whole-pixel positions within `radius` of
+/// `(x0, y0)`: with `coarse_step` > 1, every `coarse_step`-th position first, then every
+/// position within 1.5 steps of the best of those (the coarse-to-fine search of RCT, MIL,
+/// Struck and FragTrack). A tie keeps the position visited first. Returns the position and its
+/// score (`(x0, y0, -inf)` when no score is above minus infinity).
+pub(crate) fn search_disc(
+    (x0, y0): (i64, i64),
+    radius: f64,
+    coarse_step: i64,
+    mut score: impl FnMut(i64, i64) -> f64,
+) -> (i64, i64, f64) {
+    let mut best = (x0, y0, f64::NEG_INFINITY);
+    let mut visit = |cx: i64, cy: i64, radius: f64, step: i64, best: &mut (i64, i64, f64)| {
+        let r = radius.floor() as i64;
+        let mut dy = -r - (-r).rem_euclid(step);
+        while dy <= r {
+            let mut dx = -r - (-r).rem_euclid(step);
+            while dx <= r {
+                if ((dx * dx + dy * dy) as f64) <= radius * radius {
+                    let s = score(cx + dx, cy + dy);
+                    if s > best.2 {
+                        *best = (cx + dx, cy + dy, s);
+                    }
+                }
+                dx += step;
+            }
+            dy += step;
+        }
+    };
+    if coarse_step > 1 {
+        visit(x0, y0, radius, coarse_step, &mut best);
+        let (bx, by) = (best.0, best.1);
+        visit(bx, by, coarse_step as f64 * 1.5, 1, &mut best);
+    } else {
+        visit(x0, y0, radius, 1, &mut best);
+    }
+    best
 }
 
 /// The value of parameter `name` (one of `defs`) in `spec`: its set value or its default.

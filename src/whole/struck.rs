@@ -439,40 +439,10 @@ impl WholeTracker for Struck {
         let preprocess = started.elapsed();
         let (x0, y0) = self.top_left();
         let mut f = Vec::new();
-        let mut best = (x0, y0, f64::NEG_INFINITY);
-        let mut search =
-            |t: &Self, cx: i64, cy: i64, radius: f64, step: i64, best: &mut (i64, i64, f64)| {
-                let r = radius.floor() as i64;
-                let mut dy = -r - (-r).rem_euclid(step);
-                while dy <= r {
-                    let mut dx = -r - (-r).rem_euclid(step);
-                    while dx <= r {
-                        if ((dx * dx + dy * dy) as f64) <= radius * radius {
-                            feature(&ii, (cx + dx, cy + dy), t.box_size, &mut f);
-                            let s = t.score(&f);
-                            if s > best.2 {
-                                *best = (cx + dx, cy + dy, s);
-                            }
-                        }
-                        dx += step;
-                    }
-                    dy += step;
-                }
-            };
-        if self.coarse_step > 1 {
-            search(
-                self,
-                x0,
-                y0,
-                self.search_radius,
-                self.coarse_step,
-                &mut best,
-            );
-            let (bx, by) = (best.0, best.1);
-            search(self, bx, by, self.coarse_step as f64 * 1.5, 1, &mut best);
-        } else {
-            search(self, x0, y0, self.search_radius, 1, &mut best);
-        }
+        let best = super::search_disc((x0, y0), self.search_radius, self.coarse_step, |x, y| {
+            feature(&ii, (x, y), self.box_size, &mut f);
+            self.score(&f)
+        });
         let pose = Pose {
             cx: self.base.pose.cx + (best.0 - x0) as f64,
             cy: self.base.pose.cy + (best.1 - y0) as f64,
@@ -513,8 +483,7 @@ impl WholeTracker for Struck {
     }
 
     fn corners_set(&mut self) -> Result<()> {
-        self.base.pose.scale = 1.0;
-        self.base.pose.angle = 0.0;
+        self.base.keep_only(ENTRY.build.motion);
         Ok(())
     }
 }

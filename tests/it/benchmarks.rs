@@ -519,6 +519,27 @@ fn eval_and_export_on_the_command_line() {
     for col in ["p5", "p15", "success_h", "success_iou"] {
         assert!(header.contains(&col), "{header:?}");
     }
+    // One sequence of the dataset, its annotation file given alone.
+    let one = d.path().join("one");
+    let o = regtrack(&[
+        "eval",
+        "--dataset",
+        root.join("annotation")
+            .join("V03_4_gt_points.txt")
+            .to_str()
+            .unwrap(),
+        "--sm",
+        "fclk",
+        "--am",
+        "ssd",
+        "--ssm",
+        "homography",
+        "--out",
+        one.to_str().unwrap(),
+    ]);
+    succeed(o);
+    let csv = std::fs::read_to_string(one.join("summary.csv")).unwrap();
+    assert!(csv.lines().nth(1).unwrap().starts_with("V03_4,"), "{csv}");
     let dest = d.path().join("pt");
     succeed(regtrack(&[
         "export",

@@ -156,7 +156,7 @@ fn run() -> Result<()> {
                 ..EvalOptions::default()
             };
             let specs = select.default_specs()?;
-            let sequences = dataset::discover(&dataset, seqs.as_deref())?;
+            let sequences = dataset::open_or_discover(&dataset, seqs.as_deref())?;
             warn_about(&sequences);
             let batch = Batch {
                 options,

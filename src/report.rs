@@ -120,12 +120,6 @@ pub fn pool(runs: &[RunResult]) -> Vec<TrackerResult> {
             let errors: Vec<f64> = mine.iter().flat_map(|r| r.sr_errors()).collect();
             let sequences: BTreeSet<String> = mine.iter().map(|r| r.sequence.clone()).collect();
             use eval::benchmark as b;
-            let mut factors: Vec<&str> = Vec::new();
-            for f in mine.iter().flat_map(|r| r.factors.iter()) {
-                if !factors.contains(&f.as_str()) {
-                    factors.push(f);
-                }
-            }
             TrackerResult {
                 summary: eval::summarize(eval::POOLED, mine),
                 sequences: sequences.into_iter().collect(),
@@ -135,17 +129,7 @@ pub fn pool(runs: &[RunResult]) -> Vec<TrackerResult> {
                     .map(|d| b::discrepancy_curve(&d))
                     .unwrap_or_default(),
                 iou: b::iou_curve(&b::ious(mine)),
-                factors: factors
-                    .into_iter()
-                    .map(|f| {
-                        let of: Vec<&RunResult> = mine
-                            .iter()
-                            .copied()
-                            .filter(|r| r.factors.iter().any(|x| x == f))
-                            .collect();
-                        eval::summarize(&eval::factor_label(eval::POOLED, f), &of)
-                    })
-                    .collect(),
+                factors: eval::factor_rows(mine),
             }
         })
         .collect();

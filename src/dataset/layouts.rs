@@ -278,18 +278,7 @@ pub fn scan(root: &Path) -> Result<Scan> {
     // POT and PlanarTrack: corner files with their flags or homographies beside them.
     for dir in &ann_dirs {
         for f in files_of(dir) {
-            let file = name_of(&f);
-            let (name, layout) = if let Some(s) = file.strip_suffix("_gt_points.txt") {
-                (s.to_string(), Layout::Pot)
-            } else if let Some(s) = file.strip_suffix(".txt")
-                && (is_planartrack_name(s)
-                    || (!s.ends_with("_flag")
-                        && !s.ends_with("_homography")
-                        && (dir.join(format!("{s}_flag.txt")).is_file()
-                            || dir.join(format!("{s}_homography.txt")).is_file())))
-            {
-                (s.to_string(), Layout::PlanarTrack)
-            } else {
+            let Some((name, layout)) = planar_corner_file(dir, &name_of(&f)) else {
                 continue;
             };
             let (homography, flags) = if layout == Layout::Pot {
@@ -500,6 +489,23 @@ fn unplaced_reason(file: &str) -> String {
     } else {
         "not a sequence of any layout".into()
     }
+}
+
+/// The sequence and layout of a corner file `file` of `dir`: POT's `<seq>_gt_points.txt`, or
+/// PlanarTrack's `Seq_<n>.txt` (or any `<seq>.txt` with `<seq>_flag.txt` or
+/// `<seq>_homography.txt` beside it).
+fn planar_corner_file(dir: &Path, file: &str) -> Option<(String, Layout)> {
+    if let Some(s) = file.strip_suffix("_gt_points.txt") {
+        return Some((s.to_string(), Layout::Pot));
+    }
+    let s = file.strip_suffix(".txt")?;
+    let beside = |suffix: &str| dir.join(format!("{s}_{suffix}.txt")).is_file();
+    let planar = is_planartrack_name(s)
+        || (!s.is_empty()
+            && !s.ends_with("_flag")
+            && !s.ends_with("_homography")
+            && (beside("flag") || beside("homography")));
+    planar.then(|| (s.to_string(), Layout::PlanarTrack))
 }
 
 fn is_planartrack_name(s: &str) -> bool {
@@ -809,7 +815,7 @@ pub fn entries(root: &Path, names: Option<&[String]>) -> Result<Vec<Entry>> {
 /// PlanarTrack `Seq_<n>.txt`, UCSB `.warps`): found by scanning the roots it may sit in (its
 /// folder, and the folders above an `annotation/` or `ground_truth/` one). `None` for other
 /// files.
-pub fn entry_of_file(path: &Path) -> Result<Option<Entry>> {
+pub fn entry_of_file(path: &Path) -> Option<Entry> {
     let file = name_of(path);
     let dir = path.parent().unwrap_or(Path::new("."));
     let dir = if dir.as_os_str().is_empty() {
@@ -817,15 +823,8 @@ pub fn entry_of_file(path: &Path) -> Result<Option<Entry>> {
     } else {
         dir
     };
-    let stem = file.strip_suffix(".txt").unwrap_or("");
-    let benchmark = file.ends_with("_gt_points.txt")
-        || file.ends_with(".warps")
-        || is_planartrack_name(stem)
-        || (!stem.is_empty()
-            && (dir.join(format!("{stem}_flag.txt")).is_file()
-                || dir.join(format!("{stem}_homography.txt")).is_file()));
-    if !benchmark {
-        return Ok(None);
+    if !file.ends_with(".warps") && planar_corner_file(dir, &file).is_none() {
+        return None;
     }
     let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let target = canonical(path);
@@ -849,10 +848,10 @@ pub fn entry_of_file(path: &Path) -> Result<Option<Entry>> {
             Source::Ucsb { warps, .. } => canonical(warps) == target,
             _ => false,
         }) {
-            return Ok(Some(e));
+            return Some(e);
         }
     }
     // Its frames are not where the layout keeps them: opened as a corner file, its frames
     // beside it.
-    Ok(None)
+    None
 }

@@ -209,7 +209,7 @@ impl Sequence {
         } else if path.is_file() {
             // A benchmark's annotation file (POT, PlanarTrack, UCSB): opened as its dataset
             // root lays it out, flags and homographies with it.
-            if let Some(e) = layouts::entry_of_file(path)? {
+            if let Some(e) = layouts::entry_of_file(path) {
                 return e.open();
             }
             Self::open_gt_file(path)

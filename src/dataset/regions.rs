@@ -53,8 +53,8 @@ impl Region {
     }
 }
 
-/// The numbers of a line separated by commas, tabs or spaces; `None` when a token is not a
-/// number (the error says which).
+/// The numbers of a line separated by commas, semicolons, tabs or spaces; an error naming the
+/// token that is not a number.
 fn numbers(path: &Path, line: usize, text: &str) -> Result<Vec<f64>> {
     text.split(|c: char| c.is_whitespace() || c == ',' || c == ';')
         .filter(|t| !t.is_empty())
@@ -152,54 +152,56 @@ pub fn vot_region_line(region: &Region) -> String {
 /// Parses a file of boxes `x, y, w, h` a line (GOT-10k, LaSOT `groundtruth.txt`, commas or white
 /// space); a line of NaN values, a box of no area or an empty line is a frame without a box.
 pub fn parse_boxes(path: &Path, text: &str) -> Result<Vec<Option<Quad>>> {
-    frame_lines(text)
+    Ok(rows(path, text, 4, "a box x, y, w, h", false)?
         .into_iter()
-        .map(|(line, l)| {
-            if l.is_empty() {
-                return Ok(None);
-            }
-            let v = numbers(path, line, l)?;
-            if v.len() != 4 {
-                return Err(Error::Parse {
-                    path: path.to_path_buf(),
-                    line,
-                    message: format!("expected a box x, y, w, h: found {} numbers", v.len()),
-                });
-            }
-            Ok(Region::Rect {
+        .map(|r| {
+            let v = r?;
+            Region::Rect {
                 x: v[0],
                 y: v[1],
                 w: v[2],
                 h: v[3],
             }
             .quad()
-            .filter(|q| q.is_finite()))
+            .filter(|q| q.is_finite())
         })
-        .collect()
+        .collect())
 }
 
-/// Parses a file of `n` numbers a line; an empty line is `None`.
+/// Parses a file of `n` finite numbers a line; an empty line is `None`.
 pub fn parse_rows(path: &Path, text: &str, n: usize, what: &str) -> Result<Vec<Option<Vec<f64>>>> {
+    rows(path, text, n, what, true)
+}
+
+/// The rows of `n` numbers of a file (`None` for an empty line), each also finite when `finite`;
+/// errors name the line.
+fn rows(
+    path: &Path,
+    text: &str,
+    n: usize,
+    what: &str,
+    finite: bool,
+) -> Result<Vec<Option<Vec<f64>>>> {
     frame_lines(text)
         .into_iter()
         .map(|(line, l)| {
             if l.is_empty() {
                 return Ok(None);
             }
+            let err = |message: String| Error::Parse {
+                path: path.to_path_buf(),
+                line,
+                message,
+            };
             let v = numbers(path, line, l)?;
             if v.len() != n {
-                return Err(Error::Parse {
-                    path: path.to_path_buf(),
-                    line,
-                    message: format!("expected {n} numbers ({what}), found {}", v.len()),
-                });
+                return Err(err(format!(
+                    "expected {n} numbers ({what}), found {}",
+                    v.len()
+                )));
             }
-            if let Some(k) = v.iter().position(|x| !x.is_finite()) {
-                return Err(Error::Parse {
-                    path: path.to_path_buf(),
-                    line,
-                    message: format!("value {} is not a finite number", k + 1),
-                });
+            if finite && let Some(k) = v.iter().position(|x| !x.is_finite()) {
+                return Err(err(format!("value {} is not a finite number", k + 1)));
             }
             Ok(Some(v))
         })

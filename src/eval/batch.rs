@@ -405,23 +405,30 @@ pub fn summary_rows(runs: &[RunResult]) -> Vec<Summary> {
         .filter(|g| g.len() > 1)
         .collect();
     rows.extend(groups.iter().map(|g| summarize(POOLED, g)));
-    for g in &groups {
-        let mut factors: Vec<&str> = Vec::new();
-        for f in g.iter().flat_map(|r| r.factors.iter()) {
-            if !factors.contains(&f.as_str()) {
-                factors.push(f);
-            }
+    rows.extend(groups.iter().flat_map(|g| factor_rows(g)));
+    rows
+}
+
+/// One tracker's runs pooled per challenge factor of their sequences (`ALL:<factor>`, the runs
+/// on the sequences of that factor counted together), factors in the order they first appear.
+pub fn factor_rows(runs: &[&RunResult]) -> Vec<Summary> {
+    let mut factors: Vec<&str> = Vec::new();
+    for f in runs.iter().flat_map(|r| r.factors.iter()) {
+        if !factors.contains(&f.as_str()) {
+            factors.push(f);
         }
-        for f in factors {
-            let mine: Vec<&RunResult> = g
+    }
+    factors
+        .into_iter()
+        .map(|f| {
+            let mine: Vec<&RunResult> = runs
                 .iter()
                 .copied()
                 .filter(|r| r.factors.iter().any(|x| x == f))
                 .collect();
-            rows.push(summarize(&factor_label(POOLED, f), &mine));
-        }
-    }
-    rows
+            summarize(&factor_label(POOLED, f), &mine)
+        })
+        .collect()
 }
 
 /// The sequence name of the rows pooled over the sequences of a challenge factor:

@@ -10,7 +10,8 @@ mod plan_file;
 mod results_formats;
 
 pub use batch::{
-    Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, factor_label, summary_rows,
+    Batch, BatchOutcome, Finished, POOLED, Plan, Shard, by_tracker, factor_label, factor_rows,
+    summary_rows,
 };
 pub use files::{
     PARTIAL_FILE, POOLED_PARTIAL, finished_run, input_stamp, merge_shards, read_all_runs,

@@ -149,7 +149,7 @@ pub fn write_results(
                 } else {
                     0.0
                 };
-                let (mut boxes, mut times) = (String::new(), String::new());
+                let mut boxes = String::new();
                 for f in &r.frames {
                     let b = f.corners.map_or([0.0; 4], |q| {
                         let b = bbox(&q);
@@ -162,7 +162,6 @@ pub fn write_results(
                             .join(","),
                     );
                     boxes.push('\n');
-                    times.push_str(&format!("{:.6}\n", f.update_us * 1e-6));
                 }
                 if format == ResultsFormat::Lasot {
                     let p = out
@@ -174,6 +173,11 @@ pub fn write_results(
                     let dir = out.join(&tracker).join(&seq);
                     let p = dir.join(format!("{seq}_001.txt"));
                     let t = dir.join(format!("{seq}_time.txt"));
+                    let times: String = r
+                        .frames
+                        .iter()
+                        .map(|f| format!("{:.6}\n", f.update_us * 1e-6))
+                        .collect();
                     write_atomic(&p, boxes.as_bytes())?;
                     write_atomic(&t, times.as_bytes())?;
                     files.extend([p, t]);

@@ -89,12 +89,12 @@ pub const ENTRY: Entry<WholeDef> = Entry {
 /// Builds a DFT tracker.
 pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
     let g = |name: &str| super::param(spec, PARAMS, name);
+    let bins = g("bins") as usize;
     Ok(Box::new(Dft {
         base: Base::new(spec),
-        bins: g("bins") as usize,
-        sigma_s: g("spatial_sigma"),
-        sigma_f: g("feature_sigma"),
-        sigma_c: g("coarse_sigma"),
+        bins,
+        table: bin_weights(bins, g("feature_sigma")),
+        kernels: (kernel(g("spatial_sigma")), kernel(g("coarse_sigma"))),
         rate: g("learning_rate"),
         radius: g("search_radius"),
         cells: g("cells") as usize,
@@ -196,17 +196,52 @@ fn blur_layers(f: &mut Field, k: &[f32], tmp: &mut Vec<f32>) {
 /// The distribution field of the `w x h` region of `img` whose top-left pixel is `(x0, y0)`,
 /// described on blocks of `step x step` pixels (their mean; pixels beyond the frame replicate
 /// its border), with the bin weights `table` and the spatial kernel `k`.
+#[cfg(test)]
 #[allow(clippy::too_many_arguments)]
 fn field_of(
+    img: &GrayF32,
+    step: usize,
+    origin: (i64, i64),
+    size: (usize, usize),
+    bins: usize,
+    table: &[f32],
+    k: &[f32],
+    out: &mut Field,
+    tmp: &mut Vec<f32>,
+) {
+    explode(img, step, origin, size, bins, table, out);
+    blur_layers(out, k, tmp);
+}
+
+/// The fields of a region at the smoothings `fine` and `coarse` ([`Dft::kernels`]): the region
+/// exploded into its bins once, then smoothed each way.
+#[allow(clippy::too_many_arguments)]
+fn fields_of(
+    img: &GrayF32,
+    step: usize,
+    origin: (i64, i64),
+    size: (usize, usize),
+    table: (&[f32], usize),
+    (fine_k, fine): (&[f32], &mut Field),
+    (coarse_k, coarse): (&[f32], &mut Field),
+    tmp: &mut Vec<f32>,
+) {
+    explode(img, step, origin, size, table.1, table.0, fine);
+    coarse.clone_from(fine);
+    blur_layers(fine, fine_k, tmp);
+    blur_layers(coarse, coarse_k, tmp);
+}
+
+/// The unsmoothed field of a region ([`field_of`] before the spatial smoothing): each described
+/// pixel's bin weights from `table`.
+fn explode(
     img: &GrayF32,
     step: usize,
     (x0, y0): (i64, i64),
     (w, h): (usize, usize),
     bins: usize,
     table: &[f32],
-    k: &[f32],
     out: &mut Field,
-    tmp: &mut Vec<f32>,
 ) {
     out.w = w;
     out.h = h;
@@ -234,7 +269,6 @@ fn field_of(
             }
         }
     }
-    blur_layers(out, k, tmp);
 }
 
 /// The L1 distance between `model` (the target's size) and the part of `field` whose top-left
@@ -358,8 +392,9 @@ struct Scratch {
     fine: Field,
     coarse: Field,
     found: Field,
+    /// The model's box with the pixels around it, at the start.
+    wide: (Field, Field),
     tmp: Vec<f32>,
-    table: Vec<f32>,
 }
 
 /// A DFT tracker.
@@ -367,9 +402,10 @@ struct Scratch {
 pub struct Dft {
     base: Base,
     bins: usize,
-    sigma_s: f64,
-    sigma_f: f64,
-    sigma_c: f64,
+    /// The bin weights of each intensity ([`bin_weights`]).
+    table: Vec<f32>,
+    /// The spatial kernels of the model's field and of the coarse one the search starts on.
+    kernels: (Vec<f32>, Vec<f32>),
     rate: f64,
     radius: f64,
     cells: usize,
@@ -407,7 +443,6 @@ impl WholeTracker for Dft {
             ((th / step as f64).round() as usize).max(3),
         );
         let img = frame_f32(input);
-        self.scratch.table = bin_weights(self.bins, self.sigma_f);
         let mut m = Model {
             step,
             bw,
@@ -421,22 +456,22 @@ impl WholeTracker for Dft {
         m.offset = (cx - centre.0, cy - centre.1);
         let sc = &mut self.scratch;
         // Described with the pixels around the box, as a frame's region is: the smoothing near
-        // the box's edges reads beyond it.
-        let r = (3.0 * self.sigma_c.max(self.sigma_s)).ceil() as usize + 1;
-        for (sigma, out) in [(self.sigma_s, &mut m.fine), (self.sigma_c, &mut m.coarse)] {
-            field_of(
-                &img,
-                step,
-                (tl.0 - r as i64, tl.1 - r as i64),
-                (bw + 2 * r, bh + 2 * r),
-                self.bins,
-                &sc.table,
-                &kernel(sigma),
-                &mut sc.found,
-                &mut sc.tmp,
-            );
-            crop(&sc.found, r, r, bw, bh, out);
-        }
+        // the box's edges reads beyond it (a kernel's radius and one more).
+        let (kf, kc) = (&self.kernels.0, &self.kernels.1);
+        let r = kf.len().max(kc.len()) / 2 + 1;
+        let (wide_fine, wide_coarse) = &mut sc.wide;
+        fields_of(
+            &img,
+            step,
+            (tl.0 - r as i64, tl.1 - r as i64),
+            (bw + 2 * r, bh + 2 * r),
+            (&self.table, self.bins),
+            (kf, wide_fine),
+            (kc, wide_coarse),
+            &mut sc.tmp,
+        );
+        crop(wide_fine, r, r, bw, bh, &mut m.fine);
+        crop(wide_coarse, r, r, bw, bh, &mut m.coarse);
         self.model = Some(m);
         Ok(())
     }
@@ -457,19 +492,16 @@ impl WholeTracker for Dft {
         let region = (m.bw + 2 * margin, m.bh + 2 * margin);
         let sc = &mut self.scratch;
         // The region's fields, smoothed as the model's were.
-        for (sigma, out) in [(self.sigma_c, &mut sc.coarse), (self.sigma_s, &mut sc.fine)] {
-            field_of(
-                &img,
-                m.step,
-                origin,
-                region,
-                self.bins,
-                &sc.table,
-                &kernel(sigma),
-                out,
-                &mut sc.tmp,
-            );
-        }
+        fields_of(
+            &img,
+            m.step,
+            origin,
+            region,
+            (&self.table, self.bins),
+            (&self.kernels.0, &mut sc.fine),
+            (&self.kernels.1, &mut sc.coarse),
+            &mut sc.tmp,
+        );
         let lim = (2 * margin, 2 * margin);
         let steps: Vec<usize> = [4usize, 2, 1]
             .into_iter()

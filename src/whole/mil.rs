@@ -8,7 +8,7 @@
 //! patches is). The target moves to the patch of the search radius the strong classifier rates
 //! highest. Translation only.
 
-use super::rct::Gaussian;
+use super::rct::{Gaussian, Haar};
 use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
 use crate::geometry::Quad;
@@ -128,30 +128,17 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
     }))
 }
 
-/// A Haar-like box relative to the patch's top-left corner, with its weight.
-#[derive(Clone, Copy, Debug)]
-struct Rect {
-    x: i64,
-    y: i64,
-    w: i64,
-    h: i64,
-    weight: f64,
-}
-
 /// A weak classifier: the feature's Gaussian models of the target and of the background.
 #[derive(Clone, Debug)]
 struct Weak {
-    rects: Vec<Rect>,
+    feature: Haar,
     pos: Gaussian,
     neg: Gaussian,
 }
 
 impl Weak {
     fn value(&self, ii: &Integral, x: i64, y: i64) -> f64 {
-        self.rects
-            .iter()
-            .map(|r| r.weight * ii.sum(x + r.x, y + r.y, x + r.x + r.w, y + r.y + r.h))
-            .sum()
+        self.feature.value(ii, x, y)
     }
 
     /// `log p(v | target) - log p(v | background)`.
@@ -314,23 +301,10 @@ impl WholeTracker for Mil {
             .map(|_| {
                 // 2 to 4 boxes of random size and place, weights in [-1, 1].
                 let k = 2 + (rng.uniform() * 3.0) as usize;
-                let rects = (0..k.min(4))
-                    .map(|_| {
-                        let x = rng.range(0.0, (bw - 3) as f64) as i64;
-                        let y = rng.range(0.0, (bh - 3) as f64) as i64;
-                        let w = 1 + rng.range(0.0, (bw - x - 2) as f64) as i64;
-                        let h = 1 + rng.range(0.0, (bh - y - 2) as f64) as i64;
-                        Rect {
-                            x,
-                            y,
-                            w,
-                            h,
-                            weight: rng.range(-1.0, 1.0),
-                        }
-                    })
-                    .collect();
+                let feature =
+                    Haar::random(&mut rng, (bw, bh), k.min(4), |rng| rng.range(-1.0, 1.0));
                 Weak {
-                    rects,
+                    feature,
                     pos: g,
                     neg: g,
                 }

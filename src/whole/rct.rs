@@ -142,6 +142,48 @@ struct Rect {
     weight: f64,
 }
 
+/// A Haar-like feature: the weighted sum of a few boxes of a patch (RCT's compressed features,
+/// MIL's weak classifiers' features).
+#[derive(Clone, Debug)]
+pub(crate) struct Haar(Vec<Rect>);
+
+impl Haar {
+    /// `k` boxes of random place and size inside a `bw x bh` patch, each weighted by
+    /// `weight(rng)`, drawn after its place.
+    pub fn random(
+        rng: &mut Rng,
+        (bw, bh): (i64, i64),
+        k: usize,
+        mut weight: impl FnMut(&mut Rng) -> f64,
+    ) -> Self {
+        Haar(
+            (0..k)
+                .map(|_| {
+                    let x = rng.range(0.0, (bw - 3) as f64) as i64;
+                    let y = rng.range(0.0, (bh - 3) as f64) as i64;
+                    let w = 1 + rng.range(0.0, (bw - x - 2) as f64) as i64;
+                    let h = 1 + rng.range(0.0, (bh - y - 2) as f64) as i64;
+                    Rect {
+                        x,
+                        y,
+                        w,
+                        h,
+                        weight: weight(rng),
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    /// The feature of the patch whose top-left pixel is `(x, y)`.
+    pub fn value(&self, ii: &Integral, x: i64, y: i64) -> f64 {
+        self.0
+            .iter()
+            .map(|r| r.weight * ii.sum(x + r.x, y + r.y, x + r.x + r.w, y + r.y + r.h))
+            .sum()
+    }
+}
+
 /// The Gaussian class conditional of one feature.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Gaussian {
@@ -191,7 +233,7 @@ struct Model {
     /// The box's size (whole pixels).
     bw: i64,
     bh: i64,
-    features: Vec<Vec<Rect>>,
+    features: Vec<Haar>,
     classifier: Classifier,
     rng: Rng,
     first: bool,
@@ -219,12 +261,7 @@ impl Model {
     /// The compressed features of the box whose top-left pixel is `(x, y)`.
     fn describe(&self, ii: &Integral, x: i64, y: i64, out: &mut Vec<f64>) {
         out.clear();
-        out.extend(self.features.iter().map(|rects| {
-            rects
-                .iter()
-                .map(|r| r.weight * ii.sum(x + r.x, y + r.y, x + r.x + r.w, y + r.y + r.h))
-                .sum::<f64>()
-        }));
+        out.extend(self.features.iter().map(|f| f.value(ii, x, y)));
     }
 }
 
@@ -294,22 +331,10 @@ impl WholeTracker for Rct {
                 let k = self.rects.0
                     + (rng.uniform() * (self.rects.1 - self.rects.0 + 1) as f64) as usize;
                 let k = k.min(self.rects.1).max(1);
-                (0..k)
-                    .map(|_| {
-                        let x = rng.range(0.0, (bw - 3) as f64) as i64;
-                        let y = rng.range(0.0, (bh - 3) as f64) as i64;
-                        let w = 1 + rng.range(0.0, (bw - x - 2) as f64) as i64;
-                        let h = 1 + rng.range(0.0, (bh - y - 2) as f64) as i64;
-                        let sign = if rng.uniform() < 0.5 { 1.0 } else { -1.0 };
-                        Rect {
-                            x,
-                            y,
-                            w,
-                            h,
-                            weight: sign / (k as f64).sqrt(),
-                        }
-                    })
-                    .collect()
+                Haar::random(&mut rng, (bw, bh), k, |rng| {
+                    let sign = if rng.uniform() < 0.5 { 1.0 } else { -1.0 };
+                    sign / (k as f64).sqrt()
+                })
             })
             .collect();
         let g = Gaussian {

@@ -78,6 +78,7 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
         coarse_step: g("coarse_step") as i64,
         rng: Rng::new(g("seed") as u64),
         box_size: (0, 0),
+        outputs: training_outputs(g("search_radius")),
         patterns: Vec::new(),
         svs: Vec::new(),
     }))
@@ -130,10 +131,10 @@ fn training_outputs(radius: f64) -> Vec<(i64, i64)> {
     out
 }
 
-/// A frame learned on: the features of its displaced boxes (the first the true one).
+/// A frame learned on: the features of its boxes displaced by each of [`Struck::outputs`] (the
+/// first the true one).
 #[derive(Debug)]
 struct Pattern {
-    outputs: Vec<(i64, i64)>,
     features: Vec<Vec<f32>>,
 }
 
@@ -158,6 +159,8 @@ pub struct Struck {
     coarse_step: i64,
     rng: Rng,
     box_size: (i64, i64),
+    /// The displacements every frame is learned on ([`training_outputs`]).
+    outputs: Vec<(i64, i64)>,
     /// Patterns (`None` once no support vector refers to them).
     patterns: Vec<Option<Pattern>>,
     svs: Vec<Sv>,
@@ -189,7 +192,7 @@ impl Struck {
         let Some(pat) = &self.patterns[p] else {
             return 0.0;
         };
-        -loss(pat.outputs[o], pat.outputs[0], self.box_size) - self.score(&pat.features[o])
+        -loss(self.outputs[o], self.outputs[0], self.box_size) - self.score(&pat.features[o])
     }
 
     /// The index of the support vector of `(p, o)`, added (beta 0) if it is not one.
@@ -262,10 +265,10 @@ impl Struck {
     /// ProcessOld (a pattern seen before, up on its best support vector): down on its output
     /// of least gradient.
     fn process(&mut self, p: usize, old: bool) {
-        let n = match &self.patterns[p] {
-            Some(pat) => pat.outputs.len(),
-            None => return,
-        };
+        if self.patterns[p].is_none() {
+            return;
+        }
+        let n = self.outputs.len();
         let grads: Vec<f64> = (0..n).map(|o| self.gradient(p, o)).collect();
         let down = (0..n)
             .min_by(|&a, &b| grads[a].total_cmp(&grads[b]))
@@ -360,10 +363,9 @@ impl Struck {
 
     /// Learns the frame with the target's box at `(x, y)`.
     fn learn(&mut self, ii: &Integral, x: i64, y: i64) {
-        let outputs = training_outputs(self.search_radius);
-        let mut features = Vec::with_capacity(outputs.len());
+        let mut features = Vec::with_capacity(self.outputs.len());
         let mut f = Vec::new();
-        for &(dx, dy) in &outputs {
+        for &(dx, dy) in &self.outputs {
             feature(ii, (x + dx, y + dy), self.box_size, &mut f);
             features.push(f.clone());
         }
@@ -374,7 +376,7 @@ impl Struck {
                 self.patterns.len() - 1
             }
         };
-        self.patterns[p] = Some(Pattern { outputs, features });
+        self.patterns[p] = Some(Pattern { features });
         self.process(p, false);
         self.prune();
         self.enforce_budget();
@@ -457,21 +459,20 @@ impl WholeTracker for Struck {
             self.learn(&ii, best.0, best.1);
         }
         let want = observer.wants_method_visuals();
-        // The support vectors of the newest pattern, drawn as their boxes.
+        // The first support vectors, as the boxes their displacements put around the target.
         let quads: Vec<Quad> = if want {
             self.svs
                 .iter()
-                .filter_map(|s| {
-                    let p = self.patterns[s.pattern].as_ref()?;
-                    let (dx, dy) = p.outputs[s.output];
-                    Some(Quad::from_rect(
+                .take(8)
+                .map(|s| {
+                    let (dx, dy) = self.outputs[s.output];
+                    Quad::from_rect(
                         (best.0 + dx) as f64,
                         (best.1 + dy) as f64,
                         self.box_size.0 as f64,
                         self.box_size.1 as f64,
-                    ))
+                    )
                 })
-                .take(8)
                 .collect()
         } else {
             Vec::new()
@@ -534,6 +535,7 @@ mod tests {
             coarse_step: 2,
             rng: Rng::new(0),
             box_size: (30, 24),
+            outputs: training_outputs(30.0),
             patterns: Vec::new(),
             svs: Vec::new(),
         };

@@ -444,6 +444,25 @@ fn vot_got10k_and_lasot_folders_and_vot_results() {
         .collect();
     let r = runs[0].frames[1].corners.unwrap().bbox();
     assert!((b[0] - (r.x0 + 1.0)).abs() < 1e-3 && (b[2] - r.width()).abs() < 1e-3);
+    // GOT-10k: boxes from 0 and a time a frame.
+    let files = eval::write_results(&runs, ResultsFormat::Got10k, &out).unwrap();
+    let dir = out.join(&tracker).join("ball");
+    assert_eq!(files, [dir.join("ball_001.txt"), dir.join("ball_time.txt")]);
+    let boxes = std::fs::read_to_string(&files[0]).unwrap();
+    let x: f64 = boxes
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((x - r.x0).abs() < 1e-3);
+    assert_eq!(
+        std::fs::read_to_string(&files[1]).unwrap().lines().count(),
+        5
+    );
 }
 
 /// A root mixing layouts is read when every file finds its sequence, and a file that does not

@@ -93,9 +93,16 @@ impl Fft2 {
 
 /// `dst` (h x w) = transpose of `src` (w x h, row-major).
 fn transpose(src: &[C32], dst: &mut [C32], w: usize, h: usize) {
-    for y in 0..h {
-        for x in 0..w {
-            dst[x * h + y] = src[y * w + x];
+    // In tiles of 8 x 8, so that both sides stay in the cache.
+    const T: usize = 8;
+    let (src, dst) = (&src[..w * h], &mut dst[..w * h]);
+    for y0 in (0..h).step_by(T) {
+        for x0 in (0..w).step_by(T) {
+            for y in y0..(y0 + T).min(h) {
+                for x in x0..(x0 + T).min(w) {
+                    dst[x * h + y] = src[y * w + x];
+                }
+            }
         }
     }
 }

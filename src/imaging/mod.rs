@@ -19,7 +19,7 @@ pub use filter::{
     gaussian_kernel, pad_replicate_into, pyramid,
 };
 pub use integral::Integral;
-pub use resample::resample_window;
+pub use resample::{resample_window, resample_window_on};
 pub use sample::{
     Border, ImageView, STAMP_LEVELS, new_stamp, sample_grid_shifted, sample_value, sample_values,
     sample_values_gradients,

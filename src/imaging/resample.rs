@@ -2,6 +2,7 @@
 //! boxes: correlation filters, their scale pyramids, the detectors' normalised patches).
 
 use super::GrayF32;
+use crate::crew::{Crew, Shares};
 
 /// Fills `out` (`out_w x out_h`, row-major) with the window of `src_w x src_h` frame pixels
 /// centred at `(cx, cy)`, resampled bilinearly; outside the frame the edge is replicated. When a
@@ -23,50 +24,105 @@ pub fn resample_window(
     if img.data.is_empty() || out_w == 0 || out_h == 0 {
         return;
     }
-    let sx = src_w / out_w as f64;
-    let sy = src_h / out_h as f64;
-    let k = if sx.max(sy) > 1.5 {
-        sx.max(sy).ceil().clamp(1.0, 8.0) as usize
-    } else {
-        1
-    };
-    // Sampling is separable: the `k` sample columns of each output column and the `k` sample
-    // rows of each output row, as (first pixel, weight of the second) with the edge replicated.
-    let taps = |c: f64, s: f64, n: usize, len: usize| -> Vec<(usize, usize, f32)> {
-        let half = 0.5 * n as f64;
-        let mut v = Vec::with_capacity(n * k);
-        for i in 0..n {
-            for a in 0..k {
-                // Window pixel i spans [i, i + 1) in window units; the window's centre is at
-                // n / 2, placed on c (pixel centres are at whole coordinates).
-                let f = (c + s * (i as f64 + (a as f64 + 0.5) / k as f64 - half))
-                    .clamp(0.0, (len - 1) as f64);
-                let i0 = f.floor() as usize;
-                let i1 = (i0 + 1).min(len - 1);
-                v.push((i0, i1, (f - i0 as f64) as f32));
-            }
+    let taps = Taps::new(img, (cx, cy), (src_w, src_h), (out_w, out_h));
+    taps.fill(img, 0, out);
+}
+
+/// [`resample_window`] with the rows of `out` shared among the members of `crew` (the same
+/// bits).
+#[allow(clippy::too_many_arguments)]
+pub fn resample_window_on<S: Send>(
+    crew: &mut Crew<S>,
+    img: &GrayF32,
+    (cx, cy): (f64, f64),
+    (src_w, src_h): (f64, f64),
+    out_w: usize,
+    out_h: usize,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    out.resize(out_w * out_h, 0.0);
+    if img.data.is_empty() || out_w == 0 || out_h == 0 {
+        return;
+    }
+    let taps = Taps::new(img, (cx, cy), (src_w, src_h), (out_w, out_h));
+    let parts = crew.len();
+    let shares = Shares::new(out, out_h.div_ceil(parts) * out_w, parts);
+    crew.run(&|_, member| {
+        while let Some((start, rows)) = shares.take(member) {
+            taps.fill(img, start / out_w, rows);
         }
-        v
-    };
-    let xt = taps(cx, sx, out_w, img.width);
-    let yt = taps(cy, sy, out_h, img.height);
-    let inv = 1.0 / (k * k) as f32;
-    let w = img.width;
-    for j in 0..out_h {
-        let row = &mut out[j * out_w..(j + 1) * out_w];
-        for &(y0, y1, wy) in &yt[j * k..(j + 1) * k] {
-            let (r0, r1) = (
-                &img.data[y0 * w..(y0 + 1) * w],
-                &img.data[y1 * w..(y1 + 1) * w],
-            );
-            for (i, o) in row.iter_mut().enumerate() {
-                let mut s = 0.0;
-                for &(x0, x1, wx) in &xt[i * k..(i + 1) * k] {
-                    let top = r0[x0] + wx * (r0[x1] - r0[x0]);
-                    let bot = r1[x0] + wx * (r1[x1] - r1[x0]);
-                    s += top + wy * (bot - top);
+    });
+}
+
+/// Where each window pixel samples: sampling is separable, so the `k` sample columns of each
+/// output column and the `k` sample rows of each output row, as (first pixel, second pixel,
+/// weight of the second) with the edge replicated.
+struct Taps {
+    k: usize,
+    out_w: usize,
+    xt: Vec<(usize, usize, f32)>,
+    yt: Vec<(usize, usize, f32)>,
+}
+
+impl Taps {
+    fn new(
+        img: &GrayF32,
+        (cx, cy): (f64, f64),
+        (src_w, src_h): (f64, f64),
+        (out_w, out_h): (usize, usize),
+    ) -> Self {
+        let sx = src_w / out_w as f64;
+        let sy = src_h / out_h as f64;
+        let k = if sx.max(sy) > 1.5 {
+            sx.max(sy).ceil().clamp(1.0, 8.0) as usize
+        } else {
+            1
+        };
+        let taps = |c: f64, s: f64, n: usize, len: usize| -> Vec<(usize, usize, f32)> {
+            let half = 0.5 * n as f64;
+            let mut v = Vec::with_capacity(n * k);
+            for i in 0..n {
+                for a in 0..k {
+                    // Window pixel i spans [i, i + 1) in window units; the window's centre is at
+                    // n / 2, placed on c (pixel centres are at whole coordinates).
+                    let f = (c + s * (i as f64 + (a as f64 + 0.5) / k as f64 - half))
+                        .clamp(0.0, (len - 1) as f64);
+                    let i0 = f.floor() as usize;
+                    let i1 = (i0 + 1).min(len - 1);
+                    v.push((i0, i1, (f - i0 as f64) as f32));
                 }
-                *o += s * inv;
+            }
+            v
+        };
+        Taps {
+            k,
+            out_w,
+            xt: taps(cx, sx, out_w, img.width),
+            yt: taps(cy, sy, out_h, img.height),
+        }
+    }
+
+    /// The output rows from `first` on into `out` (whole rows, zeroed).
+    fn fill(&self, img: &GrayF32, first: usize, out: &mut [f32]) {
+        let (k, out_w, w) = (self.k, self.out_w, img.width);
+        let inv = 1.0 / (k * k) as f32;
+        for (r, row) in out.chunks_exact_mut(out_w).enumerate() {
+            let j = first + r;
+            for &(y0, y1, wy) in &self.yt[j * k..(j + 1) * k] {
+                let (r0, r1) = (
+                    &img.data[y0 * w..(y0 + 1) * w],
+                    &img.data[y1 * w..(y1 + 1) * w],
+                );
+                for (i, o) in row.iter_mut().enumerate() {
+                    let mut s = 0.0;
+                    for &(x0, x1, wx) in &self.xt[i * k..(i + 1) * k] {
+                        let top = r0[x0] + wx * (r0[x1] - r0[x0]);
+                        let bot = r1[x0] + wx * (r1[x1] - r1[x0]);
+                        s += top + wy * (bot - top);
+                    }
+                    *o += s * inv;
+                }
             }
         }
     }
@@ -95,5 +151,16 @@ mod tests {
         resample_window(&img, 9.5, 7.5, 8.0, 8.0, 4, 4, &mut out);
         let expect = 0.5 * (img.get(6, 4) + img.get(7, 5));
         assert!((out[0] - expect).abs() < 1e-3, "{} vs {expect}", out[0]);
+        // Rows shared among threads: the same bits.
+        let mut crew = Crew::new(vec![(); 3]);
+        for (c, size, n) in [
+            ((9.5, 7.5), (8.0, 8.0), (4, 4)),
+            ((3.2, 11.7), (13.0, 5.0), (7, 9)),
+        ] {
+            resample_window(&img, c.0, c.1, size.0, size.1, n.0, n.1, &mut out);
+            let mut banded = Vec::new();
+            resample_window_on(&mut crew, &img, c, size, n.0, n.1, &mut banded);
+            assert_eq!(banded, out);
+        }
     }
 }

@@ -2,10 +2,11 @@
 //! (HOG cells or raw pixels, under a Hann window), the Gaussian label, the kernel correlation in
 //! the Fourier domain and the sub-pixel peak of a response.
 
+use crate::crew::{Crew, Shares};
 use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
-use crate::imaging::hog::{FHOG_CHANNELS, FeatureMap, fhog};
-use crate::imaging::{GrayF32, resample_window};
+use crate::imaging::hog::{FHOG_CHANNELS, FeatureMap, fhog, fhog_on};
+use crate::imaging::{GrayF32, resample_window, resample_window_on};
 use crate::observe::{MethodVisual, ResponseMap};
 
 /// Which features a filter sees.
@@ -135,23 +136,30 @@ impl Window {
     }
 
     /// The features of the window centred at `(cx, cy)` at `scale`, each channel multiplied by
-    /// `hann` (`cells` long). `buf` is scratch.
+    /// `hann` (`cells` long), the HOG cells made by `crew` when given (the same bits). `buf` is
+    /// scratch.
     pub fn extract(
         &self,
         img: &GrayF32,
-        cx: f64,
-        cy: f64,
-        scale: f64,
+        (cx, cy, scale): (f64, f64, f64),
         hann: &[f32],
         buf: &mut Vec<f32>,
+        crew: Option<&mut Crew<Fft2>>,
     ) -> FeatureMap {
         let (sw, sh) = (
             self.pw as f64 * self.px * scale,
             self.ph as f64 * self.px * scale,
         );
-        resample_window(img, cx, cy, sw, sh, self.pw, self.ph, buf);
+        let mut crew = crew;
+        match crew.as_deref_mut() {
+            Some(crew) => resample_window_on(crew, img, (cx, cy), (sw, sh), self.pw, self.ph, buf),
+            None => resample_window(img, cx, cy, sw, sh, self.pw, self.ph, buf),
+        }
         let mut f = match self.features {
-            Features::Hog => fhog(buf, self.pw, self.ph, self.cell),
+            Features::Hog => match crew {
+                Some(crew) => fhog_on(crew, buf, self.pw, self.ph, self.cell),
+                None => fhog(buf, self.pw, self.ph, self.cell),
+            },
             Features::Raw => {
                 // Zero mean before the window, as the KCF paper's code does.
                 let mean = buf.iter().sum::<f32>() / buf.len().max(1) as f32;
@@ -209,14 +217,84 @@ pub fn gaussian_label(w: usize, h: usize, sigma: f64) -> Vec<f32> {
     out
 }
 
-/// The transform of every channel of `f`, channel after channel.
+/// The transform of every channel of `f`, channel after channel. The channels are real, so two
+/// are transformed at once (one as the real part, the other as the imaginary part of one
+/// complex transform) and told apart by the symmetry of a real signal's transform,
+/// `X(-k) = conj X(k)`.
 pub fn transform(fft: &mut Fft2, f: &FeatureMap, out: &mut Vec<C32>) {
     let n = f.width * f.height;
     out.clear();
-    out.extend(f.data.iter().map(|&v| C32::new(v, 0.0)));
-    for c in 0..f.channels {
-        fft.forward(&mut out[c * n..(c + 1) * n]);
+    out.resize(n * f.channels, C32::default());
+    for (k, pair) in out.chunks_mut(2 * n).enumerate() {
+        transform_pair(fft, f, 2 * k, pair);
     }
+}
+
+/// [`transform`] over a crew, each member (with its own plans) a share of the pairs of
+/// channels: the same bits.
+pub fn transform_on(crew: &mut Crew<Fft2>, f: &FeatureMap, out: &mut Vec<C32>) {
+    let n = f.width * f.height;
+    out.clear();
+    out.resize(n * f.channels, C32::default());
+    let parts = crew.len();
+    let shares = Shares::new(out, 2 * n, parts);
+    crew.run(&|fft, member| {
+        while let Some((start, pair)) = shares.take(member) {
+            transform_pair(fft, f, start / n, pair);
+        }
+    });
+}
+
+/// The transforms of channels `c` and `c + 1` of `f` into `out` (`2 n` long; `n` long for the
+/// last channel alone).
+fn transform_pair(fft: &mut Fft2, f: &FeatureMap, c: usize, out: &mut [C32]) {
+    let (w, h) = (f.width, f.height);
+    let n = w * h;
+    if out.len() == n {
+        for (v, &x) in out.iter_mut().zip(f.channel(c)) {
+            *v = C32::new(x, 0.0);
+        }
+        fft.forward(out);
+        return;
+    }
+    let (a, b) = out.split_at_mut(n);
+    for ((v, &x), &y) in a.iter_mut().zip(f.channel(c)).zip(f.channel(c + 1)) {
+        *v = C32::new(x, y);
+    }
+    fft.forward(a);
+    // Z = X + i Y: X(k) = (Z(k) + conj Z(-k)) / 2, Y(k) = (Z(k) - conj Z(-k)) / 2i. Each pair
+    // (k, -k) is read before either is written.
+    for v in 0..h {
+        let vm = (h - v) % h;
+        for u in 0..w {
+            let um = (w - u) % w;
+            let (i, j) = (v * w + u, vm * w + um);
+            if j < i {
+                continue;
+            }
+            let (zi, zj) = (a[i], a[j]);
+            let x = |p: C32, q: C32| C32::new(0.5 * (p.re + q.re), 0.5 * (p.im - q.im));
+            let y = |p: C32, q: C32| C32::new(0.5 * (p.im + q.im), 0.5 * (q.re - p.re));
+            a[i] = x(zi, zj);
+            b[i] = y(zi, zj);
+            a[j] = x(zj, zi);
+            b[j] = y(zj, zi);
+        }
+    }
+}
+
+/// `sum |v|^2` in f64, over four running sums (so the additions need not wait on each other).
+fn energy(v: &[C32]) -> f64 {
+    let mut acc = [0f64; 4];
+    let chunks = v.chunks_exact(4);
+    let rest = chunks.remainder();
+    for q in chunks {
+        for (a, z) in acc.iter_mut().zip(q) {
+            *a += z.norm_sqr() as f64;
+        }
+    }
+    let tail: f64 = rest.iter().map(|z| z.norm_sqr() as f64).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Which kernel compares two feature windows.
@@ -243,15 +321,19 @@ pub fn kernel_correlation(
     let n = w * h;
     out.clear();
     out.resize(n, C32::default());
-    let (mut xx, mut zz) = (0f64, 0f64);
     for c in 0..channels {
         let (xc, zc) = (&xf[c * n..(c + 1) * n], &zf[c * n..(c + 1) * n]);
-        for i in 0..n {
-            out[i] += xc[i].conj() * zc[i];
-            xx += xc[i].norm_sqr() as f64;
-            zz += zc[i].norm_sqr() as f64;
+        for ((o, x), z) in out.iter_mut().zip(xc).zip(zc) {
+            *o += x.conj() * z;
         }
     }
+    let xx = energy(&xf[..n * channels]);
+    // The kernel of a window with itself (training) needs its energy once.
+    let zz = if std::ptr::eq(xf, zf) {
+        xx
+    } else {
+        energy(&zf[..n * channels])
+    };
     // Parseval: the transform's energy is n times the signal's.
     let (xx, zz) = (xx / n as f64, zz / n as f64);
     fft.inverse(out);
@@ -394,6 +476,31 @@ mod tests {
                     got.re
                 );
                 assert!(got.im.abs() < 1e-4);
+            }
+        }
+    }
+
+    /// Two real channels transformed at once give each channel's own transform.
+    #[test]
+    fn channels_transformed_in_pairs_match_one_at_a_time() {
+        for (w, h, ch) in [(10, 8, 3), (7, 5, 2), (6, 9, 1), (56, 74, 31)] {
+            let x = random_map(w, h, ch, 5);
+            let mut fft = Fft2::new(w, h);
+            let mut got = Vec::new();
+            transform(&mut fft, &x, &mut got);
+            let mut crew = Crew::new((0..2).map(|_| Fft2::new(w, h)).collect());
+            let mut banded = Vec::new();
+            transform_on(&mut crew, &x, &mut banded);
+            assert_eq!(banded, got);
+            for c in 0..ch {
+                let mut want = Vec::new();
+                fft.forward_real(x.channel(c), &mut want);
+                for (g, e) in got[c * w * h..(c + 1) * w * h].iter().zip(&want) {
+                    assert!(
+                        (g - e).norm() < 1e-4 * (1.0 + e.norm()),
+                        "{w}x{h} channel {c}: {g} vs {e}"
+                    );
+                }
             }
         }
     }

@@ -277,7 +277,7 @@ impl State {
     fn features(&mut self, img: &GrayF32, cx: f64, cy: f64, scale: f64) {
         let f = self
             .win
-            .extract(img, cx, cy, scale, &self.hann, &mut self.buf);
+            .extract(img, (cx, cy, scale), &self.hann, &mut self.buf, None);
         cf::transform(&mut self.fft, &f, &mut self.zf);
     }
 

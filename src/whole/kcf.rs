@@ -4,6 +4,7 @@
 
 use super::cf::{self, Features, Kernel, Window};
 use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
+use crate::crew::{Crew, threads_for};
 use crate::error::Result;
 use crate::geometry::Quad;
 use crate::imaging::fft::{C32, Fft2};
@@ -69,6 +70,13 @@ pub const PARAMS: &[ParamDef] = &[
         512.0,
         256.0,
     ),
+    ParamDef::int(
+        "threads",
+        "threads making the HOG cells and the channels' transforms (0 = all cores); the result does not depend on it",
+        0.0,
+        256.0,
+        0.0,
+    ),
 ];
 
 /// The registry entry.
@@ -103,6 +111,7 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
         interp: g("interp") as f32,
         cell: g("cell") as usize,
         template_size: g("template_size") as usize,
+        threads: g("threads") as usize,
         state: None,
     }))
 }
@@ -119,6 +128,7 @@ pub struct Kcf {
     interp: f32,
     cell: usize,
     template_size: usize,
+    threads: usize,
     state: Option<State>,
 }
 
@@ -127,6 +137,8 @@ pub struct Kcf {
 struct State {
     win: Window,
     fft: Fft2,
+    /// The threads that make the features and their transforms, each with its own plans.
+    crew: Crew<Fft2>,
     hann: Vec<f32>,
     /// The label's transform.
     yf: Vec<C32>,
@@ -144,10 +156,14 @@ struct State {
 impl State {
     /// The transforms of the features at `(cx, cy)` into `zf`.
     fn features(&mut self, img: &crate::imaging::GrayF32, cx: f64, cy: f64) {
-        let f = self
-            .win
-            .extract(img, cx, cy, 1.0, &self.hann, &mut self.buf);
-        cf::transform(&mut self.fft, &f, &mut self.zf);
+        let f = self.win.extract(
+            img,
+            (cx, cy, 1.0),
+            &self.hann,
+            &mut self.buf,
+            Some(&mut self.crew),
+        );
+        cf::transform_on(&mut self.crew, &f, &mut self.zf);
     }
 
     /// Trains on `zf` (the features just extracted): the dual coefficients
@@ -205,9 +221,17 @@ impl WholeTracker for Kcf {
         );
         let (w, h) = win.cells();
         let n = w * h;
+        let threads = threads_for(self.threads).clamp(1, h);
+        let crew = Crew::try_new((0..threads).map(|_| Fft2::new(w, h)).collect()).map_err(|e| {
+            crate::error::Error::Threads {
+                threads,
+                message: e.to_string(),
+            }
+        })?;
         let mut st = State {
             win,
             fft,
+            crew,
             hann,
             yf,
             xf: vec![C32::default(); n * win.features.channels()],

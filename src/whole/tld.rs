@@ -268,6 +268,43 @@ impl Ferns {
         }
     }
 
+    /// Where each fern's tests read in a `w x h` box of the scanning grid of an image `stride`
+    /// pixels wide, as offsets from the box's top-left pixel (fern after fern, two per test):
+    /// the pixels [`Ferns::codes`] reads for a box at whole-pixel coordinates. `None` when a
+    /// test would read outside the box (where `codes` clamps to the frame instead).
+    pub fn offsets(&self, w: i32, h: i32, stride: usize) -> Option<Vec<u32>> {
+        let (bw, bh) = (w as f64, h as f64);
+        // For a box at whole pixels `x, y >= 0`, `round(x + u w) = x + round(u w)`: the sum is
+        // exact in f64 (a 24-bit `u` times a small `w`).
+        let at = |u: f32, v: f32| -> Option<u32> {
+            let (ox, oy) = ((u as f64 * bw).round(), (v as f64 * bh).round());
+            let inside = ox >= 0.0 && oy >= 0.0 && ox < bw && oy < bh;
+            inside.then(|| (oy as usize * stride + ox as usize) as u32)
+        };
+        let mut out =
+            Vec::with_capacity(self.tests.len() * self.tests.first().map_or(0, Vec::len) * 2);
+        for t in self.tests.iter().flatten() {
+            out.push(at(t[0], t[1])?);
+            out.push(at(t[2], t[3])?);
+        }
+        Some(out)
+    }
+
+    /// [`Ferns::codes`] for the box whose top-left pixel is `img.data[origin]`, through its
+    /// size's [`Ferns::offsets`].
+    pub fn codes_at(&self, img: &GrayF32, origin: usize, offsets: &[u32], out: &mut Vec<usize>) {
+        out.clear();
+        let data = &img.data[origin..];
+        let tests = self.tests.first().map_or(0, Vec::len);
+        for fern in offsets.chunks_exact(2 * tests.max(1)) {
+            let mut code = 0usize;
+            for t in fern.chunks_exact(2) {
+                code = (code << 1) | usize::from(data[t[0] as usize] > data[t[1] as usize]);
+            }
+            out.push(code);
+        }
+    }
+
     /// A leaf's posterior `P(target | leaf) = pos / (pos + neg)` (0 for an unseen leaf).
     pub fn posterior(&self, fern: usize, code: usize) -> f64 {
         let (p, n) = (self.pos[fern][code] as f64, self.neg[fern][code] as f64);
@@ -379,6 +416,8 @@ struct GridBox {
     y: i32,
     w: i32,
     h: i32,
+    /// The index of its size in [`Model::offsets`].
+    scale: u8,
 }
 
 impl GridBox {
@@ -395,6 +434,8 @@ impl GridBox {
 #[derive(Debug)]
 struct Model {
     grid: Vec<GridBox>,
+    /// Per size of the grid's boxes, where the ferns read ([`Ferns::offsets`]).
+    offsets: Vec<Option<Vec<u32>>>,
     ferns: Ferns,
     nn: NearestNeighbour,
     min_variance: f64,
@@ -402,6 +443,19 @@ struct Model {
     /// The previous frame, its pyramid and the box in it (`None` after a loss).
     prev: Option<(GrayF32, Pyramid)>,
     bbox: Option<BBox>,
+}
+
+impl Model {
+    /// The ferns' codes of a grid box of `img` (the fern image, of the frame's size).
+    fn grid_codes(&self, img: &GrayF32, g: &GridBox, out: &mut Vec<usize>) {
+        match self.offsets.get(g.scale as usize).and_then(Option::as_ref) {
+            Some(offsets) => {
+                let origin = g.y as usize * img.width + g.x as usize;
+                self.ferns.codes_at(img, origin, offsets, out);
+            }
+            None => self.ferns.codes(img, &g.bbox(), out),
+        }
+    }
 }
 
 /// A TLD tracker.
@@ -431,15 +485,19 @@ fn fern_image(img: &GrayF32) -> GrayF32 {
 }
 
 impl Tld {
-    /// The scanning grid of a frame for a `w x h` target.
-    fn grid(&self, fw: usize, fh: usize, w: f64, h: f64) -> Vec<GridBox> {
+    /// The scanning grid of a frame for a `w x h` target, and the size of its boxes at each
+    /// scale kept (what [`GridBox::scale`] indexes).
+    fn grid(&self, fw: usize, fh: usize, w: f64, h: f64) -> (Vec<GridBox>, Vec<(i32, i32)>) {
         let mut out = Vec::new();
+        let mut sizes = Vec::new();
         for k in -self.scales..=self.scales {
             let s = 1.2f64.powi(k);
             let (bw, bh) = ((w * s).round(), (h * s).round());
             if bw.min(bh) < self.min_size || bw > fw as f64 || bh > fh as f64 {
                 continue;
             }
+            let scale = sizes.len() as u8;
+            sizes.push((bw as i32, bh as i32));
             let (sx, sy) = ((bw * self.shift).max(1.0), (bh * self.shift).max(1.0));
             let mut y = 0.0;
             while y + bh <= fh as f64 {
@@ -450,13 +508,14 @@ impl Tld {
                         y: y.round() as i32,
                         w: bw as i32,
                         h: bh as i32,
+                        scale,
                     });
                     x += sx;
                 }
                 y += sy;
             }
         }
-        out
+        (out, sizes)
     }
 
     /// P-N learning at the validated box `b`: fern positives from the grid boxes that overlap
@@ -488,7 +547,8 @@ impl Tld {
         near.sort_by(|a, c| c.0.total_cmp(&a.0));
         near.truncate(10);
         for &(_, i) in &near {
-            let gb = m.grid[i].bbox();
+            let g = m.grid[i];
+            let gb = g.bbox();
             for wi in 0..warps.max(1) {
                 // Small random similarity warps of the box (position, scale) as new views.
                 let wb = if wi == 0 {
@@ -502,7 +562,11 @@ impl Tld {
                         h: gb.h * s,
                     }
                 };
-                m.ferns.codes(blurred, &wb, &mut codes);
+                if wi == 0 {
+                    m.grid_codes(blurred, &g, &mut codes);
+                } else {
+                    m.ferns.codes(blurred, &wb, &mut codes);
+                }
                 if first || m.ferns.score(&codes) < 0.5 {
                     m.ferns.add(&codes, true);
                 }
@@ -523,7 +587,7 @@ impl Tld {
             if mims.variance(&g) < m.min_variance {
                 continue;
             }
-            m.ferns.codes(blurred, &gb, &mut codes);
+            m.grid_codes(blurred, &g, &mut codes);
             let s = m.ferns.score(&codes);
             if first || s > 0.5 {
                 m.ferns.add(&codes, false);
@@ -578,11 +642,10 @@ impl Tld {
             if mims.variance(g) < m.min_variance {
                 continue;
             }
-            let gb = g.bbox();
-            m.ferns.codes(blurred, &gb, &mut codes);
+            m.grid_codes(blurred, g, &mut codes);
             let s = m.ferns.score(&codes);
             if s > 0.5 {
-                passed.push((s, gb));
+                passed.push((s, g.bbox()));
             }
         }
         passed.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -647,18 +710,24 @@ impl WholeTracker for Tld {
         };
         let mut rng = Rng::new(self.seed);
         let ferns = Ferns::new(self.n_ferns, self.fern_tests, &mut rng);
-        let grid = self.grid(img.width, img.height, tw, th);
+        let (grid, sizes) = self.grid(img.width, img.height, tw, th);
+        let offsets = sizes
+            .iter()
+            .map(|&(w, h)| ferns.offsets(w, h, img.width))
+            .collect();
         let mims = Moments::new(&img);
         let var = mims.variance(&GridBox {
             x: b.x.max(0.0) as i32,
             y: b.y.max(0.0) as i32,
             w: b.w.min(img.width as f64 - b.x.max(0.0)).max(1.0) as i32,
             h: b.h.min(img.height as f64 - b.y.max(0.0)).max(1.0) as i32,
+            scale: 0,
         });
         let blurred = fern_image(&img);
         let pyr = Pyramid::new(&img, self.lk.levels);
         self.model = Some(Model {
             grid,
+            offsets,
             ferns,
             nn: NearestNeighbour::default(),
             min_variance: 0.5 * var,

@@ -199,6 +199,25 @@ impl<S: Send + 'static> Crew<S> {
         assert!(!panicked, "a crew member's job panicked");
     }
 
+    /// `out[i] = f(state, i)` for every `i`, the indices shared among the members in blocks of
+    /// `block` (each member with its own state): the same result on any number of members when
+    /// `f` depends only on `i` (the state is scratch).
+    pub fn fill<T: Send>(
+        &mut self,
+        out: &mut [T],
+        block: usize,
+        f: &(dyn Fn(&mut S, usize) -> T + Sync),
+    ) {
+        let shares = Shares::new(out, block, self.len());
+        self.run(&|state, member| {
+            while let Some((start, part)) = shares.take(member) {
+                for (k, o) in part.iter_mut().enumerate() {
+                    *o = f(state, start + k);
+                }
+            }
+        });
+    }
+
     /// Each member's state, in the order of their indices (between runs).
     pub fn states(&mut self) -> impl Iterator<Item = MutexGuard<'_, S>> {
         self.shared.states.iter().map(|s| lock(s))
@@ -324,6 +343,20 @@ impl<S: Send + 'static> Drop for Crew<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fill_gives_each_index_its_value_on_any_number_of_members() {
+        for n in 1..=3 {
+            let mut crew = Crew::new(vec![0usize; n]);
+            let mut out = vec![0u64; 1000];
+            crew.fill(&mut out, 7, &|calls, i| {
+                *calls += 1;
+                (i as u64) * (i as u64)
+            });
+            assert!(out.iter().enumerate().all(|(i, &v)| v == (i * i) as u64));
+            assert_eq!(crew.states().map(|s| *s).sum::<usize>(), 1000);
+        }
+    }
 
     #[test]
     fn every_member_runs_each_job_once_on_its_own_state() {

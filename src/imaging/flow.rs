@@ -57,6 +57,35 @@ pub fn track_points(
     guesses: Option<&[Point]>,
     p: &LkParams,
 ) -> Vec<Option<Point>> {
+    // Whole images (what a pyramid holds) are sampled without the general view's checks: the
+    // same bits.
+    let whole = prev
+        .levels
+        .iter()
+        .chain(&next.levels)
+        .all(|l| l.view().is_whole());
+    if whole {
+        track_points_with(prev, next, pts, guesses, p, true, |v, x, y| {
+            v.sample_whole(x, y)
+        })
+    } else {
+        track_points_with(prev, next, pts, guesses, p, true, |v, x, y| {
+            sample_value(v, x, y)
+        })
+    }
+}
+
+/// [`track_points`] with the sampler `at`; `share`: the template's gradients from its own
+/// samples where that gives the same bits (off: every sample made anew, for the test).
+fn track_points_with(
+    prev: &Pyramid,
+    next: &Pyramid,
+    pts: &[Point],
+    guesses: Option<&[Point]>,
+    p: &LkParams,
+    share: bool,
+    at: impl Fn(&ImageView, f32, f32) -> f32,
+) -> Vec<Option<Point>> {
     let levels = prev
         .levels
         .len()
@@ -67,6 +96,7 @@ pub fn track_points(
     let mut tmpl = vec![0f32; n];
     let mut gx = vec![0f32; n];
     let mut gy = vec![0f32; n];
+    let mut ext = Vec::with_capacity(((2 * r + 3) * (2 * r + 3)) as usize);
     pts.iter()
         .enumerate()
         .map(|(k, &pt)| {
@@ -86,19 +116,56 @@ pub fn track_points(
                 let (x, y) = (pt.x / s, pt.y / s);
                 // The template window and its gradients (central differences).
                 let (mut gxx, mut gxy, mut gyy) = (0f64, 0f64, 0f64);
-                let mut i = 0;
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let (u, v) = ((x + dx as f64) as f32, (y + dy as f64) as f32);
-                        tmpl[i] = sample_value(&va, u, v);
-                        gx[i] =
-                            0.5 * (sample_value(&va, u + 1.0, v) - sample_value(&va, u - 1.0, v));
-                        gy[i] =
-                            0.5 * (sample_value(&va, u, v + 1.0) - sample_value(&va, u, v - 1.0));
-                        gxx += (gx[i] * gx[i]) as f64;
-                        gxy += (gx[i] * gy[i]) as f64;
-                        gyy += (gy[i] * gy[i]) as f64;
-                        i += 1;
+                // The sample positions along each axis, one beyond the window on each side.
+                // Where `u + 1` and `u - 1` are the neighbouring positions (nearly always; not
+                // where f32 rounding differs across a power of two), the gradients' samples are
+                // the window's own, each sampled once.
+                let ax = |c: f64, k: i64| (c + k as f64) as f32;
+                let shared = |c: f64| {
+                    (-r..=r)
+                        .all(|k| ax(c, k) + 1.0 == ax(c, k + 1) && ax(c, k) - 1.0 == ax(c, k - 1))
+                };
+                if share && shared(x) && shared(y) {
+                    let side = (2 * r + 3) as usize;
+                    ext.clear();
+                    for dy in -r - 1..=r + 1 {
+                        for dx in -r - 1..=r + 1 {
+                            let corner = dx.abs() > r && dy.abs() > r;
+                            ext.push(if corner {
+                                0.0
+                            } else {
+                                at(&va, ax(x, dx), ax(y, dy))
+                            });
+                        }
+                    }
+                    let e = |dx: i64, dy: i64| {
+                        ext[(dy + r + 1) as usize * side + (dx + r + 1) as usize]
+                    };
+                    let mut i = 0;
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            tmpl[i] = e(dx, dy);
+                            gx[i] = 0.5 * (e(dx + 1, dy) - e(dx - 1, dy));
+                            gy[i] = 0.5 * (e(dx, dy + 1) - e(dx, dy - 1));
+                            gxx += (gx[i] * gx[i]) as f64;
+                            gxy += (gx[i] * gy[i]) as f64;
+                            gyy += (gy[i] * gy[i]) as f64;
+                            i += 1;
+                        }
+                    }
+                } else {
+                    let mut i = 0;
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            let (u, v) = (ax(x, dx), ax(y, dy));
+                            tmpl[i] = at(&va, u, v);
+                            gx[i] = 0.5 * (at(&va, u + 1.0, v) - at(&va, u - 1.0, v));
+                            gy[i] = 0.5 * (at(&va, u, v + 1.0) - at(&va, u, v - 1.0));
+                            gxx += (gx[i] * gx[i]) as f64;
+                            gxy += (gx[i] * gy[i]) as f64;
+                            gyy += (gy[i] * gy[i]) as f64;
+                            i += 1;
+                        }
                     }
                 }
                 let det = gxx * gyy - gxy * gxy;
@@ -113,8 +180,7 @@ pub fn track_points(
                     let mut i = 0;
                     for dy in -r..=r {
                         for dx in -r..=r {
-                            let j =
-                                sample_value(&vb, (cx + dx as f64) as f32, (cy + dy as f64) as f32);
+                            let j = at(&vb, (cx + dx as f64) as f32, (cy + dy as f64) as f32);
                             let e = (tmpl[i] - j) as f64;
                             bx += e * gx[i] as f64;
                             by += e * gy[i] as f64;
@@ -215,6 +281,43 @@ mod tests {
             }
         }
         img
+    }
+
+    /// The template's gradients from its own samples, and the whole-image sampler, give the
+    /// bits of sampling every point anew through the general view (points near powers of two,
+    /// where the positions' rounding differs, included).
+    #[test]
+    fn shared_samples_and_the_whole_image_sampler_change_no_bit() {
+        let a = blobs(300, 200, (0.0, 0.0));
+        let b = blobs(300, 200, (2.3, -1.7));
+        let p = LkParams::default();
+        let (pa, pb) = (Pyramid::new(&a, p.levels), Pyramid::new(&b, p.levels));
+        let mut rng = crate::rng::Rng::new(11);
+        let mut pts: Vec<Point> = (0..300)
+            .map(|_| Point {
+                x: rng.range(5.0, 295.0),
+                y: rng.range(5.0, 195.0),
+            })
+            .collect();
+        for c in [64.0, 128.0, 256.0] {
+            pts.push(Point {
+                x: c - 1e-6,
+                y: 127.999_999_9,
+            });
+            pts.push(Point {
+                x: c + 4.0 - 3e-7,
+                y: 63.999_999,
+            });
+        }
+        let plain = track_points_with(&pa, &pb, &pts, None, &p, false, |v, x, y| {
+            sample_value(v, x, y)
+        });
+        let fast = track_points(&pa, &pb, &pts, None, &p);
+        let bits = |q: &Option<Point>| q.map(|q| (q.x.to_bits(), q.y.to_bits()));
+        assert!(plain.iter().filter(|q| q.is_some()).count() > 250);
+        for (k, (u, v)) in plain.iter().zip(&fast).enumerate() {
+            assert_eq!(bits(u), bits(v), "point {k} {:?}", pts[k]);
+        }
     }
 
     #[test]

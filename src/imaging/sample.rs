@@ -117,6 +117,25 @@ impl<'a> ImageView<'a> {
         self.width == 0 || self.height == 0
     }
 
+    /// Whether [`ImageView::sample_whole`] may sample this view: a whole image (placed at the
+    /// origin, scale 1) with its edge replicated, at least 2 x 2.
+    pub fn is_whole(&self) -> bool {
+        self.x0 == 0
+            && self.y0 == 0
+            && self.scale == 1.0
+            && self.border == Border::Replicate
+            && self.width >= 2
+            && self.height >= 2
+    }
+
+    /// [`sample_value`] on a view that [`ImageView::is_whole`]: the same bits (frame and window
+    /// coordinates are the same), without the checks of each call.
+    #[inline(always)]
+    pub fn sample_whole(&self, x: f32, y: f32) -> f32 {
+        debug_assert!(self.is_whole());
+        self.bilinear_replicate(x, y)
+    }
+
     #[inline(always)]
     fn pixel(&self, ix: i64, iy: i64) -> f32 {
         let (w, h) = (self.width as i64, self.height as i64);

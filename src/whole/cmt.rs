@@ -5,6 +5,7 @@
 //! decides. Outputs a rotated and scaled quad.
 
 use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
+use crate::crew::{Crew, threads_for};
 use crate::error::Result;
 use crate::geometry::{Point, Quad};
 use crate::imaging::flow::{LkParams, Pyramid, track_forward_backward};
@@ -80,6 +81,13 @@ pub const PARAMS: &[ParamDef] = &[
     ParamDef::choice("scale", "estimate the scale", &["on", "off"]),
     ParamDef::choice("rotation", "estimate the rotation", &["on", "off"]),
     ParamDef::int("seed", "seed of the descriptor's tests", 0.0, 1e9, 0.0),
+    ParamDef::int(
+        "threads",
+        "threads describing and matching the keypoints (0 = all cores); the result does not depend on it",
+        0.0,
+        256.0,
+        0.0,
+    ),
 ];
 
 /// The scales at which the target's region is also described at initialisation.
@@ -116,6 +124,8 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
         est_rotation: g("rotation") == 0.0,
         brief: Brief::new(g("seed") as u64),
         lk: LkParams::default(),
+        threads: g("threads") as usize,
+        crew: None,
         model: None,
         vis_points: Vec::new(),
         vis_weights: Vec::new(),
@@ -213,16 +223,17 @@ pub fn consensus(
 
 #[derive(Debug)]
 struct Model {
-    /// The target's keypoints: descriptors and offsets from the initial centre.
-    fg: Vec<Descriptor>,
+    /// The descriptors of the target's keypoints (the first `nfg`) and of the background's
+    /// (matches to them are rejected), in one array that each keypoint is compared with.
+    descriptors: Vec<Descriptor>,
+    nfg: usize,
+    /// The target's keypoints' offsets from the initial centre.
     offsets: Vec<Point>,
     /// How many model points were found at the initial scale.
     native: usize,
     /// Each model point's place: points of the scaled views within 3 px of an earlier point
     /// share its place.
     place: Vec<usize>,
-    /// Background keypoints' descriptors (matches to them are rejected).
-    bg: Vec<Descriptor>,
     /// The keypoints followed now, with their model index.
     active: Vec<(Point, usize)>,
     prev: Option<Pyramid>,
@@ -244,6 +255,10 @@ pub struct Cmt {
     est_rotation: bool,
     brief: Brief,
     lk: LkParams,
+    threads: usize,
+    /// The threads that describe and match the keypoints (each with its distances' scratch),
+    /// started at the first initialisation.
+    crew: Option<Crew<Vec<u32>>>,
     model: Option<Model>,
     vis_points: Vec<Point>,
     vis_weights: Vec<f32>,
@@ -253,6 +268,7 @@ pub struct Cmt {
 /// descriptors: every corner `keep` accepts and the `max` strongest of the others. A strongly
 /// textured background would otherwise take every place from a weakly textured target.
 fn describe_frame(
+    crew: &mut Crew<Vec<u32>>,
     img: &GrayF32,
     brief: &Brief,
     threshold: f32,
@@ -278,7 +294,7 @@ fn describe_frame(
     };
     let smoothed = gaussian_blur(&crop, &gaussian_kernel(5, 2.0));
     let mut others = 0;
-    fast_in(img, threshold, BRIEF_BORDER, usize::MAX, r)
+    let kept: Vec<_> = fast_in(img, threshold, BRIEF_BORDER, usize::MAX, r)
         .into_iter()
         .filter(|k| {
             keep(k.point()) || {
@@ -286,13 +302,66 @@ fn describe_frame(
                 others <= max
             }
         })
-        .filter_map(|k| {
-            // In the smoothed crop's pixels.
-            let (x, y) = (k.x - sx0 as f64, k.y - sy0 as f64);
-            let a = orientation(&smoothed, x as usize, y as usize, 15);
-            brief.describe(&smoothed, x, y, a).map(|d| (k.point(), d))
-        })
-        .collect()
+        .collect();
+    // Each keypoint described on its own, shared among the crew.
+    let mut out = vec![None; kept.len()];
+    crew.fill(&mut out, 16, &|_, i| {
+        let k = &kept[i];
+        // In the smoothed crop's pixels.
+        let (x, y) = (k.x - sx0 as f64, k.y - sy0 as f64);
+        let a = orientation(&smoothed, x as usize, y as usize, 15);
+        brief.describe(&smoothed, x, y, a).map(|d| (k.point(), d))
+    });
+    out.into_iter().flatten().collect()
+}
+
+/// The best match of descriptor `d` among `descriptors` (the first `nfg` the target's, with
+/// their `place`s) and the best of another place: `(best, second, index of the best)`. `dist`
+/// is scratch.
+fn best_two(
+    d: &Descriptor,
+    descriptors: &[Descriptor],
+    nfg: usize,
+    places: &[usize],
+    dist: &mut Vec<u32>,
+) -> (u32, u32, usize) {
+    // Every distance first (a loop the compiler vectorises), then the best and the second best
+    // of another place in one pass: a model point described at another scale is the same place
+    // (no rival in the ratio test); each background keypoint is a place of its own.
+    dist.clear();
+    dist.extend(descriptors.iter().map(|e| hamming(d, e)));
+    let (mut best, mut idx, mut place) = (u32::MAX, usize::MAX, usize::MAX);
+    let mut second = u32::MAX;
+    // Nothing changes for a distance of at least `second` (`best <= second`): a block whose
+    // least distance is that large is passed over whole.
+    const BLOCK: usize = 32;
+    for (b, block) in dist.chunks(BLOCK).enumerate() {
+        if block.iter().copied().min().unwrap_or(u32::MAX) >= second {
+            continue;
+        }
+        for (k, &h) in block.iter().enumerate() {
+            let i = b * BLOCK + k;
+            let pl = if i < nfg {
+                places[i]
+            } else {
+                usize::MAX - 1 - i
+            };
+            if pl == place {
+                if h < best {
+                    best = h;
+                    idx = i;
+                }
+            } else if h < best {
+                second = best;
+                best = h;
+                idx = i;
+                place = pl;
+            } else if h < second {
+                second = h;
+            }
+        }
+    }
+    (best, second, idx)
 }
 
 impl WholeTracker for Cmt {
@@ -302,8 +371,19 @@ impl WholeTracker for Cmt {
 
     fn start(&mut self, input: FrameInput<'_>, quad: &Quad) -> Result<()> {
         let img = frame_f32(input);
+        let threads = threads_for(self.threads);
+        let crew = match &mut self.crew {
+            Some(crew) if crew.len() == threads => crew,
+            slot => slot.insert(Crew::try_new(vec![Vec::new(); threads]).map_err(|e| {
+                crate::error::Error::Threads {
+                    threads,
+                    message: e.to_string(),
+                }
+            })?),
+        };
         let inside = |p: Point| point_in_quad(quad, p);
         let kps = describe_frame(
+            crew,
             &img,
             &self.brief,
             self.fast_threshold,
@@ -350,9 +430,15 @@ impl WholeTracker for Cmt {
                 y: by + (p.y + 0.5 - 0.5 * oh as f64) * (bh / oh as f64),
             };
             let cap = self.model_keypoints;
-            for (p, d) in describe_frame(&view, &self.brief, self.fast_threshold, 0, None, |p| {
-                inside(to_frame(p))
-            })
+            for (p, d) in describe_frame(
+                crew,
+                &view,
+                &self.brief,
+                self.fast_threshold,
+                0,
+                None,
+                |p| inside(to_frame(p)),
+            )
             .into_iter()
             .take(cap)
             {
@@ -376,12 +462,15 @@ impl WholeTracker for Cmt {
             let same = (0..i).find(|&j| offsets[j].dist(offsets[i]) < 3.0);
             place.push(same.map_or(i, |j| place[j]));
         }
+        let nfg = fg.len();
+        let mut descriptors = fg;
+        descriptors.extend(bg);
         self.model = Some(Model {
             native: active.len(),
             place,
-            fg,
+            descriptors,
+            nfg,
             offsets,
-            bg,
             active,
             prev: Some(Pyramid::new(&img, self.lk.levels)),
         });
@@ -392,7 +481,7 @@ impl WholeTracker for Cmt {
         if self.base.status == TrackStatus::Uninitialized {
             return self.base.idle();
         }
-        let Some(m) = self.model.as_mut() else {
+        let (Some(m), Some(crew)) = (self.model.as_mut(), self.crew.as_mut()) else {
             return self.base.idle();
         };
         let started = self.base.begin(observer);
@@ -428,6 +517,7 @@ impl WholeTracker for Cmt {
         // of the whole frame once lost (for the global matching to find the target again).
         let region = (!lost).then_some((c.x - r, c.y - r, c.x + r, c.y + r));
         let kps = describe_frame(
+            crew,
             &img,
             &self.brief,
             self.fast_threshold,
@@ -435,38 +525,16 @@ impl WholeTracker for Cmt {
             region,
             |_| false,
         );
-        let nfg = m.fg.len();
+        let nfg = m.nfg;
         let mut taken = vec![false; nfg];
         for f in &fused {
             taken[f.1] = true;
         }
-        for (p, d) in &kps {
-            // The best and the second best of another place in one pass: a model point
-            // described at another scale is the same place (no rival in the ratio test); each
-            // background keypoint is a place of its own.
-            let (mut best, mut idx, mut place) = (u32::MAX, usize::MAX, usize::MAX);
-            let mut second = u32::MAX;
-            for (i, e) in m.fg.iter().chain(&m.bg).enumerate() {
-                let h = hamming(d, e);
-                let pl = if i < nfg {
-                    m.place[i]
-                } else {
-                    usize::MAX - 1 - i
-                };
-                if pl == place {
-                    if h < best {
-                        best = h;
-                        idx = i;
-                    }
-                } else if h < best {
-                    second = best;
-                    best = h;
-                    idx = i;
-                    place = pl;
-                } else if h < second {
-                    second = h;
-                }
-            }
+        let mut matches = vec![(u32::MAX, u32::MAX, usize::MAX); kps.len()];
+        crew.fill(&mut matches, 8, &|dist, i| {
+            best_two(&kps[i].1, &m.descriptors, nfg, &m.place, dist)
+        });
+        for ((p, _), &(best, second, idx)) in kps.iter().zip(&matches) {
             let good = idx < nfg
                 && best <= self.max_distance
                 && (best as f64) < self.ratio * second as f64;

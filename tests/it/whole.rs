@@ -219,6 +219,39 @@ fn seeded_trackers_repeat_themselves() {
     assert_ne!(run("rct", "3"), run("rct", "4"));
 }
 
+/// Every tracker with a `threads` parameter (the work of a frame shared among threads) tracks
+/// to the same bits on one thread as on three.
+#[test]
+fn threaded_trackers_give_the_same_bits_on_any_number_of_threads() {
+    let d = TempDir::new("whole-threads");
+    let p = d.path().join("translation.txt");
+    write_profile(&p, &synthetic(30, |_| 1.0));
+    let (frames, truth) = render(&p, Some((480, 360)));
+    let run = |name: &str, threads: &str| -> Vec<(u64, u64)> {
+        let mut spec = TrackerSpec::whole(name).unwrap();
+        spec.set_param("threads", threads).unwrap();
+        let mut t = Tracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&frames[0]), &truth[0])
+            .unwrap();
+        frames[1..]
+            .iter()
+            .flat_map(|f| {
+                let c = t.update(FrameInput::Gray8(f), &mut NoObserver).corners;
+                c.0.map(|p| (p.x.to_bits(), p.y.to_bits()))
+            })
+            .collect()
+    };
+    let threaded: Vec<_> = WHOLE_REGISTRY
+        .iter()
+        .filter(|e| e.build.params.iter().any(|d| d.name == "threads"))
+        .map(|e| e.name)
+        .collect();
+    assert!(threaded.contains(&"kcf") && threaded.contains(&"cmt"));
+    for name in threaded {
+        assert_eq!(run(name, "1"), run(name, "3"), "{name}");
+    }
+}
+
 /// KCF on raw gray levels follows a target whose texture dominates its window. (Raw levels are
 /// not normalised per cell as HOG is: a small, faint target over a contrasted background, as the
 /// brick texture over grass, leaves the window's static background to win.)

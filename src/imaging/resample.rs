@@ -19,18 +19,13 @@ pub fn resample_window(
     out_h: usize,
     out: &mut Vec<f32>,
 ) {
-    out.clear();
-    out.resize(out_w * out_h, 0.0);
-    if img.data.is_empty() || out_w == 0 || out_h == 0 {
-        return;
+    if let Some(taps) = Taps::for_window(img, (cx, cy), (src_w, src_h), (out_w, out_h), out) {
+        taps.fill(img, 0, out);
     }
-    let taps = Taps::new(img, (cx, cy), (src_w, src_h), (out_w, out_h));
-    taps.fill(img, 0, out);
 }
 
 /// [`resample_window`] with the rows of `out` shared among the members of `crew` (the same
 /// bits).
-#[allow(clippy::too_many_arguments)]
 pub fn resample_window_on<S: Send>(
     crew: &mut Crew<S>,
     img: &GrayF32,
@@ -40,12 +35,9 @@ pub fn resample_window_on<S: Send>(
     out_h: usize,
     out: &mut Vec<f32>,
 ) {
-    out.clear();
-    out.resize(out_w * out_h, 0.0);
-    if img.data.is_empty() || out_w == 0 || out_h == 0 {
+    let Some(taps) = Taps::for_window(img, (cx, cy), (src_w, src_h), (out_w, out_h), out) else {
         return;
-    }
-    let taps = Taps::new(img, (cx, cy), (src_w, src_h), (out_w, out_h));
+    };
     let parts = crew.len();
     let shares = Shares::new(out, out_h.div_ceil(parts) * out_w, parts);
     crew.run(&|_, member| {
@@ -66,6 +58,21 @@ struct Taps {
 }
 
 impl Taps {
+    /// `out` made `out_w x out_h` zeros, and the taps of that window (`None` when the image or
+    /// the window is empty: nothing to sample).
+    fn for_window(
+        img: &GrayF32,
+        centre: (f64, f64),
+        size: (f64, f64),
+        (out_w, out_h): (usize, usize),
+        out: &mut Vec<f32>,
+    ) -> Option<Self> {
+        out.clear();
+        out.resize(out_w * out_h, 0.0);
+        let empty = img.data.is_empty() || out_w == 0 || out_h == 0;
+        (!empty).then(|| Taps::new(img, centre, size, (out_w, out_h)))
+    }
+
     fn new(
         img: &GrayF32,
         (cx, cy): (f64, f64),

@@ -558,11 +558,6 @@ impl WholeTracker for Dft {
         self.base
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

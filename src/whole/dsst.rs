@@ -406,11 +406,6 @@ impl WholeTracker for Dsst {
             visual,
         )
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

@@ -346,11 +346,6 @@ impl WholeTracker for FragTrack {
         self.base
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

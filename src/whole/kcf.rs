@@ -286,9 +286,4 @@ impl WholeTracker for Kcf {
             visual,
         )
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }

@@ -375,11 +375,6 @@ impl WholeTracker for Mil {
         self.base
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

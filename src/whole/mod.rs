@@ -100,8 +100,11 @@ pub trait WholeTracker: Send + std::fmt::Debug {
     /// Tracks one frame ([`VisualTracker::update`]).
     fn track(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome;
     /// The base was moved to new corners ([`VisualTracker::set_corners`]): adjust the pose to
-    /// what the tracker can represent, and its model.
+    /// what the tracker can represent, and its model. By default the pose keeps only what the
+    /// tracker's registry entry models ([`Base::keep_only`]).
     fn corners_set(&mut self) -> Result<()> {
+        let motion = self.base().motion;
+        self.base_mut().keep_only(motion);
         Ok(())
     }
 }
@@ -142,11 +145,16 @@ pub struct Base {
     pub pose: Pose,
     pub status: TrackStatus,
     pub frame: usize,
+    /// What the tracker's registry entry models (every motion for a name no entry has).
+    pub motion: Motion,
 }
 
 impl Base {
     pub fn new(spec: &WholeSpec) -> Self {
+        let motion = crate::registry::lookup(REGISTRY, "whole tracker", &spec.tracker)
+            .map_or(Motion::Similarity, |e| e.build.motion);
         Base {
+            motion,
             spec: TrackerSpec::Whole(spec.clone()),
             init: Quad::default(),
             c0: Point::default(),
@@ -439,6 +447,37 @@ pub(crate) fn frame_f32(input: FrameInput<'_>) -> Cow<'_, GrayF32> {
 mod tests {
     use super::*;
     use crate::params::MethodParams;
+
+    /// A base knows its tracker's motion from the registry (by name or alias), and corners set
+    /// by hand keep only that motion.
+    #[test]
+    fn a_base_keeps_only_its_entrys_motion() {
+        let spec = |name: &str| WholeSpec {
+            tracker: name.into(),
+            method: MethodParams::default(),
+        };
+        for e in REGISTRY {
+            assert_eq!(
+                Base::new(&spec(e.name)).motion,
+                e.build.motion,
+                "{}",
+                e.name
+            );
+            for a in e.aliases {
+                assert_eq!(Base::new(&spec(a)).motion, e.build.motion, "{a}");
+            }
+        }
+        let mut b = Base::new(&spec("kcf"));
+        b.pose.scale = 1.3;
+        b.pose.angle = 0.2;
+        b.keep_only(b.motion);
+        assert_eq!((b.pose.scale, b.pose.angle), (1.0, 0.0));
+        let mut b = Base::new(&spec("tld"));
+        b.pose.scale = 1.3;
+        b.pose.angle = 0.2;
+        b.keep_only(b.motion);
+        assert_eq!((b.pose.scale, b.pose.angle), (1.3, 0.0));
+    }
 
     #[test]
     fn a_pose_maps_the_initial_quad_and_is_recovered_from_its_quad() {

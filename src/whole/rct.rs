@@ -421,11 +421,6 @@ impl WholeTracker for Rct {
         self.base
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

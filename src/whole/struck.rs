@@ -482,11 +482,6 @@ impl WholeTracker for Struck {
         self.base
             .finish(found, input.size(), started, preprocess, observer, visual)
     }
-
-    fn corners_set(&mut self) -> Result<()> {
-        self.base.keep_only(ENTRY.build.motion);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

@@ -106,6 +106,15 @@ impl<S: Send + 'static> Crew<S> {
         Self::try_new(states).expect("cannot start a thread")
     }
 
+    /// [`Crew::try_new`], a failure to start a thread as the library's error.
+    pub fn start(states: Vec<S>) -> crate::error::Result<Self> {
+        let threads = states.len();
+        Self::try_new(states).map_err(|e| crate::error::Error::Threads {
+            threads,
+            message: e.to_string(),
+        })
+    }
+
     /// [`Crew::new`], with the error of a thread that cannot be started (the threads already
     /// started are stopped).
     ///

@@ -66,7 +66,7 @@ pub enum Error {
     /// A report that cannot be made: a folder without runs, a figure that cannot be drawn.
     #[error("{}: {message}", path.display())]
     Report { path: PathBuf, message: String },
-    /// The worker threads of a batch could not be started.
+    /// The worker threads of a batch or of a tracker could not be started.
     #[error("cannot start {threads} worker threads: {message}")]
     Threads { threads: usize, message: String },
 }

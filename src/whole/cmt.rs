@@ -374,12 +374,7 @@ impl WholeTracker for Cmt {
         let threads = threads_for(self.threads);
         let crew = match &mut self.crew {
             Some(crew) if crew.len() == threads => crew,
-            slot => slot.insert(Crew::try_new(vec![Vec::new(); threads]).map_err(|e| {
-                crate::error::Error::Threads {
-                    threads,
-                    message: e.to_string(),
-                }
-            })?),
+            slot => slot.insert(Crew::start(vec![Vec::new(); threads])?),
         };
         let inside = |p: Point| point_in_quad(quad, p);
         let kps = describe_frame(

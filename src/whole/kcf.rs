@@ -222,12 +222,7 @@ impl WholeTracker for Kcf {
         let (w, h) = win.cells();
         let n = w * h;
         let threads = threads_for(self.threads).clamp(1, h);
-        let crew = Crew::try_new((0..threads).map(|_| Fft2::new(w, h)).collect()).map_err(|e| {
-            crate::error::Error::Threads {
-                threads,
-                message: e.to_string(),
-            }
-        })?;
+        let crew = Crew::start((0..threads).map(|_| Fft2::new(w, h)).collect())?;
         let mut st = State {
             win,
             fft,

@@ -9,6 +9,8 @@ kinds of footage below (the UCSB and TMT motion profiles at 1x to 3x speed, blur
 light that changes across the target, partial occlusion):
 
     python3 docs/heldout.py render OUT           # OUT/tune/*.txt, OUT/heldout/*.txt (~1 min)
+    python3 docs/heldout.py render-appearance OUT  # the same halves under strong changes of
+                                                 # light (APPEARANCE_KINDS; for `pca`)
     python3 docs/heldout.py eval OUT NAME [regtrack eval options...]
         # runs `regtrack eval` on both halves into OUT/runs/NAME/{tune,heldout}
     python3 docs/heldout.py table OUT NAME...    # SR@5 by kind and half, frame-weighted
@@ -180,8 +182,17 @@ KINDS = [
 ]
 BACKGROUNDS = ["skimage_grass.png", "skimage_coffee.png"]
 
+# The appearance set (`render-appearance`): the target's appearance changes much more than in
+# KINDS, by light that sweeps across it and dims it (what a learnt appearance model, `pca`,
+# is for); long, slow profiles.
+APPEARANCE_KINDS = [
+    ("light_sweep", "ls", "tmt_dl_bookIII_s5", ["--local-light", "0.9", "--gain-drift", "0.4", "--noise", "2"]),
+    ("light_sweep", "lsu", "ucsb_bricks_uc", ["--local-light", "0.8", "--bias-drift", "30", "--noise", "2"]),
+    ("dimming", "dm", "ucsb_bricks_ld", ["--local-light", "0.7", "--gain-drift", "0.6", "--noise", "2"]),
+]
 
-def render(out):
+
+def render(out, kinds_of_footage=KINDS):
     tex_dir = os.path.join(out, "textures")
     os.makedirs(tex_dir, exist_ok=True)
     for k, (name, make) in enumerate(PROCEDURAL.items()):
@@ -200,7 +211,7 @@ def render(out):
                 else find(TEXTURE_DIRS, texture)
             )
             base = texture.replace("skimage_", "").replace(".png", "")
-            for k, (kind, suffix, motion, opts) in enumerate(KINDS):
+            for k, (kind, suffix, motion, opts) in enumerate(kinds_of_footage):
                 name = f"{base}_{suffix}"
                 # A periodic texture on grass moving 5 px a frame is its own kind too.
                 kinds[f"{half}/{name}"] = (kind, cls)
@@ -282,6 +293,8 @@ def loss_counts(out, name, half, tracker):
 def table(out, names):
     kinds = kind_of(out)
     order = ["fast", "periodic_5px", "panning_light", "slow", "static_light", "all"]
+    if any(k in ("light_sweep", "dimming") for k in kinds.values()):
+        order = ["light_sweep", "dimming", "all"]
     acc = {}
     for name, half, tracker, seq, frames, within, _, _ in rows(out, names):
         for kind in (kinds.get(seq, "?"), "all"):
@@ -311,6 +324,8 @@ def main():
     cmd, out = sys.argv[1], sys.argv[2]
     if cmd == "render":
         render(out)
+    elif cmd == "render-appearance":
+        render(out, APPEARANCE_KINDS)
     elif cmd == "eval":
         evaluate(out, sys.argv[3], sys.argv[4:])
     elif cmd == "table":

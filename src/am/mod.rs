@@ -21,6 +21,7 @@ mod ncc;
 mod ngf;
 mod nssd;
 mod parzen;
+pub mod pca;
 mod riu;
 mod rscv;
 mod sad;
@@ -201,6 +202,16 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     /// Updates an internal model (e.g. the intensity map of SCV) from `current`, the patch of the
     /// frame being tracked where the search has settled.
     fn update_model(&mut self, _current: &[f32]) {}
+    /// Whether the model learns the target's appearance from the frames tracked
+    /// ([`Am::learn`]; the PCA subspace).
+    fn learns(&self) -> bool {
+        false
+    }
+    /// Learns `patch`, sampled where the tracker's search ended on a frame it accepted: once a
+    /// frame (unlike [`Am::update_model`], which follows the light within a frame's search).
+    /// A search method that keeps something made from the model is then told
+    /// ([`crate::registration::SearchMethod::model_updated`]).
+    fn learn(&mut self, _patch: &[f32]) {}
     /// Writes the embedding of `patch` into `out` (same length as the patch): the squared L2
     /// distance between embeddings ranks patches as the similarity does, so that nearest-neighbour
     /// search can index them. Models without [`Capabilities::distance`] leave it unused; the
@@ -316,6 +327,7 @@ pub const REGISTRY: &[Entry<AmBuilder>] = &[
     sad::ENTRY,
     nssd::ENTRY,
     kld::ENTRY,
+    pca::ENTRY,
 ];
 
 /// The AM called `name` (or one of its aliases), with its default parameters.

@@ -326,6 +326,11 @@ fn the_moments_capabilities_hold_for_the_models_that_claim_them() {
         if am.updates_model() {
             am.update_model(&lit);
         }
+        // A model that learns (PCA) with something learnt: its Hessian has more than `J^T J`.
+        if am.learns() {
+            am.learn(&lit);
+            am.learn(&c);
+        }
         for kind in [
             HessianKind::GaussNewton,
             HessianKind::Newton,
@@ -380,5 +385,5 @@ fn the_moments_capabilities_hold_for_the_models_that_claim_them() {
     }
     claimed.sort();
     claimed.dedup();
-    assert_eq!(claimed, ["lscv", "ncc", "scv", "ssd", "zncc"]);
+    assert_eq!(claimed, ["lscv", "ncc", "pca", "scv", "ssd", "zncc"]);
 }

@@ -18,7 +18,7 @@
 //! settles in a few iterations. A hard frame (a large or sudden motion, blur, a change of
 //! light) pays both.
 
-use super::{Estimate, FrameRun, Init, Stage, TwoStages, measured, run_stages};
+use super::{Estimate, FrameRun, Init, Learn, Stage, TwoStages, measured, run_stages};
 use crate::error::Result;
 use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
@@ -95,6 +95,10 @@ impl Stage for Escalate {
 
     fn initialize(&mut self, init: &Init<'_>) -> Result<()> {
         self.stages.initialize(init)
+    }
+
+    fn learn(&mut self, at: &mut Learn<'_>) {
+        self.stages.learn(at)
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {

@@ -4,7 +4,7 @@
 //! tracker shares the normaliser and the template's corners), at the finest level. The
 //! tracker's own SSM then starts from its fit to the last one's corners.
 
-use super::{BuildSearcher, FrameRun, Init, Searcher, Stage};
+use super::{BuildSearcher, FrameRun, Init, Learn, Searcher, Stage};
 use crate::error::{Error, Result};
 use crate::registration::{Limits, Reader, SearchMethod};
 use crate::status::LossReason;
@@ -60,6 +60,16 @@ impl Stage for Hierarchy {
         Ok(())
     }
 
+    /// Each SSM learns the patch of its fit to where the frame ended.
+    fn learn(&mut self, at: &mut Learn<'_>) {
+        let view = at.src.view(at.input, 0);
+        for searcher in self.lower.iter_mut() {
+            if let Some(p) = searcher.ctx.problem().fit_normalised(&at.normalised) {
+                searcher.learn(&view, &p);
+            }
+        }
+    }
+
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
         let limits = Limits::of(run.params);
         let view = run.src.view(run.input, 0);
@@ -99,11 +109,31 @@ impl Stage for Hierarchy {
 mod tests {
     use super::*;
     use crate::observe::IterationCounter;
-    use crate::plan::harness::{error, initialize, searchers, shifted, tracker, with_run};
+    use crate::plan::harness::{
+        assert_learnt, error, initialize, learn_at, searchers, shifted, tracker, with_run,
+    };
 
     /// Below a homography, translation, similitude and affine in turn; from 4 px off they
     /// bring the estimate (the homography's fit to the affine's corners) near the target. Below
     /// a translation there is nothing.
+    /// An AM that learns (PCA) learns at each SSM below the patch of its fit to where the
+    /// frame ended.
+    #[test]
+    fn each_ssm_learns_the_patch_of_its_fit() {
+        let (t, gray, quads) = tracker(("fclk", "pca", "homography"), |_| {}, (5, 2));
+        let mut h = Hierarchy::new(8, 50, &searchers("fclk", "pca"))
+            .unwrap()
+            .unwrap();
+        initialize(&mut h, &t, &gray[0], &quads[0]);
+        let (src, p) = learn_at(&mut h, &t, &gray[4], &quads[4]);
+        let normalised = t.finest.ctx.problem().normalised_corners(&p);
+        let view = src.view(crate::visual_tracker::FrameInput::Gray8(&gray[4]), 0);
+        for s in h.lower.iter_mut() {
+            let fit = s.ctx.problem().fit_normalised(&normalised).unwrap();
+            assert_learnt(s, &view, &fit);
+        }
+    }
+
     #[test]
     fn the_ssms_below_bring_the_estimate_near_the_target() {
         let (mut t, gray, quads) = tracker(

@@ -88,6 +88,12 @@ impl Searcher {
     pub fn into_parts(self) -> (Context, Box<dyn SearchMethod>) {
         (self.ctx, self.sm)
     }
+    /// The AM learns the patch of `img` at `p` ([`crate::am::Am::learn`]) and the method is
+    /// told (it may keep something made from the model: ICLK's Hessian, PF's scorers).
+    pub fn learn(&mut self, img: &crate::imaging::ImageView, p: &Params) {
+        self.ctx.learn_appearance(img, p);
+        self.sm.model_updated(&mut self.ctx);
+    }
 }
 
 /// Builds a [`Searcher`] for an SSM (by name) on an `res x res` grid, with the tracker's AM and
@@ -192,6 +198,17 @@ pub struct Init<'a> {
     pub(crate) params: &'a TrackerParams,
 }
 
+/// Where a frame the tracker accepted ended, for the stages' searchers to learn the target's
+/// appearance there ([`Stage::learn`], AMs that learn: [`crate::am::Am::learn`]).
+pub struct Learn<'a> {
+    pub(crate) src: &'a mut FrameSource,
+    pub(crate) input: FrameInput<'a>,
+    /// The finest level's parameters (the same at every pyramid level).
+    pub(crate) params: Params,
+    /// The corners in the normalised frame (which an SSM of the hierarchy fits).
+    pub(crate) normalised: Quad,
+}
+
 /// One stage of a plan.
 pub trait Stage: std::fmt::Debug + Send {
     /// What the stage is.
@@ -213,6 +230,9 @@ pub trait Stage: std::fmt::Debug + Send {
     fn levels(&self) -> usize {
         0
     }
+    /// The stage's own searchers (a pyramid level's, an SSM of the hierarchy's) learn the
+    /// appearance where a frame the tracker accepted ended (called only for AMs that learn).
+    fn learn(&mut self, _at: &mut Learn<'_>) {}
 }
 
 /// The two lists of stages a policy stage holds and runs (the pyramid's [`Retry`], the
@@ -252,6 +272,14 @@ impl TwoStages {
     /// The most coarse levels a stage of either reads.
     pub fn levels(&self) -> usize {
         self.all().map(|s| s.levels()).max().unwrap_or(0)
+    }
+
+    /// Every stage of both learns ([`Stage::learn`]).
+    pub fn learn(&mut self, at: &mut Learn<'_>) {
+        self.first
+            .iter_mut()
+            .chain(&mut self.then)
+            .for_each(|s| s.learn(at));
     }
 
     /// Sets up every stage of both.
@@ -369,6 +397,11 @@ impl Plan {
     pub fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
         run_stages(&mut self.stages, run)
     }
+
+    /// Every stage learns where a frame the tracker accepted ended ([`Stage::learn`]).
+    pub fn learn(&mut self, at: &mut Learn<'_>) {
+        self.stages.iter_mut().for_each(|s| s.learn(at));
+    }
 }
 
 #[cfg(test)]
@@ -392,6 +425,41 @@ mod tests {
     }
 
     use super::harness::spec;
+
+    /// A tracker whose AM learns (PCA, with the pyramid and the SSM hierarchy) learns on every
+    /// frame it tracks and on none it loses, and follows the demo's target.
+    #[test]
+    fn an_am_that_learns_learns_on_the_frames_tracked_only() {
+        let (gray, quads) = frames(10, 2);
+        let mut spec = spec("esm", "pca", "homography");
+        spec.params.ssm_hierarchy = true;
+        spec.params.on_loss = crate::spec::LossPolicy::Continue;
+        let mut t = RegistrationTracker::new(&spec).unwrap();
+        t.initialize(FrameInput::Gray8(&gray[0]), &quads[0])
+            .unwrap();
+        let mean = |t: &RegistrationTracker| t.context().am().template().to_vec();
+        let mut last = mean(&t);
+        assert_eq!(last, t.context().problem().template());
+        for k in 1..gray.len() {
+            let out = t.update(FrameInput::Gray8(&gray[k]), &mut NoObserver);
+            assert_eq!(out.status, TrackStatus::Tracking, "frame {k}");
+            let e = super::harness::error(&out.corners, &quads[k]);
+            assert!(e < 1.0, "frame {k}: {e} px");
+            let now = mean(&t);
+            assert_ne!(now, last, "frame {k}: nothing learnt");
+            last = now;
+        }
+        // The target gone (a flat frame): lost, and nothing learnt.
+        let (w, h) = (gray[0].width, gray[0].height);
+        let flat = GrayU8::from_vec(w, h, vec![128; w * h]).unwrap();
+        let out = t.update(FrameInput::Gray8(&flat), &mut NoObserver);
+        assert!(
+            matches!(out.status, TrackStatus::Lost(_)),
+            "{:?}",
+            out.status
+        );
+        assert_eq!(mean(&t), last);
+    }
 
     /// The levels at which an observer saw iterations.
     #[derive(Default)]
@@ -682,6 +750,47 @@ pub(crate) mod harness {
                 params: &t.params,
             })
             .unwrap();
+    }
+
+    /// Teaches `stage` (built for `t`) where `frame` shows the target at `quad`, as the tracker
+    /// does on a frame it accepts; returns the frame's source (with the stage's levels) and the
+    /// finest level's parameters there.
+    pub fn learn_at(
+        stage: &mut dyn Stage,
+        t: &RegistrationTracker,
+        frame: &GrayU8,
+        quad: &Quad,
+    ) -> (FrameSource, Params) {
+        let input = FrameInput::Gray8(frame);
+        let mut src = FrameSource::new(t.src.kernel().clone(), stage.levels());
+        src.prepare(input, t.region_around(quad));
+        let problem = t.finest.ctx.problem();
+        let params = problem.fit(quad).unwrap();
+        let normalised = problem.normalised_corners(&params);
+        stage.learn(&mut Learn {
+            src: &mut src,
+            input,
+            params,
+            normalised,
+        });
+        (src, params)
+    }
+
+    /// Checks that `s` (a `pca` model's, default parameters, one patch learnt) has learnt the
+    /// patch of `view` at `p`: its mean is the template and that patch weighed as the model
+    /// weighs them.
+    pub fn assert_learnt(s: &mut Searcher, view: &crate::imaging::ImageView, p: &Params) {
+        s.ctx.sample_at(view, p);
+        let patch = s.ctx.values().to_vec();
+        let (template, mean) = (s.ctx.problem().template(), s.ctx.am().template());
+        let w = 0.95;
+        let mut moved = 0.0f32;
+        for ((&t, &m), &x) in template.iter().zip(mean).zip(&patch) {
+            let want = (w * t + x) / (w + 1.0);
+            assert!((m - want).abs() < 1e-3, "mean {m}, want {want}");
+            moved = moved.max((m - t).abs());
+        }
+        assert!(moved > 0.1, "nothing learnt");
     }
 
     /// The confidence against the template of the patch at `p` on the run's finest level.

@@ -12,7 +12,7 @@
 //! levels' pixels (a star field) vanish there, and the coarse search then follows the light
 //! instead of the target.
 
-use super::{BuildSearcher, FrameRun, Init, Searcher, Stage};
+use super::{BuildSearcher, FrameRun, Init, Learn, Searcher, Stage};
 use crate::error::{Error, Result};
 use crate::imaging::COARSE_EPS;
 use crate::registration::{Limits, Reader, SearchMethod, at_least};
@@ -85,6 +85,14 @@ impl Stage for Pyramid {
         Ok(())
     }
 
+    /// Each level learns its own patch where the frame ended (the levels are made for it).
+    fn learn(&mut self, at: &mut Learn<'_>) {
+        at.src.build_levels(at.input);
+        for (l, searcher) in self.coarse.iter_mut().enumerate() {
+            searcher.learn(&at.src.view(at.input, l + 1), &at.params);
+        }
+    }
+
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {
         let params = run.params;
         let start = run.estimate.params;
@@ -131,7 +139,8 @@ mod tests {
     use super::*;
     use crate::observe::{Iteration, Observer};
     use crate::plan::harness::{
-        confidence_at, error, initialize, searchers, shifted, tracker, with_run,
+        assert_learnt, confidence_at, error, initialize, learn_at, searchers, shifted, tracker,
+        with_run,
     };
 
     /// The pyramid levels the observer saw iterations at.
@@ -172,6 +181,23 @@ mod tests {
             // Coarsest first, never the finest level.
             assert!(!levels.0.is_empty() && levels.0[0] == 2);
             assert!(levels.0.windows(2).all(|w| w[0] >= w[1]) && !levels.0.contains(&0));
+        }
+    }
+
+    /// An AM that learns (PCA) learns at each coarse level that level's patch where the frame
+    /// ended.
+    #[test]
+    fn each_level_learns_its_own_patch_where_the_frame_ended() {
+        let (t, gray, quads) = tracker(("esm", "pca", "homography"), |_| {}, (5, 2));
+        let mut pyramid = Pyramid::new("homography", &t.params, 3, &searchers("esm", "pca"))
+            .unwrap()
+            .unwrap();
+        initialize(&mut pyramid, &t, &gray[0], &quads[0]);
+        let (mut src, p) = learn_at(&mut pyramid, &t, &gray[4], &quads[4]);
+        let input = crate::visual_tracker::FrameInput::Gray8(&gray[4]);
+        src.build_levels(input);
+        for (l, s) in pyramid.coarse.iter_mut().enumerate() {
+            assert_learnt(s, &src.view(input, l + 1), &p);
         }
     }
 

@@ -5,7 +5,7 @@
 //! light may still have looked better than the start, and the finest level then settles on a
 //! look-alike nearby.)
 
-use super::{FrameRun, Init, Stage, TwoStages, measured, run_stages};
+use super::{FrameRun, Init, Learn, Stage, TwoStages, measured, run_stages};
 use crate::error::Result;
 use crate::registration::{SearchMethod, at_least};
 use crate::status::LossReason;
@@ -48,6 +48,10 @@ impl Stage for Retry {
 
     fn initialize(&mut self, init: &Init<'_>) -> Result<()> {
         self.stages.initialize(init)
+    }
+
+    fn learn(&mut self, at: &mut Learn<'_>) {
+        self.stages.learn(at)
     }
 
     fn run(&mut self, run: &mut FrameRun<'_>) -> std::result::Result<(), LossReason> {

@@ -173,6 +173,9 @@ impl RegistrationTracker {
         // The next frame's patch is compared with this one's (made in place: a frame's update
         // does not allocate once the buffers have grown).
         self.remember_patch(input, &out);
+        if self.finest.ctx.am().learns() {
+            self.learn(input, &out);
+        }
         FrameOutcome {
             frame: self.frame,
             status: TrackStatus::Tracking,
@@ -185,6 +188,20 @@ impl RegistrationTracker {
             confidence: out.confidence,
             timing,
         }
+    }
+
+    /// An AM that learns the target's appearance (PCA) learns the patch where the accepted
+    /// frame ended, at every level and SSM the plan searches (`remember_patch` sampled the
+    /// finest level's there).
+    fn learn(&mut self, input: FrameInput<'_>, out: &super::Estimate) {
+        self.finest.learn(&self.src.view(input, 0), &out.params);
+        let normalised = self.finest.ctx.problem().normalised_corners(&out.params);
+        self.plan.learn(&mut super::Learn {
+            src: &mut self.src,
+            input,
+            params: out.params,
+            normalised,
+        });
     }
 
     /// A frame lost for `reason`: the tracker stays where the frame started (`start`), and

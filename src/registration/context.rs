@@ -162,6 +162,15 @@ impl Context {
         self.problem.am_mut().update_model(self.work.values());
     }
 
+    /// The AM learns the target's appearance from the patch of `img` at `p` ([`Am::learn`]; the
+    /// patch sampled there is reused).
+    ///
+    /// [`Am::learn`]: crate::am::Am::learn
+    pub fn learn_appearance(&mut self, img: &ImageView, p: &Params) {
+        self.patch_at(img, p);
+        self.problem.am_mut().learn(self.work.values());
+    }
+
     /// Turns the sampled frame gradients into the gradient of the warped frame
     /// `I_t(pixel(w(x, p)))` with respect to the normalised template point `x` (chain rule
     /// through the warp's point Jacobian), in place.

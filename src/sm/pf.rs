@@ -235,12 +235,17 @@ impl Scorer {
         if f.is_finite() { f } else { f64::NEG_INFINITY }
     }
 
-    /// The AM's model learns `patch` (on the whole grid), as the tracker's did.
+    /// The AM's model learns `patch` (on the whole grid), as the tracker's did: the light of
+    /// a frame (`update_model`), or the appearance of a frame tracked (`learn`).
     fn update_model(&mut self, patch: &[f32]) {
         for (v, &i) in self.values.iter_mut().zip(&self.index) {
             *v = patch[i];
         }
-        self.am.update_model(&self.values);
+        if self.am.learns() {
+            self.am.learn(&self.values);
+        } else {
+            self.am.update_model(&self.values);
+        }
     }
 }
 
@@ -273,7 +278,7 @@ impl SearchMethod for Pf {
     fn model_updated(&mut self, ctx: &mut Context) {
         // The executor sampled the patch its model learnt into the workspace's values.
         if let Some(crew) = self.crew.as_mut()
-            && ctx.am().updates_model()
+            && (ctx.am().updates_model() || ctx.am().learns())
         {
             crew.states().for_each(|mut s| s.update_model(ctx.values()));
         }

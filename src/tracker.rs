@@ -10,6 +10,7 @@ use crate::am::ilm::Illumination;
 use crate::error::{Error, Result};
 use crate::params::{MethodParams, ParamDef};
 use crate::plan::{Plan, Searcher};
+use crate::registration::spi::Selection;
 use crate::registration::{Context, SmConfig};
 use crate::registry;
 use crate::{am, sm, ssm, whole};
@@ -195,7 +196,9 @@ impl RegistrationTracker {
             let model = appearance_model(spec)?;
             let sm = sm::build(&spec.sm, &cfg)?;
             check_capabilities(&*sm, &*model)?;
-            let ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
+            check_selection(&spec.params, &*model)?;
+            let mut ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
+            ctx.set_selection(Selection::of(&spec.params));
             Ok(Searcher::new(ctx, sm))
         };
         let main = build(&spec.ssm, spec.params.res)?;
@@ -241,6 +244,22 @@ fn appearance_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
         )));
     }
     Ok(Box::new(am::ilm::IlmSsd::new(p.ilm, p.ilm_cells)))
+}
+
+/// Refuses selective pixel integration (`spi`, a mask) with a model that reads the patch as the
+/// whole grid.
+fn check_selection(params: &TrackerParams, model: &dyn am::Am) -> Result<()> {
+    if params.selective() && model.needs_grid() {
+        let what = if params.ilm == Illumination::None {
+            format!("appearance model '{}'", model.name())
+        } else {
+            "an illumination model (ilm)".to_string()
+        };
+        return Err(Error::Incompatible(format!(
+            "selective pixel integration (spi, spi_mask_*) reads part of the grid, but {what} reads the patch as the whole grid (its neighbours or its blocks)"
+        )));
+    }
+    Ok(())
 }
 
 /// Refuses a search method whose needs the appearance model does not meet, naming the models

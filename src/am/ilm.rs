@@ -226,6 +226,10 @@ impl Am for IlmSsd {
     fn name(&self) -> &'static str {
         "ssd"
     }
+    /// The light's cells are blocks of the square grid.
+    fn needs_grid(&self) -> bool {
+        true
+    }
     fn capabilities(&self) -> Capabilities {
         // The light is fitted to each patch: no fixed embedding for nearest neighbours.
         Capabilities::DERIVATIVES_ONLY

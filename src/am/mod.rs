@@ -194,6 +194,12 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     fn pixelwise(&self) -> bool {
         false
     }
+    /// Whether the model reads the patch as the `res x res` grid it was sampled on (its
+    /// neighbours, its regions), so that it cannot score a selection of the grid's points
+    /// (selective pixel integration, `spi`, refuses it).
+    fn needs_grid(&self) -> bool {
+        false
+    }
     /// Whether [`Am::update_model`] does something (the executor then samples the patch where the
     /// search settles for it).
     fn updates_model(&self) -> bool {
@@ -207,6 +213,12 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     fn learns(&self) -> bool {
         false
     }
+    /// The directions in which the template's pixels change when the target moves: its pixel
+    /// Jacobian at the identity (`N x dof`, stored by parameter: `jac[k N + i]`), given after
+    /// each template to a model that learns ([`Am::learns`]). What it learns is kept
+    /// orthogonal to them: a patch tracked a little off the target must not teach it to ignore
+    /// a motion.
+    fn set_motion(&mut self, _jac: &[f32], _dof: usize) {}
     /// Learns `patch`, sampled where the tracker's search ended on a frame it accepted: once a
     /// frame (unlike [`Am::update_model`], which follows the light within a frame's search).
     /// A search method that keeps something made from the model is then told

@@ -213,6 +213,10 @@ impl Am for Ngf {
     fn name(&self) -> &'static str {
         ENTRY.name
     }
+    /// The fields are the patch's differences between neighbours on the grid.
+    fn needs_grid(&self) -> bool {
+        true
+    }
     fn capabilities(&self) -> Capabilities {
         Capabilities::DERIVATIVES_ONLY
     }

@@ -22,6 +22,14 @@
 //! `R = [[sqrt(phi) diag(s), c], [0, |q|]]`; the eigenvectors `V` and eigenvalues of `R R^T` give
 //! the new basis `[U q/|q|] V` and its `s^2`, of which the `components` largest are kept. So the
 //! patches are never stored: a frame costs `O(N k^2)`.
+//!
+//! What is learnt is kept orthogonal to the template's motion directions (its pixel Jacobian
+//! at the identity, [`Am::set_motion`]): `x - m` loses its part along them before it moves the
+//! mean and enters the scatter. Without that, a patch tracked a fraction of a pixel off (on
+//! frames that differ by nothing else) teaches the subspace the motion itself, and the
+//! similarity stops telling the target from its neighbourhood: the generic recovery test, 20
+//! perturbations of one frame each learnt, measured FCLK on the affine warp converging in 9 of
+//! 20 and FALK in 13. Orthogonal to the motion, the Hessian near the optimum is SSD's.
 
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::{MAX_DOF, dot, jt_times, minus_jtj};
@@ -82,6 +90,8 @@ pub struct Pca {
     /// Scratch of a learning step: the new direction, and the next basis.
     direction: Vec<f32>,
     next: Vec<f32>,
+    /// The template's motion directions ([`Am::set_motion`]), orthonormal, one after the other.
+    motion: Vec<f32>,
 }
 
 impl Pca {
@@ -102,6 +112,21 @@ impl Pca {
             residual: Vec::new(),
             direction: Vec::new(),
             next: Vec::new(),
+            motion: Vec::new(),
+        }
+    }
+
+    /// Removes from `v` its components along the motion directions.
+    fn without_motion(motion: &[f32], v: &mut [f32]) {
+        let n = v.len();
+        if n == 0 {
+            return;
+        }
+        for m in motion.chunks_exact(n) {
+            let d = dot(m, v) as f32;
+            for (x, &m) in v.iter_mut().zip(m) {
+                *x = (-d).mul_add(m, *x);
+            }
         }
     }
 
@@ -212,6 +237,7 @@ impl Pca {
         for j in 0..self.k {
             let (done, rest) = self.basis.split_at_mut(j * n);
             let u = &mut rest[..n];
+            Self::without_motion(&self.motion, u);
             for i in 0..j {
                 let prev = &done[i * n..(i + 1) * n];
                 let d = dot(prev, u) as f32;
@@ -275,6 +301,26 @@ impl Am for Pca {
         self.k = 0;
         self.sigma = [0.0; MAX_COMPONENTS];
         self.weight = 1.0;
+        self.motion.clear();
+    }
+    fn set_motion(&mut self, jac: &[f32], dof: usize) {
+        let n = self.mean.len();
+        self.motion.clear();
+        if n == 0 || jac.len() < n * dof {
+            return;
+        }
+        // Orthonormal (Gram-Schmidt), a direction the others span left out.
+        for k in 0..dof {
+            let mut v = jac[k * n..(k + 1) * n].to_vec();
+            let before = dot(&v, &v).sqrt();
+            Self::without_motion(&self.motion, &mut v);
+            Self::without_motion(&self.motion, &mut v);
+            let len = dot(&v, &v).sqrt();
+            if len > 1e-3 * before && len > 0.0 {
+                let inv = (1.0 / len) as f32;
+                self.motion.extend(v.iter().map(|x| x * inv));
+            }
+        }
     }
     fn template(&self) -> &[f32] {
         &self.mean
@@ -347,15 +393,19 @@ impl Am for Pca {
         }
         let phi = self.forgetting;
         let w = phi * self.weight;
-        let s = (w / (w + 1.0)).sqrt() as f32;
+        // The patch's difference from the mean, less its part along the motion: what the
+        // model learns (the mean moves by it too).
         for ((d, &x), &m) in self.direction.iter_mut().zip(patch).zip(&self.mean) {
-            *d = s * (x - m);
+            *d = x - m;
         }
+        Self::without_motion(&self.motion, &mut self.direction);
+        let b = (1.0 / (w + 1.0)) as f32;
+        for (m, &d) in self.mean.iter_mut().zip(&self.direction) {
+            *m = b.mul_add(d, *m);
+        }
+        let s = (w / (w + 1.0)).sqrt() as f32;
+        self.direction.iter_mut().for_each(|d| *d *= s);
         self.merge(phi);
-        let (a, b) = ((w / (w + 1.0)) as f32, (1.0 / (w + 1.0)) as f32);
-        for (m, &x) in self.mean.iter_mut().zip(patch) {
-            *m = a.mul_add(*m, b * x);
-        }
         self.weight = w + 1.0;
     }
 }

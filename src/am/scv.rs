@@ -105,6 +105,10 @@ impl Am for Scv {
     fn name(&self) -> &'static str {
         self.name
     }
+    /// LSCV's regions are blocks of the square grid (SCV has one).
+    fn needs_grid(&self) -> bool {
+        self.side > 1
+    }
     // With respect to the current pixels: the residual against the mapped template and `-Id`
     // (see the module's documentation), so the forward methods take the moments' system.
     fn hessian_is_minus_jtj(&self) -> bool {

@@ -15,7 +15,7 @@ pub enum Command {
     AddTracker,
     RemoveTracker(usize),
     /// Replace a tracker's settings (methods, parameters, colour, enabled).
-    SetTracker(usize, TrackerEntry),
+    SetTracker(usize, Box<TrackerEntry>),
     Play,
     Pause,
     /// Track one more frame.
@@ -172,7 +172,7 @@ impl InspectorApp {
             }
             Command::AddTracker => self.add_tracker(),
             Command::RemoveTracker(i) => self.remove_tracker(i),
-            Command::SetTracker(i, entry) => self.set_tracker(i, entry),
+            Command::SetTracker(i, entry) => self.set_tracker(i, *entry),
             Command::Play => self.play(),
             Command::Pause => self.pause(),
             Command::Step => self.rt.worker.send(Job::Advance {

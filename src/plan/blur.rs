@@ -130,27 +130,23 @@ impl RegistrationTracker {
         };
         self.src.hold(input, &out.corners, self.params.roi_margin);
         let view = self.src.view(input, 0);
-        ctx.patch_at(&view, &out.params);
+        ctx.whole_patch_at(&view, &out.params);
+        let (values, whole) = (ctx.whole_values(), ctx.problem().whole_template());
         let len = g.0.hypot(g.1);
         let along = (g.0 / len, g.1 / len);
-        let template = sharpness(ctx.problem().template(), res, along);
+        let template = sharpness(whole, res, along);
         // Not blurred (or nothing to tell by): the confidence stands.
-        if at_least(sharpness(ctx.values(), res, along), BLURRED * template) || template == 0.0 {
+        if at_least(sharpness(values, res, along), BLURRED * template) || template == 0.0 {
             return;
         }
         let judges = &mut self.judges;
         let mut best = confidence;
         for f in EXPOSURES {
-            box_blur(
-                ctx.problem().template(),
-                res,
-                (f * g.0, f * g.1),
-                &mut judges.blurred,
-            );
+            box_blur(whole, res, (f * g.0, f * g.1), &mut judges.blurred);
             judges
                 .blur
                 .set_template(&judges.blurred, res, super::tracker::CONFIDENCE_BLOCKS);
-            best = best.max(judges.blur.of(ctx.values()));
+            best = best.max(judges.blur.of(values));
         }
         out.confidence = Some(best);
     }

@@ -114,10 +114,10 @@ impl RegistrationTracker {
         self.src.hold(input, &out.corners, self.params.roi_margin);
         let view = self.src.view(input, 0);
         let ctx = &mut self.finest.ctx;
-        ctx.patch_at(&view, &out.params);
+        ctx.whole_patch_at(&view, &out.params);
         let res = self.params.res;
         let judges = &mut self.judges;
-        let values = ctx.values();
+        let values = ctx.whole_values();
         match &judges.sums {
             // The patch both confidences were just made of: its sums are there.
             (Some(made), sums) if *made == ctx.work().samples() => judges

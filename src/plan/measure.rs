@@ -35,24 +35,23 @@ impl Stage for Measure {
         let previous = has_previous.then_some(&*previous);
         let e = &mut run.estimate;
         if e.confidence.is_none() {
-            ctx.sample_at(&view, &p);
+            ctx.whole_sample_at(&view, &p);
             match previous {
                 Some(previous) => {
                     // Both confidences from one pass over the patch, its sums kept.
-                    let (c, f) = template.of_pair(previous, ctx.values(), &mut sums.1);
+                    let (c, f) = template.of_pair(previous, ctx.whole_values(), &mut sums.1);
                     sums.0 = Some(ctx.work().samples());
                     e.confidence = Some(c);
                     e.frame_confidence = Some(f);
                 }
-                None => e.confidence = Some(template.of(ctx.values())),
+                None => e.confidence = Some(template.of(ctx.whole_values())),
             }
         }
         if e.frame_confidence.is_none()
             && let Some(previous) = previous
         {
             // Usually just sampled there, for the confidence.
-            ctx.patch_at(&view, &p);
-            e.frame_confidence = Some(previous.of(ctx.values()));
+            e.frame_confidence = Some(previous.of(ctx.whole_patch_at(&view, &p)));
         }
         Ok(())
     }

@@ -796,8 +796,9 @@ pub(crate) mod harness {
     /// The confidence against the template of the patch at `p` on the run's finest level.
     pub fn confidence_at(run: &mut FrameRun<'_>, p: &Params) -> f64 {
         let view = run.src.view(run.input, 0);
-        run.finest.ctx.sample_at(&view, p);
-        run.judges.template.of(run.finest.ctx.values())
+        run.judges
+            .template
+            .of(run.finest.ctx.whole_sample_at(&view, p))
     }
 
     /// `q` moved by `(dx, dy)` px.

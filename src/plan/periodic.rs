@@ -159,8 +159,10 @@ impl RegistrationTracker {
             };
             self.src.hold(input, &q, self.params.roi_margin);
             let view = self.src.view(input, 0);
-            self.finest.ctx.sample_at(&view, &p);
-            let c = self.judges.template.of(self.finest.ctx.values());
+            let c = self
+                .judges
+                .template
+                .of(self.finest.ctx.whole_sample_at(&view, &p));
             if c > found + MARGIN && best.as_ref().is_none_or(|(b, _)| c > *b) {
                 best = Some((c, Estimate::start(p, q)));
             }

@@ -71,7 +71,7 @@ fn polish(run: &mut FrameRun<'_>) -> Polished {
         let iteration_started = Instant::now();
         let p = ctx.params();
         ctx.sample_gradients_at(&reader.view(), &p);
-        let c = confidence.of(ctx.values());
+        let c = confidence.of(ctx.whole_held_at(&reader.view(), &p));
         if let Some((bp, bc, bf)) = best
             && c.partial_cmp(&bc) != Some(Ordering::Greater)
         {
@@ -117,8 +117,7 @@ fn polish(run: &mut FrameRun<'_>) -> Polished {
     }
     // Settled or out of iterations: the last step's end is kept if it is the most confident.
     let q = ctx.params();
-    ctx.sample_at(&reader.view(), &q);
-    let c = confidence.of(ctx.values());
+    let c = confidence.of(ctx.whole_sample_at(&reader.view(), &q));
     match best {
         Some((bp, bc, bf)) if !at_least(c, bc) => {
             ctx.set_params(bp);

@@ -119,11 +119,9 @@ impl Stage for Pyramid {
             let (ctx, confidence) = (&mut run.finest.ctx, &run.judges.template);
             // The start first: the patch at the coarse estimate, where the search goes on, is
             // then the one in the workspace (a method that samples with `patch_at` does not
-            // sample it again).
-            ctx.sample_at(&view, &start);
-            let at_start = confidence.of(ctx.values());
-            ctx.sample_at(&view, &p);
-            let at_coarse = confidence.of(ctx.values());
+            // sample it again; unless the searches read part of the grid, `spi`).
+            let at_start = confidence.of(ctx.whole_sample_at(&view, &start));
+            let at_coarse = confidence.of(ctx.whole_sample_at(&view, &p));
             // Also when either is NaN: the start is the safe side.
             if !at_least(at_coarse, at_start) {
                 p = start;

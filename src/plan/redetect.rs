@@ -206,7 +206,7 @@ impl Detector {
     /// template sampled from `view` (that level of the first frame) where the problem's
     /// parameters `p` put the grid.
     pub fn new(problem: &Problem, res: usize, level: usize, view: &ImageView, p: &Params) -> Self {
-        let (grid_x, grid_y) = problem.grid();
+        let (grid_x, grid_y) = problem.whole_grid();
         let stride = (1usize << level.min(8)).max(2);
         let side = res.div_ceil(stride);
         let picks: Vec<usize> = (0..side)

@@ -31,9 +31,8 @@ impl RegistrationTracker {
         let params = ctx.problem().fit(&corners)?;
         self.src.hold(input, &corners, self.params.roi_margin);
         let view = self.src.view(input, 0);
-        ctx.patch_at(&view, &params);
-        let values = ctx.values();
         let mut e = Estimate::start(params, ctx.corners(&params));
+        let values = ctx.whole_patch_at(&view, &params);
         e.iterations = iterations + out.iterations;
         e.converged = out.converged;
         e.similarity = out.similarity;

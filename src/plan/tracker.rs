@@ -319,12 +319,17 @@ impl VisualTracker for RegistrationTracker {
         self.corners = ctx.corners(&ctx.params());
         self.initial_area = quad.signed_area().abs();
         self.initial = self.corners;
-        let template = ctx.problem().template();
+        // What judges a frame reads the whole grid (also when the searches read part of it).
+        let template = ctx.problem().whole_template();
+        let mask = self.params.spi_mask();
         self.judges.template = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
+        self.judges.template.set_mask(mask);
+        self.judges.previous.set_mask(mask);
         self.periods = super::periodic::periods(template, res);
         // Made here so that a frame's update does not allocate.
         self.judges.blurred = vec![0.0; res * res];
         self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
+        self.judges.blur.set_mask(mask);
         // The coarsest level made of this region (built above when the plan has levels).
         let level = self.src.levels();
         let view = self.src.view(input, level);
@@ -478,8 +483,8 @@ impl VisualTracker for RegistrationTracker {
         let ctx = &self.finest.ctx;
         Some(Inspection {
             res: self.params.res,
-            template: ctx.problem().template(),
-            patch: ctx.values(),
+            template: ctx.problem().whole_template(),
+            patch: ctx.whole_values(),
         })
     }
 }

@@ -36,6 +36,9 @@ pub struct BlockCorrelation {
     /// ty, tt).
     geometry: Option<(usize, usize)>,
     geometry_sums: Vec<[f64; 6]>,
+    /// A rectangle of the target left out (left, top, right, bottom in its unit square): the
+    /// blocks it covers a tenth or more of are left out of every template set from then on.
+    mask: Option<[f64; 4]>,
 }
 
 /// One block of [`BlockCorrelation`]: `(M, u_t, v_t, n)` with `M` the plane fit's normal matrix
@@ -50,6 +53,30 @@ impl BlockCorrelation {
         let mut bc = Self::default();
         bc.set_template(template, res, cells);
         bc
+    }
+
+    /// Leaves out, from now on, the blocks that `mask` (left, top, right, bottom in the
+    /// target's unit square; `None`: none) covers a tenth or more of: a known occluder
+    /// (`spi_mask_*`) does not make a frame look lost. Applied to the template already set too.
+    pub fn set_mask(&mut self, mask: Option<[f64; 4]>) {
+        self.mask = mask;
+        self.leave_out_masked();
+    }
+
+    /// The blocks the mask covers a tenth or more of, left out.
+    fn leave_out_masked(&mut self) {
+        let (Some([l, t, r, b]), Some((_, cells))) = (self.mask, self.geometry) else {
+            return;
+        };
+        let side = 1.0 / cells as f64;
+        let overlap = |lo: f64, hi: f64, a: f64, z: f64| (hi.min(z) - lo.max(a)).max(0.0);
+        for (k, block) in self.blocks.iter_mut().enumerate() {
+            let (x, y) = ((k % cells) as f64 * side, (k / cells) as f64 * side);
+            let covered = overlap(x, x + side, l, r) * overlap(y, y + side, t, b);
+            if covered >= 0.1 * side * side {
+                *block = None;
+            }
+        }
     }
 
     /// [`BlockCorrelation::new`] in place: once its buffers have grown to `res x res`, it does
@@ -134,6 +161,7 @@ impl BlockCorrelation {
             (vt.is_finite() && vt > 1e-6 * n).then_some((inv, ut, vt, n))
         }));
         self.template.extend_from_slice(template);
+        self.leave_out_masked();
     }
 
     /// Per block, the sums of `p`, `p x`, `p y`, `p p` and `q p` for each `q` of `qs` (one or
@@ -446,6 +474,38 @@ mod tests {
     }
 
     /// The block moments are their definition: per block, sums over its samples.
+    /// A mask leaves out the blocks it covers a tenth or more of: a patch that differs from
+    /// the template only there is then the template; the mask stays for the templates set
+    /// after it (the previous frame's patch each frame).
+    #[test]
+    fn a_mask_leaves_its_blocks_out() {
+        let mut rng = Rng::new(12);
+        let res = 40;
+        let t = smooth_patch(&mut rng, res);
+        // The left 30 % replaced by noise.
+        let mut c = t.clone();
+        for (i, v) in c.iter_mut().enumerate() {
+            if ((i % res) as f64 + 0.5) / (res as f64) < 0.3 {
+                *v = rng.range(0.0, 255.0) as f32;
+            }
+        }
+        let mut bc = BlockCorrelation::new(&t, res, 4);
+        let whole = bc.of(&c);
+        assert!(whole < 0.8, "{whole}");
+        bc.set_mask(Some([0.0, 0.0, 0.3, 1.0]));
+        assert!(bc.of(&c) > 0.999, "{}", bc.of(&c));
+        bc.set_template(&t, res, 4);
+        assert!(bc.of(&c) > 0.999);
+        // Blocks covered less than a tenth are kept (this one covers a twentieth of the third
+        // column of blocks, whose noise is then seen).
+        let mut thin = BlockCorrelation::new(&t, res, 4);
+        thin.set_mask(Some([0.0, 0.0, 0.2625, 1.0]));
+        assert!(thin.of(&c) < 0.999);
+        bc.set_mask(None);
+        bc.set_template(&t, res, 4);
+        assert_eq!(bc.of(&c), whole);
+    }
+
     #[test]
     fn block_moments_are_sums_over_each_blocks_samples() {
         let mut rng = crate::rng::Rng::new(3);

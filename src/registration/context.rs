@@ -3,6 +3,7 @@
 //! [`Context::similarity_at`] is the equation's objective evaluated at a warp. The Newton steps
 //! a method takes on it are the method's own ([`crate::sm`]).
 
+use super::workspace::Again;
 use super::{Problem, State, Update, Workspace};
 use crate::am::{Am, HessianKind};
 use crate::geometry::Quad;
@@ -102,6 +103,7 @@ impl Context {
     /// resets the parameters to the identity.
     pub fn set_region(&mut self, q: &Quad, res: usize, layout: GridLayout) -> crate::Result<()> {
         let identity = self.problem.set_region(q, res, layout)?;
+        self.work.resize(res * res, res * res, self.problem.dof());
         self.state = State::default();
         self.state.set_params(identity);
         Ok(())
@@ -120,6 +122,39 @@ impl Context {
         let (gx, gy) = self.work.gradients();
         let values = self.work.values();
         self.problem.set_template(values, (gx, gy));
+        // Selective pixel integration: the searches read the points chosen on this template.
+        if let Some(kept) = self.problem.selected_points() {
+            let whole = self.problem.len();
+            self.problem.select(&kept);
+            self.work.resize(kept.len(), whole, self.problem.dof());
+        }
+    }
+
+    /// Which points the searches read from the next template on ([`super::spi`]).
+    pub fn set_selection(&mut self, selection: super::spi::Selection) {
+        self.problem.set_selection(selection);
+    }
+
+    /// The patch of `img` under `p` on the whole grid (the confidences', the inspector's:
+    /// also when the searches read part of it, [`super::spi`]), sampled anew.
+    pub fn whole_sample_at(&mut self, img: &ImageView, p: &Params) -> &[f32] {
+        self.work.whole_patch(&self.problem, img, p, Again::Always)
+    }
+
+    /// [`Context::whole_sample_at`], sampled only if not held already.
+    pub fn whole_patch_at(&mut self, img: &ImageView, p: &Params) -> &[f32] {
+        self.work.whole_patch(&self.problem, img, p, Again::Unless)
+    }
+
+    /// [`Context::whole_sample_at`] where the search's patch was just sampled at `p` (without
+    /// a selection, that patch).
+    pub fn whole_held_at(&mut self, img: &ImageView, p: &Params) -> &[f32] {
+        self.work.whole_patch(&self.problem, img, p, Again::Held)
+    }
+
+    /// The last patch of the whole grid (without a selection, the sampled values).
+    pub fn whole_values(&self) -> &[f32] {
+        self.work.whole_values(&self.problem)
     }
 
     /// The patch of `img` under `p`: the grid warped by `p` and the frame's values sampled

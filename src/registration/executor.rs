@@ -185,8 +185,8 @@ impl<'a> Executor<'a> {
         let duration = iteration_started.elapsed();
         let patch = if self.observer.wants_patches() {
             let p = ctx.params();
-            ctx.sample_at(view, &p);
-            Some(ctx.values())
+            ctx.whole_sample_at(view, &p);
+            Some(ctx.whole_values())
         } else {
             None
         };

@@ -20,6 +20,7 @@ mod method;
 pub mod moments;
 mod problem;
 mod source;
+pub mod spi;
 mod state;
 mod workspace;
 

@@ -7,6 +7,7 @@
 
 use super::Workspace;
 use super::moments::GridMoments;
+use super::spi::Selection;
 use crate::am::{Am, HessianKind};
 use crate::geometry::{Normaliser, Point, Quad, apply_homography};
 use crate::linalg::MAX_DOF;
@@ -51,6 +52,19 @@ pub struct Problem {
     /// is `-J^T J` or made from `J^T J` on the SSMs of six or more parameters
     /// ([`super::moments`]).
     moments: Option<GridMoments>,
+    /// Which points the searches read ([`super::spi`]).
+    selection: Selection,
+    /// The whole grid and template when the searches read only part of it (the arrays above
+    /// then hold that part).
+    whole: Option<WholeGrid>,
+}
+
+/// The whole grid (normalised coordinates) and its template, kept beside a selection.
+#[derive(Debug, Clone)]
+struct WholeGrid {
+    grid_x: Vec<f32>,
+    grid_y: Vec<f32>,
+    template: Vec<f32>,
 }
 
 impl Problem {
@@ -84,6 +98,73 @@ impl Problem {
             dwdp0: z(2 * n * dof),
             dwdp0_zero: [false; 2 * MAX_DOF],
             moments: None,
+            selection: Selection::default(),
+            whole: None,
+        }
+    }
+
+    /// Which points the searches read from the next template on ([`super::spi`]).
+    pub fn set_selection(&mut self, selection: Selection) {
+        self.selection = selection;
+    }
+
+    /// Keeps only the points `kept` (ascending indices of the whole grid) for the searches:
+    /// the grid, the template, its gradients and `dw/dp` at the identity; the AM gets the
+    /// selected template. The whole grid and template are kept for [`Problem::whole_grid`].
+    /// The grid moments are left out (they sum over the whole grid's rows).
+    pub(super) fn select(&mut self, kept: &[usize]) {
+        let n = self.grid_x.len();
+        self.whole = Some(WholeGrid {
+            grid_x: self.grid_x.clone(),
+            grid_y: self.grid_y.clone(),
+            template: self.template.clone(),
+        });
+        for v in [
+            &mut self.grid_x,
+            &mut self.grid_y,
+            &mut self.grid_u,
+            &mut self.grid_v,
+            &mut self.template,
+            &mut self.template_gx,
+            &mut self.template_gy,
+        ] {
+            for (k, &i) in kept.iter().enumerate() {
+                v[k] = v[i];
+            }
+            v.truncate(kept.len());
+        }
+        let rows = 2 * self.dof;
+        let m = kept.len();
+        for r in 0..rows {
+            for (k, &i) in kept.iter().enumerate() {
+                self.dwdp0[r * m + k] = self.dwdp0[r * n + i];
+            }
+        }
+        self.dwdp0.truncate(rows * m);
+        self.set_zero_rows();
+        self.moments = None;
+        self.template_gu.clear();
+        self.template_gv.clear();
+        self.am.set_template(&self.template);
+        self.give_motion();
+    }
+
+    /// The selection the problem would make of its whole template, if any ([`super::spi`]).
+    pub(super) fn selected_points(&self) -> Option<Vec<usize>> {
+        if self.selection.is_whole() || self.whole.is_some() {
+            return None;
+        }
+        self.selection.points(
+            (&self.grid_u, &self.grid_v),
+            (&self.template_gx, &self.template_gy),
+        )
+    }
+
+    /// Which rows of `dw/dp` at the identity are zero on the whole grid.
+    fn set_zero_rows(&mut self) {
+        let n = self.grid_x.len();
+        for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
+            *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
         }
     }
 
@@ -96,6 +177,21 @@ impl Problem {
         layout: GridLayout,
     ) -> crate::Result<Params> {
         q.validate()?;
+        // The whole grid again (a selection is made on each template).
+        let n = res * res;
+        self.whole = None;
+        for v in [
+            &mut self.grid_x,
+            &mut self.grid_y,
+            &mut self.grid_u,
+            &mut self.grid_v,
+            &mut self.template,
+            &mut self.template_gx,
+            &mut self.template_gy,
+        ] {
+            v.resize(n, 0.0);
+        }
+        self.dwdp0.resize(2 * n * self.dof, 0.0);
         self.norm = Normaliser::of_quad(q);
         let nq = q.map(|p| self.norm.to_norm(p));
         let h = crate::geometry::homography_between(&Quad::unit_square(), &nq)
@@ -123,10 +219,7 @@ impl Problem {
         let identity = self.ssm.identity();
         self.ssm
             .jacobian(&identity, &self.grid_x, &self.grid_y, &mut self.dwdp0);
-        let n = self.grid_x.len();
-        for (r, z) in self.dwdp0_zero.iter_mut().enumerate() {
-            *z = r < 2 * self.dof && self.dwdp0[r * n..(r + 1) * n].iter().all(|&v| v == 0.0);
-        }
+        self.set_zero_rows();
         self.moments = if self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj() {
             GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
         } else {
@@ -146,6 +239,27 @@ impl Problem {
         self.template_gx.copy_from_slice(gx);
         self.template_gy.copy_from_slice(gy);
         self.am.set_template(&self.template);
+        self.give_motion();
+    }
+
+    /// Gives a model that learns the template's pixel Jacobian at the identity
+    /// ([`Am::set_motion`]).
+    fn give_motion(&mut self) {
+        if !self.am.learns() {
+            return;
+        }
+        let n = self.template.len();
+        let mut jac = vec![0.0f32; n * self.dof];
+        for k in 0..self.dof {
+            let (dx, dy) = (
+                &self.dwdp0[2 * k * n..(2 * k + 1) * n],
+                &self.dwdp0[(2 * k + 1) * n..(2 * k + 2) * n],
+            );
+            for (i, j) in jac[k * n..(k + 1) * n].iter_mut().enumerate() {
+                *j = self.template_gx[i] * dx[i] + self.template_gy[i] * dy[i];
+            }
+        }
+        self.am.set_motion(&jac, self.dof);
     }
 
     /// Keeps the gradient the workspace sampled as the template's in the unit square's
@@ -217,9 +331,24 @@ impl Problem {
     pub fn template_corners(&self) -> &Quad {
         &self.template_corners
     }
-    /// The template's intensities.
+    /// The template's intensities (at the points the searches read).
     pub fn template(&self) -> &[f32] {
         &self.template
+    }
+    /// The whole template, `res x res` (also when the searches read part of it).
+    pub fn whole_template(&self) -> &[f32] {
+        self.whole.as_ref().map_or(&self.template, |w| &w.template)
+    }
+    /// The whole sampling grid, `res x res` in normalised coordinates (also when the searches
+    /// read part of it: [`Problem::grid`] is then that part).
+    pub fn whole_grid(&self) -> (&[f32], &[f32]) {
+        self.whole
+            .as_ref()
+            .map_or((&self.grid_x, &self.grid_y), |w| (&w.grid_x, &w.grid_y))
+    }
+    /// Whether the searches read only part of the grid ([`super::spi`]).
+    pub fn is_selective(&self) -> bool {
+        self.whole.is_some()
     }
     /// The template's gradient in normalised coordinates.
     pub fn template_gradient(&self) -> (&[f32], &[f32]) {

@@ -18,6 +18,17 @@ use nalgebra::Matrix3;
 /// parameters, and the pixel Jacobian to be written.
 pub type Projection<'a> = ((&'a [f32], &'a [f32]), &'a [f32], &'a mut [f32]);
 
+/// When [`Workspace::whole_patch`] samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Again {
+    /// Always.
+    Always,
+    /// Unless the patch of the same view at the same parameters is held.
+    Unless,
+    /// Without a selection never: the search's values were just sampled there.
+    Held,
+}
+
 /// See the module's documentation.
 #[derive(Debug, Default)]
 pub struct Workspace {
@@ -42,6 +53,12 @@ pub struct Workspace {
     /// while this has not changed).
     samples: u64,
     solver: NewtonSolver,
+    /// The patch of the whole grid, when the problem's searches read only part of it
+    /// ([`super::spi`]): its warped grid, its values and which view and parameters they are of.
+    whole_px: Vec<f32>,
+    whole_py: Vec<f32>,
+    whole_values: Vec<f32>,
+    whole_sampled: Option<(u64, Params)>,
 }
 
 impl Workspace {
@@ -60,7 +77,80 @@ impl Workspace {
             sampled: None,
             samples: 0,
             solver: NewtonSolver::default(),
+            whole_px: Vec::new(),
+            whole_py: Vec::new(),
+            whole_values: Vec::new(),
+            whole_sampled: None,
         }
+    }
+
+    /// The last patch of the whole grid ([`Workspace::whole_patch`]; the values without a
+    /// selection).
+    pub fn whole_values(&self, problem: &Problem) -> &[f32] {
+        if problem.is_selective() {
+            &self.whole_values
+        } else {
+            &self.values
+        }
+    }
+
+    /// The buffers of an `n`-point search grid (of a `whole`-point grid: the whole patch's
+    /// buffers are kept only when the two differ) and a `dof`-parameter SSM.
+    pub fn resize(&mut self, n: usize, whole: usize, dof: usize) {
+        for v in [
+            &mut self.px,
+            &mut self.py,
+            &mut self.values,
+            &mut self.gx,
+            &mut self.gy,
+            &mut self.grad,
+        ] {
+            v.resize(n, 0.0);
+        }
+        self.dwdp.resize(2 * n * dof, 0.0);
+        self.jac.resize(n * dof, 0.0);
+        let kept = if whole != n { whole } else { 0 };
+        for v in [
+            &mut self.whole_px,
+            &mut self.whole_py,
+            &mut self.whole_values,
+        ] {
+            v.resize(kept, 0.0);
+        }
+        self.sampled = None;
+        self.whole_sampled = None;
+    }
+
+    /// The patch of `img` under `p` on the problem's whole grid ([`Problem::whole_grid`]),
+    /// sampled as `again` says. Without a selection it is the search's own patch
+    /// ([`Workspace::sample_at`], [`Workspace::patch_at`], or the values as they are). Counted
+    /// as a sampling ([`Workspace::samples`]) whenever it samples.
+    pub fn whole_patch(
+        &mut self,
+        problem: &Problem,
+        img: &ImageView,
+        p: &Params,
+        again: Again,
+    ) -> &[f32] {
+        if !problem.is_selective() {
+            match again {
+                Again::Always => self.sample_at(problem, img, p),
+                Again::Unless => self.patch_at(problem, img, p),
+                Again::Held => {}
+            }
+            return &self.values;
+        }
+        let again = again == Again::Always;
+        let stamp = img.stamp();
+        if again || stamp == 0 || self.whole_sampled != Some((stamp, *p)) {
+            let m = problem.pixel_matrix(p);
+            let (gx, gy) = problem.whole_grid();
+            warp_points(&m, gx, gy, &mut self.whole_px, &mut self.whole_py);
+            sample_values(img, &self.whole_px, &self.whole_py, &mut self.whole_values);
+            self.samples = self.samples.wrapping_add(1);
+            self.whole_sampled = (stamp != 0).then_some((stamp, *p));
+        }
+        &self.whole_values
     }
 
     /// The grid warped into frame pixels by the last [`Workspace::warp_grid`].

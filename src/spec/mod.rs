@@ -9,7 +9,7 @@ mod tracker_params;
 
 pub use tracker_params::{
     AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, GridLayout, LossPolicy, OFF_ON, ParamValue,
-    SecondHypothesis, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the

@@ -241,6 +241,58 @@ tracker_params! {
     /// judged (`plan/second.rs`). While tracking only: a lost tracker's frames do not pay it.
     second: SecondHypothesis = choice(SecondHypothesis::NAMES),
         "none, or the search method and AM of a second hypothesis tried on the frames whose search fails the checks (esm_ssd, fclk_ssd, ...), the more confident end kept";
+    /// Selective pixel integration (MTF's SPI): the searches read only part of the grid, the
+    /// points chosen once, on the template (`registration::spi`): every level and SSM of the
+    /// plan its own. The confidences and what the inspector shows read the whole grid.
+    spi: Spi = choice(Spi::NAMES),
+        "selective pixel integration: off (every grid point), or gradient: the searches read only the spi_keep fraction of the grid where the template's gradient is largest";
+    spi_keep: f64 = float(0.05, 1.0, 0.5),
+        "with spi=gradient: the fraction of the grid's points kept";
+    /// With `spi_mask_right > spi_mask_left` and `spi_mask_bottom > spi_mask_top`, the grid's
+    /// points in that rectangle of the target (fractions of its width and height, from its
+    /// first corner) are left out, whatever `spi`.
+    spi_mask_left: f64 = float(0.0, 1.0, 0.0),
+        "left edge of the part of the target the searches leave out (a known occluder), as a fraction of its width (none while spi_mask_right <= spi_mask_left)";
+    spi_mask_top: f64 = float(0.0, 1.0, 0.0),
+        "top edge of the part left out, as a fraction of the target's height";
+    spi_mask_right: f64 = float(0.0, 1.0, 0.0),
+        "right edge of the part left out, as a fraction of the target's width";
+    spi_mask_bottom: f64 = float(0.0, 1.0, 0.0),
+        "bottom edge of the part left out, as a fraction of the target's height";
+}
+
+/// Selective pixel integration (`spi`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Spi {
+    /// Every grid point.
+    #[default]
+    Off,
+    /// The points where the template's gradient is largest (`spi_keep` of them).
+    Gradient,
+}
+choice_param!(Spi {
+    Off = "off",
+    Gradient = "gradient",
+});
+
+impl TrackerParams {
+    /// The rectangle of the target the searches leave out (`spi_mask_*`: left, top, right,
+    /// bottom in the unit square of the target), if any.
+    pub fn spi_mask(&self) -> Option<[f64; 4]> {
+        let m = [
+            self.spi_mask_left,
+            self.spi_mask_top,
+            self.spi_mask_right,
+            self.spi_mask_bottom,
+        ];
+        (m[2] > m[0] && m[3] > m[1]).then_some(m)
+    }
+
+    /// Whether the searches read only part of the grid (`spi` or a mask).
+    pub fn selective(&self) -> bool {
+        self.spi != Spi::Off || self.spi_mask().is_some()
+    }
 }
 
 choice_param!(Illumination {

@@ -101,6 +101,18 @@ fn update_does_not_allocate() {
         .collect();
     assert_eq!(met.len(), ssms.len(), "{met:?}");
     assert!(combos.len() * 10 >= pair * 8, "{} of {pair}", combos.len());
+    // Selective pixel integration (the searches read part of the grid, the confidences the
+    // whole grid), on the affine warp: with a pyramid below.
+    for sm in regtrack::sm::REGISTRY {
+        for am in ["ssd", "pca"] {
+            if let Ok(mut spec) = TrackerSpec::from_names(sm.name, am, "affine") {
+                spec.set_param("spi", "gradient").unwrap();
+                spec.set_param("spi_mask_right", "0.2").unwrap();
+                spec.set_param("spi_mask_bottom", "1").unwrap();
+                combos.push(spec);
+            }
+        }
+    }
     let check = |mut spec: TrackerSpec| {
         // A pyramid too (its levels are kept between frames as well).
         let affine = spec.registration().is_some_and(|r| r.ssm == "affine");

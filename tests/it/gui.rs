@@ -634,7 +634,7 @@ fn only_the_changed_tracker_reruns_and_play_replays() {
     // the view stays on frame 7.
     let mut entry = h.state().state.trackers[1].clone();
     entry.spec.registration_mut().unwrap().am = "ncc".into();
-    h.state_mut().send(Command::SetTracker(1, entry));
+    h.state_mut().send(Command::SetTracker(1, Box::new(entry)));
     step_until(&mut h, "tracker 2 re-run", |a| {
         a.result(1, 9).is_some() && a.state.trackers[1].spec.registration().unwrap().am == "ncc"
     });

@@ -303,3 +303,52 @@ fn before_learning_it_is_ssd() {
     p.set("forgetting", 0.6);
     assert!(crate::am::build_with("ivt", &p).is_ok());
 }
+
+#[test]
+fn what_it_learns_stays_orthogonal_to_the_motion() {
+    let mut rng = Rng::new(6);
+    let n = 120;
+    let mut am = Pca::new(6, 0.9);
+    let t = patch(&mut rng, n);
+    am.set_template(&t);
+    let dof = 3;
+    let jac: Vec<f32> = (0..n * dof).map(|_| rng.normal() as f32).collect();
+    am.set_motion(&jac, dof);
+    // Patches that differ from the template along the motion and otherwise.
+    for k in 0..8 {
+        let p: Vec<f32> = (0..n)
+            .map(|i| t[i] + 3.0 * jac[(k % dof) * n + i] + rng.range(-5.0, 5.0) as f32)
+            .collect();
+        am.learn(&p);
+    }
+    let (basis, sigma) = am.basis();
+    assert!(!sigma.is_empty());
+    let moved: Vec<f32> = am.template().iter().zip(&t).map(|(m, t)| m - t).collect();
+    for k in 0..dof {
+        let j = &jac[k * n..(k + 1) * n];
+        let jn = dot(j, j).sqrt();
+        for (u, _) in basis.chunks_exact(n).zip(sigma) {
+            assert!(
+                (dot(u, j) / jn).abs() < 1e-3,
+                "a basis patch along motion {k}"
+            );
+        }
+        let mn = dot(&moved, &moved).sqrt();
+        assert!(
+            (dot(&moved, j) / (jn * mn)).abs() < 1e-3,
+            "the mean moved along motion {k}"
+        );
+    }
+    // A motion is then not absorbed: a patch moved along it is as far as SSD says.
+    let along: Vec<f32> = am
+        .template()
+        .iter()
+        .zip(&jac[..n])
+        .map(|(m, j)| m + 2.0 * j)
+        .collect();
+    let ssd = -0.5 * (0..n).map(|i| (2.0 * jac[i] as f64).powi(2)).sum::<f64>();
+    assert!((am.similarity(&along) - ssd).abs() < 1e-3 * ssd.abs());
+    // A new template forgets the motion until it is given again.
+    am.set_template(&t);
+    assert!(am.motion.is_empty());
+}

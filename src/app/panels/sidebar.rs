@@ -130,7 +130,7 @@ fn tracker_group(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>, 
         ui.label(egui::RichText::new(stats).small().color(color(entry.color)));
     });
     if next != entry {
-        out.push(Command::SetTracker(i, next));
+        out.push(Command::SetTracker(i, Box::new(next)));
     }
 }
 

@@ -777,20 +777,44 @@ pub(crate) mod harness {
     }
 
     /// Checks that `s` (a `pca` model's, default parameters, one patch learnt) has learnt the
-    /// patch of `view` at `p`: its mean is the template and that patch weighed as the model
-    /// weighs them.
+    /// patch of `view` at `p`: its mean moved from the template by that patch's difference,
+    /// weighed as the model weighs it, less its part along the template's motion (its pixel
+    /// Jacobian, to which the move is orthogonal, and the part left out to the move).
     pub fn assert_learnt(s: &mut Searcher, view: &crate::imaging::ImageView, p: &Params) {
         s.ctx.sample_at(view, p);
         let patch = s.ctx.values().to_vec();
-        let (template, mean) = (s.ctx.problem().template(), s.ctx.am().template());
-        let w = 0.95;
-        let mut moved = 0.0f32;
-        for ((&t, &m), &x) in template.iter().zip(mean).zip(&patch) {
-            let want = (w * t + x) / (w + 1.0);
-            assert!((m - want).abs() < 1e-3, "mean {m}, want {want}");
-            moved = moved.max((m - t).abs());
+        let problem = s.ctx.problem();
+        let (template, mean) = (problem.template(), s.ctx.am().template());
+        let w = 0.95f64;
+        let n = template.len();
+        let e: Vec<f64> = mean
+            .iter()
+            .zip(template)
+            .map(|(&m, &t)| (w + 1.0) * (m - t) as f64)
+            .collect();
+        let d: Vec<f64> = patch
+            .iter()
+            .zip(template)
+            .map(|(&x, &t)| (x - t) as f64)
+            .collect();
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let norm = |a: &[f64]| dot(a, a).sqrt();
+        assert!(norm(&e) > 0.1 * (n as f64).sqrt(), "nothing learnt");
+        let (gx, gy) = problem.template_gradient();
+        let (dwdp, _) = problem.dwdp0();
+        for k in 0..problem.dof() {
+            let j: Vec<f64> = (0..n)
+                .map(|i| (gx[i] * dwdp[2 * k * n + i] + gy[i] * dwdp[(2 * k + 1) * n + i]) as f64)
+                .collect();
+            let cos = dot(&e, &j) / (norm(&e) * norm(&j));
+            assert!(cos.abs() < 1e-3, "the mean moved along motion {k}: {cos}");
         }
-        assert!(moved > 0.1, "nothing learnt");
+        let rest: Vec<f64> = d.iter().zip(&e).map(|(d, e)| d - e).collect();
+        let cos = dot(&e, &rest) / (norm(&e) * norm(&rest).max(1e-9));
+        assert!(
+            cos.abs() < 1e-3,
+            "the move is not the difference's projection: {cos}"
+        );
     }
 
     /// The confidence against the template of the patch at `p` on the run's finest level.

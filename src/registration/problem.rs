@@ -119,15 +119,7 @@ impl Problem {
             grid_y: self.grid_y.clone(),
             template: self.template.clone(),
         });
-        for v in [
-            &mut self.grid_x,
-            &mut self.grid_y,
-            &mut self.grid_u,
-            &mut self.grid_v,
-            &mut self.template,
-            &mut self.template_gx,
-            &mut self.template_gy,
-        ] {
+        for v in self.per_point() {
             for (k, &i) in kept.iter().enumerate() {
                 v[k] = v[i];
             }
@@ -147,6 +139,19 @@ impl Problem {
         self.template_gv.clear();
         self.am.set_template(&self.template);
         self.give_motion();
+    }
+
+    /// The arrays with a value per grid point (what a selection keeps part of).
+    fn per_point(&mut self) -> [&mut Vec<f32>; 7] {
+        [
+            &mut self.grid_x,
+            &mut self.grid_y,
+            &mut self.grid_u,
+            &mut self.grid_v,
+            &mut self.template,
+            &mut self.template_gx,
+            &mut self.template_gy,
+        ]
     }
 
     /// The selection the problem would make of its whole template, if any ([`super::spi`]).
@@ -180,15 +185,7 @@ impl Problem {
         // The whole grid again (a selection is made on each template).
         let n = res * res;
         self.whole = None;
-        for v in [
-            &mut self.grid_x,
-            &mut self.grid_y,
-            &mut self.grid_u,
-            &mut self.grid_v,
-            &mut self.template,
-            &mut self.template_gx,
-            &mut self.template_gy,
-        ] {
+        for v in self.per_point() {
             v.resize(n, 0.0);
         }
         self.dwdp0.resize(2 * n * self.dof, 0.0);

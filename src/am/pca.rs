@@ -255,22 +255,6 @@ impl Pca {
         }
     }
 
-    /// `J^T u_j` for each basis patch, added as `sum_j a_j a_j^T` to `out` (`dof x dof`).
-    fn add_basis_terms(
-        &self,
-        rows: &[[f64; MAX_DOF]],
-        dof: usize,
-        out: &mut [f64; MAX_DOF * MAX_DOF],
-    ) {
-        for a in rows {
-            for i in 0..dof {
-                for l in 0..dof {
-                    out[i * dof + l] += a[i] * a[l];
-                }
-            }
-        }
-    }
-
     #[cfg(test)]
     pub(crate) fn set_mean(&mut self, mean: &[f32]) {
         self.mean.copy_from_slice(mean);
@@ -354,7 +338,7 @@ impl Am for Pca {
         for (j, row) in rows.iter_mut().enumerate().take(self.k) {
             jt_times(jac, self.u(j), dof, row);
         }
-        self.add_basis_terms(&rows[..self.k], dof, out);
+        add_outer_products(&rows[..self.k], dof, out);
     }
     fn hessian_from_jtj(&self) -> bool {
         true
@@ -380,7 +364,7 @@ impl Am for Pca {
         }
         let mut rows = [[0.0; MAX_DOF]; MAX_COMPONENTS];
         project(&us[..self.k], &mut rows[..self.k]);
-        self.add_basis_terms(&rows[..self.k], dof, out);
+        add_outer_products(&rows[..self.k], dof, out);
         true
     }
     fn learns(&self) -> bool {
@@ -407,6 +391,17 @@ impl Am for Pca {
         self.direction.iter_mut().for_each(|d| *d *= s);
         self.merge(phi);
         self.weight = w + 1.0;
+    }
+}
+
+/// `sum_j a_j a_j^T` (each `a_j = J^T u_j` of a basis patch) added to `out` (`dof x dof`).
+fn add_outer_products(rows: &[[f64; MAX_DOF]], dof: usize, out: &mut [f64; MAX_DOF * MAX_DOF]) {
+    for a in rows {
+        for i in 0..dof {
+            for l in 0..dof {
+                out[i * dof + l] += a[i] * a[l];
+            }
+        }
     }
 }
 

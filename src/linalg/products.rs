@@ -296,6 +296,48 @@ pub fn jt_times_many<const V: usize>(
     }
 }
 
+/// `jac[k N + i] = gx[i] dw_x/dp_k + gy[i] dw_y/dp_k`, with `dw/dp` in the layout of
+/// `crate::ssm::Ssm::jacobian`: the pixel Jacobian `dI/dp`
+/// (the gradient search methods' each iteration, the template's for a model that learns).
+pub fn project(gx: &[f32], gy: &[f32], dwdp: &[f32], dof: usize, jac: &mut [f32]) {
+    project_skipping(gx, gy, dwdp, &[false; 2 * MAX_DOF], dof, jac);
+}
+
+/// [`project`] with the rows of `dwdp` marked in `zero` known to be zero (not read).
+pub fn project_skipping(
+    gx: &[f32],
+    gy: &[f32],
+    dwdp: &[f32],
+    zero: &[bool; 2 * MAX_DOF],
+    dof: usize,
+    jac: &mut [f32],
+) {
+    let n = gx.len();
+    for k in 0..dof.min(MAX_DOF) {
+        let dx = &dwdp[2 * k * n..(2 * k + 1) * n];
+        let dy = &dwdp[(2 * k + 1) * n..(2 * k + 2) * n];
+        let jk = &mut jac[k * n..(k + 1) * n];
+        match (zero[2 * k], zero[2 * k + 1]) {
+            (false, false) => {
+                for ((((j, &a), &b), &u), &v) in jk.iter_mut().zip(gx).zip(gy).zip(dx).zip(dy) {
+                    *j = a * u + b * v;
+                }
+            }
+            (false, true) => {
+                for ((j, &a), &u) in jk.iter_mut().zip(gx).zip(dx) {
+                    *j = a * u;
+                }
+            }
+            (true, false) => {
+                for ((j, &b), &v) in jk.iter_mut().zip(gy).zip(dy) {
+                    *j = b * v;
+                }
+            }
+            (true, true) => jk.fill(0.0),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -245,17 +245,15 @@ impl Problem {
         if !self.am.learns() {
             return;
         }
-        let n = self.template.len();
-        let mut jac = vec![0.0f32; n * self.dof];
-        for k in 0..self.dof {
-            let (dx, dy) = (
-                &self.dwdp0[2 * k * n..(2 * k + 1) * n],
-                &self.dwdp0[(2 * k + 1) * n..(2 * k + 2) * n],
-            );
-            for (i, j) in jac[k * n..(k + 1) * n].iter_mut().enumerate() {
-                *j = self.template_gx[i] * dx[i] + self.template_gy[i] * dy[i];
-            }
-        }
+        let mut jac = vec![0.0f32; self.template.len() * self.dof];
+        crate::linalg::products::project_skipping(
+            &self.template_gx,
+            &self.template_gy,
+            &self.dwdp0,
+            &self.dwdp0_zero,
+            self.dof,
+            &mut jac,
+        );
         self.am.set_motion(&jac, self.dof);
     }
 

@@ -64,24 +64,9 @@ pub struct Workspace {
 impl Workspace {
     /// The buffers of an `n`-point grid and a `dof`-parameter SSM.
     pub fn new(n: usize, dof: usize) -> Self {
-        let z = |len: usize| vec![0.0f32; len];
-        Workspace {
-            dwdp: z(2 * n * dof),
-            px: z(n),
-            py: z(n),
-            values: z(n),
-            gx: z(n),
-            gy: z(n),
-            grad: z(n),
-            jac: z(n * dof),
-            sampled: None,
-            samples: 0,
-            solver: NewtonSolver::default(),
-            whole_px: Vec::new(),
-            whole_py: Vec::new(),
-            whole_values: Vec::new(),
-            whole_sampled: None,
-        }
+        let mut work = Workspace::default();
+        work.resize(n, n, dof);
+        work
     }
 
     /// The last patch of the whole grid ([`Workspace::whole_patch`]; the values without a

@@ -113,6 +113,9 @@ impl Taps {
     /// The output rows from `first` on into `out` (whole rows, zeroed).
     fn fill(&self, img: &GrayF32, first: usize, out: &mut [f32]) {
         let (k, out_w, w) = (self.k, self.out_w, img.width);
+        if k == 1 {
+            return self.fill_bilinear(img, first, out);
+        }
         let inv = 1.0 / (k * k) as f32;
         for (r, row) in out.chunks_exact_mut(out_w).enumerate() {
             let j = first + r;
@@ -130,6 +133,50 @@ impl Taps {
                     }
                     *o += s * inv;
                 }
+            }
+        }
+    }
+}
+
+impl Taps {
+    /// [`Taps::fill`] with one tap a side (bilinear), each frame row's horizontal
+    /// interpolation made once and kept while the next output row reads it too (the rows
+    /// run top to bottom): the same operations, so the same bits, as the general loop.
+    fn fill_bilinear(&self, img: &GrayF32, first: usize, out: &mut [f32]) {
+        let (out_w, w) = (self.out_w, img.width);
+        // Two frame rows' interpolations, by row index.
+        let mut kept: [(usize, Vec<f32>); 2] = [
+            (usize::MAX, vec![0.0; out_w]),
+            (usize::MAX, vec![0.0; out_w]),
+        ];
+        let across = |y: usize, into: &mut Vec<f32>| {
+            let r = &img.data[y * w..(y + 1) * w];
+            for (o, &(x0, x1, wx)) in into.iter_mut().zip(&self.xt) {
+                *o = r[x0] + wx * (r[x1] - r[x0]);
+            }
+        };
+        for (r, row) in out.chunks_exact_mut(out_w).enumerate() {
+            let (y0, y1, wy) = self.yt[first + r];
+            // Keep whichever kept row is still needed; make the other.
+            for y in [y0, y1] {
+                if kept[0].0 != y && kept[1].0 != y {
+                    let slot = usize::from(kept[0].0 == y0 || kept[0].0 == y1);
+                    kept[slot].0 = y;
+                    across(y, &mut kept[slot].1);
+                }
+            }
+            let top = if kept[0].0 == y0 {
+                &kept[0].1
+            } else {
+                &kept[1].1
+            };
+            let bot = if kept[0].0 == y1 {
+                &kept[0].1
+            } else {
+                &kept[1].1
+            };
+            for ((o, &t), &b) in row.iter_mut().zip(top).zip(bot) {
+                *o += t + wy * (b - t);
             }
         }
     }
@@ -158,6 +205,38 @@ mod tests {
         resample_window(&img, 9.5, 7.5, 8.0, 8.0, 4, 4, &mut out);
         let expect = 0.5 * (img.get(6, 4) + img.get(7, 5));
         assert!((out[0] - expect).abs() < 1e-3, "{} vs {expect}", out[0]);
+        // One tap a side (bilinear) at sub-pixel positions: exact on a linear image, the edge
+        // replicated outside it.
+        for (cx, cy) in [(9.3, 7.8), (4.71, 3.05), (14.5, 11.25)] {
+            resample_window(&img, cx, cy, 7.0, 5.0, 7, 5, &mut out);
+            for j in 0..5 {
+                for i in 0..7 {
+                    let fx = (cx + i as f64 + 0.5 - 3.5).clamp(0.0, (w - 1) as f64);
+                    let fy = (cy + j as f64 + 0.5 - 2.5).clamp(0.0, (h - 1) as f64);
+                    let want = fx + 100.0 * fy;
+                    let got = out[j * 7 + i] as f64;
+                    assert!(
+                        (got - want).abs() < 1e-3,
+                        "({cx}, {cy}) {i} {j}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+        // The kept rows give the bits of interpolating every pixel afresh.
+        let taps = Taps::new(&img, (8.37, 6.91), (13.0, 11.0), (10, 9));
+        assert_eq!(taps.k, 1);
+        resample_window(&img, 8.37, 6.91, 13.0, 11.0, 10, 9, &mut out);
+        for (j, &(y0, y1, wy)) in taps.yt.iter().enumerate() {
+            for (i, &(x0, x1, wx)) in taps.xt.iter().enumerate() {
+                let (a, b) = (img.get(x0, y0), img.get(x1, y0));
+                let (c, d) = (img.get(x0, y1), img.get(x1, y1));
+                let (top, bot) = (a + wx * (b - a), c + wx * (d - c));
+                assert_eq!(
+                    out[j * 10 + i].to_bits(),
+                    (top + wy * (bot - top)).to_bits()
+                );
+            }
+        }
         // Rows shared among threads: the same bits.
         let mut crew = Crew::new(vec![(); 3]);
         for (c, size, n) in [

@@ -230,17 +230,35 @@ pub fn transform(fft: &mut Fft2, f: &FeatureMap, out: &mut Vec<C32>) {
     }
 }
 
-/// [`transform`] over a crew, each member (with its own plans) a share of the pairs of
-/// channels: the same bits.
-pub fn transform_on(crew: &mut Crew<Fft2>, f: &FeatureMap, out: &mut Vec<C32>) {
+/// The transforms of the channels of `f` two at a time, left packed: spectrum `k` is the
+/// transform of channel `2k` plus `i` times channel `2k + 1` (the last alone when the count is
+/// odd), made by the members of `crew` (each with its own plans). [`kernel_correlation`] takes
+/// packed spectra as they are: the real part of a packed pair's cross-correlation is the sum of
+/// its two channels' (the cross terms are imaginary), and a packed spectrum's energy is its two
+/// channels'. So a filter that only correlates never tells the channels apart.
+pub fn transform_packed_on(crew: &mut Crew<Fft2>, f: &FeatureMap, out: &mut Vec<C32>) {
     let n = f.width * f.height;
     out.clear();
-    out.resize(n * f.channels, C32::default());
+    out.resize(n * f.channels.div_ceil(2), C32::default());
     let parts = crew.len();
-    let shares = Shares::new(out, 2 * n, parts);
+    let shares = Shares::new(out, n, parts);
     crew.run(&|fft, member| {
-        while let Some((start, pair)) = shares.take(member) {
-            transform_pair(fft, f, start / n, pair);
+        while let Some((start, spectrum)) = shares.take(member) {
+            let c = 2 * (start / n);
+            let second = (c + 1 < f.channels).then(|| f.channel(c + 1));
+            match second {
+                Some(b) => {
+                    for ((v, &x), &y) in spectrum.iter_mut().zip(f.channel(c)).zip(b) {
+                        *v = C32::new(x, y);
+                    }
+                }
+                None => {
+                    for (v, &x) in spectrum.iter_mut().zip(f.channel(c)) {
+                        *v = C32::new(x, 0.0);
+                    }
+                }
+            }
+            fft.forward(spectrum);
         }
     });
 }
@@ -308,36 +326,40 @@ pub enum Kernel {
 
 /// The transform of the kernel correlation `k(x, z)[d] = kernel(x, z shifted by d)` (`z(p + d)`
 /// against `x(p)`, cyclic) of all cyclic shifts `d`, from the transforms `xf`, `zf` of the
-/// channels (`channels` of `n = w h`) with one inverse and one forward transform.
+/// channels (`n = w h` values each, one after the other; or packed two to a spectrum by
+/// [`transform_packed_on`]) with one inverse and one forward transform. `values` is the number of
+/// feature values, `n` times the number of channels (the kernel's normaliser `N`).
 pub fn kernel_correlation(
     fft: &mut Fft2,
     kernel: Kernel,
     xf: &[C32],
     zf: &[C32],
-    channels: usize,
+    values: usize,
     out: &mut Vec<C32>,
 ) {
     let (w, h) = fft.size();
     let n = w * h;
+    let spectra = xf.len() / n;
+    debug_assert_eq!(xf.len(), zf.len());
     out.clear();
     out.resize(n, C32::default());
-    for c in 0..channels {
+    for c in 0..spectra {
         let (xc, zc) = (&xf[c * n..(c + 1) * n], &zf[c * n..(c + 1) * n]);
         for ((o, x), z) in out.iter_mut().zip(xc).zip(zc) {
             *o += x.conj() * z;
         }
     }
-    let xx = energy(&xf[..n * channels]);
+    let xx = energy(&xf[..n * spectra]);
     // The kernel of a window with itself (training) needs its energy once.
     let zz = if std::ptr::eq(xf, zf) {
         xx
     } else {
-        energy(&zf[..n * channels])
+        energy(&zf[..n * spectra])
     };
     // Parseval: the transform's energy is n times the signal's.
     let (xx, zz) = (xx / n as f64, zz / n as f64);
     fft.inverse(out);
-    let count = (n * channels) as f64;
+    let count = values as f64;
     match kernel {
         Kernel::Gaussian { sigma } => {
             let k = 1.0 / (sigma * sigma * count);
@@ -447,11 +469,22 @@ mod tests {
         let z = random_map(w, h, ch, 2);
         let mut fft = Fft2::new(w, h);
         let (mut xf, mut zf, mut kf) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut xp, mut zp, mut kp) = (Vec::new(), Vec::new(), Vec::new());
         transform(&mut fft, &x, &mut xf);
         transform(&mut fft, &z, &mut zf);
+        let mut crew = Crew::new(vec![Fft2::new(w, h)]);
+        transform_packed_on(&mut crew, &x, &mut xp);
+        transform_packed_on(&mut crew, &z, &mut zp);
+        assert_eq!(xp.len(), w * h * ch.div_ceil(2));
         for kernel in [Kernel::Gaussian { sigma: 0.7 }, Kernel::Linear] {
-            kernel_correlation(&mut fft, kernel, &xf, &zf, ch, &mut kf);
+            kernel_correlation(&mut fft, kernel, &xf, &zf, w * h * ch, &mut kf);
             fft.inverse(&mut kf);
+            // Packed spectra give the same kernel.
+            kernel_correlation(&mut fft, kernel, &xp, &zp, w * h * ch, &mut kp);
+            fft.inverse(&mut kp);
+            for (a, b) in kf.iter().zip(&kp) {
+                assert!((a - b).norm() < 1e-5, "{kernel:?}: {a} vs {b}");
+            }
             let n = (w * h * ch) as f64;
             for (dx, dy) in [(0, 0), (3, 1), (9, 7), (5, 4)] {
                 let (mut d2, mut dot) = (0.0, 0.0);
@@ -488,10 +521,22 @@ mod tests {
             let mut fft = Fft2::new(w, h);
             let mut got = Vec::new();
             transform(&mut fft, &x, &mut got);
+            // Packed, by a crew of two: each spectrum is its pair's transforms recombined,
+            // `X + i Y`, on any number of members.
+            let mut packed = Vec::new();
+            transform_packed_on(&mut Crew::new(vec![Fft2::new(w, h)]), &x, &mut packed);
             let mut crew = Crew::new((0..2).map(|_| Fft2::new(w, h)).collect());
             let mut banded = Vec::new();
-            transform_on(&mut crew, &x, &mut banded);
-            assert_eq!(banded, got);
+            transform_packed_on(&mut crew, &x, &mut banded);
+            assert_eq!(banded, packed);
+            let n = w * h;
+            for (k, p) in packed.chunks(n).enumerate() {
+                for i in 0..n {
+                    let (a, b) = (got[2 * k * n + i], got.get((2 * k + 1) * n + i));
+                    let want = a + b.map_or(C32::default(), |b| C32::new(-b.im, b.re));
+                    assert!((p[i] - want).norm() < 1e-4 * (1.0 + want.norm()));
+                }
+            }
             for c in 0..ch {
                 let mut want = Vec::new();
                 fft.forward_real(x.channel(c), &mut want);

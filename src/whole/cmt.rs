@@ -170,12 +170,16 @@ pub fn consensus(
             if dm < 1e-9 {
                 continue;
             }
-            scales.push((px * px + py * py).sqrt() / dm);
-            let d = py.atan2(px) - my.atan2(mx);
-            angles.push(
-                (d + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
-                    - std::f64::consts::PI,
-            );
+            if est_scale {
+                scales.push((px * px + py * py).sqrt() / dm);
+            }
+            if est_rotation {
+                let d = py.atan2(px) - my.atan2(mx);
+                angles.push(
+                    (d + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+                        - std::f64::consts::PI,
+                );
+            }
         }
     }
     let scale = if est_scale && !scales.is_empty() {

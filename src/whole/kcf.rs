@@ -142,7 +142,8 @@ struct State {
     hann: Vec<f32>,
     /// The label's transform.
     yf: Vec<C32>,
-    /// The model: the features' transforms and the dual coefficients' transform.
+    /// The model: the features' transforms (packed two channels to a spectrum) and the dual
+    /// coefficients' transform.
     xf: Vec<C32>,
     alphaf: Vec<C32>,
     // Scratch.
@@ -163,19 +164,25 @@ impl State {
             &mut self.buf,
             Some(&mut self.crew),
         );
-        cf::transform_on(&mut self.crew, &f, &mut self.zf);
+        cf::transform_packed_on(&mut self.crew, &f, &mut self.zf);
+    }
+
+    /// The number of feature values (cells times channels).
+    fn values(&self) -> usize {
+        let (w, h) = self.win.cells();
+        w * h * self.win.features.channels()
     }
 
     /// Trains on `zf` (the features just extracted): the dual coefficients
     /// `alpha = y / (k(x, x) + lambda)` in the Fourier domain, blended into the model at `rate`.
     fn learn(&mut self, kernel: Kernel, lambda: f32, rate: f32) {
-        let channels = self.win.features.channels();
+        let values = self.values();
         cf::kernel_correlation(
             &mut self.fft,
             kernel,
             &self.zf,
             &self.zf,
-            channels,
+            values,
             &mut self.kf,
         );
         let keep = 1.0 - rate;
@@ -191,13 +198,13 @@ impl State {
     /// The response over every shift of the window at `(cx, cy)` (wrapped), into `kf`'s real
     /// parts; returns its peak shift in cells and value.
     fn detect(&mut self, kernel: Kernel) -> (f64, f64, f64) {
-        let channels = self.win.features.channels();
+        let values = self.values();
         cf::kernel_correlation(
             &mut self.fft,
             kernel,
             &self.xf,
             &self.zf,
-            channels,
+            values,
             &mut self.kf,
         );
         for (k, a) in self.kf.iter_mut().zip(&self.alphaf) {
@@ -229,7 +236,7 @@ impl WholeTracker for Kcf {
             crew,
             hann,
             yf,
-            xf: vec![C32::default(); n * win.features.channels()],
+            xf: vec![C32::default(); n * win.features.channels().div_ceil(2)],
             alphaf: vec![C32::default(); n],
             buf: Vec::new(),
             zf: Vec::new(),

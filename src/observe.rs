@@ -46,6 +46,10 @@ impl<'a> MethodVisual<'a> {
     }
 }
 
+/// The label of the visual a registration tracker that reads part of its grid shows: the points
+/// it reads ([`crate::registration::spi`]).
+pub const SELECTED_PIXELS: &str = "selected pixels";
+
 /// A `width x height` map (row-major) laid over the quad `at` of the frame: value `(0, 0)` at its
 /// first corner, rows along its first side.
 #[derive(Clone, Copy, Debug)]

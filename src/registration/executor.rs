@@ -5,9 +5,10 @@
 //! [`crate::plan`]) are decided by its callers.
 
 use super::{Context, Control, LineSearch, Reader, SearchMethod};
+use crate::geometry::Point;
 use crate::geometry::Quad;
 use crate::imaging::ImageView;
-use crate::observe::{Iteration, Observer};
+use crate::observe::{Iteration, MethodVisual, Observer, SELECTED_PIXELS};
 use crate::spec::TrackerParams;
 use crate::status::LossReason;
 use std::time::Instant;
@@ -59,6 +60,20 @@ pub struct Executor<'a> {
     observer: &'a mut dyn Observer,
     frame: usize,
     started: Instant,
+}
+
+/// The points of the grid a selective problem reads, in frame pixels under the context's
+/// parameters.
+fn selected_points(ctx: &Context) -> Vec<Point> {
+    let m = ctx.pixel_matrix(&ctx.params());
+    let (xs, ys) = ctx.problem().grid();
+    xs.iter()
+        .zip(ys)
+        .map(|(&x, &y)| {
+            let v = m * nalgebra::Vector3::new(x as f64, y as f64, 1.0);
+            Point::new(v.x / v.z, v.y / v.z)
+        })
+        .collect()
 }
 
 /// How many times a model that follows the light is relearnt in one search.
@@ -132,10 +147,21 @@ impl<'a> Executor<'a> {
                 (corners, f, step),
                 iteration_started,
             );
-            if self.observer.wants_method_visuals()
-                && let Some(v) = sm.visual(ctx)
-            {
-                self.observer.method_visual(self.frame, first + it, &v);
+            if self.observer.wants_method_visuals() {
+                if let Some(v) = sm.visual(ctx) {
+                    self.observer.method_visual(self.frame, first + it, &v);
+                } else if ctx.problem().is_selective() {
+                    // The grid points the search reads (selective pixel integration), where
+                    // the iteration put them.
+                    let points = selected_points(ctx);
+                    let weights = vec![1.0; points.len()];
+                    let v = MethodVisual {
+                        points: &points,
+                        point_weights: &weights,
+                        ..MethodVisual::quads(SELECTED_PIXELS, &[], &[], None)
+                    };
+                    self.observer.method_visual(self.frame, first + it, &v);
+                }
             }
             let stop = exhausted
                 || match s.control {

@@ -1044,6 +1044,39 @@ fn a_mask_leaves_out_a_known_occluder() {
             .collect()
     };
     let (whole, masked) = (run(false), run(true));
+    // An observer that shows methods (the inspector) sees the points the masked tracker reads:
+    // every one outside the mask, where the tracked quad puts them.
+    let mut spec = TrackerSpec::from_names("esm", "ssd", "homography").unwrap();
+    spec.set_param("spi_mask_right", "0.35").unwrap();
+    spec.set_param("spi_mask_bottom", "1").unwrap();
+    let mut t = Tracker::new(&spec).unwrap();
+    t.initialize(FrameInput::Gray8(&frames[0]), &quads[0])
+        .unwrap();
+    let mut rec = regtrack::observe::Recorder {
+        visuals: true,
+        ..Default::default()
+    };
+    let out = t.update(FrameInput::Gray8(&frames[1]), &mut rec);
+    let v = rec
+        .method_visuals
+        .last()
+        .expect("a visual of the points read");
+    assert_eq!(v.label, regtrack::observe::SELECTED_PIXELS);
+    let TrackerSpec::Registration(reg) = &spec else {
+        panic!("a registration tracker")
+    };
+    let res = reg.params.res;
+    assert!(
+        v.points.len() > res * res / 2 && v.points.len() < res * res * 7 / 10,
+        "{} points of {}",
+        v.points.len(),
+        res * res
+    );
+    let to_unit = homography_between(&out.corners, &Quad::unit_square()).unwrap();
+    for p in &v.points {
+        let u = apply_homography(&to_unit, *p);
+        assert!(u.x + 0.5 > 0.33 && u.x < 0.51 && u.y.abs() < 0.51, "{u:?}");
+    }
     let worst = |e: &[f64]| e.iter().copied().fold(0.0, f64::max);
     assert!(
         worst(&masked) < 1.0,

@@ -600,6 +600,14 @@ fn draw_visual(painter: &egui::Painter, t: &Transform, v: &VisualRecord, c: Colo
         let pts = quad_points(t, q);
         painter.add(Shape::closed_line(pts, Stroke::new(1.5, Color32::WHITE)));
     }
+    if v.label == crate::observe::SELECTED_PIXELS {
+        // Hundreds of grid points: small dots.
+        let col = c.gamma_multiply(0.8);
+        for p in &v.points {
+            painter.circle_filled(t.to_screen(*p), 1.2, col);
+        }
+        return;
+    }
     for (k, p) in v.points.iter().enumerate() {
         let w = v
             .point_weights

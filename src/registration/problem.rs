@@ -245,6 +245,15 @@ impl Problem {
         if !self.am.learns() {
             return;
         }
+        let jac = self.template_motion();
+        self.am.set_motion(&jac, self.dof);
+    }
+
+    /// The template's pixel Jacobian at the identity, as [`Am::set_motion`] takes it (at the
+    /// points the searches read; `dof` rows of one value a point): what a model that learns
+    /// keeps out of what it learns. Search methods that score with copies of the model on part
+    /// of the grid give their copies its rows at their points.
+    pub fn template_motion(&self) -> Vec<f32> {
         let mut jac = vec![0.0f32; self.template.len() * self.dof];
         crate::linalg::products::project_skipping(
             &self.template_gx,
@@ -254,7 +263,7 @@ impl Problem {
             self.dof,
             &mut jac,
         );
-        self.am.set_motion(&jac, self.dof);
+        jac
     }
 
     /// Keeps the gradient the workspace sampled as the template's in the unit square's

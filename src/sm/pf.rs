@@ -210,6 +210,16 @@ impl Scorer {
         let pick = |v: &[f32]| index.iter().map(|&i| v[i]).collect::<Vec<f32>>();
         let mut am = ctx.am().clone_am();
         am.set_template(&pick(ctx.problem().template()));
+        if am.learns() {
+            // What it learns is kept orthogonal to the motion, as the tracker's model's is:
+            // the template's pixel Jacobian at the sub-grid's points.
+            let jac = ctx.problem().template_motion();
+            let (n, dof) = (ctx.len(), ctx.dof());
+            let sub: Vec<f32> = (0..dof)
+                .flat_map(|k| index.iter().map(|&i| jac[k * n + i]).collect::<Vec<f32>>())
+                .collect();
+            am.set_motion(&sub, dof);
+        }
         let n = index.len();
         let (grid_x, grid_y) = ctx.problem().grid();
         Scorer {
@@ -407,6 +417,59 @@ mod tests {
     use super::*;
     use crate::am::HessianKind;
     use crate::spec::GridLayout;
+
+    /// A learning model's copies learn what the tracker's does, at their points: its
+    /// template's motion left out (the model given the sub-grid's rows of the template's pixel
+    /// Jacobian).
+    #[test]
+    fn the_scorers_copies_of_a_learning_model_leave_the_motion_out() {
+        let data = frame();
+        let img = ImageView::new(&data, 160, 120, 0, 0);
+        let q = Quad::from_rect(40.0, 30.0, 60.0, 50.0);
+        let mut ctx = Context::new(
+            crate::ssm::build("homography").unwrap(),
+            crate::am::build("pca").unwrap(),
+            HessianKind::Default,
+            50,
+        );
+        ctx.set_region(&q, 50, GridLayout::Centres).unwrap();
+        ctx.sample_template(&img);
+        let mut scorer = Scorer::new(&ctx, 2, 10);
+        let index = scorer.index.clone();
+        let pick = |v: &[f32]| index.iter().map(|&i| v[i]).collect::<Vec<f32>>();
+        let jac = ctx.problem().template_motion();
+        let (n, dof) = (ctx.len(), ctx.dof());
+        let sub: Vec<f32> = (0..dof)
+            .flat_map(|k| index.iter().map(|&i| jac[k * n + i]).collect::<Vec<f32>>())
+            .collect();
+        let template = pick(ctx.problem().template());
+        let mut constrained = crate::am::build("pca").unwrap();
+        constrained.set_template(&template);
+        constrained.set_motion(&sub, dof);
+        let mut free = crate::am::build("pca").unwrap();
+        free.set_template(&template);
+        // Patches a little off the target (moved, and lit differently), learnt by all three.
+        let mut p = ctx.ssm().identity();
+        for k in 0..4 {
+            p[0] += 0.004;
+            p[5] -= 0.003;
+            ctx.sample_at(&img, &p);
+            let patch: Vec<f32> = ctx
+                .values()
+                .iter()
+                .map(|v| v * (1.0 + 0.02 * k as f32))
+                .collect();
+            scorer.update_model(&patch);
+            let mine = pick(&patch);
+            constrained.learn(&mine);
+            free.learn(&mine);
+        }
+        ctx.sample_at(&img, &p);
+        let probe = pick(ctx.values());
+        let got = scorer.am.similarity(&probe);
+        assert_eq!(got, constrained.similarity(&probe));
+        assert!((got - free.similarity(&probe)).abs() > 1e-6 * got.abs().max(1.0));
+    }
 
     /// A smooth texture, 160 x 120.
     fn frame() -> Vec<f32> {

@@ -8,9 +8,11 @@
 //! Each model is one file and one line in [`REGISTRY`].
 
 mod affine;
+mod ast;
 mod corner;
 mod homography;
 mod isometry;
+mod ist;
 mod similitude;
 mod sl3;
 mod translation;
@@ -126,7 +128,9 @@ pub type SsmBuilder = fn() -> Box<dyn Ssm>;
 pub const REGISTRY: &[Entry<SsmBuilder>] = &[
     translation::ENTRY,
     isometry::ENTRY,
+    ist::ENTRY,
     similitude::ENTRY,
+    ast::ENTRY,
     affine::ENTRY,
     homography::ENTRY,
     sl3::ENTRY,

@@ -119,6 +119,8 @@ fn registry_resolves_mtf_aliases() {
         ("8", "homography"),
         ("sl3", "sl3"),
         ("c8", "corner"),
+        ("ist", "ist"),
+        ("ast", "ast"),
     ] {
         assert_eq!(build(alias).unwrap().name(), name);
     }

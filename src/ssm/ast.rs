@@ -32,7 +32,7 @@ impl Ssm for Ast {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = m[(0, 2)];
         p[1] = m[(1, 2)];
         p[2] = m[(0, 0)] - 1.0;
@@ -63,7 +63,7 @@ impl Ssm for Ast {
             return None;
         }
         let (ax, ay) = (xu / xx, yv / yy);
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = cd.x - ax * cs.x;
         p[1] = cd.y - ay * cs.y;
         p[2] = ax - 1.0;

@@ -67,7 +67,7 @@ impl Ssm for CornerHomography {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let b = base();
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         for k in 0..4 {
             let q = apply_homography(m, b[k]);
             p[2 * k] = q.x - b[k].x;

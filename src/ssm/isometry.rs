@@ -31,7 +31,7 @@ impl Ssm for Isometry {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = m[(0, 2)];
         p[1] = m[(1, 2)];
         p[2] = m[(1, 0)].atan2(m[(0, 0)]);
@@ -49,7 +49,7 @@ impl Ssm for Isometry {
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         let (a, b, tx, ty) = fit_similarity(src, dst, true)?;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = tx;
         p[1] = ty;
         p[2] = b.atan2(a);

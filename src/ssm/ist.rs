@@ -33,7 +33,7 @@ impl Ssm for Ist {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = m[(0, 2)];
         p[1] = m[(1, 2)];
         p[2] = 0.5 * (m[(0, 0)] + m[(1, 1)]) - 1.0;
@@ -61,7 +61,7 @@ impl Ssm for Ist {
             return None;
         }
         let a = dot / ss;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = cd.x - a * cs.x;
         p[1] = cd.y - a * cs.y;
         p[2] = a - 1.0;

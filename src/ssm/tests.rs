@@ -4,7 +4,7 @@ use super::*;
 use proptest::prelude::*;
 
 fn params(ssm: &dyn Ssm, raw: &[f64; 8], scale: f64) -> Params {
-    let mut p = [0.0; 8];
+    let mut p = [0.0; MAX_DOF];
     for k in 0..ssm.dof() {
         p[k] = raw[k] * scale;
     }

@@ -30,7 +30,7 @@ impl Ssm for Translation {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let m = normalise_h33(m)?;
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = m[(0, 2)];
         p[1] = m[(1, 2)];
         Some(p)
@@ -57,7 +57,7 @@ impl Ssm for Translation {
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
         let (cs, cd) = (Quad(*src).centroid(), Quad(*dst).centroid());
-        let mut p = [0.0; 8];
+        let mut p = self.identity();
         p[0] = cd.x - cs.x;
         p[1] = cd.y - cs.y;
         p.iter().all(|v| v.is_finite()).then_some(p)

@@ -5,8 +5,7 @@
 //! [`crate::plan`]) are decided by its callers.
 
 use super::{Context, Control, LineSearch, Reader, SearchMethod};
-use crate::geometry::Point;
-use crate::geometry::Quad;
+use crate::geometry::{Point, Quad};
 use crate::imaging::ImageView;
 use crate::observe::{Iteration, MethodVisual, Observer, SELECTED_PIXELS};
 use crate::spec::TrackerParams;
@@ -63,16 +62,15 @@ pub struct Executor<'a> {
 }
 
 /// The points of the grid a selective problem reads, in frame pixels under the context's
-/// parameters.
+/// parameters (warped as the sampler warps them).
 fn selected_points(ctx: &Context) -> Vec<Point> {
     let m = ctx.pixel_matrix(&ctx.params());
     let (xs, ys) = ctx.problem().grid();
-    xs.iter()
-        .zip(ys)
-        .map(|(&x, &y)| {
-            let v = m * nalgebra::Vector3::new(x as f64, y as f64, 1.0);
-            Point::new(v.x / v.z, v.y / v.z)
-        })
+    let (mut px, mut py) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
+    super::workspace::warp_points(&m, xs, ys, &mut px, &mut py);
+    px.iter()
+        .zip(&py)
+        .map(|(&x, &y)| Point::new(x as f64, y as f64))
         .collect()
 }
 

@@ -214,11 +214,8 @@ impl Scorer {
             // What it learns is kept orthogonal to the motion, as the tracker's model's is:
             // the template's pixel Jacobian at the sub-grid's points.
             let jac = ctx.problem().template_motion();
-            let (n, dof) = (ctx.len(), ctx.dof());
-            let sub: Vec<f32> = (0..dof)
-                .flat_map(|k| index.iter().map(|&i| jac[k * n + i]).collect::<Vec<f32>>())
-                .collect();
-            am.set_motion(&sub, dof);
+            let sub: Vec<f32> = jac.chunks_exact(ctx.len()).flat_map(pick).collect();
+            am.set_motion(&sub, ctx.dof());
         }
         let n = index.len();
         let (grid_x, grid_y) = ctx.problem().grid();
@@ -438,10 +435,8 @@ mod tests {
         let index = scorer.index.clone();
         let pick = |v: &[f32]| index.iter().map(|&i| v[i]).collect::<Vec<f32>>();
         let jac = ctx.problem().template_motion();
-        let (n, dof) = (ctx.len(), ctx.dof());
-        let sub: Vec<f32> = (0..dof)
-            .flat_map(|k| index.iter().map(|&i| jac[k * n + i]).collect::<Vec<f32>>())
-            .collect();
+        let dof = ctx.dof();
+        let sub: Vec<f32> = jac.chunks_exact(ctx.len()).flat_map(pick).collect();
         let template = pick(ctx.problem().template());
         let mut constrained = crate::am::build("pca").unwrap();
         constrained.set_template(&template);

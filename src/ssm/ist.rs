@@ -2,7 +2,7 @@
 //! `(tx, ty, s)`. A target that comes nearer or moves away without turning (a camera zooming on
 //! a sign, a conveyor seen from above).
 
-use super::{Params, Ssm, SsmBuilder, normalise_h33, put};
+use super::{Params, Ssm, SsmBuilder, fit_similarity, normalise_h33, put};
 use crate::geometry::{Point, Quad};
 use crate::registry::Entry;
 use nalgebra::Matrix3;
@@ -48,19 +48,10 @@ impl Ssm for Ist {
         }
     }
     fn fit(&self, src: &[Point; 4], dst: &[Point; 4]) -> Option<Params> {
-        // About the centroids the translation drops out: the scale is the least-squares ratio
-        // of the centred points, `sum x . u / sum |x|^2`.
+        // The similitude's least-squares scale (its rotation part, fitted apart from the scale,
+        // is dropped); about the centroids the translation follows.
+        let (a, _, _, _) = fit_similarity(src, dst, false)?;
         let (cs, cd) = (Quad(*src).centroid(), Quad(*dst).centroid());
-        let (mut dot, mut ss) = (0.0, 0.0);
-        for (s, d) in src.iter().zip(dst) {
-            let (x, y) = (s.x - cs.x, s.y - cs.y);
-            dot += x * (d.x - cd.x) + y * (d.y - cd.y);
-            ss += x * x + y * y;
-        }
-        if ss <= 0.0 {
-            return None;
-        }
-        let a = dot / ss;
         let mut p = self.identity();
         p[0] = cd.x - a * cs.x;
         p[1] = cd.y - a * cs.y;

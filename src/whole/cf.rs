@@ -244,23 +244,27 @@ pub fn transform_packed_on(crew: &mut Crew<Fft2>, f: &FeatureMap, out: &mut Vec<
     let shares = Shares::new(out, n, parts);
     crew.run(&|fft, member| {
         while let Some((start, spectrum)) = shares.take(member) {
-            let c = 2 * (start / n);
-            let second = (c + 1 < f.channels).then(|| f.channel(c + 1));
-            match second {
-                Some(b) => {
-                    for ((v, &x), &y) in spectrum.iter_mut().zip(f.channel(c)).zip(b) {
-                        *v = C32::new(x, y);
-                    }
-                }
-                None => {
-                    for (v, &x) in spectrum.iter_mut().zip(f.channel(c)) {
-                        *v = C32::new(x, 0.0);
-                    }
-                }
-            }
-            fft.forward(spectrum);
+            transform_packed(fft, f, 2 * (start / n), spectrum);
         }
     });
+}
+
+/// The transform of channel `c` of `f` plus `i` times channel `c + 1` (zero past the last
+/// channel) into `out` (`n` long).
+fn transform_packed(fft: &mut Fft2, f: &FeatureMap, c: usize, out: &mut [C32]) {
+    match (c + 1 < f.channels).then(|| f.channel(c + 1)) {
+        Some(second) => {
+            for ((v, &x), &y) in out.iter_mut().zip(f.channel(c)).zip(second) {
+                *v = C32::new(x, y);
+            }
+        }
+        None => {
+            for (v, &x) in out.iter_mut().zip(f.channel(c)) {
+                *v = C32::new(x, 0.0);
+            }
+        }
+    }
+    fft.forward(out);
 }
 
 /// The transforms of channels `c` and `c + 1` of `f` into `out` (`2 n` long; `n` long for the
@@ -269,17 +273,11 @@ fn transform_pair(fft: &mut Fft2, f: &FeatureMap, c: usize, out: &mut [C32]) {
     let (w, h) = (f.width, f.height);
     let n = w * h;
     if out.len() == n {
-        for (v, &x) in out.iter_mut().zip(f.channel(c)) {
-            *v = C32::new(x, 0.0);
-        }
-        fft.forward(out);
+        transform_packed(fft, f, c, out);
         return;
     }
     let (a, b) = out.split_at_mut(n);
-    for ((v, &x), &y) in a.iter_mut().zip(f.channel(c)).zip(f.channel(c + 1)) {
-        *v = C32::new(x, y);
-    }
-    fft.forward(a);
+    transform_packed(fft, f, c, a);
     // Z = X + i Y: X(k) = (Z(k) + conj Z(-k)) / 2, Y(k) = (Z(k) - conj Z(-k)) / 2i. Each pair
     // (k, -k) is read before either is written.
     for v in 0..h {

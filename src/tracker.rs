@@ -199,6 +199,7 @@ impl RegistrationTracker {
             check_selection(&spec.params, &*model)?;
             let mut ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
             ctx.set_selection(Selection::of(&spec.params));
+            ctx.set_channels(spec.params.channels.count());
             Ok(Searcher::new(ctx, sm))
         };
         let main = build(&spec.ssm, spec.params.res)?;
@@ -228,8 +229,20 @@ impl RegistrationTracker {
     }
 }
 
-/// The spec's AM, under its illumination model if it has one.
+/// The spec's AM, under its illumination model if it has one, channel by channel for colour
+/// ([`am::channels::PerChannel`]; not a model that is a plain sum of squares over the pixels,
+/// SSD, which is its own sum over the channels).
 fn appearance_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
+    let model = lit_model(spec)?;
+    let channels = spec.params.channels.count();
+    if channels == 1 || (model.pixelwise() && model.hessian_is_minus_jtj()) {
+        return Ok(model);
+    }
+    Ok(Box::new(am::channels::PerChannel::new(model, channels)))
+}
+
+/// The spec's AM, under its illumination model if it has one.
+fn lit_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
     let model = am::build_with(&spec.am, &spec.method)?;
     let p = &spec.params;
     if p.ilm == Illumination::None {

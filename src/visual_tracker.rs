@@ -4,7 +4,7 @@
 
 use crate::error::Result;
 use crate::geometry::Quad;
-use crate::imaging::{GrayF32, GrayU8, ImageRef};
+use crate::imaging::{ColourU8, Frame8, GrayF32, GrayU8, ImageRef};
 use crate::landscape::{Landscape, LandscapeSpec};
 use crate::observe::Observer;
 use crate::spec::TrackerSpec;
@@ -22,15 +22,43 @@ pub enum FrameInput<'a> {
     /// An 8-bit frame in someone else's buffer (numpy's, a decoder's), read where it is: as
     /// `Gray8` otherwise.
     View8(ImageRef<'a, u8>),
+    /// An 8-bit colour frame: a tracker with `channels = rgb` reads its three channels, every
+    /// other one its grey image ([`FrameInput::gray`]).
+    Colour(&'a ColourU8),
 }
 
-impl FrameInput<'_> {
+impl<'a> FrameInput<'a> {
     /// `(width, height)`.
     pub fn size(&self) -> (usize, usize) {
         match self {
             FrameInput::Gray8(i) => (i.width, i.height),
             FrameInput::Gray32(i) | FrameInput::Smoothed(i) => (i.width, i.height),
             FrameInput::View8(i) => (i.width, i.height),
+            FrameInput::Colour(c) => c.size(),
+        }
+    }
+
+    /// The frame as a grey reader takes it: a colour frame's grey image, any other as it is.
+    pub fn gray(self) -> FrameInput<'a> {
+        match self {
+            FrameInput::Colour(c) => FrameInput::Gray8(&c.gray),
+            other => other,
+        }
+    }
+
+    /// The colour frame, if it is one.
+    pub fn colour(self) -> Option<&'a ColourU8> {
+        match self {
+            FrameInput::Colour(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    /// The input of a frame a sequence handed out.
+    pub fn of(frame: &'a Frame8) -> Self {
+        match frame {
+            Frame8::Gray(g) => FrameInput::Gray8(g),
+            Frame8::Colour(c) => FrameInput::Colour(c),
         }
     }
 }
@@ -55,6 +83,7 @@ pub use crate::geometry::fraction_inside;
 /// outside the frame, and the frame's pixels there when they are all one value (a blank or
 /// damaged frame, such as the grey a decoder shows for a video cut short).
 pub fn why_flat(quad: &Quad, input: FrameInput<'_>) -> String {
+    let input = input.gray();
     let (w, h) = input.size();
     let mut why = Vec::new();
     let inside = fraction_inside(quad, w, h);
@@ -80,6 +109,7 @@ pub fn why_flat(quad: &Quad, input: FrameInput<'_>) -> String {
                 FrameInput::Gray8(i) => i.data[y * w + x] as f32,
                 FrameInput::View8(i) => i.data[y * w + x] as f32,
                 FrameInput::Gray32(i) | FrameInput::Smoothed(i) => i.data[y * w + x],
+                FrameInput::Colour(c) => c.gray.data[y * w + x] as f32,
             };
             range = Some(range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
         }
@@ -109,10 +139,12 @@ impl<'a> From<&'a GrayU8> for FrameInput<'a> {
 }
 
 /// What a tracker shows of its inner state for inspection: the template and the current patch
-/// (on a `res x res` grid, row-major), from which the error image follows.
+/// (on a `res x res` grid, row-major; a colour tracker's `channels` such patches, red, green
+/// and blue, one after the other), from which the error image follows.
 #[derive(Clone, Copy, Debug)]
 pub struct Inspection<'a> {
     pub res: usize,
+    pub channels: usize,
     pub template: &'a [f32],
     pub patch: &'a [f32],
 }
@@ -138,6 +170,12 @@ pub trait VisualTracker: Send + std::fmt::Debug {
     /// The template and current patch, for trackers that have them.
     fn inspection(&self) -> Option<Inspection<'_>> {
         None
+    }
+    /// The channels it reads: 1 (grey, every tracker but a registration tracker with
+    /// `channels = rgb`) or 3. A caller that has colour frames hands them to a tracker of 3
+    /// ([`FrameInput::Colour`]); a grey frame given to it is read as three equal channels.
+    fn channels(&self) -> usize {
+        1
     }
     /// The label used in file names and tables.
     fn label(&self) -> String {

@@ -11,6 +11,7 @@
 //! Each model is one file and one line in [`REGISTRY`].
 
 mod ccre;
+pub mod channels;
 mod correlation;
 pub mod ilm;
 mod intensity_map;

@@ -121,8 +121,8 @@ pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 const READ_AHEAD: usize = 4;
 
 impl Sequence {
-    /// Calls `f` with each frame of `range` in order ([`Sequence::load_gray`]'s result: an
-    /// error names the file) until `f` breaks (its value is returned) or the frames end
+    /// Calls `f` with each frame of `range` in order ([`Sequence::load_frame`]'s result, in
+    /// colour when `colour`: an error names the file) until `f` breaks (its value is returned) or the frames end
     /// (`None`). With `ahead`, another thread decodes the next frames meanwhile (at most
     /// `READ_AHEAD` ahead): a tracker then waits for no decoding (on a sequence of JPEG
     /// files, most of a run's time), at the cost of a core; without it, or when no thread can
@@ -131,14 +131,15 @@ impl Sequence {
         &self,
         range: std::ops::Range<usize>,
         ahead: bool,
-        mut f: impl FnMut(usize, Result<GrayU8>) -> std::ops::ControlFlow<B>,
+        colour: bool,
+        mut f: impl FnMut(usize, Result<imaging::Frame8>) -> std::ops::ControlFlow<B>,
     ) -> Option<B> {
         use std::ops::ControlFlow::{Break, Continue};
         let in_turn =
             |range: std::ops::Range<usize>,
-             f: &mut dyn FnMut(usize, Result<GrayU8>) -> std::ops::ControlFlow<B>| {
+             f: &mut dyn FnMut(usize, Result<imaging::Frame8>) -> std::ops::ControlFlow<B>| {
                 for i in range {
-                    if let Break(b) = f(i, self.load_gray(i)) {
+                    if let Break(b) = f(i, self.load_frame(i, colour)) {
                         return Some(b);
                     }
                 }
@@ -155,7 +156,7 @@ impl Sequence {
                 .spawn_scoped(scope, move || {
                     for i in frames {
                         // The receiver is gone once `f` broke: stop reading.
-                        if tx.send((i, self.load_gray(i))).is_err() {
+                        if tx.send((i, self.load_frame(i, colour))).is_err() {
                             break;
                         }
                     }
@@ -566,14 +567,37 @@ impl Sequence {
     }
     /// Frame `i` as 8-bit grayscale; the error names the file.
     pub fn load_gray(&self, i: usize) -> Result<GrayU8> {
+        match self.load_frame(i, false)? {
+            imaging::Frame8::Gray(g) => Ok(g),
+            imaging::Frame8::Colour(c) => Ok(c.gray),
+        }
+    }
+
+    /// Frame `i`, in colour when `colour` (its three channels and its grey, for a tracker
+    /// that reads colour, [`crate::imaging::ColourU8`]), else grey; the error names the file.
+    pub fn load_frame(&self, i: usize, colour: bool) -> Result<imaging::Frame8> {
         let p = self.frames.get(i).ok_or_else(|| Error::Sequence {
             path: self.gt_path.clone().unwrap_or_default(),
             message: format!("frame index {i} out of range (0..{})", self.len()),
         })?;
         if let Some(v) = &self.video {
-            return v.frame(i);
+            if !colour {
+                return Ok(imaging::Frame8::Gray(v.frame(i)?));
+            }
+            let (w, h) = (v.width, v.height);
+            let rgb = v.frame_rgb(i)?;
+            let frame = imaging::ColourU8::from_rgb(w, h, &rgb).ok_or_else(|| Error::Sequence {
+                path: p.clone(),
+                message: format!("frame {} decoded to the wrong size", i + 1),
+            })?;
+            return Ok(imaging::Frame8::Colour(frame));
         }
-        let img = imaging::load_gray(p)?;
+        let img = if colour {
+            imaging::Frame8::Colour(imaging::load_colour(p)?)
+        } else {
+            imaging::Frame8::Gray(imaging::load_gray(p)?)
+        };
+        let (width, height) = (img.gray().width, img.gray().height);
         // Every frame has the first one's size (a tracker's coordinates are the first's).
         if i > 0 {
             let first = match self.first_size.get() {
@@ -583,14 +607,14 @@ impl Sequence {
                     *self.first_size.get_or_init(|| s)
                 }
             };
-            if (img.width, img.height) != first {
+            if (width, height) != first {
                 return Err(Error::Image {
                     path: p.clone(),
                     message: format!(
                         "frame {} is {}x{}, but the sequence's first frame is {}x{}",
                         i + 1,
-                        img.width,
-                        img.height,
+                        width,
+                        height,
                         first.0,
                         first.1
                     ),

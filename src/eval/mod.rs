@@ -555,7 +555,9 @@ pub fn run_sequence_reading(
             }
         };
     // With `ahead`, each frame decoded while the tracker works on the one before.
-    let ended = seq.each_frame(0..seq.len(), ahead, |i, img| -> ControlFlow<Result<()>> {
+    // A tracker that reads colour is handed colour frames.
+    let colour = tracker.channels() > 1;
+    let ended = seq.each_frame(0..seq.len(), ahead, colour, |i, img| -> ControlFlow<Result<()>> {
         let img = match img {
             Ok(img) => img,
             Err(e) if i > 0 => {
@@ -569,7 +571,7 @@ pub fn run_sequence_reading(
             _ => false,
         };
         if i == 0 {
-            if let Err(e) = tracker.initialize(FrameInput::Gray8(&img), &first) {
+            if let Err(e) = tracker.initialize(FrameInput::of(&img), &first) {
                 return ControlFlow::Break(Err(e));
             }
             frames.push(record(
@@ -587,7 +589,7 @@ pub fn run_sequence_reading(
             let q = ground_truth(i).unwrap_or(first);
             // A frame the tracker cannot start on (occluded, degenerate ground truth) counts as
             // failed; the next annotated frame is tried.
-            if tracker.initialize(FrameInput::Gray8(&img), &q).is_ok() {
+            if tracker.initialize(FrameInput::of(&img), &q).is_ok() {
                 skip_until = None;
                 frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
             } else {
@@ -601,7 +603,7 @@ pub fn run_sequence_reading(
             frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
             return ControlFlow::Continue(());
         }
-        let out = tracker.update(FrameInput::Gray8(&img), observer);
+        let out = tracker.update(FrameInput::of(&img), observer);
         let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
         let search = out.timing.search.as_secs_f64() * 1e6;
         let update = search + out.timing.preprocess.as_secs_f64() * 1e6;

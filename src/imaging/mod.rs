@@ -194,6 +194,76 @@ pub fn gray_from_dynamic(img: &image::DynamicImage) -> GrayU8 {
     }
 }
 
+/// A colour frame: its three channels (red, green, blue) as planes, and its grey image (luma,
+/// [`luma`]) for everything that reads grey. A tracker with `channels = rgb` reads the
+/// channels; every other reader reads `gray`, the same image [`load_gray`] gives.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ColourU8 {
+    pub gray: GrayU8,
+    pub channels: [GrayU8; 3],
+}
+
+impl ColourU8 {
+    /// The frame of `width x height` pixels given as interleaved `r, g, b` bytes (`None` when
+    /// the length is not `3 width height`).
+    pub fn from_rgb(width: usize, height: usize, rgb: &[u8]) -> Option<Self> {
+        if width.checked_mul(height)?.checked_mul(3)? != rgb.len() {
+            return None;
+        }
+        let plane = |c: usize| Image {
+            width,
+            height,
+            data: rgb.iter().skip(c).step_by(3).copied().collect(),
+        };
+        let gray = Image {
+            width,
+            height,
+            data: rgb.chunks_exact(3).map(|p| luma(p[0], p[1], p[2])).collect(),
+        };
+        Some(ColourU8 {
+            gray,
+            channels: [plane(0), plane(1), plane(2)],
+        })
+    }
+
+    /// The frame's size.
+    pub fn size(&self) -> (usize, usize) {
+        (self.gray.width, self.gray.height)
+    }
+}
+
+/// A frame as a sequence hands it out: grey, or in colour when a tracker asked for it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Frame8 {
+    Gray(GrayU8),
+    Colour(ColourU8),
+}
+
+impl Frame8 {
+    /// The grey image (a colour frame's luma).
+    pub fn gray(&self) -> &GrayU8 {
+        match self {
+            Frame8::Gray(g) => g,
+            Frame8::Colour(c) => &c.gray,
+        }
+    }
+}
+
+/// Reads an image file in colour (a grey file's three channels are its grey); the error names
+/// the path.
+pub fn load_colour(path: &Path) -> Result<ColourU8> {
+    let img = load_dynamic(path)?;
+    let rgb = img.to_rgb8();
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    let mut frame = ColourU8::from_rgb(w, h, rgb.as_raw()).ok_or_else(|| Error::Image {
+        path: path.to_path_buf(),
+        message: "its pixels do not fill its size".into(),
+    })?;
+    // The grey every other reader sees: the same as `load_gray`'s.
+    frame.gray = gray_from_dynamic(&img);
+    Ok(frame)
+}
+
 /// The size of an image file, read from its header.
 pub fn image_size(path: &Path) -> Result<(usize, usize)> {
     crate::files::check_regular(path)?;

@@ -39,6 +39,10 @@ pub struct ImageView<'a> {
     border: Border,
     /// What content this is (see [`ImageView::stamp`]); 0: unknown.
     stamp: u64,
+    /// The second and third planes of a colour view (the same window of the other channels;
+    /// see [`ImageView::with_planes`]), and how many planes the view has (1 or 3).
+    others: [&'a [f32]; 2],
+    planes: u8,
 }
 
 impl<'a> ImageView<'a> {
@@ -60,7 +64,43 @@ impl<'a> ImageView<'a> {
             scale: 1.0,
             border: Border::Replicate,
             stamp: 0,
+            others: [&[], &[]],
+            planes: 1,
         }
+    }
+
+    /// The same window of three planes (a colour frame's channels): `self`'s pixels are the
+    /// first, `second` and `third` the others, laid out alike. The sampling functions
+    /// ([`sample_values`], [`sample_values_gradients`]) then read a grid of three equal parts,
+    /// part `c` from plane `c`; everything else reads the first plane.
+    ///
+    /// # Panics
+    /// If a plane is shorter than the window (a programming error).
+    pub fn with_planes(mut self, second: &'a [f32], third: &'a [f32]) -> Self {
+        let n = self.width * self.height;
+        assert!(
+            second.len() >= n && third.len() >= n,
+            "image plane smaller than its view"
+        );
+        self.others = [second, third];
+        self.planes = 3;
+        self
+    }
+
+    /// How many planes the view has: 1, or 3 for a colour view ([`ImageView::with_planes`]).
+    pub fn planes(&self) -> usize {
+        self.planes as usize
+    }
+
+    /// Plane `c` alone (`c < planes()`; the first for any other).
+    pub fn plane(&self, c: usize) -> ImageView<'a> {
+        let mut v = *self;
+        if c > 0 && c < self.planes() {
+            v.data = self.others[c - 1];
+        }
+        v.others = [&[], &[]];
+        v.planes = 1;
+        v
     }
 
     /// The same view marked as showing the content `stamp` (see [`ImageView::stamp`]).
@@ -242,8 +282,20 @@ fn clamp_far(x: f32, y: f32, img: &ImageView) -> (f32, f32) {
 const BLOCK: usize = 256;
 
 /// Samples the values at frame points `(xs[i], ys[i])` into `out`.
+///
+/// On a view of several planes ([`ImageView::with_planes`]) the points are that many equal
+/// parts, part `c` read from plane `c` (a colour grid: the same points once per channel).
 pub fn sample_values(img: &ImageView, xs: &[f32], ys: &[f32], out: &mut [f32]) {
     debug_assert!(xs.len() == ys.len() && out.len() == xs.len());
+    if img.planes > 1 {
+        let n = xs.len() / img.planes();
+        debug_assert_eq!(n * img.planes(), xs.len(), "a colour grid of equal parts");
+        for c in 0..img.planes() {
+            let r = c * n..(c + 1) * n;
+            sample_values(&img.plane(c), &xs[r.clone()], &ys[r.clone()], &mut out[r]);
+        }
+        return;
+    }
     if !(img.border == Border::Replicate && img.width >= 2 && img.height >= 2) {
         for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
             *o = sample_value(img, x, y);
@@ -411,7 +463,8 @@ pub fn sample_grid_shifted(
     true
 }
 
-/// Samples values and gradients (in frame pixels) at frame points `(xs[i], ys[i])`.
+/// Samples values and gradients (in frame pixels) at frame points `(xs[i], ys[i])`; on a view
+/// of several planes, part by part as [`sample_values`].
 pub fn sample_values_gradients(
     img: &ImageView,
     xs: &[f32],
@@ -422,6 +475,22 @@ pub fn sample_values_gradients(
 ) {
     debug_assert!(xs.len() == ys.len() && values.len() == xs.len());
     debug_assert!(gx.len() == xs.len() && gy.len() == xs.len());
+    if img.planes > 1 {
+        let n = xs.len() / img.planes();
+        debug_assert_eq!(n * img.planes(), xs.len(), "a colour grid of equal parts");
+        for c in 0..img.planes() {
+            let r = c * n..(c + 1) * n;
+            sample_values_gradients(
+                &img.plane(c),
+                &xs[r.clone()],
+                &ys[r.clone()],
+                &mut values[r.clone()],
+                &mut gx[r.clone()],
+                &mut gy[r],
+            );
+        }
+        return;
+    }
     if img.is_empty() {
         values.fill(0.0);
         gx.fill(0.0);

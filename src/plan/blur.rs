@@ -134,15 +134,25 @@ impl RegistrationTracker {
         let (values, whole) = (ctx.whole_values(), ctx.problem().whole_template());
         let len = g.0.hypot(g.1);
         let along = (g.0 / len, g.1 / len);
-        let template = sharpness(whole, res, along);
+        // A colour patch's channels one after the other, each `res x res`.
+        let m = res * res;
+        let channels = (whole.len() / m).max(1);
+        let sharp = |v: &[f32]| {
+            let each = (0..channels).map(|c| sharpness(&v[c * m..(c + 1) * m], res, along));
+            each.sum::<f64>() / channels as f64
+        };
+        let template = sharp(whole);
         // Not blurred (or nothing to tell by): the confidence stands.
-        if at_least(sharpness(values, res, along), BLURRED * template) || template == 0.0 {
+        if at_least(sharp(values), BLURRED * template) || template == 0.0 {
             return;
         }
         let judges = &mut self.judges;
         let mut best = confidence;
         for f in EXPOSURES {
-            box_blur(whole, res, (f * g.0, f * g.1), &mut judges.blurred);
+            for c in 0..channels {
+                let r = c * m..(c + 1) * m;
+                box_blur(&whole[r.clone()], res, (f * g.0, f * g.1), &mut judges.blurred[r]);
+            }
             judges
                 .blur
                 .set_template(&judges.blurred, res, super::tracker::CONFIDENCE_BLOCKS);

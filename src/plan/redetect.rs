@@ -238,11 +238,13 @@ impl Detector {
 
     /// Reads `view` (the level the candidates are ranked on) for [`Detector::candidate`].
     pub fn prepare(&mut self, view: &ImageView) {
-        self.sums.fill(view);
+        self.sums.fill(&view.plane(0));
     }
 
     /// Samples the detector's grid points of `view` under the parameters `p` into `patch`.
     fn sample(&mut self, problem: &Problem, view: &ImageView, p: &Params) {
+        // A colour tracker's candidates are ranked on its first channel.
+        let view = &view.plane(0);
         let m = problem.pixel_matrix(p);
         warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
         if self.side < 2 {

@@ -71,7 +71,7 @@ impl RegistrationTracker {
         let p = spec.params.clone();
         let gradient = main.sm.requires().derivatives;
         let kernel = gaussian_kernel(p.blur_size, p.smoothing_sigma(gradient) as f32);
-        let src = FrameSource::new(kernel, plan.levels());
+        let src = FrameSource::new(kernel, plan.levels()).with_channels(spec.params.channels.count());
         RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
             params: p,
@@ -327,7 +327,7 @@ impl VisualTracker for RegistrationTracker {
         self.judges.previous.set_mask(mask);
         self.periods = super::periodic::periods(template, res);
         // Made here so that a frame's update does not allocate.
-        self.judges.blurred = vec![0.0; res * res];
+        self.judges.blurred = vec![0.0; template.len()];
         self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
         self.judges.blur.set_mask(mask);
         // The coarsest level made of this region (built above when the plan has levels).
@@ -479,10 +479,15 @@ impl VisualTracker for RegistrationTracker {
         outcome
     }
 
+    fn channels(&self) -> usize {
+        self.params.channels.count()
+    }
+
     fn inspection(&self) -> Option<Inspection<'_>> {
         let ctx = &self.finest.ctx;
         Some(Inspection {
             res: self.params.res,
+            channels: ctx.problem().channels(),
             template: ctx.problem().whole_template(),
             patch: ctx.whole_values(),
         })

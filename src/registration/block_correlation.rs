@@ -10,6 +10,9 @@ const _: () = assert!(MOMENT_COLUMNS == 8, "the AVX moments sum eight columns");
 /// The most blocks per side of [`block_correlation`].
 pub const MAX_BLOCKS: usize = 8;
 
+/// The most channels of a patch (a colour grid's three, [`crate::registration::Problem::channels`]).
+pub const MAX_CHANNELS: usize = 3;
+
 /// The confidence that `current` shows what `template` shows, both `res x res` patches stored
 /// row by row, in -1..1 (see [`BlockCorrelation`], which this makes for one use).
 pub fn block_correlation(template: &[f32], current: &[f32], res: usize, cells: usize) -> f64 {
@@ -24,13 +27,19 @@ pub fn block_correlation(template: &[f32], current: &[f32], res: usize, cells: u
 /// to the light: in each block that is nearly a gain, a bias and a slope), and blocks the
 /// template has no texture in (only noise) weigh little. 0 when the template is flat.
 ///
+/// A patch of several channels (a colour grid's: `channels` patches of `res x res`, one after
+/// the other, as long a template) has its blocks in each channel, all averaged alike.
+///
 /// What depends on the template and the grid only (each block's plane fit, the template's
 /// moments) is computed once, by [`BlockCorrelation::new`]; [`BlockCorrelation::of`] then makes
 /// five sums per sample (row segment by row segment, four lanes) and does not allocate.
 #[derive(Clone, Debug, Default)]
 pub struct BlockCorrelation {
     template: Vec<f32>,
+    /// The blocks of each channel in turn.
     blocks: Vec<Block>,
+    /// The template's channels (its length over `res x res`, at most [`MAX_CHANNELS`]).
+    channels: usize,
     /// What depends on the grid only, kept while `res` and `cells` stay: `(res, cells)` and per
     /// block the sums of 1, x, y, xx, xy, yy (a new template per frame then only sums t, tx,
     /// ty, tt).
@@ -71,6 +80,7 @@ impl BlockCorrelation {
         let side = 1.0 / cells as f64;
         let overlap = |lo: f64, hi: f64, a: f64, z: f64| (hi.min(z) - lo.max(a)).max(0.0);
         for (k, block) in self.blocks.iter_mut().enumerate() {
+            let k = k % (cells * cells);
             let (x, y) = ((k % cells) as f64 * side, (k / cells) as f64 * side);
             let covered = overlap(x, x + side, l, r) * overlap(y, y + side, t, b);
             if covered >= 0.1 * side * side {
@@ -84,9 +94,12 @@ impl BlockCorrelation {
     pub fn set_template(&mut self, template: &[f32], res: usize, cells: usize) {
         if self.set_geometry(template, res, cells) {
             // The template's part: per block, sums of t, tx, ty, tt.
-            let template = &template[..res * res];
-            let sums = self.moments(template, [template]);
-            self.set_template_sums(template, &sums);
+            let m = res * res;
+            for c in 0..self.channels {
+                let part = &template[c * m..(c + 1) * m];
+                let sums = self.moments(part, [part]);
+                self.set_template_sums(part, &sums);
+            }
         }
     }
 
@@ -100,11 +113,16 @@ impl BlockCorrelation {
         cells: usize,
         sums: &PatchSums,
     ) {
-        if sums.geometry != Some((res, blocks_per_side(res, cells))) {
+        if sums.geometry != Some((res, blocks_per_side(res, cells)))
+            || sums.channels != channels_of(template, res)
+        {
             return self.set_template(template, res, cells);
         }
         if self.set_geometry(template, res, cells) {
-            self.set_template_sums(&template[..res * res], &sums.blocks);
+            let m = res * res;
+            for c in 0..self.channels {
+                self.set_template_sums(&template[c * m..(c + 1) * m], &sums.blocks[c]);
+            }
         }
     }
 
@@ -118,6 +136,7 @@ impl BlockCorrelation {
             self.geometry = None;
             return false;
         }
+        self.channels = channels_of(template, res);
         // The grid's part, once per (res, cells): per block the sums of 1, x, y, xx, xy, yy of
         // the samples' block-local coordinates.
         if self.geometry != Some((res, cells)) {
@@ -142,7 +161,7 @@ impl BlockCorrelation {
     }
 
     /// Each block's plane fit and the template's moments from its sums `t, tx, ty, tt` (the
-    /// first four of each block's in `sums`).
+    /// first four of each block's in `sums`), of the next channel (after those set).
     fn set_template_sums(&mut self, template: &[f32], sums: &BlockSums) {
         let acc = self
             .geometry_sums
@@ -229,13 +248,18 @@ impl BlockCorrelation {
 
     /// The confidence of `current` (0 when it is shorter than the template, flat or not finite).
     pub fn of(&self, current: &[f32]) -> f64 {
-        let n = self.geometry.map_or(0, |(res, _)| res * res);
-        if current.len() < n {
+        let m = self.geometry.map_or(0, |(res, _)| res * res);
+        if current.len() < m * self.channels {
             return 0.0;
         }
-        // Per block, sums of: c, cx, cy, cc, tc.
-        let acc = self.moments(&current[..n], [&self.template]);
-        self.of_sums(&acc, 4)
+        let mut parts = (0.0, 0.0);
+        for c in 0..self.channels {
+            // Per block, sums of: c, cx, cy, cc, tc.
+            let r = c * m..(c + 1) * m;
+            let acc = self.moments(&current[r.clone()], [&self.template[r]]);
+            add(&mut parts, self.of_sums(c, &acc, 4));
+        }
+        ratio(parts)
     }
 
     /// [`BlockCorrelation::of`] for this correlation and `other` (the same `res` and cells,
@@ -247,24 +271,36 @@ impl BlockCorrelation {
         current: &[f32],
         sums: &mut PatchSums,
     ) -> (f64, f64) {
-        let n = self.geometry.map_or(0, |(res, _)| res * res);
+        let m = self.geometry.map_or(0, |(res, _)| res * res);
         sums.geometry = None;
-        if other.geometry != self.geometry || n == 0 || current.len() < n {
+        let n = m * self.channels;
+        if other.geometry != self.geometry
+            || other.channels != self.channels
+            || m == 0
+            || current.len() < n
+        {
             return (self.of(current), other.of(current));
         }
-        sums.blocks = self.moments(&current[..n], [&self.template, &other.template]);
+        let (mut mine, mut theirs) = ((0.0, 0.0), (0.0, 0.0));
+        for c in 0..self.channels {
+            let r = c * m..(c + 1) * m;
+            let templates = [&self.template[r.clone()], &other.template[r.clone()]];
+            sums.blocks[c] = self.moments(&current[r], templates);
+            add(&mut mine, self.of_sums(c, &sums.blocks[c], 4));
+            add(&mut theirs, other.of_sums(c, &sums.blocks[c], 5));
+        }
         sums.geometry = self.geometry;
-        (
-            self.of_sums(&sums.blocks, 4),
-            other.of_sums(&sums.blocks, 5),
-        )
+        sums.channels = self.channels;
+        (ratio(mine), ratio(theirs))
     }
 
-    /// The confidence from a patch's block sums, the products with this template being the
-    /// `cross`-th of each block's.
-    fn of_sums(&self, acc: &BlockSums, cross: usize) -> f64 {
+    /// The weighted correlations' sum and the weights' from channel `channel`'s block sums of a
+    /// patch, the products with this template being the `cross`-th of each block's.
+    fn of_sums(&self, channel: usize, acc: &BlockSums, cross: usize) -> (f64, f64) {
         let (mut num, mut den) = (0.0, 0.0);
-        for (block, a) in self.blocks.iter().zip(acc) {
+        let per = self.blocks.len() / self.channels.max(1);
+        let blocks = self.blocks.iter().skip(channel * per).take(per);
+        for (block, a) in blocks.zip(acc) {
             let Some((inv, ut, vt, n)) = block else {
                 continue;
             };
@@ -283,8 +319,25 @@ impl BlockCorrelation {
             num += vt * rho;
             den += vt;
         }
-        if den > 0.0 { num / den } else { 0.0 }
+        (num, den)
     }
+}
+
+/// Adds a channel's weighted sums into the patch's.
+fn add(total: &mut (f64, f64), part: (f64, f64)) {
+    total.0 += part.0;
+    total.1 += part.1;
+}
+
+/// The weighted mean of the blocks' correlations (0 without a weight).
+fn ratio((num, den): (f64, f64)) -> f64 {
+    if den > 0.0 { num / den } else { 0.0 }
+}
+
+/// The channels of a patch as long as `template` on a `res x res` grid: its whole number of
+/// `res x res` parts, from 1 to [`MAX_CHANNELS`].
+fn channels_of(template: &[f32], res: usize) -> usize {
+    (template.len() / (res * res).max(1)).clamp(1, MAX_CHANNELS)
 }
 
 /// The blocks per side of a [`BlockCorrelation`] asked for `cells` on a `res x res` grid: at
@@ -302,16 +355,19 @@ type BlockSums = [[f64; 6]; MAX_BLOCKS * MAX_BLOCKS];
 /// summing it again.
 #[derive(Clone, Debug)]
 pub struct PatchSums {
-    /// `(res, cells)` of the grid the sums are on (`None`: none made).
+    /// `(res, cells)` of the grid the sums are on (`None`: none made), and its channels.
     geometry: Option<(usize, usize)>,
-    blocks: BlockSums,
+    channels: usize,
+    /// Each channel's.
+    blocks: [BlockSums; MAX_CHANNELS],
 }
 
 impl Default for PatchSums {
     fn default() -> Self {
         PatchSums {
             geometry: None,
-            blocks: [[0.0; 6]; MAX_BLOCKS * MAX_BLOCKS],
+            channels: 0,
+            blocks: [[[0.0; 6]; MAX_BLOCKS * MAX_BLOCKS]; MAX_CHANNELS],
         }
     }
 }

@@ -103,7 +103,8 @@ impl Context {
     /// resets the parameters to the identity.
     pub fn set_region(&mut self, q: &Quad, res: usize, layout: GridLayout) -> crate::Result<()> {
         let identity = self.problem.set_region(q, res, layout)?;
-        self.work.resize(res * res, res * res, self.problem.dof());
+        let n = self.problem.len();
+        self.work.resize(n, n, self.problem.dof());
         self.state = State::default();
         self.state.set_params(identity);
         Ok(())
@@ -128,6 +129,12 @@ impl Context {
             self.problem.select(&kept);
             self.work.resize(kept.len(), whole, self.problem.dof());
         }
+    }
+
+    /// Samples `channels` (1, or 3 for colour) from the next region on
+    /// ([`Problem::set_channels`]).
+    pub fn set_channels(&mut self, channels: usize) {
+        self.problem.set_channels(channels);
     }
 
     /// Which points the searches read from the next template on ([`super::spi`]).

@@ -54,6 +54,10 @@ pub struct Problem {
     moments: Option<GridMoments>,
     /// Which points the searches read ([`super::spi`]).
     selection: Selection,
+    /// The channels sampled (1, or 3 for colour): the grid is the `res x res` points once per
+    /// channel, channel after channel, each part read from its plane of the frame
+    /// ([`crate::imaging::ImageView::with_planes`]).
+    channels: usize,
     /// The whole grid and template when the searches read only part of it (the arrays above
     /// then hold that part).
     whole: Option<WholeGrid>,
@@ -99,8 +103,19 @@ impl Problem {
             dwdp0_zero: [false; 2 * MAX_DOF],
             moments: None,
             selection: Selection::default(),
+            channels: 1,
             whole: None,
         }
+    }
+
+    /// Samples `channels` (1, or 3 for colour) from the next region on ([`Problem::set_region`]).
+    pub fn set_channels(&mut self, channels: usize) {
+        self.channels = channels.max(1);
+    }
+
+    /// The channels sampled: the grid is [`Problem::len`] / `channels` points once per channel.
+    pub fn channels(&self) -> usize {
+        self.channels
     }
 
     /// Which points the searches read from the next template on ([`super::spi`]).
@@ -182,8 +197,8 @@ impl Problem {
         layout: GridLayout,
     ) -> crate::Result<Params> {
         q.validate()?;
-        // The whole grid again (a selection is made on each template).
-        let n = res * res;
+        // The whole grid again (a selection is made on each template), once per channel.
+        let n = res * res * self.channels;
         self.whole = None;
         for v in self.per_point() {
             v.resize(n, 0.0);
@@ -211,13 +226,27 @@ impl Problem {
                 self.grid_v[r * res + c] = u.y as f32;
             }
         }
+        // The other channels' parts: the same points.
+        let one = res * res;
+        for v in [
+            &mut self.grid_x,
+            &mut self.grid_y,
+            &mut self.grid_u,
+            &mut self.grid_v,
+        ] {
+            for c in 1..self.channels {
+                v.copy_within(0..one, c * one);
+            }
+        }
         self.unit = h;
         self.template_corners = nq;
         let identity = self.ssm.identity();
         self.ssm
             .jacobian(&identity, &self.grid_x, &self.grid_y, &mut self.dwdp0);
         self.set_zero_rows();
-        self.moments = if self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj() {
+        // The moments sum over one `res x res` grid: not on a colour grid.
+        let moments = self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj();
+        self.moments = if moments && self.channels == 1 {
             GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
         } else {
             None
@@ -339,12 +368,13 @@ impl Problem {
     pub fn template(&self) -> &[f32] {
         &self.template
     }
-    /// The whole template, `res x res` (also when the searches read part of it).
+    /// The whole template, `res x res` once per channel (also when the searches read part of
+    /// it).
     pub fn whole_template(&self) -> &[f32] {
         self.whole.as_ref().map_or(&self.template, |w| &w.template)
     }
-    /// The whole sampling grid, `res x res` in normalised coordinates (also when the searches
-    /// read part of it: [`Problem::grid`] is then that part).
+    /// The whole sampling grid, `res x res` in normalised coordinates once per channel (also
+    /// when the searches read part of it: [`Problem::grid`] is then that part).
     pub fn whole_grid(&self) -> (&[f32], &[f32]) {
         self.whole
             .as_ref()

@@ -50,8 +50,12 @@ enum Raw<'a> {
 }
 
 impl<'a> Raw<'a> {
-    fn of(input: FrameInput<'a>) -> Self {
+    /// Plane `plane` of `input` as a tracker of `channels` reads it: a grey tracker reads a
+    /// colour frame's grey image, a colour tracker its channel `plane`.
+    fn of(input: FrameInput<'a>, channels: usize, plane: usize) -> Self {
         match input {
+            FrameInput::Colour(c) if channels == 3 => Raw::U8((&c.channels[plane]).into()),
+            FrameInput::Colour(c) => Raw::U8((&c.gray).into()),
             FrameInput::Gray8(img) => Raw::U8(img.into()),
             FrameInput::View8(img) => Raw::U8(img),
             FrameInput::Gray32(img) => Raw::F32(img.into()),
@@ -63,8 +67,14 @@ impl<'a> Raw<'a> {
 /// See the module's documentation.
 #[derive(Clone, Debug)]
 pub struct FrameSource {
-    /// The finest level's region, smoothed by the tracker's kernel, and its coarser levels.
+    /// The finest level's region, smoothed by the tracker's kernel, and its coarser levels:
+    /// the grey frame's, or a colour tracker's first channel's.
     pre: Preprocessor,
+    /// A colour tracker's second and third channels, made as `pre` (empty for grey).
+    others: Vec<Preprocessor>,
+    /// Whether the frame last prepared had its own channels (a grey frame given to a colour
+    /// tracker is read as three equal ones, from `pre`).
+    colour: bool,
     /// The coarser levels of a frame the caller smoothed.
     copy: Preprocessor,
     /// The coarse pyramid levels made of each region.
@@ -82,12 +92,27 @@ impl FrameSource {
     pub fn new(kernel: GaussianKernel, levels: usize) -> Self {
         FrameSource {
             pre: Preprocessor::new(kernel),
+            others: Vec::new(),
+            colour: false,
             copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
             levels,
             built: false,
             region: Rect::default(),
             stamp: 0,
         }
+    }
+
+    /// The same source reading `channels` (1, or 3: a colour tracker's, whose views have the
+    /// frame's three channels as planes, [`ImageView::with_planes`]).
+    pub fn with_channels(mut self, channels: usize) -> Self {
+        let more = if channels == 3 { 2 } else { 0 };
+        self.others = vec![self.pre.clone(); more];
+        self
+    }
+
+    /// The channels its views have (1 or 3).
+    pub fn channels(&self) -> usize {
+        1 + self.others.len()
     }
 
     /// The coarser pyramid levels made of each region.
@@ -113,10 +138,20 @@ impl FrameSource {
         self.stamp = new_stamp();
         self.built = false;
         self.region = region;
-        match Raw::of(input) {
-            Raw::U8(img) => self.pre.process_part(img, region, part),
-            Raw::F32(img) => self.pre.process_part(img, region, part),
-            Raw::Smoothed(_) => {}
+        let channels = self.channels();
+        self.colour = channels == 3 && input.colour().is_some();
+        let planes = if self.colour { channels } else { 1 };
+        for c in 0..planes {
+            let pre = if c == 0 {
+                &mut self.pre
+            } else {
+                &mut self.others[c - 1]
+            };
+            match Raw::of(input, channels, c) {
+                Raw::U8(img) => pre.process_part(img, region, part),
+                Raw::F32(img) => pre.process_part(img, region, part),
+                Raw::Smoothed(_) => {}
+            }
         }
     }
 
@@ -127,17 +162,25 @@ impl FrameSource {
             return;
         }
         self.built = true;
-        let pre = match Raw::of(input) {
-            Raw::Smoothed(img) => {
-                self.copy.process(img, self.region);
-                &mut self.copy
-            }
-            _ => {
-                complete(&mut self.pre, input);
-                &mut self.pre
-            }
-        };
-        pre.build_levels(self.levels);
+        if let Raw::Smoothed(img) = Raw::of(input, 1, 0) {
+            self.copy.process(img, self.region);
+            self.copy.build_levels(self.levels);
+            return;
+        }
+        complete(self.planes_mut(), input);
+        let levels = self.levels;
+        for pre in self.planes_mut() {
+            pre.build_levels(levels);
+        }
+    }
+
+    /// The pre-processors of the planes the last frame has (its channels, or the grey).
+    fn planes_mut(&mut self) -> Planes<'_> {
+        let n = if self.colour { self.others.len() } else { 0 };
+        Planes {
+            first: &mut self.pre,
+            others: &mut self.others[..n],
+        }
     }
 
     /// The region last pre-processed, in whole pixels.
@@ -150,12 +193,25 @@ impl FrameSource {
         self.pre.is_whole()
     }
 
-    /// Pyramid level `level` (0: the finest) of the frame last prepared from `input`.
+    /// Pyramid level `level` (0: the finest) of the frame last prepared from `input`; for a
+    /// colour tracker a view of three planes (a grey frame's three times).
     pub fn view<'a>(&'a self, input: FrameInput<'a>, level: usize) -> ImageView<'a> {
-        match input {
+        let v = match input {
             FrameInput::Smoothed(img) if level == 0 => img.view().with_stamp(self.stamp),
             FrameInput::Smoothed(_) => self.copy.level_view(level),
             _ => self.pre.level_view(level),
+        };
+        self.with_planes(v, level)
+    }
+
+    /// `v` (plane 0 of `level`) with the other planes of a colour tracker.
+    fn with_planes<'a>(&'a self, v: ImageView<'a>, level: usize) -> ImageView<'a> {
+        match self.others.as_slice() {
+            [g, b] if self.colour => {
+                v.with_planes(g.level_view(level).pixels(), b.level_view(level).pixels())
+            }
+            [_, _] => v.with_planes(v.pixels(), v.pixels()),
+            _ => v,
         }
     }
 
@@ -163,10 +219,7 @@ impl FrameSource {
     /// smoothed only in part when `part` (as [`FrameSource::prepare_part`] left it).
     pub fn reader<'a>(&'a mut self, input: FrameInput<'a>, part: bool) -> Reader<'a> {
         if part && !matches!(input, FrameInput::Smoothed(_)) {
-            Reader::Part {
-                pre: &mut self.pre,
-                input,
-            }
+            Reader::Part { src: self, input }
         } else {
             Reader::Whole(self.view(input, 0))
         }
@@ -181,7 +234,7 @@ impl FrameSource {
             self.prepare(input, region_around(q, margin));
         } else if !self.pre.holds(&reads(q, 0.0)) {
             // A region smoothed in part, by another search than the one whose end is kept.
-            complete(&mut self.pre, input);
+            complete(self.planes_mut(), input);
         }
     }
 
@@ -192,12 +245,30 @@ impl FrameSource {
     }
 }
 
-/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part.
-fn complete(pre: &mut Preprocessor, input: FrameInput<'_>) {
-    match Raw::of(input) {
-        Raw::U8(img) => pre.complete(img),
-        Raw::F32(img) => pre.complete(img),
-        Raw::Smoothed(_) => {}
+/// The pre-processors of a frame's planes: the first, and a colour frame's two others.
+struct Planes<'a> {
+    first: &'a mut Preprocessor,
+    others: &'a mut [Preprocessor],
+}
+
+impl<'a> IntoIterator for Planes<'a> {
+    type Item = &'a mut Preprocessor;
+    type IntoIter = std::iter::Chain<std::iter::Once<Self::Item>, std::slice::IterMut<'a, Preprocessor>>;
+    fn into_iter(self) -> Self::IntoIter {
+        std::iter::once(self.first).chain(self.others.iter_mut())
+    }
+}
+
+/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part, in each
+/// plane (plane `c` of `input` as [`Raw::of`] reads it).
+fn complete(planes: Planes<'_>, input: FrameInput<'_>) {
+    let channels = if planes.others.is_empty() { 1 } else { 3 };
+    for (c, pre) in planes.into_iter().enumerate() {
+        match Raw::of(input, channels, c) {
+            Raw::U8(img) => pre.complete(img),
+            Raw::F32(img) => pre.complete(img),
+            Raw::Smoothed(_) => {}
+        }
     }
 }
 
@@ -207,7 +278,7 @@ fn complete(pre: &mut Preprocessor, input: FrameInput<'_>) {
 pub enum Reader<'a> {
     Whole(ImageView<'a>),
     Part {
-        pre: &'a mut Preprocessor,
+        src: &'a mut FrameSource,
         input: FrameInput<'a>,
     },
 }
@@ -217,16 +288,16 @@ impl Reader<'_> {
     pub fn view(&self) -> ImageView<'_> {
         match self {
             Reader::Whole(v) => *v,
-            Reader::Part { pre, .. } => pre.view(),
+            Reader::Part { src, .. } => src.with_planes(src.pre.view(), 0),
         }
     }
 
     /// Makes sure that the patch with corners `q` reads smoothed pixels only.
     pub fn cover(&mut self, q: &Quad) {
-        if let Reader::Part { pre, input } = self
-            && !pre.holds(&reads(q, 0.0))
+        if let Reader::Part { src, input } = self
+            && !src.pre.holds(&reads(q, 0.0))
         {
-            complete(pre, *input);
+            complete(src.planes_mut(), *input);
         }
     }
 }
@@ -283,9 +354,9 @@ mod tests {
         src.prepare_part(input, region, Rect::new(10.0, 10.0, 30.0, 30.0));
         let mut reader = src.reader(input, true);
         reader.cover(&Quad::from_rect(15.0, 15.0, 5.0, 5.0));
-        assert!(matches!(reader, Reader::Part { ref pre, .. } if !pre.is_whole()));
+        assert!(matches!(reader, Reader::Part { ref src, .. } if !src.is_whole()));
         reader.cover(&q);
-        assert!(matches!(reader, Reader::Part { ref pre, .. } if pre.is_whole()));
+        assert!(matches!(reader, Reader::Part { ref src, .. } if src.is_whole()));
         assert!(matches!(src.reader(s, true), Reader::Whole(_)));
     }
 

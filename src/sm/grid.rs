@@ -163,6 +163,8 @@ impl Grid {
     /// Lays the patches on the lattice under the context's parameters and takes their templates
     /// from `img` (the frame the estimate is on).
     pub fn retemplate(&mut self, ctx: &Context, img: &ImageView) {
+        // The patches of a colour tracker read its first channel.
+        let img = &img.plane(0);
         let p = ctx.params();
         let m = ctx.pixel_matrix(&p);
         let s2 = self.size * self.size;
@@ -200,6 +202,7 @@ impl Grid {
     /// Patch `k`'s search from `start`: where its template is in `img` (`None` when it does not
     /// settle, leaves far, or is flat).
     fn track_patch(&mut self, img: &ImageView, k: usize, start: Point) -> Option<Point> {
+        let img = &img.plane(0);
         let [a, b, c] = self.hinv[k]?;
         let s2 = self.size * self.size;
         let far = 2.0 * self.size as f64;

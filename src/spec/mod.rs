@@ -9,7 +9,7 @@ mod tracker_params;
 
 pub use tracker_params::{
     AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, GridLayout, LossPolicy, OFF_ON, ParamValue,
-    SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    Channels, SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the
@@ -206,11 +206,17 @@ impl TrackerSpec {
     }
 
     /// `sm_am_ssm` (or the whole tracker's name), as used in result file names; a composite's
-    /// `cascade:a+b` becomes `cascade-a+b`.
+    /// `cascade:a+b` becomes `cascade-a+b`; a colour tracker's (`channels = rgb`) ends in
+    /// `_rgb`.
     pub fn label(&self) -> String {
         match self {
             TrackerSpec::Registration(r) => {
-                format!("{}_{}_{}", r.sm.replace(':', "-"), r.am, r.ssm)
+                // A colour tracker's label says so (its runs beside the grey one's in a table).
+                let colour = match r.params.channels {
+                    Channels::Gray => "",
+                    Channels::Rgb => "_rgb",
+                };
+                format!("{}_{}_{}{colour}", r.sm.replace(':', "-"), r.am, r.ssm)
             }
             TrackerSpec::Whole(w) => w.tracker.clone(),
         }

@@ -149,6 +149,13 @@ macro_rules! tracker_params {
 tracker_params! {
     res: usize = int(2.0, 1000.0, 50.0),
         "sampling resolution: res x res points on the target";
+    /// MTF's multi-channel trackers: with `rgb` the grid is sampled in each of the frame's red,
+    /// green and blue channels (the same points, smoothed alike), and the AM compares the
+    /// three patches channel by channel: the sum of the three similarities (SSD's sum of
+    /// squares is the same either way). A grey frame is read as three equal channels; the
+    /// learning trackers read grey.
+    channels: Channels = choice(Channels::NAMES),
+        "gray (the frame's luma), or rgb: sample the red, green and blue channels on the grid and sum the AM's similarity over them (targets that differ from their surroundings in hue)";
     max_iters: usize = int(1.0, 10_000.0, 30.0),
         "maximum iterations per frame";
     eps: f64 = float(0.0, 1000.0, 0.001),
@@ -259,6 +266,31 @@ tracker_params! {
         "right edge of the part left out, as a fraction of the target's width";
     spi_mask_bottom: f64 = float(0.0, 1.0, 0.0),
         "bottom edge of the part left out, as a fraction of the target's height";
+}
+
+/// The channels a registration tracker samples (`channels`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Channels {
+    /// The frame's grey image (luma).
+    #[default]
+    Gray,
+    /// Red, green and blue, each its patch on the same grid.
+    Rgb,
+}
+choice_param!(Channels {
+    Gray = "gray",
+    Rgb = "rgb",
+});
+
+impl Channels {
+    /// How many planes it samples.
+    pub fn count(self) -> usize {
+        match self {
+            Channels::Gray => 1,
+            Channels::Rgb => 3,
+        }
+    }
 }
 
 /// Selective pixel integration (`spi`).

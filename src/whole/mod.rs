@@ -117,10 +117,11 @@ impl<T: WholeTracker> VisualTracker for T {
         let (w, h) = input.size();
         crate::visual_tracker::check_initial_region(quad, w, h)?;
         self.base_mut().start(quad, T::MIN_SIDE)?;
-        self.start(input, quad)
+        // The learning trackers read grey (a colour frame's grey image).
+        self.start(input.gray(), quad)
     }
     fn update(&mut self, input: FrameInput<'_>, observer: &mut dyn Observer) -> FrameOutcome {
-        self.track(input, observer)
+        self.track(input.gray(), observer)
     }
     fn set_corners(&mut self, quad: &Quad) -> Result<()> {
         self.base_mut().set_corners(quad)?;
@@ -440,6 +441,7 @@ pub(crate) fn frame_f32(input: FrameInput<'_>) -> Cow<'_, GrayF32> {
             data: i.data.iter().map(|&v| v as f32).collect(),
         }),
         FrameInput::Gray32(i) | FrameInput::Smoothed(i) => Cow::Borrowed(i),
+        FrameInput::Colour(c) => Cow::Owned(c.gray.to_f32()),
     }
 }
 

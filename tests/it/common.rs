@@ -20,6 +20,12 @@ pub fn texture(name: &str) -> GrayU8 {
     load_gray(&root().join("assets/textures").join(name)).expect("bundled texture")
 }
 
+/// A bundled texture in colour (its grey is [`texture`]'s).
+pub fn colour_texture(name: &str) -> regtrack::imaging::ColourU8 {
+    regtrack::imaging::load_colour(&root().join("assets/textures").join(name))
+        .expect("bundled texture")
+}
+
 /// A fresh empty folder under the system's temporary folder, removed when dropped.
 pub struct TempDir(pub PathBuf);
 

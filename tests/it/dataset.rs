@@ -79,10 +79,15 @@ fn frames_read_ahead_come_in_order_with_their_errors() {
     std::fs::write(d.path().join("seq/frame00007.png"), b"not a png").unwrap();
     let s = Sequence::open(&gt).unwrap();
     let mut seen = Vec::new();
-    let none: Option<()> = s.each_frame(1..12, true, |i, frame| {
+    // In colour: a grey file's channels are its grey.
+    let none: Option<()> = s.each_frame(1..12, true, true, |i, frame| {
         match frame {
             // Frame i holds the gray level i + 1 (`mtf_layout`).
-            Ok(img) => seen.push((i, img.data[0])),
+            Ok(regtrack::imaging::Frame8::Colour(c)) => {
+                assert!(c.channels.iter().all(|p| p == &c.gray));
+                seen.push((i, c.gray.data[0]))
+            }
+            Ok(other) => panic!("a grey frame where colour was asked for: {other:?}"),
             Err(e) => {
                 assert!(e.to_string().contains("frame00007.png"), "{e}");
                 seen.push((i, 0));
@@ -97,21 +102,21 @@ fn frames_read_ahead_come_in_order_with_their_errors() {
     assert_eq!(seen, want);
     // A break at the fourth frame: its value back, no frame after it seen.
     let mut count = 0;
-    let stopped = s.each_frame(0..12, true, |i, _| {
+    let stopped = s.each_frame(0..12, true, false, |i, _| {
         count += 1;
         if i == 3 { Break(i * 10) } else { Continue(()) }
     });
     assert_eq!((stopped, count), (Some(30), 4));
     // One frame or none, or not ahead: read in turn.
     assert_eq!(
-        s.each_frame(5..6, true, |i, f| Break((i, f.is_ok()))),
+        s.each_frame(5..6, true, false, |i, f| Break((i, f.is_ok()))),
         Some((5, true))
     );
     assert_eq!(
-        s.each_frame(5..9, false, |i, f| Break((i, f.is_ok()))),
+        s.each_frame(5..9, false, false, |i, f| Break((i, f.is_ok()))),
         Some((5, true))
     );
-    assert_eq!(s.each_frame(5..5, true, |_, _| Break(())), None);
+    assert_eq!(s.each_frame(5..5, true, false, |_, _| Break(())), None);
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! Generic recovery tests: every AM x SSM x SM from the registries recovers a known warp on a real
 //! texture (the Baker-Matthews protocol).
 
-use crate::common::{full_tests, paper_settings, texture};
+use crate::common::{colour_texture, full_tests, paper_settings, texture};
 use rayon::prelude::*;
 use regtrack::geometry::{Quad, alignment_error};
 use regtrack::observe::NoObserver;
@@ -28,13 +28,17 @@ fn recovered(
     seed: u64,
     own_optimum: bool,
 ) -> (usize, f64) {
-    let img = texture("skimage_coffee.png");
-    let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    // A colour tracker (`channels = rgb`) is given the texture in colour.
+    let (grey, colour) = (texture("skimage_coffee.png"), colour_texture("skimage_coffee.png"));
     let mut tracker = Tracker::new(spec).unwrap();
-    tracker.initialize(FrameInput::Gray8(&img), &truth).unwrap();
-    let optimum = tracker
-        .update(FrameInput::Gray8(&img), &mut NoObserver)
-        .corners;
+    let input = if tracker.channels() == 3 {
+        FrameInput::Colour(&colour)
+    } else {
+        FrameInput::Gray8(&grey)
+    };
+    let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
+    tracker.initialize(input, &truth).unwrap();
+    let optimum = tracker.update(input, &mut NoObserver).corners;
     let goal = if own_optimum { optimum } else { truth };
     let model = ssm::build(&spec.registration().unwrap().ssm).unwrap();
     let mut rng = Rng::new(seed);
@@ -43,7 +47,7 @@ fn recovered(
         let p = ssm::random_warp(&*model, &truth, sigma, &mut rng).unwrap();
         let start = ssm::warp_quad(&*model, &p, &truth);
         tracker.set_corners(&start).unwrap();
-        let out = tracker.update(FrameInput::Gray8(&img), &mut NoObserver);
+        let out = tracker.update(input, &mut NoObserver);
         assert!(out.corners.is_finite());
         if out.status == TrackStatus::Tracking && alignment_error(&out.corners, &goal) < tol {
             ok += 1;
@@ -663,4 +667,40 @@ fn every_am_recovers_a_known_warp_reading_part_of_the_grid() {
     ilm.set_param("spi", "gradient").unwrap();
     let err = Tracker::new(&ilm).unwrap_err().to_string();
     assert!(err.contains("illumination model"), "{err}");
+}
+
+/// Colour (`channels = rgb`, the texture's three channels, each AM channel by channel): every
+/// AM with every gradient method (and the sampling ones with REGTRACK_FULL_TESTS=1) recovers a
+/// known warp of the 8-DOF homography as on grey.
+#[test]
+fn every_am_recovers_a_known_warp_in_colour() {
+    let trials = if full_tests() { 100 } else { 20 };
+    let mut combos = Vec::new();
+    for s in sm::REGISTRY {
+        let sampled = sampling(s.name);
+        if sampled && !full_tests() {
+            continue;
+        }
+        for a in am::REGISTRY {
+            let Ok(mut spec) = TrackerSpec::from_names(s.name, a.name, "homography") else {
+                continue;
+            };
+            spec.set_param("channels", "rgb").unwrap();
+            assert_eq!(Tracker::new(&spec).unwrap().channels(), 3);
+            combos.push((spec, sampled));
+        }
+    }
+    let failures: Vec<(String, usize, f64)> = combos
+        .par_iter()
+        .map(|(spec, sampled)| {
+            let r = spec.registration().unwrap();
+            let (n, tol) = if *sampled { (10, 3.0) } else { (trials, 0.1) };
+            let bound = optimum_bias(&r.sm, &r.am, &r.ssm);
+            let (ok, bias) = recovered(spec, 2.0, n, tol, 42, bound.is_some());
+            let far = bound.map_or(0.0, |b| if bias > b { bias } else { 0.0 });
+            (spec.label(), n - ok, far)
+        })
+        .filter(|(_, missed, far)| *missed > trials / 20 || *far > 0.0)
+        .collect();
+    assert!(failures.is_empty(), "missed trials: {failures:?}");
 }

@@ -9,7 +9,9 @@ import numpy.typing as npt
 __version__: str
 
 Frame = Union[npt.NDArray[np.uint8], npt.NDArray[np.float32]]
-"""Grey (H, W) or BGR (H, W, 3) (OpenCV's order), uint8 or float32, any strides."""
+"""Grey (H, W) or BGR (H, W, 3) (OpenCV's order), uint8 or float32, any strides. A tracker
+with ``channels='rgb'`` reads a BGR frame's three channels (a float one's values rounded into
+0..255); every other tracker its grey."""
 
 Corners = Union[npt.ArrayLike, Seq[Seq[float]]]
 """Four points (x, y), shape (4, 2): top-left, top-right, bottom-right, bottom-left."""
@@ -56,7 +58,8 @@ class Tracker:
 class Sequence:
     """A sequence in any layout the command line reads, as ``(frame, ground_truth)`` pairs."""
 
-    def __init__(self, path: Union[str, PathLike[str]]) -> None: ...
+    def __init__(self, path: Union[str, PathLike[str]], *, colour: bool = False) -> None:
+        """With ``colour``, frames are BGR (H, W, 3) uint8 (for ``channels='rgb'``)."""
     @property
     def name(self) -> str: ...
     @property
@@ -67,7 +70,8 @@ class Sequence:
     def __len__(self) -> int: ...
     def __getitem__(
         self, i: int
-    ) -> Tuple[npt.NDArray[np.uint8], Optional[npt.NDArray[np.float64]]]: ...
+    ) -> Tuple[npt.NDArray[np.uint8], Optional[npt.NDArray[np.float64]]]:
+        """Frame ``i`` (grey (H, W), or BGR (H, W, 3) with ``colour``) and its corners."""
     def __iter__(
         self,
     ) -> Iterator[Tuple[npt.NDArray[np.uint8], Optional[npt.NDArray[np.float64]]]]: ...

@@ -11,6 +11,9 @@ light that changes across the target, partial occlusion):
     python3 docs/heldout.py render OUT           # OUT/tune/*.txt, OUT/heldout/*.txt (~1 min)
     python3 docs/heldout.py render-appearance OUT  # the same halves under strong changes of
                                                  # light (APPEARANCE_KINDS; for `pca`)
+    python3 docs/heldout.py render-hue OUT       # the same halves in colour, the texture's
+                                                 # pattern mostly in hue (HUE_KINDS; for
+                                                 # `channels = rgb`)
     python3 docs/heldout.py eval OUT NAME [regtrack eval options...]
         # runs `regtrack eval` on both halves into OUT/runs/NAME/{tune,heldout}
     python3 docs/heldout.py table OUT NAME...    # SR@5 by kind and half, frame-weighted
@@ -192,7 +195,48 @@ APPEARANCE_KINDS = [
 ]
 
 
-def render(out, kinds_of_footage=KINDS):
+# The hue set (`render-hue`): every texture of the halves recoloured so that its pattern is
+# mostly in hue (HUE_LUMA of its contrast left in luma, the rest along a red-green axis of
+# constant luma), on a background whose pattern is along the blue-yellow axis: in grey both
+# lose most of their contrast. Faster and slower profiles of KINDS.
+HUE_KINDS = [k for k in KINDS if k[1] in ("m1x2", "m2", "m3b", "uc", "pd", "rt", "m1", "book")]
+HUE_LUMA = 0.15
+# BT.601 luma weights (as regtrack's grey) and two directions of constant luma.
+LUMA = np.array([0.299, 0.587, 0.114])
+RED_GREEN = np.array([0.587, -0.299, 0.0])
+BLUE_YELLOW = np.cross(LUMA, RED_GREEN)
+
+
+def recolour(grey, axis):
+    """A grey texture (0..255) as colour: HUE_LUMA of its contrast in luma, the rest along
+    `axis` (of constant luma), scaled to stay within 0..255 around mid-grey."""
+    g = grey.astype(np.float64)
+    d = (g - g.mean()) / max(g.std(), 1e-6)
+    axis = axis / np.abs(axis).max()
+    rgb = 128.0 + 40.0 * HUE_LUMA * d[..., None] + 70.0 * d[..., None] * axis
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+def hue_textures(tex_dir):
+    """The recoloured textures (target and background versions) in `tex_dir`; returns the
+    path of a texture's or background's recoloured file."""
+    def path(texture, axis_name):
+        src = (
+            os.path.join(tex_dir, texture + ".png")
+            if texture in PROCEDURAL
+            else find(TEXTURE_DIRS, texture)
+        )
+        base = os.path.basename(src).replace(".png", "")
+        out = os.path.join(tex_dir, f"{base}_{axis_name}.png")
+        if not os.path.exists(out):
+            grey = np.asarray(Image.open(src).convert("L"))
+            axis = RED_GREEN if axis_name == "rg" else BLUE_YELLOW
+            Image.fromarray(recolour(grey, axis)).save(out)
+        return out
+    return path
+
+
+def render(out, kinds_of_footage=KINDS, hue=False):
     tex_dir = os.path.join(out, "textures")
     os.makedirs(tex_dir, exist_ok=True)
     for k, (name, make) in enumerate(PROCEDURAL.items()):
@@ -200,6 +244,7 @@ def render(out, kinds_of_footage=KINDS):
         if not os.path.exists(path):
             img = make(np.random.default_rng(1000 + k))
             Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(path)
+    coloured = hue_textures(tex_dir)
     kinds = {}
     for half, textures in HALVES.items():
         root = os.path.join(out, half)
@@ -220,8 +265,11 @@ def render(out, kinds_of_footage=KINDS):
                     bg = BACKGROUNDS[1]
                 if os.path.exists(os.path.join(root, name + ".txt")):
                     continue
+                bg_path = find(TEXTURE_DIRS, bg)
+                if hue:
+                    tex, bg_path = coloured(texture, "rg"), coloured(bg, "by")
                 cmd = [
-                    BIN, "synth", "--texture", tex, "--background", find(TEXTURE_DIRS, bg),
+                    BIN, "synth", "--texture", tex, "--background", bg_path,
                     "--motion", find(MOTION_DIRS, motion + ".txt"), "--out", root,
                     "--name", name, "--seed", str(7 + 13 * t + k),
                 ] + opts
@@ -326,6 +374,8 @@ def main():
         render(out)
     elif cmd == "render-appearance":
         render(out, APPEARANCE_KINDS)
+    elif cmd == "render-hue":
+        render(out, HUE_KINDS, hue=True)
     elif cmd == "eval":
         evaluate(out, sys.argv[3], sys.argv[4:])
     elif cmd == "table":

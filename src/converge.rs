@@ -7,7 +7,6 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{Point, Quad, alignment_error};
-use crate::imaging::GrayU8;
 use crate::observe::NoObserver;
 use crate::rng::Rng;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
@@ -66,7 +65,7 @@ pub fn perturbed(truth: &Quad, sigma: f64, seed: u64, k: usize) -> Quad {
 /// Runs the experiment for `spec` on `frame` with ground truth `truth`.
 pub fn frequency_of_convergence(
     spec: &TrackerSpec,
-    frame: &GrayU8,
+    frame: &crate::imaging::Frame8,
     truth: &Quad,
     c: &ConvergeSpec,
 ) -> Result<ConvergeCurve> {
@@ -81,13 +80,13 @@ pub fn frequency_of_convergence(
         for k in 0..c.starts {
             // A fresh tracker per start: nothing of one start's history reaches the next.
             let mut t = Tracker::new(spec)?;
-            t.initialize(FrameInput::Gray8(frame), truth)?;
+            t.initialize(FrameInput::of(frame), truth)?;
             let start = perturbed(truth, sigma, c.seed, k);
             if t.set_corners(&start).is_err() {
                 // A start the tracker cannot take (folded corners) counts as not converged.
                 continue;
             }
-            let out = t.update(FrameInput::Gray8(frame), &mut NoObserver);
+            let out = t.update(FrameInput::of(frame), &mut NoObserver);
             let e = alignment_error(&out.corners, truth);
             if out.status == TrackStatus::Tracking && e <= c.threshold {
                 converged += 1;

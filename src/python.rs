@@ -11,7 +11,7 @@
 //! command line's text. A loss of track is a status, not an exception.
 
 use crate::geometry::{Point, Quad};
-use crate::imaging::{GrayF32, GrayU8, Image, luma};
+use crate::imaging::{ColourU8, GrayF32, GrayU8, Image, luma};
 use crate::observe::{NoObserver, Recorder};
 use crate::status::TrackStatus;
 use crate::tracker::{FrameInput, Tracker, TrackerSpec};
@@ -41,13 +41,18 @@ fn library_error(e: crate::Error) -> PyErr {
 struct FrameBuffers {
     gray: GrayU8,
     float: GrayF32,
-    /// Which of the two holds the frame.
+    /// A BGR frame's channels, for a tracker that reads colour.
+    colour: ColourU8,
+    /// Which one holds the frame.
     is_float: bool,
+    is_colour: bool,
 }
 
 impl FrameBuffers {
     fn input(&self) -> FrameInput<'_> {
-        if self.is_float {
+        if self.is_colour {
+            FrameInput::Colour(&self.colour)
+        } else if self.is_float {
             FrameInput::Gray32(&self.float)
         } else {
             FrameInput::Gray8(&self.gray)
@@ -56,7 +61,20 @@ impl FrameBuffers {
 
     /// Copies (and for colour, converts to grey) a numpy frame.
     fn load(&mut self, frame: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.load_as(frame, false)
+    }
+
+    /// [`FrameBuffers::load`]; with `colour` a BGR frame (OpenCV's order) keeps its channels
+    /// as well (a float one's values rounded into 0..255), for a tracker with `channels = rgb`.
+    fn load_as(&mut self, frame: &Bound<'_, PyAny>, colour: bool) -> PyResult<()> {
         let expected = "a numpy array of uint8 or float32, grey (H, W) or BGR (H, W, 3)";
+        self.is_colour = false;
+        if colour && let Some(done) = self.load_colour(frame, expected)? {
+            self.is_colour = done;
+            if done {
+                return Ok(());
+            }
+        }
         if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, u8>>() {
             self.is_float = false;
             return copy_frame(&mut self.gray, &a, expected, |bgr| {
@@ -78,6 +96,49 @@ impl FrameBuffers {
             "frame must be {expected}, got {what}"
         )))
     }
+}
+
+impl FrameBuffers {
+    /// A BGR frame (uint8 or float32) into `colour`: `Some(true)` when it was one, `Some(false)`
+    /// for a grey frame (read as grey), `None` for another dtype.
+    fn load_colour(&mut self, frame: &Bound<'_, PyAny>, expected: &str) -> PyResult<Option<bool>> {
+        if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, u8>>() {
+            return copy_colour(&mut self.colour, &a, expected, |v| v);
+        }
+        if let Ok(a) = frame.extract::<PyReadonlyArrayDyn<'_, f32>>() {
+            return copy_colour(&mut self.colour, &a, expected, |v| {
+                v.round().clamp(0.0, 255.0) as u8
+            });
+        }
+        Ok(None)
+    }
+}
+
+/// Copies a BGR frame's channels (as bytes by `byte`) and its grey into `dst` (`Some(true)`),
+/// or leaves a grey frame (`Some(false)`). The buffers are reused.
+fn copy_colour<T: numpy::Element + Copy>(
+    dst: &mut ColourU8,
+    a: &PyReadonlyArrayDyn<'_, T>,
+    expected: &str,
+    byte: impl Fn(T) -> u8,
+) -> PyResult<Option<bool>> {
+    let (h, w, c) = shape_of(a.shape(), expected)?;
+    if c != 3 {
+        return Ok(Some(false));
+    }
+    for img in dst.channels.iter_mut().chain([&mut dst.gray]) {
+        fill(img, w, h);
+    }
+    let view = a.as_array();
+    let standard = view.as_standard_layout();
+    let flat = standard.as_slice().expect("standard layout");
+    let [r, g, b] = &mut dst.channels;
+    for (i, bgr) in flat.chunks_exact(3).enumerate() {
+        let (vb, vg, vr) = (byte(bgr[0]), byte(bgr[1]), byte(bgr[2]));
+        (r.data[i], g.data[i], b.data[i]) = (vr, vg, vb);
+        dst.gray.data[i] = luma(vr, vg, vb);
+    }
+    Ok(Some(true))
 }
 
 /// Copies a grey frame into `dst`, or converts a BGR one with `grey` (a C-ordered frame is read
@@ -224,7 +285,7 @@ impl PyTracker {
         {
             return Ok(py.detach(|| timed(|| f(t, FrameInput::View8(view)))));
         }
-        self.frames.load(frame)?;
+        self.frames.load_as(frame, t.channels() == 3)?;
         let frames = &self.frames;
         Ok(py.detach(|| timed(|| f(t, frames.input()))))
     }
@@ -426,25 +487,29 @@ impl PyTracker {
 }
 
 /// A frame (grey, `H x W`) and its ground truth (`4 x 2`, `None` when not annotated).
-type FrameAndTruth<'py> = (Bound<'py, PyArray2<u8>>, Option<Bound<'py, PyArray2<f64>>>);
+type FrameAndTruth<'py> = (Bound<'py, PyAny>, Option<Bound<'py, PyArray2<f64>>>);
 
 /// A sequence (any layout `regtrack track --seq` reads: MTF, a folder of images, POT), as
-/// `(frame, ground_truth)` pairs: the frame as a grey `uint8` array `(H, W)`, the ground truth as
-/// `(4, 2)` corners or `None` where the frame is not annotated.
+/// `(frame, ground_truth)` pairs: the frame as a grey `uint8` array `(H, W)` (with
+/// `colour=True`, BGR `(H, W, 3)` as OpenCV reads it, for a tracker with `channels='rgb'`), the
+/// ground truth as `(4, 2)` corners or `None` where the frame is not annotated.
 ///
 /// >>> seq = regtrack.Sequence("data/bookI.txt")
 /// >>> for frame, gt in seq: ...
 #[pyclass(name = "Sequence", module = "regtrack")]
 pub struct PySequence {
     seq: crate::dataset::Sequence,
+    colour: bool,
 }
 
 #[pymethods]
 impl PySequence {
     #[new]
-    fn new(path: std::path::PathBuf) -> PyResult<Self> {
+    #[pyo3(signature = (path, *, colour=false))]
+    fn new(path: std::path::PathBuf, colour: bool) -> PyResult<Self> {
         Ok(PySequence {
             seq: crate::dataset::Sequence::open(&path).map_err(library_error)?,
+            colour,
         })
     }
 
@@ -486,11 +551,24 @@ impl PySequence {
             )));
         }
         let k = k as usize;
-        let seq = &self.seq;
-        let img = py.detach(|| seq.load_gray(k)).map_err(library_error)?;
-        let frame = numpy::PyArray1::from_vec(py, img.data)
-            .reshape([img.height, img.width])
-            .map_err(|e| Error::new_err(e.to_string()))?;
+        let (seq, colour) = (&self.seq, self.colour);
+        let img = py
+            .detach(|| seq.load_frame(k, colour))
+            .map_err(library_error)?;
+        let shaped = |data: Vec<u8>, shape: &[usize]| {
+            numpy::PyArray1::from_vec(py, data)
+                .reshape(shape)
+                .map(|a| a.into_any())
+                .map_err(|e| Error::new_err(e.to_string()))
+        };
+        let frame = match img {
+            crate::imaging::Frame8::Gray(g) => shaped(g.data, &[g.height, g.width])?,
+            crate::imaging::Frame8::Colour(c) => {
+                let [r, g, b] = &c.channels;
+                let bgr = (0..r.data.len()).flat_map(|i| [b.data[i], g.data[i], r.data[i]]);
+                shaped(bgr.collect(), &[r.height, r.width, 3])?
+            }
+        };
         Ok((frame, self.seq.ground_truth(k).map(|q| quad_to(py, &q))))
     }
 

@@ -55,7 +55,12 @@ fn models() -> Vec<(String, Box<dyn Am>, f32)> {
             None => out.push((e.name.to_string(), e.build.default_model(), 1.0)),
         }
         // Channel by channel (`channels = rgb`): three parts of the patch, a copy each.
-        let step = e.build.params.iter().find(|d| d.name == "bins").map_or(1.0, |d| step(d.default));
+        let step = e
+            .build
+            .params
+            .iter()
+            .find(|d| d.name == "bins")
+            .map_or(1.0, |d| step(d.default));
         let rgb = channels::PerChannel::new(e.build.default_model(), 3);
         out.push((format!("{} rgb", e.name), Box::new(rgb), step));
     }
@@ -77,7 +82,11 @@ fn colour_parts(name: &str, p: &[f32]) -> Vec<f32> {
     }
     let mut turned = p.to_vec();
     turned.rotate_left(p.len() / 7);
-    p.iter().copied().chain(p.iter().rev().copied()).chain(turned).collect()
+    p.iter()
+        .copied()
+        .chain(p.iter().rev().copied())
+        .chain(turned)
+        .collect()
 }
 
 /// Similarity with the `wrt` argument replaced by `x`.
@@ -372,7 +381,10 @@ fn the_moments_capabilities_hold_for_the_models_that_claim_them() {
                 // A colour model sums its channels' products apart: another order of sums.
                 let tol = if name.ends_with(" rgb") { 1e-5 } else { 1e-9 };
                 for (a, b) in h[..s * s].iter().zip(&m) {
-                    assert!((a - b).abs() <= tol * b.abs().max(1.0), "{name} {kind:?}: {a} vs {b}");
+                    assert!(
+                        (a - b).abs() <= tol * b.abs().max(1.0),
+                        "{name} {kind:?}: {a} vs {b}"
+                    );
                 }
                 let d: Vec<f32> = (0..n).map(|_| rng.range(-3.0, 3.0) as f32).collect();
                 let moved: Vec<f32> = c.iter().zip(&d).map(|(a, b)| a + b).collect();
@@ -417,7 +429,8 @@ fn the_moments_capabilities_hold_for_the_models_that_claim_them() {
     // Hessians need each channel's `J^T J`, which the moments do not give.
     assert_eq!(
         claimed,
-        ["lscv", "lscv rgb", "ncc", "pca", "scv", "scv rgb", "ssd", "ssd rgb", "zncc"]
+        [
+            "lscv", "lscv rgb", "ncc", "pca", "scv", "scv rgb", "ssd", "ssd rgb", "zncc"
+        ]
     );
 }
-

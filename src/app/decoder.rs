@@ -1,11 +1,12 @@
-//! Decoding frames: a frame file to a gray image for the trackers and RGBA for display, and a
+//! Decoding frames: a frame file to the trackers' image (in colour, [`Frame8::Colour`]: its grey
+//! for a grey tracker, its channels for `channels = rgb`) and RGBA for display, and a
 //! thread that decodes the next frames while the worker tracks the current one (at most
 //! [`AHEAD`] of them, so memory stays bounded); a frame being decoded is waited for on a
 //! condition variable.
 
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::imaging::{GrayU8, gray_from_dynamic, load_dynamic};
+use crate::imaging::{ColourU8, Frame8, GrayU8, gray_from_dynamic, load_dynamic};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::mpsc::{Sender, channel};
 use std::sync::{Arc, Condvar, Mutex};
@@ -24,8 +25,9 @@ pub struct FrameImage {
 /// the sequence's length: about 4 x 1280 x 720 x 5 bytes).
 pub(super) const AHEAD: usize = 4;
 
-/// Decodes frame `i`: grayscale for the trackers, RGBA for display.
-pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameImage)> {
+/// Decodes frame `i`: in colour for the trackers (their grey is the command line's), RGBA for
+/// display.
+pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(Frame8, FrameImage)> {
     let path = seq.frames.get(i).ok_or_else(|| {
         Error::InvalidParameter(format!(
             "frame {} is out of range (1..{})",
@@ -34,27 +36,42 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(GrayU8, FrameIma
         ))
     })?;
     if let Some(video) = &seq.video {
-        // The trackers' grey, and the colour for display (grey when it cannot be had).
+        // The trackers' grey and the colour (grey when it cannot be had), for display too.
         let gray = seq.load_gray(i)?;
-        let image = match video.frame_rgb(i) {
-            Ok(rgb) if rgb.len() == gray.width * gray.height * 3 => FrameImage {
-                index: i,
-                width: gray.width,
-                height: gray.height,
-                rgba: rgb
-                    .chunks_exact(3)
-                    .flat_map(|c| [c[0], c[1], c[2], 255])
-                    .collect(),
-            },
-            _ => gray_image(i, &gray),
-        };
-        return Ok((gray, image));
+        let (w, h) = (gray.width, gray.height);
+        return Ok(match video.frame_rgb(i) {
+            Ok(rgb) if rgb.len() == w * h * 3 => {
+                let image = FrameImage {
+                    index: i,
+                    width: w,
+                    height: h,
+                    rgba: rgb
+                        .chunks_exact(3)
+                        .flat_map(|c| [c[0], c[1], c[2], 255])
+                        .collect(),
+                };
+                let mut colour = ColourU8::from_rgb(w, h, &rgb).expect("length checked");
+                colour.gray = gray;
+                (Frame8::Colour(colour), image)
+            }
+            _ => {
+                let image = gray_image(i, &gray);
+                (Frame8::Gray(gray), image)
+            }
+        });
     }
     let img = load_dynamic(path)?;
     let gray = gray_from_dynamic(&img);
     let rgba = img.to_rgba8();
+    let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+    let rgb: Vec<u8> = rgba
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mut colour = ColourU8::from_rgb(w, h, &rgb).expect("the image's own size");
+    colour.gray = gray;
     Ok((
-        gray,
+        Frame8::Colour(colour),
         FrameImage {
             index: i,
             width: rgba.width() as usize,
@@ -74,7 +91,7 @@ pub(super) fn gray_image(index: usize, gray: &GrayU8) -> FrameImage {
     }
 }
 
-pub(super) type Decoded = Result<(GrayU8, FrameImage)>;
+pub(super) type Decoded = Result<(Frame8, FrameImage)>;
 
 /// A thread that decodes the next frames while the worker tracks the current one.
 pub(super) struct Ahead {
@@ -206,9 +223,15 @@ mod tests {
         for i in 0..8 {
             let got = ahead.take(&seq, i).unwrap_or_else(|| decode_frame(&seq, i));
             ahead.request(&seq, i + 1..(i + 1 + AHEAD).min(seq.len()));
-            let (gray, image) = got.unwrap();
+            let (frame, image) = got.unwrap();
             let direct = decode_frame(&seq, i).unwrap();
-            assert_eq!(gray.data, direct.0.data, "frame {i}");
+            assert_eq!(frame, direct.0, "frame {i}");
+            // The trackers' grey is the command line's; a grey file's channels are its grey.
+            assert_eq!(frame.gray(), &seq.load_gray(i).unwrap());
+            let Frame8::Colour(c) = &frame else {
+                panic!("frame {i} decoded without its channels")
+            };
+            assert!(c.channels.iter().all(|p| p == frame.gray()));
             assert_eq!(image.index, i);
             let s = ahead.done.0.lock().unwrap();
             assert!(

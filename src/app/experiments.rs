@@ -119,7 +119,9 @@ impl InspectorApp {
         );
         let spawned = self.rt.worker.spawn_task("convergence", move || {
             let run = || -> crate::Result<Vec<(usize, crate::converge::ConvergeCurve)>> {
-                let img = seq.load_gray(frame)?;
+                // In colour when a tracker reads colour.
+                let colour = trackers.iter().any(|(_, t)| t.reads_colour());
+                let img = seq.load_frame(frame, colour)?;
                 let spec = crate::converge::ConvergeSpec {
                     starts,
                     ..Default::default()

@@ -11,6 +11,7 @@ use crate::dataset::{Sequence, demo};
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
 use crate::gt;
+use crate::imaging::Frame8;
 use crate::imaging::GrayU8;
 use crate::observe::{IterationRecord, Recorder, VisualRecord};
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
@@ -35,8 +36,10 @@ pub struct TrackerFrame {
     pub start: Option<Quad>,
     pub search_us: f64,
     pub update_us: f64,
-    /// Template, last sampled patch (res x res).
+    /// Template, last sampled patch (res x res, once per channel: `channels` 1 or 3, red, green
+    /// and blue one after the other).
     pub res: usize,
+    pub channels: usize,
     pub template: Arc<Vec<f32>>,
     pub patch: Vec<f32>,
     /// What a sampling search method showed at its last iteration (NN's samples, PF's
@@ -151,6 +154,7 @@ fn tracked_frame(
         search_us: out.timing.search.as_secs_f64() * 1e6,
         update_us: (out.timing.search + out.timing.preprocess).as_secs_f64() * 1e6,
         res: t.inspection().map(|i| i.res).unwrap_or(0),
+        channels: t.inspection().map_or(1, |i| i.channels),
         template,
         patch: t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default(),
     }
@@ -169,6 +173,7 @@ fn initial_frame(index: usize, t: &Tracker, template: Arc<Vec<f32>>) -> TrackerF
         search_us: 0.0,
         update_us: 0.0,
         res: t.inspection().map(|i| i.res).unwrap_or(0),
+        channels: t.inspection().map_or(1, |i| i.channels),
         patch: template.to_vec(),
         template,
     }
@@ -532,7 +537,7 @@ impl<W: Fn() + Sync> Thread<W> {
 
     /// Frame `i`: from the frames decoded ahead, else decoded now; asks the decoder for the
     /// next few frames (tracking and replay go forward).
-    fn decode(&self, i: usize) -> Result<(GrayU8, FrameImage)> {
+    fn decode(&self, i: usize) -> Result<(Frame8, FrameImage)> {
         if let Some(run) = &self.live {
             let gray = run
                 .kept
@@ -546,7 +551,7 @@ impl<W: Fn() + Sync> Thread<W> {
                     ))
                 })?;
             let image = gray_image(i, &gray);
-            return Ok((gray, image));
+            return Ok((Frame8::Gray(gray), image));
         }
         let seq = self
             .sequence
@@ -588,7 +593,7 @@ impl<W: Fn() + Sync> Thread<W> {
         let mut results = Vec::new();
         for (idx, spec, quad) in specs {
             let made = Tracker::new(&spec).and_then(|mut t| {
-                t.initialize(FrameInput::Gray8(&gray), &quad)?;
+                t.initialize(FrameInput::of(&gray), &quad)?;
                 Ok(t)
             });
             match made {
@@ -629,7 +634,7 @@ impl<W: Fn() + Sync> Thread<W> {
             let run = || -> Result<TrackerFrame> {
                 let (first, _) = self.decode(*from)?;
                 let mut t = Tracker::new(spec)?;
-                t.initialize(FrameInput::Gray8(&first), init)?;
+                t.initialize(FrameInput::of(&first), init)?;
                 let template = Arc::new(
                     t.inspection()
                         .map(|i| i.template.to_vec())
@@ -642,7 +647,7 @@ impl<W: Fn() + Sync> Thread<W> {
                     patches: true,
                     ..Recorder::default()
                 };
-                let o = t.update(FrameInput::Gray8(&img), &mut rec);
+                let o = t.update(FrameInput::of(&img), &mut rec);
                 Ok(tracked_frame(*index, &t, &mut rec, &o, template))
             };
             match run() {
@@ -659,9 +664,9 @@ impl<W: Fn() + Sync> Thread<W> {
     fn landscape(&self, job: &LandscapeJob) -> Result<crate::landscape::Landscape> {
         let (start, _) = self.decode(job.start)?;
         let mut t = Tracker::new(&job.spec)?;
-        t.initialize(FrameInput::Gray8(&start), &job.init)?;
+        t.initialize(FrameInput::of(&start), &job.init)?;
         let (img, _) = self.decode(job.frame)?;
-        t.landscape(FrameInput::Gray8(&img), &job.at, &job.sweep)
+        t.landscape(FrameInput::of(&img), &job.at, &job.sweep)
             .unwrap_or_else(|| {
                 Err(Error::Incompatible(format!(
                     "{} has no similarity over warps",
@@ -740,7 +745,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 patches: true,
                 ..Recorder::default()
             };
-            let out = t.update(FrameInput::Gray8(&gray), &mut rec);
+            let out = t.update(FrameInput::of(&gray), &mut rec);
             self.reply(Reply::Frame {
                 generation: self.generation,
                 frame: i,
@@ -768,7 +773,7 @@ impl<W: Fn() + Sync> Thread<W> {
             }
         };
         match Tracker::new(spec).and_then(|mut t| {
-            t.initialize(FrameInput::Gray8(&gray), quad)?;
+            t.initialize(FrameInput::of(&gray), quad)?;
             Ok(t)
         }) {
             Ok(t) => Some(t),
@@ -945,9 +950,7 @@ impl<W: Fn() + Sync> Thread<W> {
                     patches: true,
                     ..Recorder::default()
                 };
-                let out = self.trackers[k]
-                    .1
-                    .update(FrameInput::Gray8(&gray), &mut rec);
+                let out = self.trackers[k].1.update(FrameInput::of(&gray), &mut rec);
                 results.push(self.snapshot(k, &self.trackers[k].1, &mut rec, &out));
             }
             self.frame = i;

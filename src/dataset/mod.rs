@@ -135,16 +135,18 @@ impl Sequence {
         mut f: impl FnMut(usize, Result<imaging::Frame8>) -> std::ops::ControlFlow<B>,
     ) -> Option<B> {
         use std::ops::ControlFlow::{Break, Continue};
-        let in_turn =
-            |range: std::ops::Range<usize>,
-             f: &mut dyn FnMut(usize, Result<imaging::Frame8>) -> std::ops::ControlFlow<B>| {
-                for i in range {
-                    if let Break(b) = f(i, self.load_frame(i, colour)) {
-                        return Some(b);
-                    }
+        let in_turn = |range: std::ops::Range<usize>,
+                       f: &mut dyn FnMut(
+            usize,
+            Result<imaging::Frame8>,
+        ) -> std::ops::ControlFlow<B>| {
+            for i in range {
+                if let Break(b) = f(i, self.load_frame(i, colour)) {
+                    return Some(b);
                 }
-                None
-            };
+            }
+            None
+        };
         if !ahead || range.len() < 2 {
             return in_turn(range, &mut f);
         }

@@ -557,78 +557,83 @@ pub fn run_sequence_reading(
     // With `ahead`, each frame decoded while the tracker works on the one before.
     // A tracker that reads colour is handed colour frames.
     let colour = tracker.channels() > 1;
-    let ended = seq.each_frame(0..seq.len(), ahead, colour, |i, img| -> ControlFlow<Result<()>> {
-        let img = match img {
-            Ok(img) => img,
-            Err(e) if i > 0 => {
-                stopped = Some(format!("stopped at frame {}: {e}", i + 1));
-                return ControlFlow::Break(Ok(()));
+    let ended = seq.each_frame(
+        0..seq.len(),
+        ahead,
+        colour,
+        |i, img| -> ControlFlow<Result<()>> {
+            let img = match img {
+                Ok(img) => img,
+                Err(e) if i > 0 => {
+                    stopped = Some(format!("stopped at frame {}: {e}", i + 1));
+                    return ControlFlow::Break(Ok(()));
+                }
+                Err(e) => return ControlFlow::Break(Err(e)),
+            };
+            let reinit_here = match skip_until {
+                Some(k) if i >= k => ground_truth(i).is_some(),
+                _ => false,
+            };
+            if i == 0 {
+                if let Err(e) = tracker.initialize(FrameInput::of(&img), &first) {
+                    return ControlFlow::Break(Err(e));
+                }
+                frames.push(record(
+                    i,
+                    Some(first),
+                    TrackStatus::Tracking,
+                    0,
+                    0.0,
+                    0.0,
+                    true,
+                ));
+                return ControlFlow::Continue(());
             }
-            Err(e) => return ControlFlow::Break(Err(e)),
-        };
-        let reinit_here = match skip_until {
-            Some(k) if i >= k => ground_truth(i).is_some(),
-            _ => false,
-        };
-        if i == 0 {
-            if let Err(e) = tracker.initialize(FrameInput::of(&img), &first) {
-                return ControlFlow::Break(Err(e));
+            if reinit_here {
+                let q = ground_truth(i).unwrap_or(first);
+                // A frame the tracker cannot start on (occluded, degenerate ground truth) counts as
+                // failed; the next annotated frame is tried.
+                if tracker.initialize(FrameInput::of(&img), &q).is_ok() {
+                    skip_until = None;
+                    frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
+                } else {
+                    skip_until = Some(i + 1);
+                    frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
+                }
+                return ControlFlow::Continue(());
             }
-            frames.push(record(
-                i,
-                Some(first),
-                TrackStatus::Tracking,
-                0,
-                0.0,
-                0.0,
-                true,
-            ));
-            return ControlFlow::Continue(());
-        }
-        if reinit_here {
-            let q = ground_truth(i).unwrap_or(first);
-            // A frame the tracker cannot start on (occluded, degenerate ground truth) counts as
-            // failed; the next annotated frame is tried.
-            if tracker.initialize(FrameInput::of(&img), &q).is_ok() {
-                skip_until = None;
-                frames.push(record(i, Some(q), TrackStatus::Tracking, 0, 0.0, 0.0, true));
-            } else {
-                skip_until = Some(i + 1);
+            if skip_until.is_some() {
+                // Skipped after a failure, before re-initialisation: counts as failed.
                 frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
+                return ControlFlow::Continue(());
             }
-            return ControlFlow::Continue(());
-        }
-        if skip_until.is_some() {
-            // Skipped after a failure, before re-initialisation: counts as failed.
-            frames.push(record(i, None, tracker.status(), 0, 0.0, 0.0, false));
-            return ControlFlow::Continue(());
-        }
-        let out = tracker.update(FrameInput::of(&img), observer);
-        let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
-        let search = out.timing.search.as_secs_f64() * 1e6;
-        let update = search + out.timing.preprocess.as_secs_f64() * 1e6;
-        let mut rec = record(
-            i,
-            corners,
-            out.status,
-            out.iterations,
-            search,
-            update,
-            false,
-        );
-        rec.searched = out.searched;
-        rec.confidence = out.confidence;
-        if let (Some(q), Some(g)) = (out.estimate, rec.ground_truth) {
-            rec.estimate_error = alignment_error(&q, &g);
-        }
-        let failed =
-            rec.status != TrackStatus::Tracking || rec.alignment_error > opts.failure_threshold;
-        frames.push(rec);
-        if opts.reinit && failed {
-            skip_until = Some(i + 1 + opts.reinit_skip);
-        }
-        ControlFlow::Continue(())
-    });
+            let out = tracker.update(FrameInput::of(&img), observer);
+            let corners = (out.status == TrackStatus::Tracking).then_some(out.corners);
+            let search = out.timing.search.as_secs_f64() * 1e6;
+            let update = search + out.timing.preprocess.as_secs_f64() * 1e6;
+            let mut rec = record(
+                i,
+                corners,
+                out.status,
+                out.iterations,
+                search,
+                update,
+                false,
+            );
+            rec.searched = out.searched;
+            rec.confidence = out.confidence;
+            if let (Some(q), Some(g)) = (out.estimate, rec.ground_truth) {
+                rec.estimate_error = alignment_error(&q, &g);
+            }
+            let failed =
+                rec.status != TrackStatus::Tracking || rec.alignment_error > opts.failure_threshold;
+            frames.push(rec);
+            if opts.reinit && failed {
+                skip_until = Some(i + 1 + opts.reinit_skip);
+            }
+            ControlFlow::Continue(())
+        },
+    );
     if let Some(Err(e)) = ended {
         return Err(e);
     }

@@ -642,8 +642,10 @@ pub fn propagate(
     let mut agreeing = 0usize;
     use crate::tracker::{FrameInput, TrackStatus, Tracker};
     let mut tracker = Tracker::new(spec)?;
-    let img = seq.load_gray(from)?;
-    tracker.initialize(FrameInput::Gray8(&img), &start)?;
+    // A tracker that reads colour is handed colour frames.
+    let colour = tracker.channels() > 1;
+    let img = seq.load_frame(from, colour)?;
+    tracker.initialize(FrameInput::of(&img), &start)?;
     let mut frames = Vec::new();
     // The baseline is the first tracked frame's error: a correction moves the start away from
     // the old ground truth, and that offset is what the next frames inherit, not a jump.
@@ -656,7 +658,7 @@ pub fn propagate(
                 stop: PropagateStop::Corrected(f),
             });
         }
-        let img = match seq.load_gray(f) {
+        let img = match seq.load_frame(f, colour) {
             Ok(i) => i,
             Err(e) => {
                 return Ok(Proposal {
@@ -672,7 +674,7 @@ pub fn propagate(
         {
             tracker.set_corners(&moved)?;
         }
-        let mut out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+        let mut out = tracker.update(FrameInput::of(&img), &mut crate::observe::NoObserver);
         // Lost: once more from where the old ground truth says the target went (its motion
         // from the frame before, applied to the last proposed corners). A tracker started on
         // the selection has no motion to predict yet: on a brick wall moving 5 px a frame the
@@ -683,7 +685,7 @@ pub fn propagate(
             && let Some(moved) = moved_as_before(old, f, &last)
             && tracker.set_corners(&moved).is_ok()
         {
-            out = tracker.update(FrameInput::Gray8(&img), &mut crate::observe::NoObserver);
+            out = tracker.update(FrameInput::of(&img), &mut crate::observe::NoObserver);
         }
         if out.status != TrackStatus::Tracking {
             return Ok(Proposal {

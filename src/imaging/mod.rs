@@ -218,7 +218,10 @@ impl ColourU8 {
         let gray = Image {
             width,
             height,
-            data: rgb.chunks_exact(3).map(|p| luma(p[0], p[1], p[2])).collect(),
+            data: rgb
+                .chunks_exact(3)
+                .map(|p| luma(p[0], p[1], p[2]))
+                .collect(),
         };
         Some(ColourU8 {
             gray,

@@ -906,6 +906,48 @@ mod avx2 {
 mod tests {
     use super::*;
 
+    /// A view of three planes samples a grid of three equal parts, part `c` from plane `c`
+    /// (values and gradients, the same bits as each plane alone); `plane` gives each alone.
+    #[test]
+    fn a_colour_view_samples_each_part_from_its_plane() {
+        let (w, h) = (31, 23);
+        let plane = |k: usize| -> Vec<f32> {
+            (0..w * h)
+                .map(|i| ((i * (7 + 4 * k)) % 97) as f32 + 0.5 * k as f32)
+                .collect()
+        };
+        let (r, g, b) = (plane(0), plane(1), plane(2));
+        let view = ImageView::new(&r, w, h, 5, -3)
+            .with_planes(&g, &b)
+            .with_stamp(9);
+        assert_eq!(view.planes(), 3);
+        assert_eq!(view.plane(2).planes(), 1);
+        assert_eq!(view.plane(1).stamp(), 9);
+        let n = 37;
+        let xs: Vec<f32> = (0..n).map(|i| 4.0 + (i as f32 * 0.77) % 30.0).collect();
+        let ys: Vec<f32> = (0..n).map(|i| -4.0 + (i as f32 * 1.31) % 22.0).collect();
+        let (x3, y3) = (xs.repeat(3), ys.repeat(3));
+        let mut all = vec![0f32; 3 * n];
+        let (mut v, mut gx, mut gy) = (vec![0f32; 3 * n], vec![0f32; 3 * n], vec![0f32; 3 * n]);
+        sample_values(&view, &x3, &y3, &mut all);
+        sample_values_gradients(&view, &x3, &y3, &mut v, &mut gx, &mut gy);
+        for (c, data) in [&r, &g, &b].into_iter().enumerate() {
+            let alone = ImageView::new(data, w, h, 5, -3);
+            let mut one = vec![0f32; n];
+            let (mut ov, mut ogx, mut ogy) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+            sample_values(&alone, &xs, &ys, &mut one);
+            sample_values_gradients(&alone, &xs, &ys, &mut ov, &mut ogx, &mut ogy);
+            let part = c * n..(c + 1) * n;
+            assert_eq!(&all[part.clone()], &one[..], "plane {c}");
+            assert_eq!(&v[part.clone()], &ov[..]);
+            assert_eq!(&gx[part.clone()], &ogx[..]);
+            assert_eq!(&gy[part], &ogy[..]);
+            let mut via = vec![0f32; n];
+            sample_values(&view.plane(c), &xs, &ys, &mut via);
+            assert_eq!(via, one);
+        }
+    }
+
     /// The shifted grid reads what point-by-point sampling reads, inside the image and across
     /// its borders.
     #[test]

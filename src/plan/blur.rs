@@ -151,7 +151,12 @@ impl RegistrationTracker {
         for f in EXPOSURES {
             for c in 0..channels {
                 let r = c * m..(c + 1) * m;
-                box_blur(&whole[r.clone()], res, (f * g.0, f * g.1), &mut judges.blurred[r]);
+                box_blur(
+                    &whole[r.clone()],
+                    res,
+                    (f * g.0, f * g.1),
+                    &mut judges.blurred[r],
+                );
             }
             judges
                 .blur

@@ -71,7 +71,8 @@ impl RegistrationTracker {
         let p = spec.params.clone();
         let gradient = main.sm.requires().derivatives;
         let kernel = gaussian_kernel(p.blur_size, p.smoothing_sigma(gradient) as f32);
-        let src = FrameSource::new(kernel, plan.levels()).with_channels(spec.params.channels.count());
+        let src =
+            FrameSource::new(kernel, plan.levels()).with_channels(spec.params.channels.count());
         RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
             params: p,

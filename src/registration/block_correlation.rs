@@ -668,6 +668,72 @@ mod tests {
         assert_eq!(a.of_pair(&empty, &cur, &mut sums), (a.of(&cur), 0.0));
     }
 
+    /// A colour patch (three `res x res` channels one after the other): each channel's blocks
+    /// count as a grey patch's, so a channel flat in the template adds nothing (the other
+    /// channels' confidence, to the bit), one shown negated pulls it down, and the pair in one
+    /// pass, the sums kept for the next template and a mask work on every channel.
+    #[test]
+    fn a_colour_patch_is_its_channels_blocks() {
+        let mut rng = crate::rng::Rng::new(17);
+        let (res, cells) = (30, 4);
+        let mut draw = || -> Vec<f32> {
+            (0..res * res)
+                .map(|_| rng.range(20.0, 230.0) as f32)
+                .collect()
+        };
+        let (r, g, b) = (draw(), draw(), draw());
+        let colour = |a: &[f32], b: &[f32], c: &[f32]| -> Vec<f32> {
+            a.iter().chain(b).chain(c).copied().collect()
+        };
+        let t = colour(&r, &g, &b);
+        let same = BlockCorrelation::new(&t, res, cells).of(&t);
+        assert!((same - 1.0).abs() < 1e-9, "{same}");
+        // Flat green and blue in the template: red's confidence alone, whatever they show.
+        let flat = vec![90.0f32; res * res];
+        let red_only = BlockCorrelation::new(&colour(&r, &flat, &flat), res, cells);
+        let seen = colour(&g, &b, &r);
+        let grey = BlockCorrelation::new(&r, res, cells);
+        assert_eq!(red_only.of(&seen).to_bits(), grey.of(&g).to_bits());
+        // Blue negated: about (1 + 1 - 1) / 3.
+        let neg: Vec<f32> = b.iter().map(|v| 255.0 - v).collect();
+        let c = BlockCorrelation::new(&t, res, cells).of(&colour(&r, &g, &neg));
+        assert!((c - 1.0 / 3.0).abs() < 0.05, "{c}");
+        // A short patch: 0.
+        assert_eq!(
+            BlockCorrelation::new(&t, res, cells).of(&t[..2 * res * res]),
+            0.0
+        );
+        // The pair in one pass, and its sums as the next template.
+        let (a, prev) = (BlockCorrelation::new(&t, res, cells), colour(&b, &r, &g));
+        let bc = BlockCorrelation::new(&prev, res, cells);
+        let cur = colour(&draw(), &g, &r);
+        let mut sums = PatchSums::default();
+        let (ca, cb) = a.of_pair(&bc, &cur, &mut sums);
+        assert_eq!(
+            (ca.to_bits(), cb.to_bits()),
+            (a.of(&cur).to_bits(), bc.of(&cur).to_bits())
+        );
+        let mut from = bc.clone();
+        from.set_template_from(&cur, res, cells, &sums);
+        let again = BlockCorrelation::new(&cur, res, cells);
+        assert_eq!(from.of(&t).to_bits(), again.of(&t).to_bits());
+        // A mask over the left half: a patch that differs only there, in every channel, is the
+        // template.
+        let mut masked = BlockCorrelation::new(&t, res, cells);
+        masked.set_mask(Some([0.0, 0.0, 0.5, 1.0]));
+        let mut left = t.clone();
+        for (i, v) in left.iter_mut().enumerate() {
+            if i % res < res / 2 - 1 {
+                *v = 255.0 - *v;
+            }
+        }
+        assert!(
+            (masked.of(&left) - 1.0).abs() < 1e-9,
+            "{}",
+            masked.of(&left)
+        );
+    }
+
     /// A [`BlockCorrelation`] set again to other templates (as the tracker does every frame,
     /// keeping the grid's sums) gives exactly what a fresh one gives, also when the grid changes.
     #[test]

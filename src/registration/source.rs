@@ -253,7 +253,8 @@ struct Planes<'a> {
 
 impl<'a> IntoIterator for Planes<'a> {
     type Item = &'a mut Preprocessor;
-    type IntoIter = std::iter::Chain<std::iter::Once<Self::Item>, std::slice::IterMut<'a, Preprocessor>>;
+    type IntoIter =
+        std::iter::Chain<std::iter::Once<Self::Item>, std::slice::IterMut<'a, Preprocessor>>;
     fn into_iter(self) -> Self::IntoIter {
         std::iter::once(self.first).chain(self.others.iter_mut())
     }
@@ -358,6 +359,68 @@ mod tests {
         reader.cover(&q);
         assert!(matches!(reader, Reader::Part { ref src, .. } if src.is_whole()));
         assert!(matches!(src.reader(s, true), Reader::Whole(_)));
+    }
+
+    /// A colour source's views have the frame's three channels as planes, each smoothed (and
+    /// its pyramid made) as a grey source smooths that channel; read in part and covered, the
+    /// same bits. A grey frame given to it is three equal planes; a grey source reads a colour
+    /// frame's grey.
+    #[test]
+    fn a_colour_source_makes_each_channel_as_a_grey_one() {
+        let (w, h) = (64, 48);
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| ((i * 53) % 241) as u8).collect();
+        let colour = crate::imaging::ColourU8::from_rgb(w, h, &rgb).unwrap();
+        let input = FrameInput::Colour(&colour);
+        let region = Rect::new(3.0, 2.0, 50.0, 40.0);
+        let mut src = FrameSource::new(gaussian_kernel(5, 1.0), 1).with_channels(3);
+        assert_eq!(src.channels(), 3);
+        src.prepare(input, region);
+        src.build_levels(input);
+        for level in 0..2 {
+            let v = src.view(input, level);
+            assert_eq!(v.planes(), 3);
+            for c in 0..3 {
+                let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 1);
+                let plane = FrameInput::Gray8(&colour.channels[c]);
+                grey.prepare(plane, region);
+                grey.build_levels(plane);
+                let want = grey.view(plane, level);
+                assert_eq!(
+                    v.plane(c).pixels(),
+                    want.pixels(),
+                    "level {level} channel {c}"
+                );
+                assert_eq!(v.plane(c).origin(), want.origin());
+            }
+        }
+        // In part, then covered: the whole region's bits in every plane.
+        let whole: Vec<Vec<f32>> = (0..3)
+            .map(|c| src.view(input, 0).plane(c).pixels().to_vec())
+            .collect();
+        src.prepare_part(input, region, Rect::new(10.0, 10.0, 20.0, 20.0));
+        let mut reader = src.reader(input, true);
+        reader.cover(&Quad::from_rect(30.0, 25.0, 10.0, 10.0));
+        for (c, want) in whole.iter().enumerate() {
+            assert_eq!(reader.view().plane(c).pixels(), &want[..], "channel {c}");
+        }
+        // A grey frame: three equal planes.
+        let g = frame();
+        src.prepare(FrameInput::Gray8(&g), region);
+        let v = src.view(FrameInput::Gray8(&g), 0);
+        assert_eq!(v.planes(), 3);
+        assert_eq!(v.plane(1).pixels(), v.plane(0).pixels());
+        assert_eq!(v.plane(2).pixels(), v.plane(0).pixels());
+        // A grey source on a colour frame: its grey.
+        let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 0);
+        grey.prepare(input, region);
+        let mut luma = FrameSource::new(gaussian_kernel(5, 1.0), 0);
+        luma.prepare(FrameInput::Gray8(&colour.gray), region);
+        let (a, b) = (
+            grey.view(input, 0),
+            luma.view(FrameInput::Gray8(&colour.gray), 0),
+        );
+        assert_eq!(a.planes(), 1);
+        assert_eq!(a.pixels(), b.pixels());
     }
 
     #[test]

@@ -8,8 +8,8 @@
 mod tracker_params;
 
 pub use tracker_params::{
-    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, GridLayout, LossPolicy, OFF_ON, ParamValue,
-    Channels, SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, Channels, GridLayout, LossPolicy, OFF_ON, ParamValue,
+    SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the
@@ -195,6 +195,12 @@ impl TrackerSpec {
             TrackerSpec::Registration(r) => &r.method,
             TrackerSpec::Whole(w) => &w.method,
         }
+    }
+
+    /// Whether a tracker of this spec reads colour frames (`channels = rgb`).
+    pub fn reads_colour(&self) -> bool {
+        self.registration()
+            .is_some_and(|r| r.params.channels == Channels::Rgb)
     }
 
     /// `(sm, am, ssm)` as summary columns (a whole tracker: its name, then empty).

@@ -29,7 +29,10 @@ fn recovered(
     own_optimum: bool,
 ) -> (usize, f64) {
     // A colour tracker (`channels = rgb`) is given the texture in colour.
-    let (grey, colour) = (texture("skimage_coffee.png"), colour_texture("skimage_coffee.png"));
+    let (grey, colour) = (
+        texture("skimage_coffee.png"),
+        colour_texture("skimage_coffee.png"),
+    );
     let mut tracker = Tracker::new(spec).unwrap();
     let input = if tracker.channels() == 3 {
         FrameInput::Colour(&colour)
@@ -530,7 +533,7 @@ fn an_illumination_model_recovers_a_known_warp_with_every_gradient_method() {
 #[test]
 fn the_frequency_of_convergence_falls_with_the_perturbation_and_the_pyramid_widens_it() {
     use regtrack::converge::{ConvergeSpec, frequency_of_convergence};
-    let img = crate::common::texture("skimage_coffee.png");
+    let img = regtrack::imaging::Frame8::Gray(crate::common::texture("skimage_coffee.png"));
     let truth = regtrack::geometry::Quad::from_rect(250.0, 150.0, 100.0, 100.0);
     let c = ConvergeSpec {
         sigmas: vec![1.0, 20.0],

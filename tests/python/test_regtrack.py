@@ -105,6 +105,30 @@ def test_colour_and_float_frames_and_any_strides(rendered):
         assert np.abs(c - results[0]).max() < 1e-3
 
 
+def test_a_colour_tracker_reads_the_channels_of_a_bgr_frame(rendered, tmp_path):
+    seq = regtrack.Sequence(rendered, colour=True)
+    grey = regtrack.Sequence(rendered)
+    f0, g0 = seq[0]
+    assert f0.shape[2] == 3 and f0.dtype == np.uint8 and f0.shape[:2] == grey[0][0].shape
+    t = regtrack.Tracker("fclk", "zncc", "homography", channels="rgb")
+    t.initialize(f0, g0)
+    ours = [t.corners]
+    for f, _ in list(seq)[1:]:
+        c, s = t.update(f)
+        assert s == "tracking"
+        ours.append(c)
+    # The command line's colour run (it reads the frames in colour for channels=rgb).
+    out = tmp_path / "cli.txt"
+    subprocess.run(
+        [cli(), "track", "--seq", str(rendered), "--sm", "fclk", "--am", "zncc",
+         "--ssm", "homography", "--channels", "rgb", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    for k, (a, b) in enumerate(zip(ours, read_corners(out))):
+        assert np.abs(a - b).max() < 1e-3, f"frame {k + 1}: {a} vs {b}"
+
+
 def test_errors_name_what_was_expected():
     frame = np.zeros((60, 80), np.uint8)
     frame[20:40, 30:50] = np.arange(400, dtype=np.uint8).reshape(20, 20)

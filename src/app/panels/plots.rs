@@ -711,7 +711,7 @@ fn patch_image(
     coarse: bool,
     kind: usize,
 ) -> egui::ColorImage {
-    let n = r.res * r.res;
+    let n = r.res * r.res * r.channels;
     let (lo, hi) = r
         .template
         .iter()
@@ -733,7 +733,20 @@ fn patch_image(
             size,
         ),
     };
-    egui::ColorImage::from_gray(size, &g)
+    planes_image(&g, size, r.channels)
+}
+
+/// An image of `size` from `values` (one plane, or a colour patch's three, red, green and blue
+/// one after the other).
+fn planes_image(values: &[u8], size: [usize; 2], channels: usize) -> egui::ColorImage {
+    let n = size[0] * size[1];
+    if channels != 3 || values.len() != 3 * n {
+        return egui::ColorImage::from_gray(size, &values[..n.min(values.len())]);
+    }
+    let rgb: Vec<u8> = (0..n)
+        .flat_map(|i| [values[i], values[n + i], values[2 * n + i]])
+        .collect();
+    egui::ColorImage::from_rgb(size, &rgb)
 }
 
 fn patches(
@@ -743,7 +756,9 @@ fn patches(
     frame: usize,
     r: &crate::app::worker::TrackerFrame,
 ) {
-    let n = r.res * r.res;
+    // A colour tracker's patches are its channels' one after the other.
+    let channels = r.channels.max(1);
+    let n = r.res * r.res * channels;
     if r.template.len() != n || r.patch.len() != n || n == 0 {
         return;
     }
@@ -757,9 +772,9 @@ fn patches(
         .map(|it| it.patch.iter().map(|&v| v as f32).collect());
     let missing = selected.is_some() && recorded.is_none();
     let current: &[f32] = recorded.as_deref().unwrap_or(&r.patch);
-    let side = (current.len() as f64).sqrt().round() as usize;
+    let side = ((current.len() / channels) as f64).sqrt().round() as usize;
     let coarse = chosen.filter(|_| current.len() != n).map(|it| it.level);
-    if side * side != current.len() {
+    if side * side * channels != current.len() {
         return;
     }
     let size = [side, side];

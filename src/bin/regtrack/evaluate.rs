@@ -162,7 +162,8 @@ pub fn run_converge(
     let truth = seq
         .ground_truth(k)
         .with_context(|| format!("frame {frame} of {} has no ground truth", seq.name))?;
-    let img = seq.load_gray(k)?;
+    // In colour when a tracker reads colour.
+    let img = seq.load_frame(k, specs.iter().any(|s| s.reads_colour()))?;
     let curves: Vec<regtrack::converge::ConvergeCurve> = specs
         .par_iter()
         .map(|s| regtrack::converge::frequency_of_convergence(s, &img, &truth, c))

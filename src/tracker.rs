@@ -229,13 +229,19 @@ impl RegistrationTracker {
     }
 }
 
-/// The spec's AM, under its illumination model if it has one, channel by channel for colour
-/// ([`am::channels::PerChannel`]; not a model that is a plain sum of squares over the pixels,
-/// SSD, which is its own sum over the channels).
+/// The spec's AM, under its illumination model if it has one; for colour, on the three
+/// channels' patches stacked into one (`channel_model = stacked`, but for a model that reads
+/// the patch as its grid) or channel by channel ([`am::channels::PerChannel`]; not a model
+/// that is a plain sum of squares over the pixels, SSD, which is its own sum over the channels
+/// either way).
 fn appearance_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
     let model = lit_model(spec)?;
     let channels = spec.params.channels.count();
-    if channels == 1 || (model.pixelwise() && model.hessian_is_minus_jtj()) {
+    // Stacked unless the model reads the patch as its grid (neighbours, regions), which it
+    // can only do channel by channel.
+    let stacked = spec.params.channel_model == crate::spec::ChannelModel::Stacked;
+    let sum_of_squares = model.pixelwise() && model.hessian_is_minus_jtj();
+    if channels == 1 || (stacked && !model.needs_grid()) || sum_of_squares {
         return Ok(model);
     }
     Ok(Box::new(am::channels::PerChannel::new(model, channels)))

@@ -8,8 +8,8 @@
 mod tracker_params;
 
 pub use tracker_params::{
-    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, Channels, GridLayout, LossPolicy, OFF_ON, ParamValue,
-    SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, ChannelModel, Channels, GridLayout, LossPolicy,
+    OFF_ON, ParamValue, SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the
@@ -213,14 +213,15 @@ impl TrackerSpec {
 
     /// `sm_am_ssm` (or the whole tracker's name), as used in result file names; a composite's
     /// `cascade:a+b` becomes `cascade-a+b`; a colour tracker's (`channels = rgb`) ends in
-    /// `_rgb`.
+    /// `_rgb` (`_rgb_pc` channel by channel).
     pub fn label(&self) -> String {
         match self {
             TrackerSpec::Registration(r) => {
                 // A colour tracker's label says so (its runs beside the grey one's in a table).
-                let colour = match r.params.channels {
-                    Channels::Gray => "",
-                    Channels::Rgb => "_rgb",
+                let colour = match (r.params.channels, r.params.channel_model) {
+                    (Channels::Gray, _) => "",
+                    (Channels::Rgb, ChannelModel::Stacked) => "_rgb",
+                    (Channels::Rgb, ChannelModel::PerChannel) => "_rgb_pc",
                 };
                 format!("{}_{}_{}{colour}", r.sm.replace(':', "-"), r.am, r.ssm)
             }

@@ -155,7 +155,16 @@ tracker_params! {
     /// squares is the same either way). A grey frame is read as three equal channels; the
     /// learning trackers read grey.
     channels: Channels = choice(Channels::NAMES),
-        "gray (the frame's luma), or rgb: sample the red, green and blue channels on the grid and sum the AM's similarity over them (targets that differ from their surroundings in hue)";
+        "gray (the frame's luma), or rgb: sample the red, green and blue channels on the grid (targets that differ from their surroundings in hue)";
+    /// With `per_channel` each channel's patch has its own copy of the AM (its own means and
+    /// norms, its own joint histogram: MTF's "a histogram per channel"), and the similarity is
+    /// the sum of the three; with `stacked` the AM sees the three patches as one patch of
+    /// three times the points (one mean and norm, one joint histogram), so a channel counts by
+    /// its contrast. SSD is the same either way; the models that read the patch as its grid
+    /// (NGF's neighbours, LSCV's regions, an illumination model's cells) are always per
+    /// channel.
+    channel_model: ChannelModel = choice(ChannelModel::NAMES),
+        "with channels=rgb: stacked (the AM compares the three channels' patches as one patch) or per_channel (the AM on each channel's patch, the similarities summed)";
     max_iters: usize = int(1.0, 10_000.0, 30.0),
         "maximum iterations per frame";
     eps: f64 = float(0.0, 1000.0, 0.001),
@@ -292,6 +301,21 @@ impl Channels {
         }
     }
 }
+
+/// How an AM compares a colour tracker's channels (`channel_model`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelModel {
+    /// The three patches as one.
+    #[default]
+    Stacked,
+    /// Each channel's patch its own model, the similarities summed.
+    PerChannel,
+}
+choice_param!(ChannelModel {
+    Stacked = "stacked",
+    PerChannel = "per_channel",
+});
 
 /// Selective pixel integration (`spi`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -2,7 +2,7 @@
 //! (pre-processing included) makes no heap allocation. Counted per thread by the test binary's
 //! global allocator.
 
-use crate::common::{full_tests, texture};
+use crate::common::{colour_texture, full_tests, texture};
 use regtrack::geometry::Quad;
 use regtrack::observe::NoObserver;
 use regtrack::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
@@ -44,6 +44,7 @@ fn update_does_not_allocate() {
     let v = std::hint::black_box(vec![1u8; 100]);
     assert!(allocations() > before && v.len() == 100);
     let img = texture("skimage_coffee.png");
+    let colour = colour_texture("skimage_coffee.png");
     let truth = Quad::from_rect(250.0, 150.0, 100.0, 100.0);
     let shifted: Vec<Quad> = (0..6)
         .map(|k| {
@@ -113,19 +114,36 @@ fn update_does_not_allocate() {
             }
         }
     }
+    // Colour (`channels = rgb`, each AM channel by channel) with every AM, on the homography
+    // (the search methods in turn, the next that takes the AM).
+    let sms = regtrack::sm::REGISTRY;
+    for (k, am) in regtrack::am::REGISTRY.iter().enumerate() {
+        let mut spec = (0..sms.len())
+            .find_map(|i| {
+                TrackerSpec::from_names(sms[(k + i) % sms.len()].name, am.name, "homography").ok()
+            })
+            .unwrap_or_else(|| panic!("no search method takes {}", am.name));
+        spec.set_param("channels", "rgb").unwrap();
+        combos.push(spec);
+    }
     let check = |mut spec: TrackerSpec| {
         // A pyramid too (its levels are kept between frames as well).
         let affine = spec.registration().is_some_and(|r| r.ssm == "affine");
         spec.params_mut().unwrap().pyramid_levels = if affine { 3 } else { 1 };
         let mut t = Tracker::new(&spec).unwrap();
-        t.initialize(FrameInput::Gray8(&img), &truth).unwrap();
+        let input = if t.channels() == 3 {
+            FrameInput::Colour(&colour)
+        } else {
+            FrameInput::Gray8(&img)
+        };
+        t.initialize(input, &truth).unwrap();
         // A first update grows the buffers of the pre-processed region.
         t.set_corners(&shifted[5]).unwrap();
-        t.update(FrameInput::Gray8(&img), &mut NoObserver);
+        t.update(input, &mut NoObserver);
         let before = allocations();
         for q in &shifted {
             t.set_corners(q).unwrap();
-            let out = t.update(FrameInput::Gray8(&img), &mut NoObserver);
+            let out = t.update(input, &mut NoObserver);
             assert_eq!(out.status, TrackStatus::Tracking, "{}", spec.label());
         }
         assert_eq!(

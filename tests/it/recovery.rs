@@ -672,9 +672,9 @@ fn every_am_recovers_a_known_warp_reading_part_of_the_grid() {
     assert!(err.contains("illumination model"), "{err}");
 }
 
-/// Colour (`channels = rgb`, the texture's three channels, each AM channel by channel): every
-/// AM with every gradient method (and the sampling ones with REGTRACK_FULL_TESTS=1) recovers a
-/// known warp of the 8-DOF homography as on grey.
+/// Colour (`channels = rgb`, the texture's three channels, the AM on them stacked and channel
+/// by channel): every AM with every gradient method (and the sampling ones with
+/// REGTRACK_FULL_TESTS=1) recovers a known warp of the 8-DOF homography as on grey.
 #[test]
 fn every_am_recovers_a_known_warp_in_colour() {
     let trials = if full_tests() { 100 } else { 20 };
@@ -690,7 +690,10 @@ fn every_am_recovers_a_known_warp_in_colour() {
             };
             spec.set_param("channels", "rgb").unwrap();
             assert_eq!(Tracker::new(&spec).unwrap().channels(), 3);
-            combos.push((spec, sampled));
+            for model in ["stacked", "per_channel"] {
+                spec.set_param("channel_model", model).unwrap();
+                combos.push((spec.clone(), sampled));
+            }
         }
     }
     let failures: Vec<(String, usize, f64)> = combos

@@ -114,7 +114,9 @@ impl GridMoments {
     }
 
     /// `h = -J^T J` (row-major `dof x dof`) and `g = J^T r` for the gradient `(a, b)` with
-    /// respect to the unit square's coordinates and the AM's gradient `r`, all on the grid.
+    /// respect to the unit square's coordinates and the AM's gradient `r`, all on the grid (a
+    /// colour grid's parts, the same `res x res` points once per channel, summed: the system
+    /// is a sum over the samples).
     pub fn minus_jtj_and_jtr(
         &mut self,
         a: &[f32],
@@ -123,7 +125,20 @@ impl GridMoments {
         h: &mut [f64; MAX_DOF * MAX_DOF],
         g: &mut [f64; MAX_DOF],
     ) {
-        let (hu, gu) = self.unit_system(a, b, r);
+        let n = self.res * self.res;
+        let (mut hu, mut gu) = self.unit_system(a, b, r);
+        for c in 1..a.len() / n {
+            let part = c * n..(c + 1) * n;
+            let (hc, gc) = self.unit_system(&a[part.clone()], &b[part.clone()], &r[part]);
+            for (row, more) in hu.iter_mut().zip(&hc) {
+                for (o, v) in row.iter_mut().zip(more) {
+                    *o += v;
+                }
+            }
+            for (o, v) in gu.iter_mut().zip(&gc) {
+                *o += v;
+            }
+        }
         let (dof, l) = (self.dof, &self.l);
         // H = L^T Hu L, g = L^T gu.
         let mut hl = [[0.0f64; MAX_DOF]; 8];
@@ -147,6 +162,21 @@ impl GridMoments {
     /// template's (its Hessian is kept). Six multiply-adds per sample, and neither `J` (eight
     /// values a sample) nor the AM's kind matter.
     pub fn jtr(&mut self, a: &[f32], b: &[f32], r: &[f32], g: &mut [f64; MAX_DOF]) {
+        let n = self.res * self.res;
+        let mut gu = self.unit_jtr(a, b, r);
+        // A colour grid's other parts (see `minus_jtj_and_jtr`).
+        for c in 1..a.len() / n {
+            let part = c * n..(c + 1) * n;
+            let more = self.unit_jtr(&a[part.clone()], &b[part.clone()], &r[part]);
+            for (o, v) in gu.iter_mut().zip(&more) {
+                *o += v;
+            }
+        }
+        self.l_transposed(&gu, g);
+    }
+
+    /// `J_u^T r` of the full homography on the first `res x res` samples.
+    fn unit_jtr(&mut self, a: &[f32], b: &[f32], r: &[f32]) -> [f64; 8] {
         let (res, n) = (self.res, self.res * self.res);
         let (a, b, r) = (&a[..n], &b[..n], &r[..n]);
         let vpow = &self.vpow;
@@ -155,7 +185,7 @@ impl GridMoments {
         });
         let mut mom = [[0.0f64; POWERS]; SUMS];
         self.across(3 * POWERS..SUMS, &mut mom);
-        self.l_transposed(&unit_gradient_sums(&mom), g);
+        unit_gradient_sums(&mom)
     }
 
     /// `g = L^T gu`: the unit square's gradient sums to the SSM's parameters.

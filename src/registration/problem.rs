@@ -244,12 +244,21 @@ impl Problem {
         self.ssm
             .jacobian(&identity, &self.grid_x, &self.grid_y, &mut self.dwdp0);
         self.set_zero_rows();
-        // The moments sum over one `res x res` grid: not on a colour grid.
+        // The moments of one `res x res` grid (a colour grid's parts are summed), from the
+        // first part's rows of `dw/dp`.
         let moments = self.am.hessian_is_minus_jtj() || self.am.hessian_from_jtj();
-        self.moments = if moments && self.channels == 1 {
+        self.moments = if !moments {
+            None
+        } else if self.channels == 1 {
             GridMoments::new(&h, res, layout, &self.dwdp0, self.dof)
         } else {
-            None
+            let first: Vec<f32> = self
+                .dwdp0
+                .chunks_exact(n)
+                .flat_map(|row| &row[..one])
+                .copied()
+                .collect();
+            GridMoments::new(&h, res, layout, &first, self.dof)
         };
         let kept = if self.moments.is_some() { n } else { 0 };
         self.template_gu.resize(kept, 0.0);

@@ -280,10 +280,12 @@ mod tests {
         for entry in ssm::REGISTRY {
             let dof = ssm::build(entry.name).unwrap().dof();
             for layout in [GridLayout::Centres, GridLayout::Border] {
-                for res in [8, 13, 50] {
+                // A colour grid too: its three parts' systems summed.
+                for (res, channels) in [(8, 1), (13, 1), (50, 1), (13, 3), (50, 3)] {
                     let model = ssm::build(entry.name).unwrap();
                     let mut ctx =
                         Context::new(model, am::build("ssd").unwrap(), HessianKind::Default, res);
+                    ctx.set_channels(channels);
                     ctx.set_region(&skewed(), res, layout).unwrap();
                     if dof < 6 {
                         assert!(
@@ -294,7 +296,8 @@ mod tests {
                         continue;
                     }
                     assert!(moments_step(&ctx), "{} has no moments", entry.name);
-                    let n = res * res;
+                    let n = res * res * channels;
+                    assert_eq!(ctx.len(), n);
                     let p = warp_near_identity(&ctx, &mut rng);
                     ctx.warp_grid(&p);
                     let mut draw = |scale: f64| -> Vec<f32> {
@@ -315,7 +318,7 @@ mod tests {
                     moments.jtr(&ta, &tb, &r, &mut g2);
                     let mut h1 = [0.0; MAX_DOF * MAX_DOF];
                     minus_jtj(&jt, dof, &mut h1);
-                    let what = format!("{} {layout:?} {res}x{res} template", entry.name);
+                    let what = format!("{} {layout:?} {res}x{res}x{channels} template", entry.name);
                     close((&h1, &h1), (&g1, &g2), dof, &r, &what);
                     for mean in [false, true] {
                         ctx.work_mut().grad_mut().copy_from_slice(&r);
@@ -332,7 +335,10 @@ mod tests {
                             .moments_mut()
                             .unwrap()
                             .minus_jtj_and_jtr(&a, &b, &r, &mut h2, &mut g2);
-                        let what = format!("{} {layout:?} {res}x{res} mean {mean}", entry.name);
+                        let what = format!(
+                            "{} {layout:?} {res}x{res}x{channels} mean {mean}",
+                            entry.name
+                        );
                         close((&h1, &h2), (&g1, &g2), dof, &r, &what);
                         checked += 1;
                     }

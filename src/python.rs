@@ -849,7 +849,7 @@ fn synth(
     let seq = py
         .detach(|| crate::dataset::synth::render_sequence(&cfg, &out, name, &|_, _| {}))
         .map_err(library_error)?;
-    Ok(PySequence { seq })
+    Ok(PySequence { seq, colour: false })
 }
 
 /// Many patches per frame: N small patches (translation or affine), each tracked by

@@ -76,14 +76,29 @@ impl BenchRow {
 /// How many updates while lost `bench_tracker` times.
 pub const LOST_FRAMES: usize = 12;
 
-/// Frames of a sequence loaded in memory.
+/// Frames of a sequence loaded in memory: grey, and in colour when a tracker reads colour.
 pub struct LoadedFrames {
     pub gray: Vec<GrayU8>,
+    pub colour: Vec<crate::imaging::ColourU8>,
     pub init: crate::geometry::Quad,
 }
 
-/// Loads up to `max_frames` frames.
-pub fn load_frames(seq: &Sequence, max_frames: Option<usize>) -> Result<LoadedFrames> {
+impl LoadedFrames {
+    /// Frame `i` as a tracker of `channels` reads it (in colour when loaded so).
+    fn input(&self, i: usize, channels: usize) -> FrameInput<'_> {
+        match self.colour.get(i) {
+            Some(c) if channels == 3 => FrameInput::Colour(c),
+            _ => FrameInput::Gray8(&self.gray[i]),
+        }
+    }
+}
+
+/// Loads up to `max_frames` frames, in colour too with `colour`.
+pub fn load_frames(
+    seq: &Sequence,
+    max_frames: Option<usize>,
+    colour: bool,
+) -> Result<LoadedFrames> {
     let n = max_frames.unwrap_or(usize::MAX).min(seq.len());
     if n < 2 {
         return Err(Error::InvalidParameter(format!(
@@ -95,10 +110,21 @@ pub fn load_frames(seq: &Sequence, max_frames: Option<usize>) -> Result<LoadedFr
         path: seq.frames.first().cloned().unwrap_or_default(),
         message: "the benchmark needs ground truth for the first frame".into(),
     })?;
-    let gray = (0..n)
-        .map(|i| seq.load_gray(i))
-        .collect::<Result<Vec<_>>>()?;
-    Ok(LoadedFrames { gray, init })
+    let (mut gray, mut colours) = (Vec::with_capacity(n), Vec::new());
+    for i in 0..n {
+        match seq.load_frame(i, colour)? {
+            crate::imaging::Frame8::Gray(g) => gray.push(g),
+            crate::imaging::Frame8::Colour(c) => {
+                gray.push(c.gray.clone());
+                colours.push(c);
+            }
+        }
+    }
+    Ok(LoadedFrames {
+        gray,
+        colour: colours,
+        init,
+    })
 }
 
 /// Benchmarks one tracker on loaded frames, `repeats` times.
@@ -156,15 +182,17 @@ pub fn bench_tracker(
             other.push((secs - busy).max(0.0) * 1e6 / n as f64);
         }
         tracked = n;
-        // Live path: 8-bit frames, the tracker smooths the region it reads.
+        // Live path: 8-bit frames (in colour for a tracker that reads colour), the tracker
+        // smooths the region it reads.
         let mut t = Tracker::new(spec)?;
-        t.initialize(FrameInput::Gray8(&frames.gray[0]), &frames.init)?;
+        let channels = t.channels();
+        t.initialize(frames.input(0, channels), &frames.init)?;
         let mut counter = IterationCounter::default();
         let mut n = 0usize;
         let start = Instant::now();
         lost_at = None;
-        for (i, img) in frames.gray[1..].iter().enumerate() {
-            let out = t.update(FrameInput::Gray8(img), &mut counter);
+        for i in 0..frames.gray.len() - 1 {
+            let out = t.update(frames.input(i + 1, channels), &mut counter);
             if out.status != TrackStatus::Tracking {
                 lost_at = Some(i + 1);
                 break;
@@ -228,6 +256,7 @@ mod tests {
         .unwrap();
         let frames = LoadedFrames {
             gray,
+            colour: Vec::new(),
             init: quads[0],
         };
         let spec = TrackerSpec::from_names("iclk", "ssd", "homography").unwrap();

@@ -115,9 +115,12 @@ def synth(
 
 class Camera:
     """A live source (``"/dev/video0"``, or ``"lavfi:testsrc=size=320x240:rate=30"``) read by
-    ffmpeg, as an iterator of grey uint8 frames (H, W), always the newest."""
+    ffmpeg, as an iterator of grey uint8 frames (H, W) (with ``colour``, BGR (H, W, 3)), always
+    the newest."""
 
-    def __init__(self, source: str, size: Tuple[int, int] = (640, 480)) -> None: ...
+    def __init__(
+        self, source: str, size: Tuple[int, int] = (640, 480), *, colour: bool = False
+    ) -> None: ...
     @property
     def dropped(self) -> int:
         """Frames the source sent that were never handed out."""

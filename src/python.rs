@@ -555,20 +555,7 @@ impl PySequence {
         let img = py
             .detach(|| seq.load_frame(k, colour))
             .map_err(library_error)?;
-        let shaped = |data: Vec<u8>, shape: &[usize]| {
-            numpy::PyArray1::from_vec(py, data)
-                .reshape(shape)
-                .map(|a| a.into_any())
-                .map_err(|e| Error::new_err(e.to_string()))
-        };
-        let frame = match img {
-            crate::imaging::Frame8::Gray(g) => shaped(g.data, &[g.height, g.width])?,
-            crate::imaging::Frame8::Colour(c) => {
-                let [r, g, b] = &c.channels;
-                let bgr = (0..r.data.len()).flat_map(|i| [b.data[i], g.data[i], r.data[i]]);
-                shaped(bgr.collect(), &[r.height, r.width, 3])?
-            }
-        };
+        let frame = frame_to_numpy(py, img)?;
         Ok((frame, self.seq.ground_truth(k).map(|q| quad_to(py, &q))))
     }
 
@@ -585,6 +572,25 @@ impl PySequence {
             self.seq.name,
             self.seq.len()
         )
+    }
+}
+
+/// A frame as numpy has it: grey `(H, W)`, or a colour frame as BGR `(H, W, 3)` (OpenCV's
+/// order, what the trackers take), `uint8`.
+fn frame_to_numpy(py: Python<'_>, frame: crate::imaging::Frame8) -> PyResult<Bound<'_, PyAny>> {
+    let shaped = |data: Vec<u8>, shape: &[usize]| {
+        numpy::PyArray1::from_vec(py, data)
+            .reshape(shape)
+            .map(|a| a.into_any())
+            .map_err(|e| Error::new_err(e.to_string()))
+    };
+    match frame {
+        crate::imaging::Frame8::Gray(g) => shaped(g.data, &[g.height, g.width]),
+        crate::imaging::Frame8::Colour(c) => {
+            let [r, g, b] = &c.channels;
+            let bgr = (0..r.data.len()).flat_map(|i| [b.data[i], g.data[i], r.data[i]]);
+            shaped(bgr.collect(), &[r.height, r.width, 3])
+        }
     }
 }
 
@@ -613,7 +619,8 @@ impl SequenceIter {
 
 /// A live source: a V4L2 camera (`"/dev/video0"`) or an FFmpeg test source
 /// (`"lavfi:testsrc=size=320x240:rate=30"`), read by `ffmpeg`, as an iterator of grey `uint8`
-/// frames `(H, W)`, always the newest: frames that arrive while Python works are dropped and
+/// frames `(H, W)` (with `colour=True`, BGR `(H, W, 3)`, for a tracker with `channels='rgb'`),
+/// always the newest: frames that arrive while Python works are dropped and
 /// counted (`dropped`, after the first). Iteration ends when the source stops (`stopped` says
 /// why); a source that stops before its first frame raises `regtrack.Error`. The library's live
 /// run ([`crate::dataset::live::LiveRun`], as `regtrack track --camera` and the inspector).
@@ -631,8 +638,8 @@ pub struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (source, size=(640, 480)))]
-    fn new(source: &str, size: (i64, i64)) -> PyResult<Self> {
+    #[pyo3(signature = (source, size=(640, 480), *, colour=false))]
+    fn new(source: &str, size: (i64, i64), colour: bool) -> PyResult<Self> {
         let (Ok(w), Ok(h)) = (usize::try_from(size.0), usize::try_from(size.1)) else {
             return Err(PyValueError::new_err(format!(
                 "size must be (width, height) in pixels, got ({}, {})",
@@ -640,7 +647,9 @@ impl PyCamera {
             )));
         };
         Ok(PyCamera {
-            live: Some(crate::dataset::live::LiveRun::open(source, w, h).map_err(library_error)?),
+            live: Some(
+                crate::dataset::live::LiveRun::open(source, w, h, colour).map_err(library_error)?,
+            ),
             dropped: 0,
             stopped: None,
             given: 0,
@@ -668,7 +677,7 @@ impl PyCamera {
         slf
     }
 
-    fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<u8>>>> {
+    fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         let Some(live) = self.live.as_mut() else {
             return Ok(None);
         };
@@ -677,12 +686,7 @@ impl PyCamera {
             Ok(Some(f)) => {
                 self.dropped = live.info().dropped;
                 self.given += 1;
-                let (w, h) = (f.image.width, f.image.height);
-                Ok(Some(
-                    numpy::PyArray1::from_vec(py, f.image.data)
-                        .reshape([h, w])
-                        .map_err(|e| Error::new_err(e.to_string()))?,
-                ))
+                Ok(Some(frame_to_numpy(py, f.image)?))
             }
             Err(e) => {
                 self.stopped = Some(e.to_string());

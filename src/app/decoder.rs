@@ -81,6 +81,24 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(Frame8, FrameIma
     ))
 }
 
+/// A frame for display: a colour frame's channels, a grey one's grey (a live source's).
+pub(super) fn frame_image(index: usize, frame: &Frame8) -> FrameImage {
+    match frame {
+        Frame8::Gray(g) => gray_image(index, g),
+        Frame8::Colour(c) => {
+            let [r, g, b] = &c.channels;
+            FrameImage {
+                index,
+                width: r.width,
+                height: r.height,
+                rgba: (0..r.data.len())
+                    .flat_map(|i| [r.data[i], g.data[i], b.data[i], 255])
+                    .collect(),
+            }
+        }
+    }
+}
+
 /// A gray frame for display (a video's or a live source's).
 pub(super) fn gray_image(index: usize, gray: &GrayU8) -> FrameImage {
     FrameImage {

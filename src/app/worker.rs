@@ -5,14 +5,13 @@
 //! tracking, propagating corrections, sweeping a landscape) never runs on the UI thread.
 //! Results of an older generation (before a re-initialisation) are dropped by the UI.
 
-use super::decoder::{AHEAD, Ahead, FrameImage, decode_frame, gray_image};
+use super::decoder::{AHEAD, Ahead, FrameImage, decode_frame, frame_image};
 use super::state::SequenceSource;
 use crate::dataset::{Sequence, demo};
 use crate::error::{Error, Result};
 use crate::geometry::Quad;
 use crate::gt;
 use crate::imaging::Frame8;
-use crate::imaging::GrayU8;
 use crate::observe::{IterationRecord, Recorder, VisualRecord};
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
 use std::collections::BTreeSet;
@@ -124,7 +123,7 @@ pub const LIVE_KEPT: usize = 90;
 struct LiveShown {
     run: crate::dataset::live::LiveRun,
     /// The newest frames, by index.
-    kept: std::collections::VecDeque<(usize, GrayU8)>,
+    kept: std::collections::VecDeque<(usize, Frame8)>,
     /// The tracker whose corners are recorded, while recording.
     recorded: Option<usize>,
 }
@@ -550,8 +549,8 @@ impl<W: Fn() + Sync> Thread<W> {
                         i + 1
                     ))
                 })?;
-            let image = gray_image(i, &gray);
-            return Ok((Frame8::Gray(gray), image));
+            let image = frame_image(i, &gray);
+            return Ok((gray, image));
         }
         let seq = self
             .sequence
@@ -790,7 +789,8 @@ impl<W: Fn() + Sync> Thread<W> {
     /// Opens a live source; its frames then come between jobs ([`Thread::live_step`]).
     fn open_live(&mut self, generation: u64, source: String, width: usize, height: usize) {
         self.end_live(None);
-        match crate::dataset::live::LiveRun::open(&source, width, height) {
+        // In colour: shown so, and read so by a tracker with `channels = rgb`.
+        match crate::dataset::live::LiveRun::open(&source, width, height, true) {
             Ok(run) => {
                 self.sequence = None;
                 self.trackers.clear();
@@ -827,7 +827,7 @@ impl<W: Fn() + Sync> Thread<W> {
             live.kept.pop_front();
         }
         let gray = &live.kept.back().expect("just pushed").1;
-        let image = gray_image(i, gray);
+        let image = frame_image(i, gray);
         // Trackers initialised on this frame or before (a box drawn on a kept frame starts
         // its tracker there) follow it.
         let mut results = Vec::with_capacity(self.trackers.len());
@@ -837,7 +837,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 patches: true,
                 ..Recorder::default()
             };
-            let out = self.trackers[k].1.update(FrameInput::Gray8(gray), &mut rec);
+            let out = self.trackers[k].1.update(FrameInput::of(gray), &mut rec);
             results.push(tracked_frame(
                 self.trackers[k].0,
                 &self.trackers[k].1,

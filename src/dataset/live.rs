@@ -8,7 +8,7 @@
 //! stopped at.
 
 use crate::error::{Error, Result};
-use crate::imaging::GrayU8;
+use crate::imaging::{ColourU8, Frame8, GrayU8};
 use std::io::Read;
 use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
@@ -59,23 +59,24 @@ pub struct Live {
 
 #[derive(Default)]
 struct Slot {
-    frame: Option<GrayU8>,
+    frame: Option<Frame8>,
     /// Frames received so far.
     received: u64,
     /// Why the stream ended, once it has.
     ended: Option<String>,
 }
 
-/// A frame from a live source, with how many were dropped before it.
+/// A frame from a live source (in colour when opened so), with how many were dropped before it.
 pub struct LiveFrame {
-    pub image: GrayU8,
+    pub image: Frame8,
     /// Frames the camera sent since the previous one handed out that were never handed out.
     pub dropped: u64,
 }
 
 impl Live {
-    /// Opens `source` at `width x height` (the camera's mode, or the test source's size).
-    pub fn open(source: &str, width: usize, height: usize) -> Result<Live> {
+    /// Opens `source` at `width x height` (the camera's mode, or the test source's size), its
+    /// frames grey, or in colour with `colour` (their channels and grey, [`ColourU8`]).
+    pub fn open(source: &str, width: usize, height: usize, colour: bool) -> Result<Live> {
         check_size(width, height)?;
         let mut c = super::video::command("ffmpeg");
         c.args(["-v", "error", "-nostdin"]);
@@ -100,7 +101,7 @@ impl Live {
             "-f",
             "rawvideo",
             "-pix_fmt",
-            "gray",
+            if colour { "rgb24" } else { "gray" },
             "-",
         ])
         .stdout(Stdio::piped())
@@ -111,21 +112,27 @@ impl Live {
         let shared: Arc<(Mutex<Slot>, Condvar)> = Arc::default();
         let writer = shared.clone();
         std::thread::spawn(move || {
+            let bytes = width * height * if colour { 3 } else { 1 };
             loop {
-                let mut img = GrayU8 {
-                    width,
-                    height,
-                    data: vec![0; width * height],
+                let mut data = vec![0; bytes];
+                let read = out.read_exact(&mut data);
+                let frame = match colour {
+                    true => ColourU8::from_rgb(width, height, &data).map(Frame8::Colour),
+                    false => GrayU8::from_vec(width, height, data).map(Frame8::Gray),
                 };
-                let read = out.read_exact(&mut img.data);
                 let (lock, cv) = &*writer;
                 let mut slot = lock.lock().unwrap_or_else(|e| e.into_inner());
-                match read {
-                    Ok(()) => {
-                        slot.frame = Some(img);
+                match (read, frame) {
+                    (Ok(()), Some(frame)) => {
+                        slot.frame = Some(frame);
                         slot.received += 1;
                     }
-                    Err(_) => {
+                    (Ok(()), None) => {
+                        slot.ended = Some("a frame of the wrong size".into());
+                        cv.notify_all();
+                        return;
+                    }
+                    (Err(_), _) => {
                         let mut why = String::new();
                         let _ = err.read_to_string(&mut why);
                         let why = why.trim().replace('\n', "; ");
@@ -270,24 +277,40 @@ impl Recording {
         Recording::create(root, &free)
     }
 
-    /// Appends a frame and its corners (`None`: not tracked, written `lost`).
-    pub fn push(&mut self, image: &GrayU8, corners: Option<&crate::geometry::Quad>) -> Result<()> {
+    /// Appends a frame (grey, or in colour) and its corners (`None`: not tracked, written
+    /// `lost`).
+    pub fn push(&mut self, frame: &Frame8, corners: Option<&crate::geometry::Quad>) -> Result<()> {
         use std::io::Write;
         let name = format!("frame{:05}.jpg", self.frames + 1);
         let path = self.frames_dir.join(&name);
+        let image = frame.gray();
         if image.data.len() != image.width * image.height {
             return Err(Error::InvalidParameter(
                 "a frame's data does not match its size".into(),
             ));
         }
+        let (data, kind) = match frame {
+            Frame8::Gray(g) => (
+                std::borrow::Cow::Borrowed(&g.data[..]),
+                image::ExtendedColorType::L8,
+            ),
+            Frame8::Colour(c) => {
+                let [r, g, b] = &c.channels;
+                let rgb = (0..r.data.len()).flat_map(|i| [r.data[i], g.data[i], b.data[i]]);
+                (
+                    std::borrow::Cow::Owned(rgb.collect()),
+                    image::ExtendedColorType::Rgb8,
+                )
+            }
+        };
         let file = std::fs::File::create(&path).map_err(|e| Error::io(&path, e))?;
         let mut writer = std::io::BufWriter::new(file);
         image::ImageEncoder::write_image(
             image::codecs::jpeg::JpegEncoder::new_with_quality(&mut writer, RECORD_QUALITY),
-            &image.data,
+            &data,
             image.width as u32,
             image.height as u32,
-            image::ExtendedColorType::L8,
+            kind,
         )
         .map_err(|e| Error::ImageWrite {
             path: path.clone(),
@@ -339,10 +362,10 @@ pub struct LiveInfo {
     pub recording: Option<(std::path::PathBuf, usize)>,
 }
 
-/// A frame a live run took: its index in the run and its image.
+/// A frame a live run took: its index in the run and its image (in colour when opened so).
 pub struct Taken {
     pub index: usize,
-    pub image: GrayU8,
+    pub image: Frame8,
 }
 
 /// A live run, the one loop of every live user (`regtrack track --camera`, the inspector's live
@@ -360,10 +383,10 @@ pub struct LiveRun {
 }
 
 impl LiveRun {
-    /// Opens `source` at `width x height` (see [`Live::open`]).
-    pub fn open(source: &str, width: usize, height: usize) -> Result<LiveRun> {
+    /// Opens `source` at `width x height`, in colour with `colour` (see [`Live::open`]).
+    pub fn open(source: &str, width: usize, height: usize, colour: bool) -> Result<LiveRun> {
         Ok(LiveRun {
-            live: Live::open(source, width, height)?,
+            live: Live::open(source, width, height, colour)?,
             info: LiveInfo {
                 source: source.to_string(),
                 ..LiveInfo::default()
@@ -454,7 +477,7 @@ impl LiveRun {
     #[allow(clippy::type_complexity)]
     pub fn record(
         &mut self,
-        image: &GrayU8,
+        image: &Frame8,
         corners: Option<&crate::geometry::Quad>,
     ) -> std::result::Result<(), (Error, Option<(std::path::PathBuf, usize)>)> {
         let Some(r) = self.recording.as_mut() else {

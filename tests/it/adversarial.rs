@@ -130,7 +130,7 @@ fn a_live_size_that_cannot_be_a_frame_is_refused() {
     ] {
         let e = check_size(w, h).unwrap_err().to_string();
         assert!(e.contains(&format!("{w}x{h}")), "{e}");
-        let e = Live::open("lavfi:testsrc=size=320x240:rate=30", w, h)
+        let e = Live::open("lavfi:testsrc=size=320x240:rate=30", w, h, false)
             .err()
             .expect("refused")
             .to_string();
@@ -151,7 +151,8 @@ fn a_live_source_that_stalls_is_reported() {
     // One frame every 4 s (FFmpeg holds each until the next: the first after about 4 s),
     // then nothing for longer than the stall time.
     let mut live =
-        regtrack::dataset::live::Live::open("lavfi:testsrc=size=32x32:rate=0.25", 32, 32).unwrap();
+        regtrack::dataset::live::Live::open("lavfi:testsrc=size=32x32:rate=0.25", 32, 32, false)
+            .unwrap();
     live.set_stall(Duration::from_secs(20));
     live.newest().unwrap();
     live.set_stall(Duration::from_secs(1));

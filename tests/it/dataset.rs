@@ -543,7 +543,7 @@ fn a_live_source_is_tracked_dropped_recorded_and_its_end_reported() {
     use crate::cli::{regtrack, succeed};
     let d = TempDir::new("live");
     let out = d.path().join("c.txt");
-    let rec = d.path().join("rec");
+    let (rec, rec2) = (d.path().join("rec"), d.path().join("rec_colour"));
     let live = |source: &str, frames: &str, extra: &[&str]| {
         regtrack(
             &[
@@ -577,6 +577,20 @@ fn a_live_source_is_tracked_dropped_recorded_and_its_end_reported() {
     assert_eq!(recorded.len(), 20);
     assert!(recorded.ground_truth(0).is_some());
     assert_eq!(read_ground_truth(&out).unwrap().len(), 20);
+    // A colour tracker reads the camera in colour, and the recording keeps it (the test
+    // source's bars differ in hue).
+    let o = live(
+        "lavfi:testsrc=size=320x240:rate=30",
+        "8",
+        &["--channels", "rgb", "--record", rec2.to_str().unwrap()],
+    );
+    succeed(o.clone());
+    let recorded = Sequence::open(&rec2.join("live.txt")).unwrap();
+    assert_eq!(recorded.len(), 8);
+    let regtrack::imaging::Frame8::Colour(c) = recorded.load_frame(0, true).unwrap() else {
+        panic!("read grey")
+    };
+    assert!(c.channels[0] != c.channels[1] && c.channels[1] != c.channels[2]);
     // A tracker slower than the camera (a 200x200 grid, 100 iterations a frame, no early stop)
     // drops frames, and says how many.
     let o = live(

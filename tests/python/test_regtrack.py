@@ -346,6 +346,15 @@ def test_a_live_source_from_python():
     t.initialize(frames[0], [[100, 60], [220, 60], [220, 180], [100, 180]])
     c, s = t.update(frames[1])
     assert c.shape == (4, 2)
+    # In colour: BGR frames, which a colour tracker reads.
+    colour = list(regtrack.Camera("lavfi:testsrc=size=320x240:rate=30:duration=0.5",
+                                  size=(320, 240), colour=True))
+    assert colour[0].shape == (240, 320, 3) and colour[0].dtype == np.uint8
+    assert (colour[0][:, :, 0] != colour[0][:, :, 2]).any()
+    t = regtrack.Tracker("fclk", "ssd", "homography", channels="rgb")
+    t.initialize(colour[0], [[100, 60], [220, 60], [220, 180], [100, 180]])
+    c, s = t.update(colour[1])
+    assert c.shape == (4, 2)
     with pytest.raises(regtrack.Error, match="cannot|not"):
         list(regtrack.Camera("/dev/nosuchcamera", size=(320, 240)))
     # Sizes that cannot be a picture's: named, before anything is allocated (10**9 squared

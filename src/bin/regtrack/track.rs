@@ -135,7 +135,9 @@ pub fn run_live(
     let (w, h) = parse_size(size)?;
     let spec = spec_of(t)?;
     let mut tracker = tracker::Tracker::new(&spec)?;
-    let mut live = dataset::live::LiveRun::open(camera, w, h)?;
+    // In colour for a tracker that reads colour (and so recorded).
+    let colour = tracker.channels() == 3;
+    let mut live = dataset::live::LiveRun::open(camera, w, h, colour)?;
     // Written as it happens: a run that ends in any way leaves a sequence up to its last frame.
     if let Some(d) = record {
         live.start_recording(d, Some("live"))?;
@@ -152,11 +154,7 @@ pub fn run_live(
                 break;
             }
         };
-        let q = tracker.follow(
-            regtrack::tracker::FrameInput::Gray8(&f.image),
-            &init,
-            f.index,
-        )?;
+        let q = tracker.follow(regtrack::tracker::FrameInput::of(&f.image), &init, f.index)?;
         if let Err((e, _)) = live.record(&f.image, q.as_ref()) {
             return Err(e.into());
         }

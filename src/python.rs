@@ -96,9 +96,7 @@ impl FrameBuffers {
             "frame must be {expected}, got {what}"
         )))
     }
-}
 
-impl FrameBuffers {
     /// A BGR frame (uint8 or float32) into `colour`: `Some(true)` when it was one, `Some(false)`
     /// for a grey frame (read as grey), `None` for another dtype.
     fn load_colour(&mut self, frame: &Bound<'_, PyAny>, expected: &str) -> PyResult<Option<bool>> {
@@ -486,7 +484,8 @@ impl PyTracker {
     }
 }
 
-/// A frame (grey, `H x W`) and its ground truth (`4 x 2`, `None` when not annotated).
+/// A frame (grey `H x W`, or BGR `H x W x 3`) and its ground truth (`4 x 2`, `None` when not
+/// annotated).
 type FrameAndTruth<'py> = (Bound<'py, PyAny>, Option<Bound<'py, PyArray2<f64>>>);
 
 /// A sequence (any layout `regtrack track --seq` reads: MTF, a folder of images, POT), as

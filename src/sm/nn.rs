@@ -165,7 +165,8 @@ pub struct Nn {
 }
 
 impl Nn {
-    /// The method, if its store of sampled patches (`samples x res^2` values) fits in
+    /// The method, if its store of sampled patches (`samples x res^2` values, a colour
+    /// tracker's three times as many) fits in
     /// [`MAX_STORE_BYTES`]: parameters that are each in range must not combine into an abort.
     pub(super) fn new(
         name: &'static str,
@@ -173,12 +174,14 @@ impl Nn {
         cfg: &SmConfig,
     ) -> crate::error::Result<Self> {
         let samples = cfg.get(&defs[0]) as usize;
-        let res = cfg.tracker.res;
-        let bytes = samples as u128 * (res * res) as u128 * 4;
+        // A colour tracker's patches are its three channels'.
+        let (res, channels) = (cfg.tracker.res, cfg.tracker.channels.count());
+        let bytes = samples as u128 * (res * res * channels) as u128 * 4;
         if bytes > MAX_STORE_BYTES as u128 {
             return Err(crate::Error::InvalidParameter(format!(
-                "{name}: {samples} samples of {res}x{res} values would need {:.1} GB of \
+                "{name}: {samples} samples of {res}x{res} values{} would need {:.1} GB of \
                  memory, more than the {} GB allowed: lower samples or res",
+                if channels > 1 { " in 3 channels" } else { "" },
                 bytes as f64 / 1e9,
                 MAX_STORE_BYTES >> 30
             )));

@@ -197,6 +197,8 @@ pub struct Detector {
     /// The sums of the view the candidates are ranked on (each sample is the mean of a cell
     /// about it).
     sums: CellSums,
+    /// The plane of the view it reads (a colour tracker's channel of most contrast).
+    plane: usize,
     /// Where the frame search goes on.
     pub(super) scan: Scan,
 }
@@ -223,6 +225,7 @@ impl Detector {
             confidence: BlockCorrelation::default(),
             side,
             sums: CellSums::default(),
+            plane: problem.strongest_channel(),
             scan: Scan::default(),
         };
         d.prepare(view);
@@ -238,13 +241,13 @@ impl Detector {
 
     /// Reads `view` (the level the candidates are ranked on) for [`Detector::candidate`].
     pub fn prepare(&mut self, view: &ImageView) {
-        self.sums.fill(&view.plane(0));
+        self.sums.fill(&view.plane(self.plane));
     }
 
     /// Samples the detector's grid points of `view` under the parameters `p` into `patch`.
     fn sample(&mut self, problem: &Problem, view: &ImageView, p: &Params) {
-        // A colour tracker's candidates are ranked on its first channel.
-        let view = &view.plane(0);
+        // A colour tracker's candidates are ranked on its channel of most contrast.
+        let view = &view.plane(self.plane);
         let m = problem.pixel_matrix(p);
         warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
         if self.side < 2 {

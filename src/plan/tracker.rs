@@ -326,7 +326,9 @@ impl VisualTracker for RegistrationTracker {
         self.judges.template = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);
         self.judges.template.set_mask(mask);
         self.judges.previous.set_mask(mask);
-        self.periods = super::periodic::periods(template, res);
+        // A colour template's periods: those of its channel of most contrast.
+        let strongest = ctx.problem().strongest_channel() * res * res;
+        self.periods = super::periodic::periods(&template[strongest..], res);
         // Made here so that a frame's update does not allocate.
         self.judges.blurred = vec![0.0; template.len()];
         self.judges.blur = BlockCorrelation::new(template, res, CONFIDENCE_BLOCKS);

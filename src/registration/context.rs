@@ -262,6 +262,48 @@ mod grid_tests {
     use super::*;
     use crate::geometry::Point;
 
+    /// A colour grid is the `res x res` points once per channel, each part sampled from its
+    /// plane; the channel of most contrast is the one whose template varies most.
+    #[test]
+    fn a_colour_grid_samples_each_channel_and_knows_its_strongest() {
+        let (w, h) = (40, 30);
+        let plane = |amp: f32| -> Vec<f32> {
+            (0..w * h)
+                .map(|i| 100.0 + amp * (((i % w) as f32) * 0.7).sin())
+                .collect()
+        };
+        let (r, g, b) = (plane(5.0), plane(1.0), plane(30.0));
+        let view = ImageView::new(&r, w, h, 0, 0).with_planes(&g, &b);
+        let mut ctx = Context::new(
+            crate::ssm::build("homography").unwrap(),
+            crate::am::build("zncc").unwrap(),
+            HessianKind::Default,
+            6,
+        );
+        ctx.set_channels(3);
+        ctx.set_region(
+            &Quad::from_rect(8.0, 6.0, 20.0, 15.0),
+            6,
+            GridLayout::Centres,
+        )
+        .unwrap();
+        assert_eq!((ctx.len(), ctx.problem().channels()), (108, 3));
+        let (gx, gy) = ctx.problem().grid();
+        assert_eq!((&gx[..36], &gy[..36]), (&gx[72..], &gy[72..]));
+        let (gx, gy) = (gx.to_vec(), gy.to_vec());
+        ctx.sample_template(&view);
+        let t = ctx.problem().template();
+        for (c, data) in [&r, &g, &b].into_iter().enumerate() {
+            let mut one = vec![0f32; 36];
+            let m = ctx.pixel_matrix(&ctx.params());
+            let (mut px, mut py) = (vec![0f32; 36], vec![0f32; 36]);
+            super::super::workspace::warp_points(&m, &gx[..36], &gy[..36], &mut px, &mut py);
+            crate::imaging::sample_values(&ImageView::new(data, w, h, 0, 0), &px, &py, &mut one);
+            assert_eq!(&t[c * 36..(c + 1) * 36], &one[..], "channel {c}");
+        }
+        assert_eq!(ctx.problem().strongest_channel(), 2);
+    }
+
     #[test]
     fn the_grid_lies_inside_or_spans_the_target() {
         let q = Quad::from_rect(10.0, 20.0, 40.0, 30.0);

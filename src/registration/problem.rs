@@ -118,6 +118,24 @@ impl Problem {
         self.channels
     }
 
+    /// The channel whose part of the whole template varies most (0 for grey): what a judge
+    /// that reads one channel reads (the periodic check, the redetection's ranking).
+    pub fn strongest_channel(&self) -> usize {
+        let t = self.whole_template();
+        let m = t.len() / self.channels.max(1);
+        let variance = |part: &[f32]| {
+            let n = part.len().max(1) as f64;
+            let mean = part.iter().map(|&v| v as f64).sum::<f64>() / n;
+            part.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n
+        };
+        (0..self.channels)
+            .map(|c| (c, variance(&t[c * m..(c + 1) * m])))
+            .fold((0, f64::NEG_INFINITY), |best, (c, v)| {
+                if v > best.1 { (c, v) } else { best }
+            })
+            .0
+    }
+
     /// Which points the searches read from the next template on ([`super::spi`]).
     pub fn set_selection(&mut self, selection: Selection) {
         self.selection = selection;

@@ -163,7 +163,8 @@ impl Grid {
     /// Lays the patches on the lattice under the context's parameters and takes their templates
     /// from `img` (the frame the estimate is on).
     pub fn retemplate(&mut self, ctx: &Context, img: &ImageView) {
-        // The patches of a colour tracker read its first channel.
+        // The patches of a colour tracker read its first channel (they are small; the grid
+        // method is for grey trackers first).
         let img = &img.plane(0);
         let p = ctx.params();
         let m = ctx.pixel_matrix(&p);

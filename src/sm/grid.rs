@@ -100,6 +100,8 @@ pub struct Grid {
     /// Per patch: the inverse of its structure tensor `(a, b, c)` for `[[a, b], [b, c]]`, or
     /// `None` for a flat patch.
     hinv: Vec<Option<[f64; 3]>>,
+    /// The plane the patches read (a colour tracker's channel of most contrast).
+    plane: usize,
     /// Where the templates were taken (frame pixels), and the target's corners then.
     from: Vec<Point>,
     from_corners: Quad,
@@ -140,6 +142,7 @@ impl Grid {
             tgx: Vec::new(),
             tgy: Vec::new(),
             hinv: Vec::new(),
+            plane: 0,
             from: Vec::new(),
             from_corners: Quad::default(),
             to: Vec::new(),
@@ -163,9 +166,9 @@ impl Grid {
     /// Lays the patches on the lattice under the context's parameters and takes their templates
     /// from `img` (the frame the estimate is on).
     pub fn retemplate(&mut self, ctx: &Context, img: &ImageView) {
-        // The patches of a colour tracker read its first channel (they are small; the grid
-        // method is for grey trackers first).
-        let img = &img.plane(0);
+        // The patches of a colour tracker read its channel of most contrast.
+        self.plane = ctx.problem().strongest_channel();
+        let img = &img.plane(self.plane);
         let p = ctx.params();
         let m = ctx.pixel_matrix(&p);
         let s2 = self.size * self.size;
@@ -203,7 +206,7 @@ impl Grid {
     /// Patch `k`'s search from `start`: where its template is in `img` (`None` when it does not
     /// settle, leaves far, or is flat).
     fn track_patch(&mut self, img: &ImageView, k: usize, start: Point) -> Option<Point> {
-        let img = &img.plane(0);
+        let img = &img.plane(self.plane);
         let [a, b, c] = self.hinv[k]?;
         let s2 = self.size * self.size;
         let far = 2.0 * self.size as f64;

@@ -13,7 +13,7 @@
 
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::imaging::{GrayF32, GrayU8, gaussian_blur};
+use crate::imaging::{Frame8, GrayF32, GrayU8, gaussian_blur};
 use crate::linalg::median;
 use crate::observe::IterationCounter;
 use crate::tracker::{FrameInput, TrackStatus, Tracker, TrackerSpec};
@@ -76,19 +76,18 @@ impl BenchRow {
 /// How many updates while lost `bench_tracker` times.
 pub const LOST_FRAMES: usize = 12;
 
-/// Frames of a sequence loaded in memory: grey, and in colour when a tracker reads colour.
+/// Frames of a sequence loaded in memory: grey, or in colour when a tracker reads colour.
 pub struct LoadedFrames {
-    pub gray: Vec<GrayU8>,
-    pub colour: Vec<crate::imaging::ColourU8>,
+    pub frames: Vec<Frame8>,
     pub init: crate::geometry::Quad,
 }
 
 impl LoadedFrames {
     /// Frame `i` as a tracker of `channels` reads it (in colour when loaded so).
     fn input(&self, i: usize, channels: usize) -> FrameInput<'_> {
-        match self.colour.get(i) {
-            Some(c) if channels == 3 => FrameInput::Colour(c),
-            _ => FrameInput::Gray8(&self.gray[i]),
+        match &self.frames[i] {
+            Frame8::Colour(c) if channels == 3 => FrameInput::Colour(c),
+            f => FrameInput::Gray8(f.gray()),
         }
     }
 }
@@ -110,21 +109,10 @@ pub fn load_frames(
         path: seq.frames.first().cloned().unwrap_or_default(),
         message: "the benchmark needs ground truth for the first frame".into(),
     })?;
-    let (mut gray, mut colours) = (Vec::with_capacity(n), Vec::new());
-    for i in 0..n {
-        match seq.load_frame(i, colour)? {
-            crate::imaging::Frame8::Gray(g) => gray.push(g),
-            crate::imaging::Frame8::Colour(c) => {
-                gray.push(c.gray.clone());
-                colours.push(c);
-            }
-        }
-    }
-    Ok(LoadedFrames {
-        gray,
-        colour: colours,
-        init,
-    })
+    let frames = (0..n)
+        .map(|i| seq.load_frame(i, colour))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(LoadedFrames { frames, init })
 }
 
 /// Benchmarks one tracker on loaded frames, `repeats` times.
@@ -137,13 +125,14 @@ pub fn bench_tracker(
     // a whole tracker's pre-processing is its own business (timed): it gets the frame as floats.
     let smoothed: Vec<GrayF32> = match spec.smoothing()? {
         Some(kernel) => frames
-            .gray
+            .frames
             .iter()
-            .map(|g| gaussian_blur(g, &kernel))
+            .map(|f| gaussian_blur(f.gray(), &kernel))
             .collect(),
         None => frames
-            .gray
+            .frames
             .iter()
+            .map(|f| f.gray())
             .map(|g| GrayF32 {
                 width: g.width,
                 height: g.height,
@@ -191,7 +180,7 @@ pub fn bench_tracker(
         let mut n = 0usize;
         let start = Instant::now();
         lost_at = None;
-        for i in 0..frames.gray.len() - 1 {
+        for i in 0..frames.frames.len() - 1 {
             let out = t.update(frames.input(i + 1, channels), &mut counter);
             if out.status != TrackStatus::Tracking {
                 lost_at = Some(i + 1);
@@ -226,7 +215,7 @@ pub fn bench_tracker(
 /// frame, then given frames of seeded noise of the same size (the target gone: it is lost on
 /// the first, and searches for the target on every one after).
 fn lost_update_ms(spec: &TrackerSpec, frames: &LoadedFrames) -> Result<f64> {
-    let first = &frames.gray[0];
+    let first = frames.frames[0].gray();
     let noise = GrayU8::noise(first.width, first.height, &mut crate::rng::Rng::new(7));
     let mut t = Tracker::new(spec)?;
     t.initialize(FrameInput::Gray8(first), &frames.init)?;
@@ -255,8 +244,7 @@ mod tests {
         })
         .unwrap();
         let frames = LoadedFrames {
-            gray,
-            colour: Vec::new(),
+            frames: gray.into_iter().map(Frame8::Gray).collect(),
             init: quads[0],
         };
         let spec = TrackerSpec::from_names("iclk", "ssd", "homography").unwrap();

@@ -586,9 +586,8 @@ fn frame_to_numpy(py: Python<'_>, frame: crate::imaging::Frame8) -> PyResult<Bou
     match frame {
         crate::imaging::Frame8::Gray(g) => shaped(g.data, &[g.height, g.width]),
         crate::imaging::Frame8::Colour(c) => {
-            let [r, g, b] = &c.channels;
-            let bgr = (0..r.data.len()).flat_map(|i| [b.data[i], g.data[i], r.data[i]]);
-            shaped(bgr.collect(), &[r.height, r.width, 3])
+            let bgr = c.rgb_pixels().flat_map(|[r, g, b]| [b, g, r]).collect();
+            shaped(bgr, &[c.gray.height, c.gray.width, 3])
         }
     }
 }

@@ -50,8 +50,7 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(Frame8, FrameIma
                         .flat_map(|c| [c[0], c[1], c[2], 255])
                         .collect(),
                 };
-                let mut colour = ColourU8::from_rgb(w, h, &rgb).expect("length checked");
-                colour.gray = gray;
+                let colour = ColourU8::from_rgb_and_gray(&rgb, gray).expect("length checked");
                 (Frame8::Colour(colour), image)
             }
             _ => {
@@ -63,13 +62,8 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(Frame8, FrameIma
     let img = load_dynamic(path)?;
     let gray = gray_from_dynamic(&img);
     let rgba = img.to_rgba8();
-    let (w, h) = (rgba.width() as usize, rgba.height() as usize);
-    let rgb: Vec<u8> = rgba
-        .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    let mut colour = ColourU8::from_rgb(w, h, &rgb).expect("the image's own size");
-    colour.gray = gray;
+    let colour =
+        ColourU8::from_rgb_and_gray(img.to_rgb8().as_raw(), gray).expect("the image's own size");
     Ok((
         Frame8::Colour(colour),
         FrameImage {
@@ -85,17 +79,15 @@ pub(super) fn decode_frame(seq: &Sequence, i: usize) -> Result<(Frame8, FrameIma
 pub(super) fn frame_image(index: usize, frame: &Frame8) -> FrameImage {
     match frame {
         Frame8::Gray(g) => gray_image(index, g),
-        Frame8::Colour(c) => {
-            let [r, g, b] = &c.channels;
-            FrameImage {
-                index,
-                width: r.width,
-                height: r.height,
-                rgba: (0..r.data.len())
-                    .flat_map(|i| [r.data[i], g.data[i], b.data[i], 255])
-                    .collect(),
-            }
-        }
+        Frame8::Colour(c) => FrameImage {
+            index,
+            width: c.gray.width,
+            height: c.gray.height,
+            rgba: c
+                .rgb_pixels()
+                .flat_map(|[r, g, b]| [r, g, b, 255])
+                .collect(),
+        },
     }
 }
 

@@ -295,8 +295,7 @@ impl Recording {
                 image::ExtendedColorType::L8,
             ),
             Frame8::Colour(c) => {
-                let [r, g, b] = &c.channels;
-                let rgb = (0..r.data.len()).flat_map(|i| [r.data[i], g.data[i], b.data[i]]);
+                let rgb = c.rgb_pixels().flatten();
                 (
                     std::borrow::Cow::Owned(rgb.collect()),
                     image::ExtendedColorType::Rgb8,

@@ -207,14 +207,6 @@ impl ColourU8 {
     /// The frame of `width x height` pixels given as interleaved `r, g, b` bytes (`None` when
     /// the length is not `3 width height`).
     pub fn from_rgb(width: usize, height: usize, rgb: &[u8]) -> Option<Self> {
-        if width.checked_mul(height)?.checked_mul(3)? != rgb.len() {
-            return None;
-        }
-        let plane = |c: usize| Image {
-            width,
-            height,
-            data: rgb.iter().skip(c).step_by(3).copied().collect(),
-        };
         let gray = Image {
             width,
             height,
@@ -223,10 +215,33 @@ impl ColourU8 {
                 .map(|p| luma(p[0], p[1], p[2]))
                 .collect(),
         };
+        Self::from_rgb_and_gray(rgb, gray)
+    }
+
+    /// The frame given as interleaved `r, g, b` bytes and its grey image made elsewhere (a
+    /// decoder's, whose grey the command line's trackers read); `None` when the lengths
+    /// disagree.
+    pub fn from_rgb_and_gray(rgb: &[u8], gray: GrayU8) -> Option<Self> {
+        let (width, height) = (gray.width, gray.height);
+        let n = gray.data.len();
+        if n != width.checked_mul(height)? || n.checked_mul(3)? != rgb.len() {
+            return None;
+        }
+        let plane = |c: usize| Image {
+            width,
+            height,
+            data: rgb.iter().skip(c).step_by(3).copied().collect(),
+        };
         Some(ColourU8 {
-            gray,
             channels: [plane(0), plane(1), plane(2)],
+            gray,
         })
+    }
+
+    /// The pixels as `[r, g, b]`, row by row.
+    pub fn rgb_pixels(&self) -> impl Iterator<Item = [u8; 3]> + '_ {
+        let [r, g, b] = &self.channels;
+        (0..r.data.len()).map(|i| [r.data[i], g.data[i], b.data[i]])
     }
 
     /// The frame's size.
@@ -256,15 +271,13 @@ impl Frame8 {
 /// the path.
 pub fn load_colour(path: &Path) -> Result<ColourU8> {
     let img = load_dynamic(path)?;
-    let rgb = img.to_rgb8();
-    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-    let mut frame = ColourU8::from_rgb(w, h, rgb.as_raw()).ok_or_else(|| Error::Image {
-        path: path.to_path_buf(),
-        message: "its pixels do not fill its size".into(),
-    })?;
     // The grey every other reader sees: the same as `load_gray`'s.
-    frame.gray = gray_from_dynamic(&img);
-    Ok(frame)
+    ColourU8::from_rgb_and_gray(img.to_rgb8().as_raw(), gray_from_dynamic(&img)).ok_or_else(|| {
+        Error::Image {
+            path: path.to_path_buf(),
+            message: "its pixels do not fill its size".into(),
+        }
+    })
 }
 
 /// The size of an image file, read from its header.

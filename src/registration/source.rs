@@ -138,16 +138,9 @@ impl FrameSource {
         self.stamp = new_stamp();
         self.built = false;
         self.region = region;
-        let channels = self.channels();
-        self.colour = channels == 3 && input.colour().is_some();
-        let planes = if self.colour { channels } else { 1 };
-        for c in 0..planes {
-            let pre = if c == 0 {
-                &mut self.pre
-            } else {
-                &mut self.others[c - 1]
-            };
-            match Raw::of(input, channels, c) {
+        self.colour = self.channels() == 3 && input.colour().is_some();
+        for (pre, raw) in self.planes_mut(input) {
+            match raw {
                 Raw::U8(img) => pre.process_part(img, region, part),
                 Raw::F32(img) => pre.process_part(img, region, part),
                 Raw::Smoothed(_) => {}
@@ -167,19 +160,31 @@ impl FrameSource {
             self.copy.build_levels(self.levels);
             return;
         }
-        complete(self.planes_mut(), input);
         let levels = self.levels;
-        for pre in self.planes_mut() {
+        for (pre, raw) in self.planes_mut(input) {
+            complete(pre, raw);
             pre.build_levels(levels);
         }
     }
 
-    /// The pre-processors of the planes the last frame has (its channels, or the grey).
-    fn planes_mut(&mut self) -> Planes<'_> {
+    /// The pre-processors of the planes the last frame has (its channels, or the grey), each
+    /// with what it reads of `input` ([`Raw::of`]).
+    fn planes_mut<'s, 'a>(
+        &'s mut self,
+        input: FrameInput<'a>,
+    ) -> impl Iterator<Item = (&'s mut Preprocessor, Raw<'a>)> {
+        let channels = self.channels();
         let n = if self.colour { self.others.len() } else { 0 };
-        Planes {
-            first: &mut self.pre,
-            others: &mut self.others[..n],
+        let planes = std::iter::once(&mut self.pre).chain(&mut self.others[..n]);
+        planes
+            .enumerate()
+            .map(move |(c, pre)| (pre, Raw::of(input, channels, c)))
+    }
+
+    /// Smooths the rest of a region each plane's pre-processor smoothed in part.
+    fn complete_planes(&mut self, input: FrameInput<'_>) {
+        for (pre, raw) in self.planes_mut(input) {
+            complete(pre, raw);
         }
     }
 
@@ -234,7 +239,7 @@ impl FrameSource {
             self.prepare(input, region_around(q, margin));
         } else if !self.pre.holds(&reads(q, 0.0)) {
             // A region smoothed in part, by another search than the one whose end is kept.
-            complete(self.planes_mut(), input);
+            self.complete_planes(input);
         }
     }
 
@@ -245,31 +250,13 @@ impl FrameSource {
     }
 }
 
-/// The pre-processors of a frame's planes: the first, and a colour frame's two others.
-struct Planes<'a> {
-    first: &'a mut Preprocessor,
-    others: &'a mut [Preprocessor],
-}
-
-impl<'a> IntoIterator for Planes<'a> {
-    type Item = &'a mut Preprocessor;
-    type IntoIter =
-        std::iter::Chain<std::iter::Once<Self::Item>, std::slice::IterMut<'a, Preprocessor>>;
-    fn into_iter(self) -> Self::IntoIter {
-        std::iter::once(self.first).chain(self.others.iter_mut())
-    }
-}
-
-/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part, in each
-/// plane (plane `c` of `input` as [`Raw::of`] reads it).
-fn complete(planes: Planes<'_>, input: FrameInput<'_>) {
-    let channels = if planes.others.is_empty() { 1 } else { 3 };
-    for (c, pre) in planes.into_iter().enumerate() {
-        match Raw::of(input, channels, c) {
-            Raw::U8(img) => pre.complete(img),
-            Raw::F32(img) => pre.complete(img),
-            Raw::Smoothed(_) => {}
-        }
+/// Smooths the rest of a region that [`Preprocessor::process_part`] smoothed in part, from
+/// `raw`, the image it was given.
+fn complete(pre: &mut Preprocessor, raw: Raw<'_>) {
+    match raw {
+        Raw::U8(img) => pre.complete(img),
+        Raw::F32(img) => pre.complete(img),
+        Raw::Smoothed(_) => {}
     }
 }
 
@@ -298,7 +285,7 @@ impl Reader<'_> {
         if let Reader::Part { src, input } = self
             && !src.pre.holds(&reads(q, 0.0))
         {
-            complete(src.planes_mut(), *input);
+            src.complete_planes(*input);
         }
     }
 }

@@ -205,7 +205,7 @@ pub fn run_bench(
     let loaded = bench::load_frames(&seq, frames, colour)?;
     println!(
         "{} frames of {}, {} repeats (medians); us/iter = an iteration's own time, other = the rest of a frame (pyramid, loss checks); tracker-only = search on pre-smoothed frames (read from memory; grey, which a colour tracker reads as three equal channels), live = from 8-bit frames, in colour for a colour tracker (the region the tracker smooths is in the cache when it searches)",
-        loaded.gray.len(),
+        loaded.frames.len(),
         seq.name,
         repeats
     );

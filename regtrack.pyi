@@ -46,6 +46,10 @@ class Tracker:
     @property
     def status(self) -> str: ...
     @property
+    def warped_grid(self) -> Optional[npt.NDArray[np.float64]]:
+        """A non-rigid tracker's (``ssm="spline"``, ``"tps"``...) warp as a lattice over its
+        target: ``(side, side, 2)`` image points, row by row; ``None`` for the others."""
+    @property
     def label(self) -> str: ...
     @property
     def last_update_us(self) -> float:

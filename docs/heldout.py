@@ -14,6 +14,9 @@ light that changes across the target, partial occlusion):
     python3 docs/heldout.py render-hue OUT       # the same halves in colour, the texture's
                                                  # pattern mostly in hue (HUE_KINDS; for
                                                  # `channels = rgb`)
+    python3 docs/heldout.py render-bend OUT      # the same halves bending (BEND_KINDS: the
+                                                 # texture waves, its corners with it; for
+                                                 # the non-rigid SSMs, `spline` and `tps`)
     python3 docs/heldout.py eval OUT NAME [regtrack eval options...]
         # runs `regtrack eval` on both halves into OUT/runs/NAME/{tune,heldout}
     python3 docs/heldout.py table OUT NAME...    # SR@5 by kind and half, frame-weighted
@@ -185,6 +188,15 @@ KINDS = [
 ]
 BACKGROUNDS = ["skimage_grass.png", "skimage_coffee.png"]
 
+# The bending set (`render-bend`): the target bends as cloth or a page does (`synth --bend`,
+# the amplitude a fraction of its size), on slow and faster profiles.
+BEND_KINDS = [
+    ("bend", "bm1", "ucsb_bricks_m1", ["--bend", "0.04", "--noise", "2"]),
+    ("bend", "bbook", "tmt_dl_bookIII_s5", ["--bend", "0.06", "--noise", "2"]),
+    ("bend", "bzm", "ucsb_bricks_zm", ["--bend", "0.05", "--noise", "2", "--jpeg-quality", "80"]),
+    ("bend_fast", "bm2", "ucsb_bricks_m2", ["--bend", "0.05", "--noise", "2"]),
+]
+
 # The appearance set (`render-appearance`): the target's appearance changes much more than in
 # KINDS, by light that sweeps across it and dims it (what a learnt appearance model, `pca`,
 # is for); long, slow profiles.
@@ -343,6 +355,8 @@ def table(out, names):
     order = ["fast", "periodic_5px", "panning_light", "slow", "static_light", "all"]
     if any(k in ("light_sweep", "dimming") for k in kinds.values()):
         order = ["light_sweep", "dimming", "all"]
+    if any(k in ("bend", "bend_fast") for k in kinds.values()):
+        order = ["bend", "bend_fast", "all"]
     acc = {}
     for name, half, tracker, seq, frames, within, _, _ in rows(out, names):
         for kind in (kinds.get(seq, "?"), "all"):
@@ -376,6 +390,8 @@ def main():
         render(out, APPEARANCE_KINDS)
     elif cmd == "render-hue":
         render(out, HUE_KINDS, hue=True)
+    elif cmd == "render-bend":
+        render(out, BEND_KINDS)
     elif cmd == "eval":
         evaluate(out, sys.argv[3], sys.argv[4:])
     elif cmd == "table":

@@ -403,6 +403,23 @@ impl PyTracker {
         quad_to(py, &self.tracker().corners())
     }
 
+    /// A non-rigid tracker's (`ssm="spline"`, `"tps"`...) warp as a lattice over its target:
+    /// `(side, side, 2)` image points, row by row; `None` for the others.
+    #[getter]
+    fn warped_grid<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray3<f64>>>> {
+        let Some(grid) = self.tracker().warped_grid() else {
+            return Ok(None);
+        };
+        let rows: Vec<Vec<Vec<f64>>> = grid
+            .points
+            .chunks(grid.side.max(1))
+            .map(|row| row.iter().map(|p| vec![p.x, p.y]).collect())
+            .collect();
+        PyArray3::from_vec3(py, &rows)
+            .map(Some)
+            .map_err(|e| Error::new_err(e.to_string()))
+    }
+
     /// `"tracking"`, `"lost: <reason>"` or `"uninitialized"`.
     #[getter]
     fn status(&self) -> String {

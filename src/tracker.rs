@@ -197,8 +197,12 @@ impl RegistrationTracker {
             let sm = sm::build(&spec.sm, &cfg)?;
             check_capabilities(&*sm, &*model)?;
             check_selection(&spec.params, &*model)?;
-            let mut ctx = Context::new(ssm::build(ssm_name)?, model, spec.params.hessian, res);
+            let warp = ssm::build(ssm_name)?;
+            check_dof(&*warp, &*model)?;
+            check_non_rigid(&*warp, &*sm, &cfg)?;
+            let mut ctx = Context::new(warp, model, spec.params.hessian, res);
             ctx.set_selection(Selection::of(&spec.params));
+            ctx.set_smoothness(spec.params.smoothness);
             ctx.set_channels(spec.params.channels.count());
             Ok(Searcher::new(ctx, sm))
         };
@@ -279,6 +283,59 @@ fn check_selection(params: &TrackerParams, model: &dyn am::Am) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// Whether the models' capabilities allow the combination: the AM has what the search method
+/// needs, its Hessian takes the SSM's parameters, and a non-rigid SSM has a search method that
+/// can search it. What building a tracker checks, for the generic tests to predict.
+pub fn allowed(sm: &dyn sm::SearchMethod, model: &dyn am::Am, warp: &dyn ssm::Ssm) -> bool {
+    model.capabilities().missing(&sm.requires()).is_none()
+        && warp.dof() <= model.max_dof()
+        && (warp.projective() || sm.non_rigid())
+}
+
+/// Refuses an SSM of more parameters than the appearance model's Hessian takes, naming the
+/// models that take it.
+fn check_dof(warp: &dyn ssm::Ssm, model: &dyn am::Am) -> Result<()> {
+    if warp.dof() <= model.max_dof() {
+        return Ok(());
+    }
+    Err(Error::Incompatible(format!(
+        "state space model '{}' has {} parameters, but appearance model '{}' takes at most {}; \
+         appearance models that take {}: {}",
+        warp.name(),
+        warp.dof(),
+        model.name(),
+        model.max_dof(),
+        warp.dof(),
+        am::REGISTRY
+            .iter()
+            .filter(|e| e.build.default_model().max_dof() >= warp.dof())
+            .map(|e| e.name)
+            .collect::<Vec<_>>()
+            .join(", ")
+    )))
+}
+
+/// Refuses a non-rigid SSM with a search method that reads the warp as a matrix or draws
+/// random warps, naming the methods that take it.
+fn check_non_rigid(warp: &dyn ssm::Ssm, sm: &dyn sm::SearchMethod, cfg: &SmConfig) -> Result<()> {
+    if warp.projective() || sm.non_rigid() {
+        return Ok(());
+    }
+    let takers: Vec<&str> = sm::REGISTRY
+        .iter()
+        .filter(|e| sm::build(e.name, cfg).is_ok_and(|m| m.non_rigid()))
+        .map(|e| e.name)
+        .collect();
+    Err(Error::Incompatible(format!(
+        "state space model '{}' is non-rigid (a grid of control points), which search method \
+         '{}' cannot search (it samples warps or reads them as a homography); search methods \
+         that can: {} (and lm:, cascade: and parallel: of them)",
+        warp.name(),
+        sm.name(),
+        takers.join(", ")
+    )))
 }
 
 /// Refuses a search method whose needs the appearance model does not meet, naming the models

@@ -138,6 +138,15 @@ impl<'a> From<&'a GrayU8> for FrameInput<'a> {
     }
 }
 
+/// A lattice of `side x side` points on the template's quad, row by row (the first along its
+/// first side), under a tracker's warp, in image coordinates: what a non-rigid warp does to the
+/// target between its corners.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WarpedGrid {
+    pub side: usize,
+    pub points: Vec<crate::geometry::Point>,
+}
+
 /// What a tracker shows of its inner state for inspection: the template and the current patch
 /// (on a `res x res` grid, row-major; a colour tracker's `channels` such patches, red, green
 /// and blue, one after the other), from which the error image follows.
@@ -176,6 +185,11 @@ pub trait VisualTracker: Send + std::fmt::Debug {
     /// ([`FrameInput::Colour`]); a grey frame given to it is read as three equal channels.
     fn channels(&self) -> usize {
         1
+    }
+    /// A non-rigid tracker's warp drawn as a lattice over its target (the inspector draws it);
+    /// `None` for the others.
+    fn warped_grid(&self) -> Option<WarpedGrid> {
+        None
     }
     /// The label used in file names and tables.
     fn label(&self) -> String {

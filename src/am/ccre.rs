@@ -30,6 +30,9 @@ pub const ENTRY: Entry<AmBuilder> = Entry {
 pub struct Ccre(Parzen);
 
 impl Am for Ccre {
+    fn max_dof(&self) -> usize {
+        super::parzen::PDOF
+    }
     fn name(&self) -> &'static str {
         ENTRY.name
     }

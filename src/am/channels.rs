@@ -12,7 +12,7 @@
 //! [`super::Am::hessian_is_minus_jtj`]), for which the sum over channels is the model itself.
 
 use super::{Am, Capabilities, HessianKind, Wrt};
-use crate::linalg::MAX_DOF;
+use crate::linalg::{MAX_DOF, SquareBuf, clear_square};
 
 /// See the module's documentation.
 #[derive(Debug)]
@@ -23,6 +23,8 @@ pub struct PerChannel {
     template: Vec<f32>,
     /// One channel's rows of `J` (scratch of [`Am::hessian`], sized with the template).
     jac: Vec<f32>,
+    /// One channel's Hessian (scratch of [`Am::hessian`]).
+    one: SquareBuf,
 }
 
 impl Clone for PerChannel {
@@ -31,6 +33,7 @@ impl Clone for PerChannel {
             models: self.models.iter().map(|m| m.clone_am()).collect(),
             template: self.template.clone(),
             jac: self.jac.clone(),
+            one: self.one.clone(),
         }
     }
 }
@@ -47,6 +50,7 @@ impl PerChannel {
             models,
             template: Vec::new(),
             jac: Vec::new(),
+            one: SquareBuf::default(),
         }
     }
 
@@ -124,11 +128,12 @@ impl Am for PerChannel {
         let n = current.len();
         let m = self.part(n);
         out[..dof * dof].fill(0.0);
-        let mut one = [0.0f64; MAX_DOF * MAX_DOF];
+        let one = &mut self.one;
+        clear_square(one, dof);
         for (c, model) in self.models.iter_mut().enumerate() {
             let rows = &mut self.jac[..m * dof];
             channel_rows(jac, n, m, c, dof, rows);
-            model.hessian(wrt, kind, &current[c * m..(c + 1) * m], rows, dof, &mut one);
+            model.hessian(wrt, kind, &current[c * m..(c + 1) * m], rows, dof, one);
             for (o, v) in out[..dof * dof].iter_mut().zip(&one[..dof * dof]) {
                 *o += v;
             }
@@ -142,6 +147,9 @@ impl Am for PerChannel {
     fn pixelwise(&self) -> bool {
         // A sub-grid of the whole patch would cut across the channels' parts.
         false
+    }
+    fn max_dof(&self) -> usize {
+        self.first().max_dof()
     }
     fn needs_grid(&self) -> bool {
         self.first().needs_grid()

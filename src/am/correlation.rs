@@ -10,7 +10,7 @@
 //! - after convergence (`x = I*`): `beta / n^2 (a a^T - P)`, equal to both above there.
 
 use super::{HessianKind, Wrt};
-use crate::linalg::MAX_DOF;
+use crate::linalg::{MAX_DOF, SquareBuf, clear_square};
 use crate::linalg::{accumulate_jtj, jt_times_many, sum};
 
 #[derive(Debug, Clone, Default)]
@@ -28,6 +28,8 @@ pub(crate) struct Correlation {
     seen: Option<(usize, usize, f64, f64)>,
     /// A patch of ones: `J^T 1` (the sums of `J`'s columns) with the other products in one pass ([`jt_times_many`]).
     ones: Vec<f32>,
+    /// `J^T J` (stride [`MAX_DOF`]), the Hessian's scratch.
+    jtj: SquareBuf,
 }
 
 /// Writes the unit vector of `P x` into `out`; returns `|P x|` (0 for a flat patch, with `out`
@@ -243,7 +245,8 @@ impl Correlation {
             dof,
             out,
             |ones, other, var, into, uvw| {
-                into.copy_from_slice(jtj);
+                let used = (dof - 1) * MAX_DOF + dof;
+                into[..used].copy_from_slice(&jtj[..used]);
                 let mut got = [[0.0; MAX_DOF]; 3];
                 match (newton, centered) {
                     (true, true) => project(&[other, var, ones], &mut got),
@@ -292,13 +295,14 @@ impl Correlation {
             (false, Wrt::Current) => (nc, &self.c_unit, &self.t_unit),
             (false, Wrt::Template) => (self.t_norm, &self.t_unit, &self.c_unit),
         };
-        out.iter_mut().for_each(|v| *v = 0.0);
-        if n <= 0.0 {
+        out[..dof * dof].fill(0.0);
+        if n <= 0.0 || dof == 0 {
             return;
         }
-        let mut jtj = [0.0f64; MAX_DOF * MAX_DOF];
+        let jtj = &mut self.jtj;
+        clear_square(jtj, dof);
         let mut uvw = [[0.0; MAX_DOF]; 3];
-        products(&self.ones, other, var, &mut jtj, &mut uvw);
+        products(&self.ones, other, var, jtj, &mut uvw);
         let [u, v, w] = uvw;
         let s = beta / (n * n);
         let newton = matches!(kind, HessianKind::Newton | HessianKind::AfterConvergence);

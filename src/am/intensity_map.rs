@@ -219,14 +219,8 @@ fn banded_cholesky_solve(
 
 /// `out = J^T diag(d) J` (row-major `dof x dof`, `J` stored by parameter).
 pub(crate) fn jt_diag_j(jac: &[f32], d: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_DOF]) {
-    let mut acc = [0.0f64; MAX_DOF * MAX_DOF];
-    crate::linalg::accumulate_weighted_jtj(jac, Some(d), dof, &mut acc);
-    out.iter_mut().for_each(|v| *v = 0.0);
-    for a in 0..dof {
-        for b in 0..dof {
-            out[a * dof + b] = acc[a * MAX_DOF + b];
-        }
-    }
+    out[..dof * dof].fill(0.0);
+    crate::linalg::products::jtj_into(jac, Some(d), dof, dof, out);
 }
 
 /// The sub-regions of a square `res x res` patch (row-major) for localised maps: `side x side`

@@ -83,7 +83,7 @@
 //! The histograms of the last patch are kept from the similarity or gradient call for the
 //! Hessian on the same patch. No embedding (a divergence between joint histograms of the pair).
 
-use super::parzen::{SCALE, SIDE, Weights};
+use super::parzen::{PDOF, SCALE, SIDE, Weights};
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
 use crate::registry::Entry;
@@ -176,7 +176,7 @@ pub struct Kld {
     valid: bool,
     self_stats: Stats,
     self_valid: bool,
-    /// Scratch: `V_p`, `V_0` (`SIDE x SIDE x MAX_DOF`), the per-pixel diagonal, a product buffer.
+    /// Scratch: `V_p`, `V_0` (`SIDE x SIDE x PDOF`), the per-pixel diagonal, a product buffer.
     vp: Vec<f64>,
     v0: Vec<f64>,
     diag: Vec<f32>,
@@ -196,6 +196,9 @@ impl Kld {
 }
 
 impl Am for Kld {
+    fn max_dof(&self) -> usize {
+        super::parzen::PDOF
+    }
     fn name(&self) -> &'static str {
         ENTRY.name
     }
@@ -225,8 +228,8 @@ impl Am for Kld {
         );
         self.valid = false;
         self.self_valid = false;
-        self.vp.resize(SIDE * SIDE * MAX_DOF, 0.0);
-        self.v0.resize(SIDE * SIDE * MAX_DOF, 0.0);
+        self.vp.resize(SIDE * SIDE * PDOF, 0.0);
+        self.v0.resize(SIDE * SIDE * PDOF, 0.0);
         self.diag.resize(template.len(), 0.0);
     }
     fn template(&self) -> &[f32] {
@@ -309,7 +312,7 @@ impl Am for Kld {
         let (gp, g0) = (&st.gp, &st.g0);
         for j in 0..n {
             let (ta, cb) = (tw.base[j] as usize, cw.base[j] as usize);
-            let mut jj = [0.0f64; MAX_DOF];
+            let mut jj = [0.0f64; PDOF];
             for (k, e) in jj.iter_mut().enumerate().take(dof) {
                 *e = jac[k * n + j] as f64;
             }
@@ -328,7 +331,7 @@ impl Am for Kld {
                         dj += x2[u] * y2[v] * gp[cell];
                     }
                     let coef = x[u] * y[v];
-                    let vc = &mut self.vp[cell * MAX_DOF..cell * MAX_DOF + dof];
+                    let vc = &mut self.vp[cell * PDOF..cell * PDOF + dof];
                     for (e, &q) in vc.iter_mut().zip(&jj[..dof]) {
                         *e += coef * q;
                     }
@@ -345,7 +348,7 @@ impl Am for Kld {
                             dj += c2 * g0[cell];
                         }
                         let coef = d1[u] * w0[v] + w0[u] * d1[v];
-                        let vc = &mut self.v0[cell * MAX_DOF..cell * MAX_DOF + dof];
+                        let vc = &mut self.v0[cell * PDOF..cell * PDOF + dof];
                         for (e, &q) in vc.iter_mut().zip(&jj[..dof]) {
                             *e += coef * q;
                         }
@@ -363,21 +366,21 @@ impl Am for Kld {
         }
         // Q = -sum p0 W W^T, W = ((1 - alpha) V_p + alpha V_0) / m - V_0 / p0, times (k/N)^2.
         let kn = SCALE * inv_n;
-        let mut q = [0.0f64; MAX_DOF * MAX_DOF];
+        let mut q = [0.0f64; PDOF * PDOF];
         for cell in 0..SIDE * SIDE {
             let p0 = self.p0[cell];
             if p0 <= 0.0 {
                 continue;
             }
             let m = st.m[cell];
-            let mut w = [0.0f64; MAX_DOF];
-            let vp = &self.vp[cell * MAX_DOF..cell * MAX_DOF + dof];
+            let mut w = [0.0f64; PDOF];
+            let vp = &self.vp[cell * PDOF..cell * PDOF + dof];
             if current_side {
                 for (e, &a) in w.iter_mut().zip(vp) {
                     *e = (1.0 - ALPHA) * a / m;
                 }
             } else {
-                let v0 = &self.v0[cell * MAX_DOF..cell * MAX_DOF + dof];
+                let v0 = &self.v0[cell * PDOF..cell * PDOF + dof];
                 for ((e, &a), &b) in w.iter_mut().zip(vp).zip(v0) {
                     *e = ((1.0 - ALPHA) * a + ALPHA * b) / m - b / p0;
                 }
@@ -385,13 +388,13 @@ impl Am for Kld {
             for a in 0..dof {
                 let wa = p0 * w[a];
                 for b in 0..dof {
-                    q[a * MAX_DOF + b] += wa * w[b];
+                    q[a * PDOF + b] += wa * w[b];
                 }
             }
         }
         for a in 0..dof {
             for b in 0..dof {
-                out[a * dof + b] -= kn * kn * q[a * MAX_DOF + b];
+                out[a * dof + b] -= kn * kn * q[a * PDOF + b];
             }
         }
     }

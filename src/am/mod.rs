@@ -195,6 +195,12 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     fn pixelwise(&self) -> bool {
         false
     }
+    /// The most warp parameters the model's Hessian takes (its per-pixel derivative cells hold
+    /// this many: MI's, CCRE's and KLD's are eight lanes, one AVX register); an SSM of more is
+    /// refused with it when the tracker is built.
+    fn max_dof(&self) -> usize {
+        MAX_DOF
+    }
     /// Whether the model reads the patch as the `res x res` grid it was sampled on (its
     /// neighbours, its regions), so that it cannot score a selection of the grid's points
     /// (selective pixel integration, `spi`, refuses it).

@@ -86,6 +86,9 @@
 
 use crate::linalg::{MAX_DOF, negative_part};
 
+/// The largest number of warp parameters these models take (a cell's lanes, one AVX register).
+pub(crate) const PDOF: usize = 8;
+
 /// The paper's and MTF's bins (KLD's, and the weights' default).
 pub(crate) const DEFAULT_BINS: usize = 8;
 /// Bin units per grey level, with [`DEFAULT_BINS`].
@@ -492,16 +495,16 @@ fn bilinear_forms<const M: usize>(
 /// the same cell).
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
-pub(crate) struct Lanes(pub [f32; MAX_DOF]);
+pub(crate) struct Lanes(pub [f32; PDOF]);
 
 /// `cells[u side + v] += x_u (y_v jj)` (eight lanes a cell) for the 4 x 4 cells (rows `side`
 /// apart) of one pixel: its share of the Newton Hessian's `V`.
 #[inline(always)]
-fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32; MAX_DOF]) {
+fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32; PDOF]) {
     assert!(cells.len() >= 3 * side + 4);
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
-        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a cell is eight f32 (MAX_DOF
+    if PDOF == 8 {
+        // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a cell is eight f32 (PDOF
         // == 8), and row u touches cells u side .. u side + 4, inside `cells` (asserted above).
         unsafe {
             use std::arch::x86_64::*;
@@ -509,7 +512,7 @@ fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32
             for (u, &xu) in x.iter().enumerate() {
                 let p = cells.as_mut_ptr().add(u * side) as *mut f32;
                 for (w, &yw) in y.iter().enumerate() {
-                    let c = p.add(w * MAX_DOF);
+                    let c = p.add(w * PDOF);
                     let coef = _mm256_set1_ps(xu * yw);
                     _mm256_storeu_ps(c, _mm256_fmadd_ps(coef, j, _mm256_loadu_ps(c)));
                 }
@@ -524,11 +527,11 @@ fn add_v(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32
 /// sums folded into the whole patch's.
 #[inline(always)]
 fn flush_lanes(acc: &mut [f64], b: &mut Lanes) {
-    let acc: &mut [f64; MAX_DOF] = acc.try_into().expect("a cell is MAX_DOF lanes");
+    let acc: &mut [f64; PDOF] = acc.try_into().expect("a cell is PDOF lanes");
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
+    if PDOF == 8 {
         // SAFETY: AVX2 is enabled at compile time (cfg); `acc` and `b` are eight lanes each
-        // (MAX_DOF == 8), `b` on a 32-byte boundary (`Lanes`' alignment).
+        // (PDOF == 8), `b` on a 32-byte boundary (`Lanes`' alignment).
         unsafe {
             use std::arch::x86_64::*;
             let v = _mm256_load_ps(b.0.as_ptr());
@@ -683,12 +686,12 @@ impl SameBin {
 
 /// `sum_i basis[i][m] rows[order[i]]` for each `m`, in f32 (in registers along the run).
 #[inline(always)]
-fn run_sums(rows: &[Lanes], order: &[u32], basis: &[[f32; MOMENTS]]) -> [[f32; MAX_DOF]; MOMENTS] {
-    let mut acc = [[0f32; MAX_DOF]; MOMENTS];
+fn run_sums(rows: &[Lanes], order: &[u32], basis: &[[f32; MOMENTS]]) -> [[f32; PDOF]; MOMENTS] {
+    let mut acc = [[0f32; PDOF]; MOMENTS];
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
+    if PDOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); a row is eight f32 on a
-        // 32-byte boundary (`Lanes`, MAX_DOF == 8), read through a bounds-checked index; each
+        // 32-byte boundary (`Lanes`, PDOF == 8), read through a bounds-checked index; each
         // store writes the eight lanes of one `acc[m]`.
         unsafe {
             use std::arch::x86_64::*;
@@ -726,10 +729,10 @@ fn jacobian_rows(
     rows: &mut [Lanes],
 ) {
     let len = block.len();
-    assert!(dof <= MAX_DOF && rows.len() >= len && jac.len() >= dof * n && block.end <= n);
+    assert!(dof <= PDOF && rows.len() >= len && jac.len() >= dof * n && block.end <= n);
     let mut done = 0;
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
+    if PDOF == 8 {
         // SAFETY: AVX2 is enabled at compile time (cfg); parameter k's loads read
         // jac[k n + block.start + i .. + 8] with i + 8 <= len (inside, asserted above); the
         // stores write rows[i .. i + 8], each a 32-byte aligned `Lanes`.
@@ -785,13 +788,7 @@ fn jacobian_rows(
 }
 
 /// [`add_v`] in plain Rust.
-fn add_v_portable(
-    cells: &mut [Lanes],
-    side: usize,
-    x: &[f32; 4],
-    y: &[f32; 4],
-    jj: &[f32; MAX_DOF],
-) {
+fn add_v_portable(cells: &mut [Lanes], side: usize, x: &[f32; 4], y: &[f32; 4], jj: &[f32; PDOF]) {
     for u in 0..4 {
         for w in 0..4 {
             let (xu, yw) = (x[u], y[w]);
@@ -1150,7 +1147,7 @@ pub(crate) struct Parzen {
     self_valid: bool,
     /// The template's pixels grouped by bin (after convergence).
     same: SameBin,
-    /// Scratch: `V` (`side x side x MAX_DOF`).
+    /// Scratch: `V` (`side x side x PDOF`).
     v: Vec<f64>,
     scratch: Scratch,
     /// The Newton Hessian's per-pixel diagonal terms, and which Hessian they are of.
@@ -1188,13 +1185,13 @@ impl Parzen {
             valid: false,
             self_stats: Stats::new(bins.side),
             self_valid: false,
-            v: vec![0.0; bins.side * bins.side * MAX_DOF],
+            v: vec![0.0; bins.side * bins.side * PDOF],
             same: SameBin::default(),
             scratch: Scratch {
                 v_block: vec![Lanes::default(); bins.side * bins.side],
                 rows: Vec::new(),
-                moments: vec![[0.0; MAX_DOF]; bins.side * MOMENTS],
-                lines: vec![[0.0; MAX_DOF]; bins.side],
+                moments: vec![[0.0; PDOF]; bins.side * MOMENTS],
+                lines: vec![[0.0; PDOF]; bins.side],
                 terms: Vec::new(),
             },
             diag: Vec::new(),
@@ -1360,11 +1357,11 @@ struct Scratch {
     /// The Jacobian's rows (a block's, or every pixel's after convergence).
     rows: Vec<Lanes>,
     /// After convergence: each bin's six sums (`side x MOMENTS`).
-    moments: Vec<[f64; MAX_DOF]>,
+    moments: Vec<[f64; PDOF]>,
     /// One `dof`-vector per histogram row or column.
-    lines: Vec<[f64; MAX_DOF]>,
+    lines: Vec<[f64; PDOF]>,
     /// The Hessian's weighted outer products, as (weight, vector).
-    terms: Vec<(f64, [f64; MAX_DOF])>,
+    terms: Vec<(f64, [f64; PDOF])>,
 }
 
 /// Adds `V` after convergence into `v` (see [`SameBin`]): the Jacobian's rows, each bin's six
@@ -1385,7 +1382,7 @@ fn same_bin_v(
     let moments = &mut scratch.moments;
     for &b in &same.bins {
         let b = b as usize;
-        moments[b * MOMENTS..(b + 1) * MOMENTS].fill([0.0; MAX_DOF]);
+        moments[b * MOMENTS..(b + 1) * MOMENTS].fill([0.0; PDOF]);
     }
     let mut start = 0;
     for &(b, end) in &same.runs {
@@ -1408,15 +1405,15 @@ fn same_bin_v(
     let products = &same.products[if current { 0 } else { 1 }];
     for &b in &same.bins {
         let b = b as usize;
-        let m: &[[f64; MAX_DOF]; MOMENTS] = moments[b * MOMENTS..(b + 1) * MOMENTS]
+        let m: &[[f64; PDOF]; MOMENTS] = moments[b * MOMENTS..(b + 1) * MOMENTS]
             .try_into()
             .expect("MOMENTS sums a bin");
         for (u, row) in products.iter().enumerate() {
             for (w, coefficients) in row.iter().enumerate() {
-                let at = ((b + u) * side + b + w) * MAX_DOF;
-                let cell: &mut [f64; MAX_DOF] = (&mut v[at..at + MAX_DOF])
+                let at = ((b + u) * side + b + w) * PDOF;
+                let cell: &mut [f64; PDOF] = (&mut v[at..at + PDOF])
                     .try_into()
-                    .expect("a cell is MAX_DOF lanes");
+                    .expect("a cell is PDOF lanes");
                 add_cell(cell, coefficients, m);
             }
         }
@@ -1425,11 +1422,11 @@ fn same_bin_v(
 
 /// `cell += sum_m c[m] moments[m]` (eight lanes), the sum made in registers first.
 #[inline(always)]
-fn add_cell(cell: &mut [f64; MAX_DOF], c: &[f64; MOMENTS], moments: &[[f64; MAX_DOF]; MOMENTS]) {
+fn add_cell(cell: &mut [f64; PDOF], c: &[f64; MOMENTS], moments: &[[f64; PDOF]; MOMENTS]) {
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
+    if PDOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); each load or store reads or
-        // writes four of the eight lanes (MAX_DOF == 8) of a cell or of a moment.
+        // writes four of the eight lanes (PDOF == 8) of a cell or of a moment.
         unsafe {
             use std::arch::x86_64::*;
             let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
@@ -1444,7 +1441,7 @@ fn add_cell(cell: &mut [f64; MAX_DOF], c: &[f64; MOMENTS], moments: &[[f64; MAX_
         }
         return;
     }
-    let mut sum = [0.0; MAX_DOF];
+    let mut sum = [0.0; PDOF];
     for (mm, &cm) in moments.iter().zip(c) {
         for (e, &q) in sum.iter_mut().zip(mm) {
             *e = cm.mul_add(q, *e);
@@ -1484,7 +1481,7 @@ fn newton(
     // blocks of pixels (16 cells a pixel, one 8-lane multiply-add each), then in f64 across
     // blocks, as `jt_times` does.
     for a in r0..r1 {
-        v[(a * side + c0) * MAX_DOF..(a * side + c1) * MAX_DOF].fill(0.0);
+        v[(a * side + c0) * PDOF..(a * side + c1) * PDOF].fill(0.0);
     }
     let g = &st.g;
     match same {
@@ -1534,15 +1531,15 @@ fn newton(
                 if !diag_ready {
                     bilinear_forms(g, side, ta, cb, x2, [y2], [1.0], [&mut diag[block]]);
                 }
-                // All MAX_DOF lanes of a row (those past `dof` are zero and never read).
+                // All PDOF lanes of a row (those past `dof` are zero and never read).
                 for ((((jj, &ta), &cb), x), y) in rows.iter().zip(ta).zip(cb).zip(x).zip(y) {
                     let at = ta as usize * side + cb as usize;
                     add_v(&mut v_block[at..at + 3 * side + 4], side, x, y, &jj.0);
                 }
                 for a in r0..r1 {
                     let cells = a * side + c0..a * side + c1;
-                    let sums = &mut v[cells.start * MAX_DOF..cells.end * MAX_DOF];
-                    for (acc, vb) in sums.chunks_exact_mut(MAX_DOF).zip(&mut v_block[cells]) {
+                    let sums = &mut v[cells.start * PDOF..cells.end * PDOF];
+                    for (acc, vb) in sums.chunks_exact_mut(PDOF).zip(&mut v_block[cells]) {
                         flush_lanes(acc, vb);
                     }
                 }
@@ -1557,11 +1554,9 @@ fn newton(
     // The second-order part, `sum_c w_c t_c t_c^T` over histogram cells, rows and columns:
     // the terms first, then their weighted Gram matrix. Every lane (those past `dof` are zero
     // in `V` and so in every sum of its cells).
-    let cell = |a: usize, b: usize| -> [f64; MAX_DOF] {
-        let at = (a * side + b) * MAX_DOF;
-        v[at..at + MAX_DOF]
-            .try_into()
-            .expect("a cell is MAX_DOF lanes")
+    let cell = |a: usize, b: usize| -> [f64; PDOF] {
+        let at = (a * side + b) * PDOF;
+        v[at..at + PDOF].try_into().expect("a cell is PDOF lanes")
     };
     let terms = &mut scratch.terms;
     terms.clear();
@@ -1570,16 +1565,16 @@ fn newton(
     match measure {
         Measure::Mi => {
             let col = lines;
-            col.fill([0.0; MAX_DOF]);
+            col.fill([0.0; PDOF]);
             for a in r0..r1 {
-                let mut row = [0.0f64; MAX_DOF];
+                let mut row = [0.0f64; PDOF];
                 for b in c0..c1 {
                     let vab = cell(a, b);
                     let p = st.p[a * side + b];
                     if p > 0.0 {
                         terms.push((1.0 / p, vab));
                     }
-                    for k in 0..MAX_DOF {
+                    for k in 0..PDOF {
                         row[k] += vab[k];
                         col[b][k] += vab[k];
                     }
@@ -1596,12 +1591,12 @@ fn newton(
         }
         Measure::Ccre => {
             let rows = lines;
-            rows.fill([0.0; MAX_DOF]);
+            rows.fill([0.0; PDOF]);
             for b in c0..c1 {
-                let (mut u, mut x, mut w) = ([0.0f64; MAX_DOF], [0.0f64; MAX_DOF], [0.0; MAX_DOF]);
+                let (mut u, mut x, mut w) = ([0.0f64; PDOF], [0.0f64; PDOF], [0.0; PDOF]);
                 for a in r0..r1 {
                     let vab = cell(a, b);
-                    for k in 0..MAX_DOF {
+                    for k in 0..PDOF {
                         u[k] += vab[k];
                         w[k] += vab[k];
                         x[k] += u[k];
@@ -1634,20 +1629,20 @@ fn newton(
     let q = weighted_gram(terms);
     for i in 0..dof {
         for j in 0..dof {
-            out[i * dof + j] = s_diag * out[i * dof + j] + kn * kn * q[i * MAX_DOF + j];
+            out[i * dof + j] = s_diag * out[i * dof + j] + kn * kn * q[i * PDOF + j];
         }
     }
 }
 
-/// `sum_i w_i t_i t_i^T` over `terms` (row-major, `MAX_DOF x MAX_DOF`). With AVX2 and eight
+/// `sum_i w_i t_i t_i^T` over `terms` (row-major, `PDOF x PDOF`). With AVX2 and eight
 /// lanes, the upper triangle's 4 x 4 blocks (twelve registers) accumulate along the terms, each
 /// row's factor `w t_i` broadcast from a register; the lower triangle is the upper's mirror.
-fn weighted_gram(terms: &[(f64, [f64; MAX_DOF])]) -> [f64; MAX_DOF * MAX_DOF] {
-    let mut q = [0.0; MAX_DOF * MAX_DOF];
+fn weighted_gram(terms: &[(f64, [f64; PDOF])]) -> [f64; PDOF * PDOF] {
+    let mut q = [0.0; PDOF * PDOF];
     #[cfg(simd = "avx2")]
-    if MAX_DOF == 8 {
+    if PDOF == 8 {
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); the loads read the eight
-        // lanes of a term (MAX_DOF == 8), the stores write the four lanes at 8 i and 8 i + 4 of
+        // lanes of a term (PDOF == 8), the stores write the four lanes at 8 i and 8 i + 4 of
         // row i < 8 of `q`.
         unsafe {
             use std::arch::x86_64::*;
@@ -1695,16 +1690,16 @@ fn weighted_gram(terms: &[(f64, [f64; MAX_DOF])]) -> [f64; MAX_DOF * MAX_DOF] {
 }
 
 /// [`weighted_gram`] in plain Rust (the same bits: the upper triangle's blocks made as there,
-/// then mirrored; also where `MAX_DOF` is not eight).
-fn weighted_gram_portable(terms: &[(f64, [f64; MAX_DOF])], q: &mut [f64; MAX_DOF * MAX_DOF]) {
-    let half = MAX_DOF / 2;
+/// then mirrored; also where `PDOF` is not eight).
+fn weighted_gram_portable(terms: &[(f64, [f64; PDOF])], q: &mut [f64; PDOF * PDOF]) {
+    let half = PDOF / 2;
     for (w, t) in terms {
-        for i in 0..MAX_DOF {
+        for i in 0..PDOF {
             let b = w * t[i];
             // Rows of the first half: every column; of the second: the second half's.
             let from = if i < half { 0 } else { half };
-            for j in from..MAX_DOF {
-                q[i * MAX_DOF + j] = b.mul_add(t[j], q[i * MAX_DOF + j]);
+            for j in from..PDOF {
+                q[i * PDOF + j] = b.mul_add(t[j], q[i * PDOF + j]);
             }
         }
     }
@@ -1712,10 +1707,10 @@ fn weighted_gram_portable(terms: &[(f64, [f64; MAX_DOF])], q: &mut [f64; MAX_DOF
 }
 
 /// The lower triangle from the upper (exactly symmetric).
-fn mirror(q: &mut [f64; MAX_DOF * MAX_DOF]) {
-    for i in 1..MAX_DOF {
+fn mirror(q: &mut [f64; PDOF * PDOF]) {
+    for i in 1..PDOF {
         for j in 0..i {
-            q[i * MAX_DOF + j] = q[j * MAX_DOF + i];
+            q[i * PDOF + j] = q[j * PDOF + i];
         }
     }
 }
@@ -1837,42 +1832,42 @@ mod tests {
             add_block(&mut b1, &x64, &y);
             add_block_portable(&mut b2, &x64, &y);
             assert_eq!(b1.0.map(f64::to_bits), b2.0.map(f64::to_bits));
-            let jj: [f32; MAX_DOF] = std::array::from_fn(|_| rng.range(-3.0, 3.0) as f32);
-            let mut v1 = vec![Lanes([0.5f32; MAX_DOF]); 3 * side + 4];
+            let jj: [f32; PDOF] = std::array::from_fn(|_| rng.range(-3.0, 3.0) as f32);
+            let mut v1 = vec![Lanes([0.5f32; PDOF]); 3 * side + 4];
             let mut v2 = v1.clone();
             add_v(&mut v1, side, &x, &y, &jj);
             add_v_portable(&mut v2, side, &x, &y, &jj);
             for (p, q) in v1.iter().flat_map(|c| c.0).zip(v2.iter().flat_map(|c| c.0)) {
                 assert!((p - q).abs() < 1e-5, "{p} {q}");
             }
-            let mut acc: [f64; MAX_DOF] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
+            let mut acc: [f64; PDOF] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
             let before = acc;
             let mut lanes = Lanes(std::array::from_fn(|_| rng.range(-1.0, 1.0) as f32));
             let added = lanes;
             flush_lanes(&mut acc, &mut lanes);
-            for k in 0..MAX_DOF {
+            for k in 0..PDOF {
                 assert_eq!(acc[k], before[k] + added.0[k] as f64);
             }
-            assert_eq!(lanes.0, [0.0; MAX_DOF]);
+            assert_eq!(lanes.0, [0.0; PDOF]);
         }
         // The weighted Gram matrix: the portable one's bits, symmetric, and the plain sum.
         for count in [0usize, 1, 7, 40] {
-            let terms: Vec<(f64, [f64; MAX_DOF])> = (0..count)
+            let terms: Vec<(f64, [f64; PDOF])> = (0..count)
                 .map(|_| {
                     let t = std::array::from_fn(|_| rng.range(-2.0, 2.0));
                     (rng.range(-3.0, 3.0), t)
                 })
                 .collect();
             let q = weighted_gram(&terms);
-            let mut p = [0.0; MAX_DOF * MAX_DOF];
+            let mut p = [0.0; PDOF * PDOF];
             weighted_gram_portable(&terms, &mut p);
             assert_eq!(q.map(f64::to_bits), p.map(f64::to_bits), "{count} terms");
-            for i in 0..MAX_DOF {
-                for j in 0..MAX_DOF {
+            for i in 0..PDOF {
+                for j in 0..PDOF {
                     let plain: f64 = terms.iter().map(|(w, t)| w * t[i] * t[j]).sum();
-                    let got = q[i * MAX_DOF + j];
+                    let got = q[i * PDOF + j];
                     assert!((got - plain).abs() < 1e-10, "({i}, {j}): {got} {plain}");
-                    assert_eq!(got, q[j * MAX_DOF + i]);
+                    assert_eq!(got, q[j * PDOF + i]);
                 }
             }
         }
@@ -1904,10 +1899,10 @@ mod tests {
         // for blocks with and without a tail of fewer than eight pixels.
         for (n, dof, block) in [(37, 8, 3..37), (40, 6, 8..40), (19, 2, 0..19), (8, 8, 0..8)] {
             let jac: Vec<f32> = (0..dof * n).map(|_| rng.range(-5.0, 5.0) as f32).collect();
-            let mut rows = vec![Lanes([9.0; MAX_DOF]); block.len()];
+            let mut rows = vec![Lanes([9.0; PDOF]); block.len()];
             jacobian_rows(&jac, n, dof, block.clone(), &mut rows);
             for (i, row) in rows.iter().enumerate() {
-                for k in 0..MAX_DOF {
+                for k in 0..PDOF {
                     let want = if k < dof {
                         jac[k * n + block.start + i]
                     } else {

@@ -43,7 +43,8 @@
 
 use super::{Am, AmBuilder, Capabilities, HessianKind, Wrt};
 use crate::linalg::MAX_DOF;
-use crate::linalg::{accumulate_jtj, dot, negative_part, sum};
+use crate::linalg::products::jtj_into;
+use crate::linalg::{dot, negative_part, sum};
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<AmBuilder> = Entry {
@@ -320,14 +321,10 @@ impl Am for Ssim {
                 *e = acc;
             }
         }
-        let mut jtj = [0.0f64; MAX_DOF * MAX_DOF];
-        accumulate_jtj(jac, dof, &mut jtj);
+        out[..dof * dof].fill(0.0);
+        jtj_into(jac, None, dof, dof, out);
         let diag = 2.0 * j.d[1] / nf;
-        for a in 0..dof {
-            for c in 0..dof {
-                out[a * dof + c] = diag * jtj[a * MAX_DOF + c];
-            }
-        }
+        out[..dof * dof].iter_mut().for_each(|v| *v *= diag);
         add_moment_form(&u, &m, 1.0 / (nf * nf), dof, out);
         if kind == HessianKind::GaussNewton {
             negative_part(out, dof);

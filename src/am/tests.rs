@@ -169,12 +169,12 @@ fn hessians_match_finite_differences() {
         }
         for wrt in [Wrt::Current, Wrt::Template] {
             am.set_template(&t);
-            let mut h = [0.0; 64];
+            let mut h = [0.0; MAX_DOF * MAX_DOF];
             am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut h);
             // After a gradient on the same patch (whose statistics a model may reuse): the same.
             let mut g = vec![0f32; n];
             am.gradient(wrt, &c, &mut g);
-            let mut again = [0.0; 64];
+            let mut again = [0.0; MAX_DOF * MAX_DOF];
             am.hessian(wrt, HessianKind::Newton, &c, &jac, s, &mut again);
             for (a, b) in h.iter().zip(&again) {
                 assert!(
@@ -182,7 +182,7 @@ fn hessians_match_finite_differences() {
                     "{name} {wrt:?}: {a} after a gradient, {b} alone"
                 );
             }
-            let jtg = |am: &mut dyn Am, d: &[f64]| -> [f64; 8] {
+            let jtg = |am: &mut dyn Am, d: &[f64]| -> [f64; MAX_DOF] {
                 let moved = |x: &[f32]| -> Vec<f32> {
                     x.iter()
                         .enumerate()
@@ -202,7 +202,7 @@ fn hessians_match_finite_differences() {
                         am.gradient(wrt, &c, &mut g);
                     }
                 }
-                let mut out = [0.0; 8];
+                let mut out = [0.0; MAX_DOF];
                 jt_times(&jac, &g, s, &mut out);
                 out
             };
@@ -243,9 +243,9 @@ fn hessian_kinds_agree_at_convergence_and_gauss_newton_is_negative() {
             continue;
         }
         am.set_template(&t);
-        let mut hn = [0.0; 64];
-        let mut hg = [0.0; 64];
-        let mut ha = [0.0; 64];
+        let mut hn = [0.0; MAX_DOF * MAX_DOF];
+        let mut hg = [0.0; MAX_DOF * MAX_DOF];
+        let mut ha = [0.0; MAX_DOF * MAX_DOF];
         am.hessian(Wrt::Current, HessianKind::Newton, &t, &jac, s, &mut hn);
         am.hessian(Wrt::Current, HessianKind::GaussNewton, &t, &jac, s, &mut hg);
         let c: Vec<f32> = t

@@ -43,7 +43,7 @@ impl InspectorApp {
                 Reply::Landscape { key, result } => {
                     if self.rt.ui.landscape.requested.as_deref() == Some(key.as_str()) {
                         self.rt.ui.landscape.result =
-                            Some((key, result.map_err(|e| e.to_string())));
+                            Some((key, result.map(|l| *l).map_err(|e| e.to_string())));
                     }
                 }
                 Reply::FrameError { index, error } => {

@@ -44,6 +44,8 @@ pub struct TrackerFrame {
     /// What a sampling search method showed at its last iteration (NN's samples, PF's
     /// particles); the app keeps it for the newest frame only.
     pub visual: Option<Arc<VisualRecord>>,
+    /// A non-rigid tracker's warped lattice over its target.
+    pub grid: Option<crate::visual_tracker::WarpedGrid>,
 }
 
 /// Work for the thread.
@@ -156,6 +158,7 @@ fn tracked_frame(
         channels: t.inspection().map_or(1, |i| i.channels),
         template,
         patch: t.inspection().map(|i| i.patch.to_vec()).unwrap_or_default(),
+        grid: t.warped_grid(),
     }
 }
 
@@ -175,6 +178,7 @@ fn initial_frame(index: usize, t: &Tracker, template: Arc<Vec<f32>>) -> TrackerF
         channels: t.inspection().map_or(1, |i| i.channels),
         patch: template.to_vec(),
         template,
+        grid: t.warped_grid(),
     }
 }
 
@@ -241,10 +245,11 @@ pub enum Reply {
         index: usize,
         error: Error,
     },
-    /// A cost landscape (for the request `key`).
+    /// A cost landscape (for the request `key`; boxed: its centre holds a whole parameter
+    /// vector).
     Landscape {
         key: String,
-        result: Result<crate::landscape::Landscape>,
+        result: Result<Box<crate::landscape::Landscape>>,
     },
     /// A propagation's proposal (see [`Job::Propagate`]).
     Proposal {
@@ -463,7 +468,7 @@ impl<W: Fn() + Sync> Thread<W> {
                 });
             }
             Job::Landscape(job) => {
-                let result = self.landscape(&job);
+                let result = self.landscape(&job).map(Box::new);
                 self.reply(Reply::Landscape {
                     key: job.key.clone(),
                     result,

@@ -45,6 +45,10 @@ pub struct SynthConfig {
     pub motion_blur: usize,
     /// Side of a moving occluder as a fraction of the target's size (0 = none).
     pub occlusion: f32,
+    /// Amplitude of a non-rigid bend of the target, as a fraction of its size (0 = rigid):
+    /// the texture waves along both axes, its corners moving with it (the ground truth
+    /// follows them), over a period of [`BEND_PERIOD`] frames.
+    pub bend: f32,
     /// JPEG quality (1..=100); 0 writes PNG frames instead.
     pub jpeg_quality: u8,
     /// Seed of every random nuisance.
@@ -67,10 +71,25 @@ impl Default for SynthConfig {
             local_light: 0.0,
             motion_blur: 0,
             occlusion: 0.0,
+            bend: 0.0,
             jpeg_quality: 95,
             seed: 1,
         }
     }
+}
+
+/// Frames of one period of the bend ([`SynthConfig::bend`]).
+pub const BEND_PERIOD: f64 = 80.0;
+
+/// The bend's displacement of the texture's unit-square point `(u, v)` on frame `i`, in the
+/// same units: two waves, one across each axis, each moving the points along the other.
+fn bend_at(amplitude: f64, u: f64, v: f64, i: usize) -> (f64, f64) {
+    use std::f64::consts::{PI, TAU};
+    let t = i as f64 / BEND_PERIOD;
+    (
+        amplitude * (TAU * t).sin() * (1.2 * PI * v + 0.3).sin(),
+        amplitude * (TAU * t / 1.3).cos() * (1.2 * PI * u + 0.5).sin(),
+    )
 }
 
 /// An RGB float image.
@@ -225,6 +244,8 @@ struct Scene {
     mips: Vec<Rgb>,
     background: Rgb,
     quads: Vec<Quad>,
+    /// The ground truth: the quads, or with a bend the corners it moves them to.
+    truth: Vec<Quad>,
     w: usize,
     h: usize,
 }
@@ -236,9 +257,14 @@ impl Scene {
                 "step must be >= 1 and supersample in 1..=8".into(),
             ));
         }
-        if !(0.0..=1.0).contains(&cfg.occlusion) || cfg.jpeg_quality > 100 || cfg.motion_blur > 32 {
+        if !(0.0..=1.0).contains(&cfg.occlusion)
+            || cfg.jpeg_quality > 100
+            || cfg.motion_blur > 32
+            || !(0.0..=0.2).contains(&cfg.bend)
+        {
             return Err(Error::InvalidParameter(
-                "occlusion must be in 0..=1, jpeg_quality in 0..=100, motion_blur at most 32"
+                "occlusion must be in 0..=1, jpeg_quality in 0..=100, motion_blur at most 32, \
+                 bend in 0..=0.2"
                     .into(),
             ));
         }
@@ -272,14 +298,50 @@ impl Scene {
             let next = last.half();
             mips.push(next);
         }
-        Ok(Scene {
+        let mut scene = Scene {
             cfg: cfg.clone(),
             mips,
             background,
+            truth: quads.clone(),
             quads,
             w,
             h,
-        })
+        };
+        if cfg.bend > 0.0 {
+            scene.truth = (0..scene.quads.len())
+                .map(|i| scene.bent_corners(i))
+                .collect();
+        }
+        Ok(scene)
+    }
+
+    /// The corners of frame `i`'s quad moved by the bend: the texture's corners displaced in
+    /// its unit square, then taken to the frame by the quad's homography.
+    fn bent_corners(&self, i: usize) -> Quad {
+        let rect = self.texture_rect();
+        let q = self.quads[i];
+        let Some(h) = homography_from_points(&rect, &q.0) else {
+            return q;
+        };
+        let (tw, th) = (self.mips[0].w as f64, self.mips[0].h as f64);
+        Quad(std::array::from_fn(|k| {
+            let (u, v) = ((rect[k].x + 0.5) / tw, (rect[k].y + 0.5) / th);
+            let (du, dv) = bend_at(self.cfg.bend as f64, u, v, i);
+            apply_homography(&h, Point::new((u + du) * tw - 0.5, (v + dv) * th - 0.5))
+        }))
+    }
+
+    /// The texture point that frame `i`'s bend moves to the texture point `t` (its inverse,
+    /// by fixed-point iterations: the bend's gradient is well below one).
+    fn unbend(&self, t: Point, i: usize) -> Point {
+        let (tw, th) = (self.mips[0].w as f64, self.mips[0].h as f64);
+        let (a, b) = ((t.x + 0.5) / tw, (t.y + 0.5) / th);
+        let (mut u, mut v) = (a, b);
+        for _ in 0..12 {
+            let (du, dv) = bend_at(self.cfg.bend as f64, u, v, i);
+            (u, v) = (a - du, b - dv);
+        }
+        Point::new(u * tw - 0.5, v * th - 0.5)
     }
 
     /// The texture rectangle's corners (pixel edges), in the TMT order.
@@ -344,8 +406,16 @@ impl Scene {
                 f64::NEG_INFINITY,
                 f64::NEG_INFINITY,
             );
+            // The bend moves the texture up to its amplitude beyond the quad.
+            let pad = 2.0 * cfg.bend as f64 * q.mean_side();
             for sq in &subquads {
                 let b = sq.bbox();
+                let b = crate::geometry::Rect {
+                    x0: b.x0 - pad,
+                    y0: b.y0 - pad,
+                    x1: b.x1 + pad,
+                    y1: b.y1 + pad,
+                };
                 bx = (
                     bx.0.min(b.x0),
                     bx.1.min(b.y0),
@@ -368,7 +438,10 @@ impl Scene {
                             for sx in 0..s {
                                 let px = x as f64 + (sx as f64 + 0.5) / s as f64 - 0.5;
                                 let py = y as f64 + (sy as f64 + 0.5) / s as f64 - 0.5;
-                                let t = apply_homography(hinv, Point::new(px, py));
+                                let mut t = apply_homography(hinv, Point::new(px, py));
+                                if cfg.bend > 0.0 {
+                                    t = self.unbend(t, i);
+                                }
                                 let v = if t.x >= -0.5
                                     && t.y >= -0.5
                                     && t.x < tw - 0.5
@@ -485,7 +558,7 @@ pub fn render_frames(cfg: &SynthConfig) -> Result<(Vec<GrayU8>, Vec<Quad>)> {
             }
         })
         .collect();
-    Ok((frames, scene.quads.clone()))
+    Ok((frames, scene.truth.clone()))
 }
 
 /// Renders a sequence into `<out_root>/<name>.txt` and `<out_root>/<name>/frame%05d.{jpg,png}`,
@@ -543,7 +616,7 @@ pub fn render_sequence(
         Ok(())
     })?;
     let gt_path = out_root.join(format!("{name}.txt"));
-    let corners: Vec<Option<Quad>> = scene.quads.iter().map(|q| Some(*q)).collect();
+    let corners: Vec<Option<Quad>> = scene.truth.iter().map(|q| Some(*q)).collect();
     write_corners(&gt_path, &corners, ext)?;
     Sequence::open(&gt_path)
 }

@@ -115,7 +115,7 @@ impl LowDofGroundTruth {
 
 /// Fits `ssm` to every frame of `gt` (8-DOF quads), from the first annotated frame's quad.
 pub fn fit_ground_truth(ssm_name: &str, gt: &[Option<Quad>]) -> Result<LowDofGroundTruth> {
-    let model = ssm::build(ssm_name)?;
+    let model = super::quad_model(ssm_name)?;
     let mut quads = vec![None; gt.len()];
     let mut residuals = vec![None; gt.len()];
     if let Some(base) = gt.iter().flatten().next().copied() {
@@ -209,7 +209,7 @@ pub struct LowDofTruth {
 /// not annotated, as the sequence's own ground truth reads them). 8-DOF SSMs give the
 /// sequence's own ground truth unless an OptGT file (a corrected export) exists.
 pub fn low_dof_ground_truth(seq: &Sequence, ssm_name: &str) -> Result<LowDofTruth> {
-    let model = ssm::build(ssm_name)?;
+    let model = super::quad_model(ssm_name)?;
     let path = opt_gt_path(&ground_truth_dir(seq), &seq.name, model.name());
     if path.exists() {
         let mut entries = read_ground_truth(&path)?;

@@ -28,11 +28,23 @@ use journal::{Record, Writer};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The model a ground truth of SSM `name` is fitted with: the SSM itself, or for a non-rigid
+/// one (laid on a tracker's own quad, its ground truth four free corners) the homography.
+pub(crate) fn quad_model(name: &str) -> Result<Box<dyn ssm::Ssm>> {
+    let m = ssm::build(name)?;
+    if m.projective() {
+        Ok(m)
+    } else {
+        ssm::build("homography")
+    }
+}
+
 /// The key corrections are kept under for an SSM: its registry name, `homography` for every
-/// 8-DOF SSM (they describe the same quads).
+/// 8-DOF SSM and the non-rigid ones (their ground truth is four free corners: they describe the
+/// same quads).
 pub fn ssm_key(name: &str) -> Result<String> {
     let m = ssm::build(name)?;
-    Ok(if m.dof() == 8 {
+    Ok(if m.dof() == 8 || !m.projective() {
         "homography".into()
     } else {
         m.name().to_string()
@@ -524,7 +536,7 @@ pub fn interpolate(
     a: (usize, Quad),
     b: (usize, Quad),
 ) -> Result<Option<Vec<(usize, Quad)>>> {
-    let m = ssm::build(ssm_name)?;
+    let m = quad_model(ssm_name)?;
     let ((fa, qa), (fb, qb)) = if a.0 <= b.0 { (a, b) } else { (b, a) };
     let Some(p) = m.fit(&qa.0, &qb.0) else {
         return Ok(None);

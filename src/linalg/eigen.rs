@@ -2,26 +2,36 @@
 //! Hessian, which the AMs without a concave similarity (RIU, SSIM, MI's Newton Hessian) take so
 //! that a Newton step goes uphill.
 
-use super::MAX_DOF;
+use super::{MAX_DOF, Square};
 
 /// Replaces the symmetric `dof x dof` matrix in `h` (row-major) by its negative semi-definite
 /// part (cyclic Jacobi eigen-decomposition, positive eigenvalues set to zero).
-pub fn negative_part(h: &mut [f64; MAX_DOF * MAX_DOF], dof: usize) {
+pub fn negative_part(h: &mut Square, dof: usize) {
+    // The eigenvectors and the rotated matrix on the stack, of a stride that fits `dof`.
+    if dof <= 8 {
+        jacobi::<8, 64>(h, dof);
+    } else {
+        jacobi::<MAX_DOF, { MAX_DOF * MAX_DOF }>(h, dof);
+    }
+}
+
+/// [`negative_part`] with scratch matrices of stride `S` (`SS = S * S`, `dof <= S`).
+fn jacobi<const S: usize, const SS: usize>(h: &mut Square, dof: usize) {
     let n = dof;
-    let mut a = [0.0f64; MAX_DOF * MAX_DOF];
-    let mut e = [0.0f64; MAX_DOF * MAX_DOF];
+    let mut a = [0.0f64; SS];
+    let mut e = [0.0f64; SS];
     for i in 0..n {
         for j in 0..n {
-            a[i * MAX_DOF + j] = 0.5 * (h[i * n + j] + h[j * n + i]);
+            a[i * S + j] = 0.5 * (h[i * n + j] + h[j * n + i]);
         }
-        e[i * MAX_DOF + i] = 1.0;
+        e[i * S + i] = 1.0;
     }
     for _sweep in 0..60 {
         let mut off = 0.0;
         let mut total = 0.0;
         for i in 0..n {
             for j in 0..n {
-                let v = a[i * MAX_DOF + j] * a[i * MAX_DOF + j];
+                let v = a[i * S + j] * a[i * S + j];
                 total += v;
                 if i != j {
                     off += v;
@@ -33,30 +43,30 @@ pub fn negative_part(h: &mut [f64; MAX_DOF * MAX_DOF], dof: usize) {
         }
         for p in 0..n {
             for r in p + 1..n {
-                let apr = a[p * MAX_DOF + r];
+                let apr = a[p * S + r];
                 if apr == 0.0 {
                     continue;
                 }
-                let (app, arr) = (a[p * MAX_DOF + p], a[r * MAX_DOF + r]);
+                let (app, arr) = (a[p * S + p], a[r * S + r]);
                 let theta = (arr - app) / (2.0 * apr);
                 let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
                 let t = if theta == 0.0 { 1.0 } else { t };
                 let c = 1.0 / (t * t + 1.0).sqrt();
                 let s = t * c;
                 for k in 0..n {
-                    let (akp, akr) = (a[k * MAX_DOF + p], a[k * MAX_DOF + r]);
-                    a[k * MAX_DOF + p] = c * akp - s * akr;
-                    a[k * MAX_DOF + r] = s * akp + c * akr;
+                    let (akp, akr) = (a[k * S + p], a[k * S + r]);
+                    a[k * S + p] = c * akp - s * akr;
+                    a[k * S + r] = s * akp + c * akr;
                 }
                 for k in 0..n {
-                    let (apk, ark) = (a[p * MAX_DOF + k], a[r * MAX_DOF + k]);
-                    a[p * MAX_DOF + k] = c * apk - s * ark;
-                    a[r * MAX_DOF + k] = s * apk + c * ark;
+                    let (apk, ark) = (a[p * S + k], a[r * S + k]);
+                    a[p * S + k] = c * apk - s * ark;
+                    a[r * S + k] = s * apk + c * ark;
                 }
                 for k in 0..n {
-                    let (ekp, ekr) = (e[k * MAX_DOF + p], e[k * MAX_DOF + r]);
-                    e[k * MAX_DOF + p] = c * ekp - s * ekr;
-                    e[k * MAX_DOF + r] = s * ekp + c * ekr;
+                    let (ekp, ekr) = (e[k * S + p], e[k * S + r]);
+                    e[k * S + p] = c * ekp - s * ekr;
+                    e[k * S + r] = s * ekp + c * ekr;
                 }
             }
         }
@@ -65,9 +75,9 @@ pub fn negative_part(h: &mut [f64; MAX_DOF * MAX_DOF], dof: usize) {
         for j in 0..n {
             let mut v = 0.0;
             for k in 0..n {
-                let l = a[k * MAX_DOF + k];
+                let l = a[k * S + k];
                 if l < 0.0 {
-                    v += l * e[i * MAX_DOF + k] * e[j * MAX_DOF + k];
+                    v += l * e[i * S + k] * e[j * S + k];
                 }
             }
             h[i * n + j] = v;

@@ -1,4 +1,4 @@
-//! Small dense linear algebra on stack arrays: the `S x S` (S <= 8) Newton systems of the search
+//! Small dense linear algebra: the `S x S` (S <= [`MAX_DOF`]) Newton systems of the search
 //! methods, the matrix exponential and logarithm used by the SL3 state space model, the median
 //! of a sample; the products of patches and pixel Jacobians ([`products`]: `J^T J`, `J^T v`,
 //! dot products) and the negative semi-definite part of a Hessian ([`eigen`]).
@@ -13,8 +13,50 @@ pub use products::{
 
 use nalgebra::{Matrix3, SMatrix};
 
-/// The largest number of warp parameters.
-pub const MAX_DOF: usize = 8;
+/// The largest number of warp parameters (the spline and thin-plate spline SSMs' 5 x 5 control
+/// points). Parameter vectors hold this many; a Hessian is a [`Square`] whose first `dof x dof`
+/// entries are used.
+pub const MAX_DOF: usize = 50;
+
+/// A dense matrix of up to `MAX_DOF x MAX_DOF` (a Hessian, row-major; the first `dof x dof`
+/// entries with stride `dof`, unless a function says stride [`MAX_DOF`]). At 20 KB it is not
+/// made on the stack per iteration: its owner keeps a [`SquareBuf`].
+pub type Square = [f64; MAX_DOF * MAX_DOF];
+
+/// A [`Square`] on the heap, allocated with its owner (a workspace, a solver, a model), zeroed.
+#[derive(Clone, Debug)]
+pub struct SquareBuf(Box<Square>);
+
+impl Default for SquareBuf {
+    fn default() -> Self {
+        let zeros = vec![0.0; MAX_DOF * MAX_DOF].into_boxed_slice();
+        // A boxed slice of exactly MAX_DOF * MAX_DOF values is a boxed Square.
+        match zeros.try_into() {
+            Ok(square) => SquareBuf(square),
+            Err(_) => unreachable!("a slice of MAX_DOF * MAX_DOF values"),
+        }
+    }
+}
+
+impl std::ops::Deref for SquareBuf {
+    type Target = Square;
+    fn deref(&self) -> &Square {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for SquareBuf {
+    fn deref_mut(&mut self) -> &mut Square {
+        &mut self.0
+    }
+}
+
+/// Sets to zero what a `dof x dof` matrix of either stride (`dof` or [`MAX_DOF`]) occupies.
+pub fn clear_square(h: &mut Square, dof: usize) {
+    if dof > 0 {
+        h[..(dof - 1) * MAX_DOF + dof].fill(0.0);
+    }
+}
 
 /// The load added to the Newton system's diagonal, relative to its largest entry.
 pub const RIDGE: f64 = 1e-9;
@@ -22,143 +64,149 @@ pub const RIDGE: f64 = 1e-9;
 /// Solves `H x = -g` for the Newton step of a maximisation, with `H` (row-major, `n x n`) the
 /// Hessian, normally negative definite. Tries a Cholesky factorisation of `-H`, then LU with
 /// partial pivoting; `None` when the system is singular or the result is not finite.
-pub fn newton_step(
-    h: &[f64; MAX_DOF * MAX_DOF],
-    g: &[f64; MAX_DOF],
-    n: usize,
-) -> Option<[f64; MAX_DOF]> {
-    NewtonSolver::default().step(h, g, n)
+pub fn newton_step(h: &Square, g: &[f64; MAX_DOF], n: usize) -> Option<[f64; MAX_DOF]> {
+    NewtonSolver::default().step(h, g, n, 0.0)
 }
 
 /// [`newton_step`] that keeps the Cholesky factor of the last Hessian it solved with: a search
 /// method whose Hessian is the same from iteration to iteration (ICLK's, made once per
-/// template) factors it once. The same steps, bit for bit.
+/// template) factors it once. The same steps, bit for bit. Its matrices are its own (allocated
+/// once), each used with stride `n`.
 #[derive(Clone, Debug, Default)]
 pub struct NewtonSolver {
-    /// `(n, H, L)`: the last Hessian that had a Cholesky factor, and the factor.
-    last: Option<(usize, [f64; MAX_DOF * MAX_DOF], [f64; MAX_DOF * MAX_DOF])>,
+    /// The size of the last Hessian that had a Cholesky factor (`last`, its factor `l`).
+    kept: Option<usize>,
+    last: SquareBuf,
+    l: SquareBuf,
+    a: SquareBuf,
 }
 
 impl NewtonSolver {
-    /// Solves `H x = -g` as [`newton_step`] does.
+    /// Solves `H x = -g` as [`newton_step`] does; with `damping > 0` (Levenberg-Marquardt) the
+    /// diagonal of `H` is first scaled by `1 + damping` (a shorter, more gradient-like step).
     pub fn step(
         &mut self,
-        h: &[f64; MAX_DOF * MAX_DOF],
+        h: &Square,
         g: &[f64; MAX_DOF],
         n: usize,
+        damping: f64,
     ) -> Option<[f64; MAX_DOF]> {
         let finite = |x: [f64; MAX_DOF]| x[..n].iter().all(|v| v.is_finite()).then_some(x);
-        let same = |last: &[f64; MAX_DOF * MAX_DOF]| {
-            h[..n * n]
-                .iter()
-                .zip(&last[..n * n])
-                .all(|(a, b)| a.to_bits() == b.to_bits())
+        // The system's matrix, damped.
+        let entry = |i: usize, j: usize| {
+            let v = h[i * n + j];
+            if damping > 0.0 && i == j {
+                v * (1.0 + damping)
+            } else {
+                v
+            }
         };
-        if let Some((m, last, l)) = &self.last
-            && *m == n
-            && same(last)
-        {
-            return finite(cholesky_apply(l, g, n));
+        let same = self.kept == Some(n)
+            && (0..n)
+                .all(|i| (0..n).all(|j| entry(i, j).to_bits() == self.last[i * n + j].to_bits()));
+        if same {
+            return finite(cholesky_apply(&self.l, g, n));
         }
-        let mut a = [0.0f64; MAX_DOF * MAX_DOF];
+        let a = &mut self.a;
         let mut b = [0.0f64; MAX_DOF];
         for i in 0..n {
             for j in 0..n {
-                a[i * MAX_DOF + j] = -h[i * n + j];
+                a[i * n + j] = -entry(i, j);
             }
             b[i] = g[i];
         }
         // A ridge of RIDGE times the largest curvature: a direction the patch does not
         // constrain (stripes along it) gets a step of the size of its gradient's noise over
         // that load, not over a pivot as small as rounding.
-        let top = (0..n).map(|i| a[i * MAX_DOF + i]).fold(0.0f64, f64::max);
+        let top = (0..n).map(|i| a[i * n + i]).fold(0.0f64, f64::max);
         for i in 0..n {
-            a[i * MAX_DOF + i] += RIDGE * top;
+            a[i * n + i] += RIDGE * top;
         }
-        match cholesky_factor(&a, n) {
-            Some(l) => {
-                let x = cholesky_apply(&l, &b, n);
-                self.last = Some((n, *h, l));
-                finite(x)
+        if cholesky_factor(a, n, &mut self.l) {
+            let x = cholesky_apply(&self.l, &b, n);
+            for i in 0..n {
+                for j in 0..n {
+                    self.last[i * n + j] = entry(i, j);
+                }
             }
-            None => {
-                self.last = None;
-                finite(lu_solve(&a, &b, n)?)
-            }
+            self.kept = Some(n);
+            finite(x)
+        } else {
+            self.kept = None;
+            finite(lu_solve(a, &b, n)?)
         }
     }
 }
 
-/// The Cholesky factor `L` (`A = L L^T`, row-major with stride 8) of the first `n x n` of `a`;
-/// `None` if `a` is not clearly positive definite.
-fn cholesky_factor(a: &[f64; 64], n: usize) -> Option<[f64; 64]> {
-    let mut l = [0.0f64; 64];
-    let scale = (0..n).map(|i| a[i * 8 + i].abs()).fold(0.0, f64::max);
+/// The Cholesky factor `L` (`A = L L^T`, row-major with stride `n`, its lower triangle) of the
+/// `n x n` matrix `a` into `l`; `false` if `a` is not clearly positive definite.
+fn cholesky_factor(a: &Square, n: usize, l: &mut Square) -> bool {
+    let scale = (0..n).map(|i| a[i * n + i].abs()).fold(0.0, f64::max);
     if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return None;
+        return false;
     }
     for i in 0..n {
         for j in 0..=i {
-            let mut s = a[i * 8 + j];
+            let mut s = a[i * n + j];
             for k in 0..j {
-                s -= l[i * 8 + k] * l[j * 8 + k];
+                s -= l[i * n + k] * l[j * n + k];
             }
             if i == j {
                 if s <= scale * 1e-13 {
-                    return None;
+                    return false;
                 }
-                l[i * 8 + i] = s.sqrt();
+                l[i * n + i] = s.sqrt();
             } else {
-                l[i * 8 + j] = s / l[j * 8 + j];
+                l[i * n + j] = s / l[j * n + j];
             }
         }
     }
-    Some(l)
+    true
 }
 
 /// Solves `L L^T x = b` by the two triangular systems.
-fn cholesky_apply(l: &[f64; 64], b: &[f64; 8], n: usize) -> [f64; 8] {
-    let mut y = [0.0f64; 8];
+fn cholesky_apply(l: &Square, b: &[f64; MAX_DOF], n: usize) -> [f64; MAX_DOF] {
+    let mut y = [0.0f64; MAX_DOF];
     for i in 0..n {
         let mut s = b[i];
         for k in 0..i {
-            s -= l[i * 8 + k] * y[k];
+            s -= l[i * n + k] * y[k];
         }
-        y[i] = s / l[i * 8 + i];
+        y[i] = s / l[i * n + i];
     }
-    let mut x = [0.0f64; 8];
+    let mut x = [0.0f64; MAX_DOF];
     for i in (0..n).rev() {
         let mut s = y[i];
         for k in i + 1..n {
-            s -= l[k * 8 + i] * x[k];
+            s -= l[k * n + i] * x[k];
         }
-        x[i] = s / l[i * 8 + i];
+        x[i] = s / l[i * n + i];
     }
     x
 }
 
-fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
-    let mut m = *a;
+/// Solves `A x = b` (`n x n`, stride `n`) by LU with partial pivoting, in place in `m`.
+fn lu_solve(m: &mut Square, b: &[f64; MAX_DOF], n: usize) -> Option<[f64; MAX_DOF]> {
     let mut x = *b;
-    let scale = m.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    let scale = m[..n * n].iter().fold(0.0f64, |s, v| s.max(v.abs()));
     if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| m[i * 8 + c].abs().total_cmp(&m[j * 8 + c].abs()))?;
-        if m[p * 8 + c].abs() <= scale * 1e-14 {
+        let p = (c..n).max_by(|&i, &j| m[i * n + c].abs().total_cmp(&m[j * n + c].abs()))?;
+        if m[p * n + c].abs() <= scale * 1e-14 {
             return None;
         }
         if p != c {
             for k in 0..n {
-                m.swap(p * 8 + k, c * 8 + k);
+                m.swap(p * n + k, c * n + k);
             }
             x.swap(p, c);
         }
         for r in c + 1..n {
-            let f = m[r * 8 + c] / m[c * 8 + c];
+            let f = m[r * n + c] / m[c * n + c];
             for k in c..n {
-                m[r * 8 + k] -= f * m[c * 8 + k];
+                m[r * n + k] -= f * m[c * n + k];
             }
             x[r] -= f * x[c];
         }
@@ -166,9 +214,9 @@ fn lu_solve(a: &[f64; 64], b: &[f64; 8], n: usize) -> Option<[f64; 8]> {
     for i in (0..n).rev() {
         let mut s = x[i];
         for k in i + 1..n {
-            s -= m[i * 8 + k] * x[k];
+            s -= m[i * n + k] * x[k];
         }
-        x[i] = s / m[i * 8 + i];
+        x[i] = s / m[i * n + i];
     }
     Some(x)
 }
@@ -287,9 +335,9 @@ mod tests {
     #[test]
     fn newton_step_solves_negative_definite_and_indefinite_systems() {
         // H = -[[4,1],[1,3]], g = [1,2]: x = [[4,1],[1,3]]^-1 [1,2] = [1/11, 7/11].
-        let mut h = [0.0; 64];
+        let mut h = [0.0; MAX_DOF * MAX_DOF];
         h[..4].copy_from_slice(&[-4.0, -1.0, -1.0, -3.0]);
-        let mut g = [0.0; 8];
+        let mut g = [0.0; MAX_DOF];
         g[0] = 1.0;
         g[1] = 2.0;
         let x = newton_step(&h, &g, 2).unwrap();
@@ -360,7 +408,7 @@ mod tests {
         let mut solver = NewtonSolver::default();
         for (k, (h, n)) in systems.into_iter().enumerate() {
             let g: [f64; MAX_DOF] = std::array::from_fn(|_| 2.0 * next());
-            let kept = solver.step(&h, &g, n).map(|x| x.map(f64::to_bits));
+            let kept = solver.step(&h, &g, n, 0.0).map(|x| x.map(f64::to_bits));
             let fresh = newton_step(&h, &g, n).map(|x| x.map(f64::to_bits));
             assert_eq!(kept, fresh, "system {k}");
             assert_eq!(kept.is_some(), k != 9, "system {k}");

@@ -5,17 +5,13 @@
 //! the build has them (the crate's `simd` cfg, see `build.rs`) and the same arithmetic in plain
 //! Rust elsewhere, compared by a test.
 
-use super::{MAX_DOF, lanes_sum};
+use super::{MAX_DOF, Square, lanes_sum};
 
 /// `out = -J^T J` (row-major `dof x dof`), the Gauss-Newton Hessian of SSD.
-pub fn minus_jtj(jac: &[f32], dof: usize, out: &mut [f64; MAX_DOF * MAX_DOF]) {
-    let mut acc = [0.0f64; MAX_DOF * MAX_DOF];
-    accumulate_jtj(jac, dof, &mut acc);
-    for i in 0..dof {
-        for j in 0..dof {
-            out[i * dof + j] = -acc[i * MAX_DOF + j];
-        }
-    }
+pub fn minus_jtj(jac: &[f32], dof: usize, out: &mut Square) {
+    out[..dof * dof].fill(0.0);
+    jtj_into(jac, None, dof, dof, out);
+    out[..dof * dof].iter_mut().for_each(|v| *v = -*v);
 }
 
 /// The dot product of two patches: 32 f32 lanes (four independent vector accumulators) over
@@ -61,10 +57,13 @@ const JT_BLOCK: usize = 256;
 /// Eight f32 lanes (one AVX register).
 type Lanes = [f32; 8];
 
+/// The columns [`jt_times_many`]'s kernel takes at a time (an accumulator register each).
+const COLS: usize = 8;
+
 /// The products' kernels with AVX2 and FMA intrinsics (the build's CPU baseline, x86-64-v3).
 #[cfg(simd = "avx2")]
 mod simd {
-    use super::{Lanes, MAX_DOF};
+    use super::{COLS, Lanes};
 
     /// The lane sums of `rows[r] . cols[t]` over the first `full` (a multiple of 8) samples.
     pub(super) fn tile_2x4(rows: [&[f32]; 2], cols: [&[f32]; 4], full: usize) -> [[Lanes; 4]; 2] {
@@ -96,27 +95,23 @@ mod simd {
     }
 
     /// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
-    pub(super) fn columns_times(
-        cols: &[&[f32]; MAX_DOF],
-        v: &[f32],
-        full: usize,
-    ) -> [Lanes; MAX_DOF] {
+    pub(super) fn columns_times(cols: &[&[f32]; COLS], v: &[f32], full: usize) -> [Lanes; COLS] {
         use std::arch::x86_64::*;
         assert!(cols.iter().all(|c| c.len() >= full) && v.len() >= full && full.is_multiple_of(8));
-        let mut out = [[0f32; 8]; MAX_DOF];
+        let mut out = [[0f32; 8]; COLS];
         // SAFETY: AVX2 and FMA are enabled at compile time (cfg); every load reads 8 values from
         // index i with i + 8 <= full <= the slice's length (asserted above).
         unsafe {
-            let mut s = [_mm256_setzero_ps(); MAX_DOF];
+            let mut s = [_mm256_setzero_ps(); COLS];
             let mut i = 0;
             while i < full {
                 let x = _mm256_loadu_ps(v.as_ptr().add(i));
-                for k in 0..MAX_DOF {
+                for k in 0..COLS {
                     s[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(cols[k].as_ptr().add(i)), s[k]);
                 }
                 i += 8;
             }
-            for k in 0..MAX_DOF {
+            for k in 0..COLS {
                 _mm256_storeu_ps(out[k].as_mut_ptr(), s[k]);
             }
         }
@@ -128,7 +123,7 @@ mod simd {
 /// test.
 #[cfg(any(test, not(simd = "avx2")))]
 mod portable {
-    use super::{Lanes, MAX_DOF};
+    use super::{COLS, Lanes};
 
     /// `acc += x * y`, lane by lane (fused multiply-adds).
     #[inline(always)]
@@ -159,12 +154,8 @@ mod portable {
     }
 
     /// The lane sums of `cols[k] . v` over the first `full` (a multiple of 8) samples.
-    pub(super) fn columns_times(
-        cols: &[&[f32]; MAX_DOF],
-        v: &[f32],
-        full: usize,
-    ) -> [Lanes; MAX_DOF] {
-        let mut s = [[0f32; 8]; MAX_DOF];
+    pub(super) fn columns_times(cols: &[&[f32]; COLS], v: &[f32], full: usize) -> [Lanes; COLS] {
+        let mut s = [[0f32; 8]; COLS];
         for i in (0..full).step_by(8) {
             let x = lanes_at(v, i);
             for (sk, c) in s.iter_mut().zip(cols) {
@@ -186,18 +177,18 @@ use simd::{columns_times, tile_2x4};
 /// Block by block of 256 samples, the upper triangle in tiles of two rows by four
 /// columns: each load feeds more than one multiply-add, and the eight accumulators of a tile
 /// keep both FMA units busy.
-pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut [f64; MAX_DOF * MAX_DOF]) {
-    accumulate_weighted_jtj(jac, None, dof, acc);
+pub fn accumulate_jtj(jac: &[f32], dof: usize, acc: &mut Square) {
+    jtj_into(jac, None, dof, MAX_DOF, acc);
 }
 
 /// Adds `J^T diag(d) J` into `acc` (stride [`MAX_DOF`]), or `J^T J` without `d`; as
 /// [`accumulate_jtj`], each block's rows weighed by `d` once before the tiles read them.
-pub fn accumulate_weighted_jtj(
-    jac: &[f32],
-    d: Option<&[f32]>,
-    dof: usize,
-    acc: &mut [f64; MAX_DOF * MAX_DOF],
-) {
+pub fn accumulate_weighted_jtj(jac: &[f32], d: Option<&[f32]>, dof: usize, acc: &mut Square) {
+    jtj_into(jac, d, dof, MAX_DOF, acc);
+}
+
+/// [`accumulate_weighted_jtj`] into `acc` with stride `stride`.
+pub fn jtj_into(jac: &[f32], d: Option<&[f32]>, dof: usize, stride: usize, acc: &mut [f64]) {
     let dof = dof.min(MAX_DOF);
     if dof == 0 {
         return;
@@ -234,7 +225,7 @@ pub fn accumulate_weighted_jtj(
                             for k in full..len {
                                 v = row[k].mul_add(c[k], v);
                             }
-                            acc[i * MAX_DOF + j] += v as f64;
+                            acc[i * stride + j] += v as f64;
                         }
                     }
                 }
@@ -244,7 +235,7 @@ pub fn accumulate_weighted_jtj(
     }
     for i in 0..dof {
         for j in 0..i {
-            acc[i * MAX_DOF + j] = acc[j * MAX_DOF + i];
+            acc[i * stride + j] = acc[j * stride + i];
         }
     }
 }
@@ -279,17 +270,21 @@ pub fn jt_times_many<const V: usize>(
     while start < n {
         let len = JT_BLOCK.min(n - start);
         let full = len / 8 * 8;
-        let cols: [&[f32]; MAX_DOF] =
-            std::array::from_fn(|k| &jac[k.min(dof - 1) * stride + start..][..len]);
-        for (v, out) in vs.iter().zip(outs.iter_mut()) {
-            let vv = &v[start..start + len];
-            let s = columns_times(&cols, vv, full);
-            for k in 0..dof {
-                let mut t = lanes_sum(&s[k]);
-                for q in full..len {
-                    t = vv[q].mul_add(cols[k][q], t);
+        // The columns in blocks of COLS; past `dof` a block reads the last column, whose
+        // sums are dropped.
+        for first in (0..dof).step_by(COLS) {
+            let cols: [&[f32]; COLS] =
+                std::array::from_fn(|k| &jac[(first + k).min(dof - 1) * stride + start..][..len]);
+            for (v, out) in vs.iter().zip(outs.iter_mut()) {
+                let vv = &v[start..start + len];
+                let s = columns_times(&cols, vv, full);
+                for k in 0..COLS.min(dof - first) {
+                    let mut t = lanes_sum(&s[k]);
+                    for q in full..len {
+                        t = vv[q].mul_add(cols[k][q], t);
+                    }
+                    out[first + k] += t as f64;
                 }
-                out[k] += t as f64;
             }
         }
         start += len;
@@ -349,7 +344,8 @@ mod tests {
     #[test]
     fn the_jacobian_products_match_plain_sums() {
         let mut rng = Rng::new(31);
-        for dof in 1..=MAX_DOF {
+        // Every size of one block of columns and past it, to MAX_DOF.
+        for dof in (1..=10).chain([17, 18, 32, MAX_DOF]) {
             for n in [1, 7, 8, 50, 257, 2500] {
                 let jac: Vec<f32> = (0..n * dof).map(|_| rng.range(-2.0, 2.0) as f32).collect();
                 let v: Vec<f32> = (0..n).map(|_| rng.range(-50.0, 50.0) as f32).collect();
@@ -375,9 +371,15 @@ mod tests {
                     );
                     for b in 0..dof {
                         let want = plain(col(a), col(b));
+                        // Within f32's rounding of the sum of the products' sizes.
+                        let size: f64 = col(a)
+                            .iter()
+                            .zip(col(b))
+                            .map(|(&x, &y)| (x as f64 * y as f64).abs())
+                            .sum();
                         let got = h[a * MAX_DOF + b];
                         assert!(
-                            (got - want).abs() <= 1e-5 * (1.0 + want.abs()),
+                            (got - want).abs() <= 1e-5 * (1.0 + size),
                             "dof {dof}, n {n}, H[{a},{b}]: {got} vs {want}"
                         );
                     }
@@ -385,7 +387,7 @@ mod tests {
                 // Entries past dof are left alone.
                 assert!(h[dof..MAX_DOF].iter().all(|&x| x == 0.0));
                 let full = n / 8 * 8;
-                let cols: [&[f32]; MAX_DOF] = std::array::from_fn(|k| col(k.min(dof - 1)));
+                let cols: [&[f32]; COLS] = std::array::from_fn(|k| col(k.min(dof - 1)));
                 assert_eq!(
                     super::columns_times(&cols, &v, full),
                     super::portable::columns_times(&cols, &v, full)

@@ -21,7 +21,7 @@ use crate::geometry::{Point, Quad, Rect};
 use crate::imaging::{ImageView, sample_values};
 use crate::observe::Observer;
 use crate::registration::BlockCorrelation;
-use crate::registration::{Problem, warp_points};
+use crate::registration::Problem;
 use crate::ssm::Params;
 use crate::status::FrameTiming;
 use crate::visual_tracker::FrameInput;
@@ -248,8 +248,7 @@ impl Detector {
     fn sample(&mut self, problem: &Problem, view: &ImageView, p: &Params) {
         // A colour tracker's candidates are ranked on its channel of most contrast.
         let view = &view.plane(self.plane);
-        let m = problem.pixel_matrix(p);
-        warp_points(&m, &self.xs, &self.ys, &mut self.px, &mut self.py);
+        problem.warp_points(p, &self.xs, &self.ys, &mut self.px, &mut self.py);
         if self.side < 2 {
             sample_values(view, &self.px, &self.py, &mut self.patch);
             return;

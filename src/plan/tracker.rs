@@ -486,6 +486,35 @@ impl VisualTracker for RegistrationTracker {
         self.params.channels.count()
     }
 
+    fn warped_grid(&self) -> Option<crate::visual_tracker::WarpedGrid> {
+        const SIDE: usize = 11;
+        let ctx = &self.finest.ctx;
+        let problem = ctx.problem();
+        if problem.ssm().projective() {
+            return None;
+        }
+        // The lattice on the unit square [-0.5, 0.5]^2, which the grid's homography takes to
+        // the template's quad (normalised frame), then warped to the frame.
+        let unit = problem.unit();
+        let (mut xs, mut ys) = (vec![0f32; SIDE * SIDE], vec![0f32; SIDE * SIDE]);
+        for k in 0..SIDE * SIDE {
+            let at = |i: usize| -0.5 + i as f64 / (SIDE - 1) as f64;
+            let q = crate::geometry::apply_homography(
+                unit,
+                crate::geometry::Point::new(at(k % SIDE), at(k / SIDE)),
+            );
+            xs[k] = q.x as f32;
+            ys[k] = q.y as f32;
+        }
+        let (mut px, mut py) = (vec![0f32; SIDE * SIDE], vec![0f32; SIDE * SIDE]);
+        problem.warp_points(&ctx.params(), &xs, &ys, &mut px, &mut py);
+        let points = px
+            .iter()
+            .zip(&py)
+            .map(|(&x, &y)| crate::geometry::Point::new(x as f64, y as f64))
+            .collect();
+        Some(crate::visual_tracker::WarpedGrid { side: SIDE, points })
+    }
     fn inspection(&self) -> Option<Inspection<'_>> {
         let ctx = &self.finest.ctx;
         Some(Inspection {

@@ -142,6 +142,11 @@ impl Context {
         self.problem.set_selection(selection);
     }
 
+    /// The weight of a non-rigid SSM's smoothness prior (tracker parameter `smoothness`).
+    pub fn set_smoothness(&mut self, smoothness: f64) {
+        self.problem.set_smoothness(smoothness);
+    }
+
     /// The patch of `img` under `p` on the whole grid (the confidences', the inspector's:
     /// also when the searches read part of it, [`super::spi`]), sampled anew.
     pub fn whole_sample_at(&mut self, img: &ImageView, p: &Params) -> &[f32] {
@@ -227,6 +232,14 @@ impl Context {
     }
 
     fn warped_gradient_with(&mut self, p: &Params, mean: bool) {
+        if !self.problem.ssm().projective() {
+            let problem = &self.problem;
+            let template = mean.then(|| problem.template_gradient());
+            let scale = problem.norm().scale as f32;
+            self.work
+                .chain_point_jacobians(|i| problem.point_jacobian(p, i), scale, template);
+            return;
+        }
         let m = self.pixel_matrix(p).cast::<f32>();
         let template = mean.then(|| self.problem.template_gradient());
         self.work.chain_gradients(&m, self.problem.grid(), template);

@@ -64,10 +64,9 @@ pub struct Executor<'a> {
 /// The points of the grid a selective problem reads, in frame pixels under the context's
 /// parameters (warped as the sampler warps them).
 fn selected_points(ctx: &Context) -> Vec<Point> {
-    let m = ctx.pixel_matrix(&ctx.params());
-    let (xs, ys) = ctx.problem().grid();
+    let xs = ctx.problem().grid().0;
     let (mut px, mut py) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
-    super::workspace::warp_points(&m, xs, ys, &mut px, &mut py);
+    ctx.problem().warp_grid(&ctx.params(), &mut px, &mut py);
     px.iter()
         .zip(&py)
         .map(|(&x, &y)| Point::new(x as f64, y as f64))

@@ -89,6 +89,14 @@ pub trait SearchMethod: Send + std::fmt::Debug {
     fn local(&self) -> bool {
         false
     }
+    /// Whether the method works with a non-rigid SSM ([`crate::ssm::Ssm::projective`] false):
+    /// it reads the warp only through the problem's grid warp, point Jacobians, `dw/dp` and the
+    /// SSM's updates (the gradient methods), not through a matrix, nor by drawing random warps
+    /// (the sampling and grid methods, which fit four corners and so could not move a control
+    /// point inside the target).
+    fn non_rigid(&self) -> bool {
+        false
+    }
     /// A new frame starts from `ctx.params`.
     fn start_frame(&mut self, _ctx: &mut Context) {}
     /// The AM's model was just updated ([`crate::am::Am::update_model`]): refresh what was computed from it

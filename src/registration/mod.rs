@@ -33,7 +33,7 @@ pub use method::{Control, SearchMethod, SmConfig, Step};
 pub use problem::Problem;
 pub use source::{FrameSource, Reader, reads, region_around};
 pub use state::{State, Update};
-pub use workspace::{Workspace, warp_points};
+pub use workspace::{NewtonParts, Workspace, warp_points};
 
 use std::cmp::Ordering;
 

@@ -28,6 +28,10 @@
 //! operations per sample for the homography), `J^T J` (36) and `J^T r` (8) are not needed.
 
 use crate::linalg::MAX_DOF;
+
+/// The most parameters an SSM with grid moments has: `L` maps the full homography's eight to
+/// them, so a model of more (the spline SSMs) has none.
+const MOMENTS_DOF: usize = 8;
 use crate::spec::GridLayout;
 use nalgebra::{Matrix3, SMatrix};
 
@@ -50,8 +54,8 @@ const FIT_TOLERANCE: f64 = 1e-5;
 pub struct GridMoments {
     res: usize,
     dof: usize,
-    /// `L`, row-major `8 x dof` (stride [`MAX_DOF`]).
-    l: [f64; 8 * MAX_DOF],
+    /// `L`, row-major `8 x dof` (stride [`MOMENTS_DOF`]).
+    l: [f64; 8 * MOMENTS_DOF],
     /// The unit square's coordinates of the grid's columns and rows.
     u: Vec<f32>,
     /// `v^j` of each row.
@@ -76,7 +80,7 @@ impl GridMoments {
         dof: usize,
     ) -> Option<Self> {
         let n = res * res;
-        if !(6..=MAX_DOF).contains(&dof) || res < 8 || dwdp0.len() < 2 * dof * n {
+        if !(6..=MOMENTS_DOF).contains(&dof) || res < 8 || dwdp0.len() < 2 * dof * n {
             return None;
         }
         let coords = unit_coordinates(res, layout);
@@ -141,15 +145,15 @@ impl GridMoments {
         }
         let (dof, l) = (self.dof, &self.l);
         // H = L^T Hu L, g = L^T gu.
-        let mut hl = [[0.0f64; MAX_DOF]; 8];
+        let mut hl = [[0.0f64; MOMENTS_DOF]; 8];
         for (k, row) in hl.iter_mut().enumerate() {
             for (m, o) in row.iter_mut().enumerate().take(dof) {
-                *o = (0..8).map(|q| hu[k][q] * l[q * MAX_DOF + m]).sum();
+                *o = (0..8).map(|q| hu[k][q] * l[q * MOMENTS_DOF + m]).sum();
             }
         }
         for i in 0..dof {
             for j in i..dof {
-                let v: f64 = (0..8).map(|k| l[k * MAX_DOF + i] * hl[k][j]).sum();
+                let v: f64 = (0..8).map(|k| l[k * MOMENTS_DOF + i] * hl[k][j]).sum();
                 h[i * dof + j] = -v;
                 h[j * dof + i] = -v;
             }
@@ -191,7 +195,7 @@ impl GridMoments {
     /// `g = L^T gu`: the unit square's gradient sums to the SSM's parameters.
     fn l_transposed(&self, gu: &[f64; 8], g: &mut [f64; MAX_DOF]) {
         for (i, o) in g.iter_mut().enumerate().take(self.dof) {
-            *o = (0..8).map(|k| self.l[k * MAX_DOF + i] * gu[k]).sum();
+            *o = (0..8).map(|k| self.l[k * MOMENTS_DOF + i] * gu[k]).sum();
         }
     }
 
@@ -689,19 +693,19 @@ pub fn homography_jacobian(g: &Matrix3<f64>, u: f64, v: f64) -> [[f64; 2]; 2] {
 }
 
 /// `L` with `D(G(u)) = dG(u) D_u(u) L` on the grid (least squares, checked), row-major
-/// `8 x dof` with stride [`MAX_DOF`].
+/// `8 x dof` with stride [`MOMENTS_DOF`].
 fn fit_l(
     g: &Matrix3<f64>,
     coords: &[f64],
     dwdp0: &[f32],
     dof: usize,
-) -> Option<[f64; 8 * MAX_DOF]> {
+) -> Option<[f64; 8 * MOMENTS_DOF]> {
     let res = coords.len();
     let n = res * res;
     // The rows of E = dG D_u (two per point) and of D, for the normal equations.
     let mut ete = SMatrix::<f64, 8, 8>::zeros();
-    let mut etd = SMatrix::<f64, 8, MAX_DOF>::zeros();
-    let rows = |i: usize| -> ([[f64; 8]; 2], [[f64; MAX_DOF]; 2]) {
+    let mut etd = SMatrix::<f64, 8, MOMENTS_DOF>::zeros();
+    let rows = |i: usize| -> ([[f64; 8]; 2], [[f64; MOMENTS_DOF]; 2]) {
         let (u, v) = (coords[i % res], coords[i / res]);
         let j = homography_jacobian(g, u, v);
         let (dx, dy) = unit_dwdp(u, v);
@@ -761,10 +765,10 @@ fn fit_l(
             }
         }
     }
-    let mut out = [0.0; 8 * MAX_DOF];
+    let mut out = [0.0; 8 * MOMENTS_DOF];
     for k in 0..8 {
         for m in 0..dof {
-            out[k * MAX_DOF + m] = l[(k, m)];
+            out[k * MOMENTS_DOF + m] = l[(k, m)];
         }
     }
     Some(out)

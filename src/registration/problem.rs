@@ -8,6 +8,7 @@
 use super::Workspace;
 use super::moments::GridMoments;
 use super::spi::Selection;
+use super::workspace::warp_points;
 use crate::am::{Am, HessianKind};
 use crate::geometry::{Normaliser, Point, Quad, apply_homography};
 use crate::linalg::MAX_DOF;
@@ -48,6 +49,12 @@ pub struct Problem {
     /// Which rows of `dwdp0` (`2 k` for `dw_x/dp_k`, `2 k + 1` for `dw_y/dp_k`) are zero on the
     /// whole grid (half of them for the affine and projective warps): projections skip them.
     dwdp0_zero: [bool; 2 * MAX_DOF],
+    /// For a non-rigid SSM, the gradients of its basis functions on the grid
+    /// ([`Ssm::basis_gradients`], `dof` rows): its point Jacobians at any `p`.
+    basis_grad: Vec<f32>,
+    /// The weight of a non-rigid SSM's smoothness prior (tracker parameter `smoothness`; -1:
+    /// the model's own).
+    smoothness: f64,
     /// The forward steps' Newton system from the gradient's moments, for the AMs whose Hessian
     /// is `-J^T J` or made from `J^T J` on the SSMs of six or more parameters
     /// ([`super::moments`]).
@@ -101,6 +108,8 @@ impl Problem {
             template_gv: Vec::new(),
             dwdp0: z(2 * n * dof),
             dwdp0_zero: [false; 2 * MAX_DOF],
+            basis_grad: Vec::new(),
+            smoothness: -1.0,
             moments: None,
             selection: Selection::default(),
             channels: 1,
@@ -141,6 +150,23 @@ impl Problem {
         self.selection = selection;
     }
 
+    /// The weight of a non-rigid SSM's smoothness prior (tracker parameter `smoothness`).
+    pub fn set_smoothness(&mut self, smoothness: f64) {
+        self.smoothness = smoothness;
+    }
+
+    /// A non-rigid SSM's smoothness prior, when it has a weight: the weight and `R`
+    /// ([`Ssm::smoothness`]).
+    pub fn smoothness(&self) -> Option<(f64, &[f64])> {
+        let r = self.ssm.smoothness()?;
+        let weight = if self.smoothness < 0.0 {
+            self.ssm.default_smoothness()
+        } else {
+            self.smoothness
+        };
+        (weight > 0.0).then_some((weight, r))
+    }
+
     /// Keeps only the points `kept` (ascending indices of the whole grid) for the searches:
     /// the grid, the template, its gradients and `dw/dp` at the identity; the AM gets the
     /// selected template. The whole grid and template are kept for [`Problem::whole_grid`].
@@ -166,6 +192,14 @@ impl Problem {
             }
         }
         self.dwdp0.truncate(rows * m);
+        if !self.basis_grad.is_empty() {
+            for r in 0..self.dof {
+                for (k, &i) in kept.iter().enumerate() {
+                    self.basis_grad[r * m + k] = self.basis_grad[r * n + i];
+                }
+            }
+            self.basis_grad.truncate(self.dof * m);
+        }
         self.set_zero_rows();
         self.moments = None;
         self.template_gu.clear();
@@ -258,9 +292,16 @@ impl Problem {
         }
         self.unit = h;
         self.template_corners = nq;
+        self.ssm.set_base(&nq.0);
         let identity = self.ssm.identity();
         self.ssm
             .jacobian(&identity, &self.grid_x, &self.grid_y, &mut self.dwdp0);
+        self.basis_grad.clear();
+        if !self.ssm.projective() {
+            self.basis_grad.resize(self.dof * n, 0.0);
+            self.ssm
+                .basis_gradients(&self.grid_x, &self.grid_y, &mut self.basis_grad);
+        }
         self.set_zero_rows();
         // The moments of one `res x res` grid (a colour grid's parts are summed), from the
         // first part's rows of `dw/dp`.
@@ -454,14 +495,95 @@ impl Problem {
 
     /// The corners under `p`, in frame pixels.
     pub fn corners(&self, p: &Params) -> Quad {
+        if !self.ssm.projective() {
+            return self.normalised_corners(p).map(|c| self.norm.to_image(c));
+        }
         let m = self.pixel_matrix(p);
         self.template_corners.map(|c| apply_homography(&m, c))
     }
 
     /// The corners under `p`, in the normalised frame.
     pub fn normalised_corners(&self, p: &Params) -> Quad {
+        if !self.ssm.projective() {
+            let mut out = [Point::default(); 4];
+            self.ssm.warp_points(p, &self.template_corners.0, &mut out);
+            return Quad(out);
+        }
         let m = self.ssm.matrix(p);
         self.template_corners.map(|c| apply_homography(&m, c))
+    }
+
+    /// The grid the searches read warped by `p`, in frame pixels, into `(px, py)`: through the
+    /// pixel matrix, or for a non-rigid SSM its displacement `x + sum_k p_k dw/dp_k(x)` (the
+    /// warp is linear in `p`) from `dw/dp` on the grid.
+    pub fn warp_grid(&self, p: &Params, px: &mut [f32], py: &mut [f32]) {
+        if self.ssm.projective() {
+            let m = self.pixel_matrix(p);
+            warp_points(&m, &self.grid_x, &self.grid_y, px, py);
+            return;
+        }
+        let n = self.grid_x.len();
+        let (px, py) = (&mut px[..n], &mut py[..n]);
+        px.copy_from_slice(&self.grid_x);
+        py.copy_from_slice(&self.grid_y);
+        for k in 0..self.dof {
+            let v = p[k] as f32;
+            for (row, out) in [(2 * k, &mut *px), (2 * k + 1, &mut *py)] {
+                if v == 0.0 || self.dwdp0_zero[row] {
+                    continue;
+                }
+                for (o, &d) in out.iter_mut().zip(&self.dwdp0[row * n..(row + 1) * n]) {
+                    *o += v * d;
+                }
+            }
+        }
+        let (s, cx, cy) = (
+            self.norm.scale as f32,
+            self.norm.cx as f32,
+            self.norm.cy as f32,
+        );
+        for (x, y) in px.iter_mut().zip(py.iter_mut()) {
+            *x = *x * s + cx;
+            *y = *y * s + cy;
+        }
+    }
+
+    /// Any points of the normalised template frame warped by `p`, in frame pixels (the
+    /// whole grid, a detector's): as [`Problem::warp_grid`] warps the grid, the non-rigid
+    /// SSMs' point by point.
+    pub fn warp_points(&self, p: &Params, xs: &[f32], ys: &[f32], px: &mut [f32], py: &mut [f32]) {
+        if self.ssm.projective() {
+            warp_points(&self.pixel_matrix(p), xs, ys, px, py);
+            return;
+        }
+        for (((&x, &y), ox), oy) in xs.iter().zip(ys).zip(px.iter_mut()).zip(py.iter_mut()) {
+            let mut out = [Point::default()];
+            self.ssm
+                .warp_points(p, &[Point::new(x as f64, y as f64)], &mut out);
+            let q = self.norm.to_image(out[0]);
+            *ox = q.x as f32;
+            *oy = q.y as f32;
+        }
+    }
+
+    /// The point Jacobian `dw/dx` (normalised frame, row-major `[a00, a01, a10, a11]`) of a
+    /// non-rigid SSM's warp by `p` at grid point `i`: `I + sum_k (p_2k, p_2k+1)^T grad phi_k`.
+    #[inline]
+    pub fn point_jacobian(&self, p: &Params, i: usize) -> [f32; 4] {
+        let n = self.grid_x.len();
+        let [mut a00, mut a01, mut a10, mut a11] = [1.0f32, 0.0, 0.0, 1.0];
+        for k in 0..self.dof / 2 {
+            let (bx, by) = (
+                self.basis_grad[2 * k * n + i],
+                self.basis_grad[(2 * k + 1) * n + i],
+            );
+            let (u, v) = (p[2 * k] as f32, p[2 * k + 1] as f32);
+            a00 += u * bx;
+            a01 += u * by;
+            a10 += v * bx;
+            a11 += v * by;
+        }
+        [a00, a01, a10, a11]
     }
 
     /// The SSM's parameters whose corners best fit `q` (frame pixels), `None` if it cannot.

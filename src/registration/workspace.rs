@@ -10,13 +10,30 @@
 
 use super::Problem;
 use crate::imaging::{ImageView, sample_values, sample_values_gradients};
-use crate::linalg::NewtonSolver;
+use crate::linalg::{NewtonSolver, Square, SquareBuf};
 use crate::ssm::Params;
 use nalgebra::Matrix3;
 
 /// What a projection reads and writes: the gradients `(gx, gy)`, `dw/dp` at the current
 /// parameters, and the pixel Jacobian to be written.
 pub type Projection<'a> = ((&'a [f32], &'a [f32]), &'a [f32], &'a mut [f32]);
+
+/// The parts of the workspace a Newton step uses ([`Workspace::newton_mut`]).
+pub struct NewtonParts<'a> {
+    /// The Newton system's matrix.
+    pub hessian: &'a mut Square,
+    /// A second matrix (`J^T J`, for a Hessian made from it).
+    pub scratch: &'a mut Square,
+    pub solver: &'a mut NewtonSolver,
+    /// The sampled gradients.
+    pub gradients: (&'a [f32], &'a [f32]),
+    /// The AM's gradient with respect to the pixels.
+    pub grad: &'a [f32],
+    /// The sampled values.
+    pub values: &'a [f32],
+    /// The pixel Jacobian.
+    pub jac: &'a [f32],
+}
 
 /// When [`Workspace::whole_patch`] samples.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,6 +70,9 @@ pub struct Workspace {
     /// while this has not changed).
     samples: u64,
     solver: NewtonSolver,
+    /// The Newton system's matrix (the AM's Hessian) and a second matrix for what makes it.
+    hessian: SquareBuf,
+    scratch: SquareBuf,
     /// The patch of the whole grid, when the problem's searches read only part of it
     /// ([`super::spi`]): its warped grid, its values and which view and parameters they are of.
     whole_px: Vec<f32>,
@@ -128,9 +148,8 @@ impl Workspace {
         let again = again == Again::Always;
         let stamp = img.stamp();
         if again || stamp == 0 || self.whole_sampled != Some((stamp, *p)) {
-            let m = problem.pixel_matrix(p);
             let (gx, gy) = problem.whole_grid();
-            warp_points(&m, gx, gy, &mut self.whole_px, &mut self.whole_py);
+            problem.warp_points(p, gx, gy, &mut self.whole_px, &mut self.whole_py);
             sample_values(img, &self.whole_px, &self.whole_py, &mut self.whole_values);
             self.samples = self.samples.wrapping_add(1);
             self.whole_sampled = (stamp != 0).then_some((stamp, *p));
@@ -185,6 +204,18 @@ impl Workspace {
     pub fn solver_mut(&mut self) -> &mut NewtonSolver {
         &mut self.solver
     }
+    /// What a Newton step reads and writes, each borrowed apart.
+    pub fn newton_mut(&mut self) -> NewtonParts<'_> {
+        NewtonParts {
+            hessian: &mut self.hessian,
+            scratch: &mut self.scratch,
+            solver: &mut self.solver,
+            gradients: (&self.gx, &self.gy),
+            grad: &self.grad,
+            values: &self.values,
+            jac: &self.jac,
+        }
+    }
     /// How many times the values have been sampled: what was made of a patch is that patch's
     /// while this has not changed.
     pub fn samples(&self) -> u64 {
@@ -193,9 +224,7 @@ impl Workspace {
 
     /// Warps the problem's grid by `p` into frame pixels.
     pub fn warp_grid(&mut self, problem: &Problem, p: &Params) {
-        let m = problem.pixel_matrix(p);
-        let (gx, gy) = problem.grid();
-        warp_points(&m, gx, gy, &mut self.px, &mut self.py);
+        problem.warp_grid(p, &mut self.px, &mut self.py);
     }
 
     /// The patch of `img` under `p`: the grid warped by `p` and the frame's values sampled
@@ -263,6 +292,32 @@ impl Workspace {
             (&mut self.gx[..n], &mut self.gy[..n]),
             mean,
         );
+    }
+
+    /// [`Workspace::chain_gradients`] for a warp that is not projective: the sampled gradient
+    /// (frame pixels) times `scale` (pixels per normalised unit) and each point's Jacobian
+    /// `jacobian(i)` (`dw/dx`, row-major), then with `mean` its mean with that gradient.
+    pub fn chain_point_jacobians(
+        &mut self,
+        jacobian: impl Fn(usize) -> [f32; 4],
+        scale: f32,
+        mean: Option<(&[f32], &[f32])>,
+    ) {
+        for i in 0..self.gx.len() {
+            let [a00, a01, a10, a11] = jacobian(i);
+            let (g, h) = (self.gx[i] * scale, self.gy[i] * scale);
+            let (a, b) = (g * a00 + h * a10, g * a01 + h * a11);
+            match mean {
+                Some((tx, ty)) => {
+                    self.gx[i] = 0.5 * (a + tx[i]);
+                    self.gy[i] = 0.5 * (b + ty[i]);
+                }
+                None => {
+                    self.gx[i] = a;
+                    self.gy[i] = b;
+                }
+            }
+        }
     }
 
     /// [`Workspace::chain_gradients`] without the mean, into `out` instead of in place.

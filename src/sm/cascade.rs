@@ -74,6 +74,9 @@ impl SearchMethod for Cascade {
     fn requires(&self) -> Capabilities {
         union(self.stages.iter().map(|s| &**s))
     }
+    fn non_rigid(&self) -> bool {
+        self.stages.iter().all(|s| s.non_rigid())
+    }
     fn template_linearised(&self) -> bool {
         // The frame ends with the last stage.
         self.stages.last().is_some_and(|s| s.template_linearised())
@@ -158,6 +161,9 @@ impl SearchMethod for Parallel {
     }
     fn requires(&self) -> Capabilities {
         union(self.stages.iter().map(|s| &**s))
+    }
+    fn non_rigid(&self) -> bool {
+        self.stages.iter().all(|s| s.non_rigid())
     }
     fn initialize(&mut self, ctx: &mut Context, img: &ImageView) -> Result<(), LossReason> {
         for s in &mut self.stages {
@@ -262,6 +268,9 @@ impl SearchMethod for LevenbergMarquardt {
     }
     fn requires(&self) -> Capabilities {
         self.inner.requires()
+    }
+    fn non_rigid(&self) -> bool {
+        self.inner.non_rigid()
     }
     fn template_linearised(&self) -> bool {
         self.inner.template_linearised()

@@ -81,6 +81,9 @@ impl SearchMethod for Esm {
     fn local(&self) -> bool {
         true
     }
+    fn non_rigid(&self) -> bool {
+        true
+    }
     fn template_linearised(&self) -> bool {
         true
     }

@@ -25,6 +25,9 @@ impl SearchMethod for Falk {
     fn local(&self) -> bool {
         true
     }
+    fn non_rigid(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }

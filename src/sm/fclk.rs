@@ -30,6 +30,9 @@ impl SearchMethod for Fclk {
     fn local(&self) -> bool {
         true
     }
+    fn non_rigid(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }

@@ -27,6 +27,9 @@ impl SearchMethod for Ialk {
     fn local(&self) -> bool {
         true
     }
+    fn non_rigid(&self) -> bool {
+        true
+    }
     fn line_search(&self) -> bool {
         true
     }
@@ -37,6 +40,20 @@ impl SearchMethod for Ialk {
         let p = ctx.params();
         ctx.sample_at(img, &p);
         // Template gradient times the inverse of the warp's point Jacobian (normalised frame).
+        if !ctx.ssm().projective() {
+            let (problem, _, work) = ctx.parts_mut();
+            let (template_gx, template_gy) = problem.template_gradient();
+            let (gx, gy) = work.gradients_mut();
+            for i in 0..problem.len() {
+                let [a00, a01, a10, a11] = problem.point_jacobian(&p, i);
+                let det = a00 * a11 - a01 * a10;
+                let (tx, ty) = (template_gx[i], template_gy[i]);
+                gx[i] = (tx * a11 - ty * a10) / det;
+                gy[i] = (-tx * a01 + ty * a00) / det;
+            }
+            newton::project_gradients(ctx, Some(&p));
+            return newton::forward_step(ctx, Update::Additive).map(Step::auto);
+        }
         let m = ctx.ssm().matrix(&p).cast::<f32>();
         let (problem, _, work) = ctx.parts_mut();
         let ((grid_x, grid_y), (template_gx, template_gy)) =

@@ -13,8 +13,8 @@
 use super::{Context, LossReason, SearchMethod, SmDef, Step, Update, newton};
 use crate::am::{HessianKind, Wrt};
 use crate::imaging::ImageView;
-use crate::linalg::MAX_DOF;
 use crate::linalg::jt_times;
+use crate::linalg::{MAX_DOF, SquareBuf};
 use crate::registry::Entry;
 
 pub const ENTRY: Entry<SmDef> = Entry {
@@ -27,21 +27,12 @@ pub const ENTRY: Entry<SmDef> = Entry {
     },
 };
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Iclk {
     /// Template Jacobian `N x S`.
     jac: Vec<f32>,
     /// Constant Hessian (unless the Newton kind is asked for).
-    hessian: [f64; MAX_DOF * MAX_DOF],
-}
-
-impl Default for Iclk {
-    fn default() -> Self {
-        Iclk {
-            jac: Vec::new(),
-            hessian: [0.0; MAX_DOF * MAX_DOF],
-        }
-    }
+    hessian: SquareBuf,
 }
 
 impl Iclk {
@@ -73,6 +64,9 @@ impl SearchMethod for Iclk {
         ENTRY.name
     }
     fn local(&self) -> bool {
+        true
+    }
+    fn non_rigid(&self) -> bool {
         true
     }
     fn line_search(&self) -> bool {

@@ -87,6 +87,9 @@ pub struct WholeSpec {
 /// and `method` for the second.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "RawSpec", into = "RawSpec")]
+// A spec is made once per tracker, never per frame: its size does not matter, and every match on
+// it reads the registration spec in place.
+#[allow(clippy::large_enum_variant)]
 pub enum TrackerSpec {
     Registration(RegistrationSpec),
     Whole(WholeSpec),

@@ -165,6 +165,14 @@ tracker_params! {
     /// channel.
     channel_model: ChannelModel = choice(ChannelModel::NAMES),
         "with channels=rgb: stacked (the AM compares the three channels' patches as one patch) or per_channel (the AM on each channel's patch, the similarities summed)";
+    /// A non-rigid SSM's (`spline`, `tps`) Newton steps maximise the similarity minus
+    /// `smoothness x (the data's mean curvature) x` the bending of the control points'
+    /// displacements (zero for an affine field): the control points that few pixels see
+    /// (at the corners, on a flat part) follow their neighbours instead of the noise. Each
+    /// model's own weight was chosen on the tune half of the bending renders
+    /// (`docs/heldout.py render-bend`; see docs/methods.md).
+    smoothness: f64 = float(-1.0, 1000.0, -1.0),
+        "with a non-rigid SSM (spline, tps): weight of the prior against bending, relative to the data's curvature (0 = none); -1 = auto: the model's own (spline 0.05, tps 0.1, tps5 0.2, spline5 3)";
     max_iters: usize = int(1.0, 10_000.0, 30.0),
         "maximum iterations per frame";
     eps: f64 = float(0.0, 1000.0, 0.001),

@@ -98,7 +98,7 @@ impl Ssm for Affine {
         let lu = ata.lu();
         let a = lu.solve(&atu)?;
         let b = lu.solve(&atv)?;
-        let p = [a[2], b[2], a[0] - 1.0, a[1], b[0], b[1] - 1.0, 0.0, 0.0];
+        let p = super::params(&[a[2], b[2], a[0] - 1.0, a[1], b[0], b[1] - 1.0]);
         p.iter().all(|v| v.is_finite()).then_some(p)
     }
 }

@@ -44,7 +44,16 @@ impl Ssm for Homography {
     }
     fn params_from_matrix(&self, m: &Matrix3<f64>) -> Option<Params> {
         let e = entries(&normalise_h33(m)?);
-        Some([e[0] - 1.0, e[1], e[2], e[3], e[4] - 1.0, e[5], e[6], e[7]])
+        Some(super::params(&[
+            e[0] - 1.0,
+            e[1],
+            e[2],
+            e[3],
+            e[4] - 1.0,
+            e[5],
+            e[6],
+            e[7],
+        ]))
     }
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         let h = entries(&self.matrix(p));

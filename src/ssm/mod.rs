@@ -3,18 +3,23 @@
 //! An SSM knows nothing about pixels. Its warp acts in the tracker's *normalised frame* (see
 //! [`crate::geometry::Normaliser`]): a similarity of the image that puts the initial quad's
 //! centroid at the origin with unit size. Every SSM here is a subgroup of the projective group,
-//! so each warp also has a 3x3 [`Ssm::matrix`]; the identity warp has all parameters zero.
+//! so each warp also has a 3x3 [`Ssm::matrix`], but the non-rigid ones ([`displacement`]:
+//! `spline` and `tps`, a grid of control points), which are not projective
+//! ([`Ssm::projective`]); the identity warp has all parameters zero.
 //!
 //! Each model is one file and one line in [`REGISTRY`].
 
 mod affine;
 mod ast;
 mod corner;
+pub mod displacement;
 mod homography;
 mod isometry;
 mod ist;
 mod similitude;
 mod sl3;
+mod spline;
+mod tps;
 mod translation;
 
 pub use corner::CornerHomography;
@@ -30,6 +35,13 @@ use nalgebra::Matrix3;
 /// Warp parameters: the first [`Ssm::dof`] entries are used, the rest are zero.
 pub type Params = [f64; MAX_DOF];
 
+/// Parameters from their first values (the rest zero).
+pub fn params(values: &[f64]) -> Params {
+    let mut p = [0.0; MAX_DOF];
+    p[..values.len()].copy_from_slice(values);
+    p
+}
+
 /// A state space model. Object-safe and called once per patch: the per-point loops inside each
 /// implementation are concrete.
 pub trait Ssm: Send + Sync + std::fmt::Debug {
@@ -43,7 +55,34 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     fn identity(&self) -> Params {
         [0.0; MAX_DOF]
     }
-    /// The warp as a 3x3 homogeneous matrix.
+    /// Whether the warp is its [`Ssm::matrix`] (every SSM but the non-rigid ones,
+    /// [`displacement`]: theirs is `x + sum_k phi_k(x) (p_2k, p_2k+1)`, linear in `p`, and
+    /// their matrix only the homography through the moved corners).
+    fn projective(&self) -> bool {
+        true
+    }
+    /// The template's quad in the normalised frame, for a model laid on it (the non-rigid
+    /// ones' control points); the others ignore it.
+    fn set_base(&mut self, _corners: &[Point; 4]) {}
+    /// For a non-rigid model ([`Ssm::projective`] false): the gradients of its basis functions
+    /// `phi_k` at the points, `out[2k N + i] = d phi_k / dx`, `out[(2k + 1) N + i] = d phi_k /
+    /// dy` (`dof / 2` functions); `false` for the others, `out` untouched.
+    fn basis_gradients(&self, _xs: &[f32], _ys: &[f32], _out: &mut [f32]) -> bool {
+        false
+    }
+    /// For a non-rigid model: the matrix `R` (`dof / 2` square, row-major) of its smoothness
+    /// prior, `d^T R d` the bending of the field's component `d` (the control points'
+    /// displacements along one axis), zero for an affine field; `None` for the others.
+    fn smoothness(&self) -> Option<&[f64]> {
+        None
+    }
+    /// The weight of [`Ssm::smoothness`]'s prior when the tracker leaves it to the model
+    /// (`smoothness = -1`).
+    fn default_smoothness(&self) -> f64 {
+        0.0
+    }
+    /// The warp as a 3x3 homogeneous matrix (for a non-rigid model, the homography through
+    /// the moved corners).
     fn matrix(&self, p: &Params) -> Matrix3<f64>;
     /// The parameters of a matrix of this model's group (defined up to scale). `None` when the
     /// matrix is degenerate. For a matrix outside the group the result is unspecified: use
@@ -135,6 +174,10 @@ pub const REGISTRY: &[Entry<SsmBuilder>] = &[
     homography::ENTRY,
     sl3::ENTRY,
     corner::ENTRY,
+    spline::ENTRY,
+    tps::ENTRY,
+    spline::ENTRY_5,
+    tps::ENTRY_5,
 ];
 
 /// The SSM called `name` (or one of its aliases).

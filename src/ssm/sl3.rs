@@ -67,7 +67,7 @@ impl Ssm for Sl3 {
         // Scale to determinant 1 (a negative scale fixes a negative determinant).
         let m = m / det.cbrt();
         let a = logm3(&m)?;
-        Some([
+        Some(super::params(&[
             a[(0, 2)],
             a[(1, 2)],
             a[(1, 0)],
@@ -76,7 +76,7 @@ impl Ssm for Sl3 {
             -a[(2, 2)],
             a[(2, 0)],
             a[(2, 1)],
-        ])
+        ]))
     }
     fn jacobian(&self, p: &Params, xs: &[f32], ys: &[f32], out: &mut [f32]) {
         let a = algebra(p);

@@ -3,7 +3,7 @@
 use super::*;
 use proptest::prelude::*;
 
-fn params(ssm: &dyn Ssm, raw: &[f64; 8], scale: f64) -> Params {
+fn params(ssm: &dyn Ssm, raw: &[f64], scale: f64) -> Params {
     let mut p = [0.0; MAX_DOF];
     for k in 0..ssm.dof() {
         p[k] = raw[k] * scale;
@@ -12,7 +12,9 @@ fn params(ssm: &dyn Ssm, raw: &[f64; 8], scale: f64) -> Params {
 }
 
 fn warp(ssm: &dyn Ssm, p: &Params, x: f64, y: f64) -> Point {
-    apply_homography(&ssm.matrix(p), Point::new(x, y))
+    let mut out = [Point::default()];
+    ssm.warp_points(p, &[Point::new(x, y)], &mut out);
+    out[0]
 }
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -23,7 +25,7 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 64, rng_seed: proptest::test_runner::RngSeed::Fixed(11), ..ProptestConfig::default() })]
 
     #[test]
-    fn jacobians_match_finite_differences(raw in prop::array::uniform8(-1.0f64..1.0), x in -0.7f64..0.7, y in -0.7f64..0.7) {
+    fn jacobians_match_finite_differences(raw in prop::collection::vec(-1.0f64..1.0, MAX_DOF), x in -0.7f64..0.7, y in -0.7f64..0.7) {
         for e in REGISTRY {
             let ssm = (e.build)();
             let s = ssm.dof();
@@ -47,10 +49,13 @@ proptest! {
     }
 
     #[test]
-    fn compose_invert_and_fit_round_trip(a in prop::array::uniform8(-1.0f64..1.0), b in prop::array::uniform8(-1.0f64..1.0)) {
+    fn compose_invert_and_fit_round_trip(a in prop::collection::vec(-1.0f64..1.0, MAX_DOF), b in prop::collection::vec(-1.0f64..1.0, MAX_DOF)) {
         let base = Quad::unit_square();
         for e in REGISTRY {
             let ssm = (e.build)();
+            if !ssm.projective() {
+                continue;
+            }
             let p = params(&*ssm, &a, 0.1);
             let q = params(&*ssm, &b, 0.1);
             // compose matches the matrix product (up to scale).
@@ -71,6 +76,96 @@ proptest! {
             prop_assert!(warp_quad(&*ssm, &fit, &base).change_norm(&target) < 1e-9, "{} fit", ssm.name());
         }
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, rng_seed: proptest::test_runner::RngSeed::Fixed(13), ..ProptestConfig::default() })]
+
+    /// The non-rigid models, on a skewed quad: their compositions and inverses (projections
+    /// onto the model) take the quad's corners where the composed (inverted) fields do; the
+    /// rest of the quad to second order in the deformations; the fit of a homography moves the
+    /// corners onto its targets; the matrix is the homography through the moved corners.
+    #[test]
+    fn non_rigid_compose_invert_and_fit_follow_the_fields(a in prop::collection::vec(-1.0f64..1.0, MAX_DOF), b in prop::collection::vec(-1.0f64..1.0, MAX_DOF)) {
+        let base = Quad::from_array([-0.6, -0.4, 0.5, -0.5, 0.55, 0.6, -0.45, 0.5]);
+        for e in REGISTRY {
+            let mut ssm = (e.build)();
+            if ssm.projective() {
+                continue;
+            }
+            ssm.set_base(&base.0);
+            let p = params(&*ssm, &a, 0.01);
+            let q = params(&*ssm, &b, 0.01);
+            let c = ssm.compose(&p, &q).unwrap();
+            let lhs = warp_quad(&*ssm, &c, &base);
+            let rhs = warp_quad(&*ssm, &p, &warp_quad(&*ssm, &q, &base));
+            prop_assert!(lhs.change_norm(&rhs) < 1e-6, "{} compose: {}", ssm.name(), lhs.change_norm(&rhs));
+            // Inside: the composed field at the quad's centre and mid-edges.
+            let inside = [Point::new(0.0, 0.05), Point::new(-0.05, -0.45), Point::new(0.52, 0.05)];
+            for x in inside {
+                let got = warp(&*ssm, &c, x.x, x.y);
+                let mid = warp(&*ssm, &q, x.x, x.y);
+                let want = warp(&*ssm, &p, mid.x, mid.y);
+                // What the model misses of a composition is of second order in the
+                // deformations (products of one's gradient, of the control points' spacing, and
+                // the other).
+                let size = p.iter().chain(&q).fold(0.0f64, |m, v| m.max(v.abs()));
+                prop_assert!(got.dist(want) <= 0.2 * ssm.dof() as f64 * size * size + 1e-12, "{} compose at {x:?}: {got:?} vs {want:?}", ssm.name());
+            }
+            let inv = ssm.invert(&p).unwrap();
+            let id = ssm.compose(&p, &inv).unwrap();
+            prop_assert!(warp_quad(&*ssm, &id, &base).change_norm(&base) < 1e-6, "{} invert", ssm.name());
+            let target = Quad::from_array([-0.62, -0.38, 0.53, -0.52, 0.5, 0.64, -0.47, 0.46]);
+            let fit = ssm.fit(&base.0, &target.0).unwrap();
+            prop_assert!(warp_quad(&*ssm, &fit, &base).change_norm(&target) < 1e-6, "{} fit", ssm.name());
+            let m = ssm.matrix(&p);
+            let moved = warp_quad(&*ssm, &p, &base);
+            prop_assert!(base.map(|x| apply_homography(&m, x)).change_norm(&moved) < 1e-9, "{} matrix", ssm.name());
+        }
+    }
+}
+
+/// A non-rigid model's basis gradients (its point Jacobians' parts) are the finite differences
+/// of its basis (`dw/dp`) across the quad and past it, on a skewed quad.
+#[test]
+fn non_rigid_basis_gradients_match_finite_differences() {
+    let base = Quad::from_array([-0.6, -0.4, 0.5, -0.5, 0.55, 0.6, -0.45, 0.5]);
+    let mut rng = crate::rng::Rng::new(29);
+    let mut checked = 0;
+    for e in REGISTRY {
+        let mut ssm = (e.build)();
+        if ssm.projective() {
+            let mut out = [f32::NAN];
+            assert!(!ssm.basis_gradients(&[0.0], &[0.0], &mut out) && out[0].is_nan());
+            continue;
+        }
+        ssm.set_base(&base.0);
+        let (dof, id) = (ssm.dof(), ssm.identity());
+        for _ in 0..40 {
+            let (x, y) = (rng.range(-0.75, 0.75), rng.range(-0.75, 0.75));
+            let mut grad = vec![0f32; dof];
+            assert!(ssm.basis_gradients(&[x as f32], &[y as f32], &mut grad));
+            let phi = |x: f64, y: f64| {
+                let mut jac = vec![0f32; 2 * dof];
+                ssm.jacobian(&id, &[x as f32], &[y as f32], &mut jac);
+                // phi_k is dw_x / dp_2k.
+                (0..dof / 2).map(|k| jac[4 * k] as f64).collect::<Vec<_>>()
+            };
+            let h = 1e-3;
+            let (xp, xm, yp, ym) = (phi(x + h, y), phi(x - h, y), phi(x, y + h), phi(x, y - h));
+            for k in 0..dof / 2 {
+                let (fx, fy) = ((xp[k] - xm[k]) / (2.0 * h), (yp[k] - ym[k]) / (2.0 * h));
+                let (gx, gy) = (grad[2 * k] as f64, grad[2 * k + 1] as f64);
+                assert!(
+                    close(gx, fx, 2e-3) && close(gy, fy, 2e-3),
+                    "{} phi{k} at ({x}, {y}): ({gx}, {gy}) vs ({fx}, {fy})",
+                    ssm.name()
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 4 * 40);
 }
 
 #[test]

@@ -112,7 +112,7 @@ fn bench(c: &mut Criterion) {
                 .project_at_identity(gx, gy, grid_x, grid_y, black_box(&mut jac))
         })
     });
-    let mut h = [0.0; 64];
+    let mut h = [0.0; regtrack::linalg::MAX_DOF * regtrack::linalg::MAX_DOF];
     let values = ctx.values().to_vec();
     g.bench_function("J^T J", |b| {
         b.iter(|| {
@@ -150,7 +150,7 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
-    let mut jg = [0.0; 8];
+    let mut jg = [0.0; regtrack::linalg::MAX_DOF];
     g.bench_function("J^T g", |b| {
         b.iter(|| regtrack::linalg::jt_times(black_box(&jac), ctx.work().grad(), 8, &mut jg))
     });

@@ -281,6 +281,48 @@ def test_synth_and_eval_give_the_command_lines_rows(tmp_path):
         regtrack.eval(tmp_path / "data", seqs=["nosuch"])
 
 
+def test_a_bending_target_tracked_by_a_non_rigid_warp_from_python(tmp_path):
+    """A rendered target that bends (synth's ``bend``), tracked by the thin-plate spline SSM:
+    the command line's corners, and the warped lattice in the frame between them."""
+    seq = regtrack.synth(
+        ROOT / "assets/textures/skimage_coffee.png",
+        ROOT / "assets/motion/ucsb_bricks_m1.txt",
+        tmp_path / "data",
+        "bend",
+        max_frames=30,
+        noise=1.0,
+        bend=0.05,
+    )
+    frames = [f for f, _ in seq]
+    gt = seq.ground_truth
+    t = regtrack.Tracker("fclk", "ssd", "tps")
+    assert t.label == "fclk_ssd_tps"
+    t.initialize(frames[0], gt[0])
+    ours = [t.corners]
+    for f in frames[1:]:
+        corners, status = t.update(f)
+        assert status == "tracking"
+        ours.append(corners)
+    grid = t.warped_grid
+    assert grid.shape == (11, 11, 2)
+    # The lattice's corners are the tracker's.
+    for k, (i, j) in enumerate([(0, 0), (0, 10), (10, 10), (10, 0)]):
+        assert np.abs(grid[i, j] - ours[-1][k]).max() < 1e-3
+    assert max(regtrack.alignment_error(a, g) for a, g in zip(ours, gt)) < 3.0
+    out = tmp_path / "cli.txt"
+    subprocess.run(
+        [cli(), "track", "--seq", str(tmp_path / "data" / "bend.txt"), "--sm", "fclk",
+         "--am", "ssd", "--ssm", "tps", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    for a, b in zip(ours, read_corners(out)):
+        assert np.abs(a - b).max() < 1e-3
+    assert regtrack.Tracker("esm", "ssd", "homography").warped_grid is None
+    with pytest.raises(regtrack.Error, match="non-rigid"):
+        regtrack.Tracker("pf", "ssd", "spline")
+
+
 def test_eval_reads_pot_as_downloaded_and_gives_the_benchmarks_figures(tmp_path):
     import shutil
     regtrack.synth(ROOT / "assets/textures/skimage_coffee.png",

@@ -161,6 +161,27 @@ fn draw_frame(
     img_rect
 }
 
+/// A non-rigid tracker's lattice: its rows and columns as thin lines.
+fn draw_warped_grid(
+    painter: &egui::Painter,
+    t: &Transform,
+    grid: &crate::visual_tracker::WarpedGrid,
+    c: Color32,
+) {
+    let n = grid.side;
+    if n < 2 || grid.points.len() != n * n {
+        return;
+    }
+    let stroke = egui::Stroke::new(1.0, c);
+    let at = |k: usize| t.to_screen(grid.points[k]);
+    for i in 0..n {
+        let row: Vec<egui::Pos2> = (0..n).map(|j| at(i * n + j)).collect();
+        let col: Vec<egui::Pos2> = (0..n).map(|j| at(j * n + i)).collect();
+        painter.add(Shape::line(row, stroke));
+        painter.add(Shape::line(col, stroke));
+    }
+}
+
 /// A tracker's corners in its colour; a lost tracker's last corners dashed and faded.
 fn draw_tracker_quad(
     painter: &egui::Painter,
@@ -170,6 +191,9 @@ fn draw_tracker_quad(
     numbers: bool,
 ) {
     let lost = r.status != TrackStatus::Tracking;
+    if let (Some(grid), false) = (&r.grid, lost) {
+        draw_warped_grid(painter, t, grid, c.gamma_multiply(0.6));
+    }
     draw_quad(
         painter,
         t,

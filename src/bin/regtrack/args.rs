@@ -458,6 +458,10 @@ pub struct SynthArgs {
     /// Occluder size as a fraction of the target (0 = none).
     #[arg(long, default_value_t = 0.0)]
     pub occlusion: f32,
+    /// Non-rigid bend amplitude as a fraction of the target's size (0 = rigid; up to 0.2):
+    /// the texture waves, its corners with it.
+    #[arg(long, default_value_t = 0.0)]
+    pub bend: f32,
     /// JPEG quality (0 = PNG frames).
     #[arg(long, default_value_t = 95)]
     pub jpeg_quality: u8,

@@ -22,6 +22,7 @@ pub fn run_synth(a: SynthArgs) -> Result<()> {
         local_light: a.local_light,
         motion_blur: a.motion_blur,
         occlusion: a.occlusion,
+        bend: a.bend,
         jpeg_quality: a.jpeg_quality,
         seed: a.seed,
     };

@@ -247,8 +247,9 @@ impl RegistrationTracker {
         if q == self.corners {
             return None;
         }
-        let p = self.finest.ctx.problem().fit(&q)?;
-        Some((p, self.finest.ctx.corners(&p)))
+        let ctx = &self.finest.ctx;
+        let p = ctx.problem().moved(&ctx.params(), &self.corners, &q)?;
+        Some((p, ctx.corners(&p)))
     }
 }
 

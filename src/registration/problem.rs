@@ -591,6 +591,21 @@ impl Problem {
         self.fit_normalised(&q.map(|p| self.norm.to_norm(p)))
     }
 
+    /// The parameters `p` moved so that its corners `from` (frame pixels) go to `to`: for a
+    /// non-rigid SSM the homography between them after `p` ([`Ssm::then_matrix`]: the warp's
+    /// shape between the corners kept), for the others the fit of `to` (`None` if it cannot).
+    pub fn moved(&self, p: &Params, from: &Quad, to: &Quad) -> Option<Params> {
+        if self.ssm.projective() {
+            return self.fit(to);
+        }
+        let (a, b) = (
+            from.map(|c| self.norm.to_norm(c)),
+            to.map(|c| self.norm.to_norm(c)),
+        );
+        let m = crate::geometry::homography_from_points(&a.0, &b.0)?;
+        self.ssm.then_matrix(p, &m)
+    }
+
     /// The SSM's parameters whose corners best fit `q` (normalised frame).
     pub fn fit_normalised(&self, q: &Quad) -> Option<Params> {
         self.ssm.fit(&self.template_corners.0, &q.0)

@@ -592,6 +592,12 @@ impl Ssm for Displacement {
     fn invert(&self, p: &Params) -> Option<Params> {
         self.project(|x| self.preimage(p, x))
     }
+    fn then_matrix(&self, p: &Params, m: &Matrix3<f64>) -> Option<Params> {
+        self.project(|x| {
+            let q = apply_homography(m, self.displace(p, x));
+            (q.x.is_finite() && q.y.is_finite()).then_some(q)
+        })
+    }
     fn warp_points(&self, p: &Params, pts: &[Point], out: &mut [Point]) {
         for (o, &q) in out.iter_mut().zip(pts) {
             *o = self.displace(p, q);

@@ -115,6 +115,12 @@ pub trait Ssm: Send + Sync + std::fmt::Debug {
     fn compose(&self, p: &Params, q: &Params) -> Option<Params> {
         self.params_from_matrix(&(self.matrix(p) * self.matrix(q)))
     }
+    /// The warp `p` followed by the homography `m` (of the normalised frame): for the
+    /// projective SSMs the composition of their matrices; for a non-rigid one the projection
+    /// of that field onto the model, its shape between the corners kept.
+    fn then_matrix(&self, p: &Params, m: &Matrix3<f64>) -> Option<Params> {
+        self.params_from_matrix(&(m * self.matrix(p)))
+    }
     /// The inverse warp.
     fn invert(&self, p: &Params) -> Option<Params> {
         self.params_from_matrix(&self.matrix(p).try_inverse()?)

@@ -84,7 +84,8 @@ proptest! {
     /// The non-rigid models, on a skewed quad: their compositions and inverses (projections
     /// onto the model) take the quad's corners where the composed (inverted) fields do; the
     /// rest of the quad to second order in the deformations; the fit of a homography moves the
-    /// corners onto its targets; the matrix is the homography through the moved corners.
+    /// corners onto its targets; the matrix is the homography through the moved corners; a
+    /// homography after the warp moves the corners and keeps the shape.
     #[test]
     fn non_rigid_compose_invert_and_fit_follow_the_fields(a in prop::collection::vec(-1.0f64..1.0, MAX_DOF), b in prop::collection::vec(-1.0f64..1.0, MAX_DOF)) {
         let base = Quad::from_array([-0.6, -0.4, 0.5, -0.5, 0.55, 0.6, -0.45, 0.5]);
@@ -121,6 +122,15 @@ proptest! {
             let m = ssm.matrix(&p);
             let moved = warp_quad(&*ssm, &p, &base);
             prop_assert!(base.map(|x| apply_homography(&m, x)).change_norm(&moved) < 1e-9, "{} matrix", ssm.name());
+            // A homography after the warp (a prediction's motion): the corners where it takes
+            // them, the warp's shape between them kept (a pure translation moves every point).
+            let shift = nalgebra::Matrix3::new(1.0, 0.0, 0.03, 0.0, 1.0, -0.02, 0.0, 0.0, 1.0);
+            let after = ssm.then_matrix(&p, &shift).unwrap();
+            let want = moved.map(|x| apply_homography(&shift, x));
+            prop_assert!(warp_quad(&*ssm, &after, &base).change_norm(&want) < 1e-6, "{} then_matrix", ssm.name());
+            let (x, y) = (0.1, -0.05);
+            let (a, b) = (warp(&*ssm, &after, x, y), warp(&*ssm, &p, x, y));
+            prop_assert!((a.x - b.x - 0.03).abs() < 1e-9 && (a.y - b.y + 0.02).abs() < 1e-9, "{} then_matrix inside", ssm.name());
         }
     }
 }

@@ -29,12 +29,7 @@ pub struct SquareBuf(Box<Square>);
 
 impl Default for SquareBuf {
     fn default() -> Self {
-        let zeros = vec![0.0; MAX_DOF * MAX_DOF].into_boxed_slice();
-        // A boxed slice of exactly MAX_DOF * MAX_DOF values is a boxed Square.
-        match zeros.try_into() {
-            Ok(square) => SquareBuf(square),
-            Err(_) => unreachable!("a slice of MAX_DOF * MAX_DOF values"),
-        }
+        SquareBuf(Box::new([0.0; MAX_DOF * MAX_DOF]))
     }
 }
 

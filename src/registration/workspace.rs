@@ -200,10 +200,6 @@ impl Workspace {
     pub fn projection_mut(&mut self) -> Projection<'_> {
         ((&self.gx, &self.gy), &self.dwdp, &mut self.jac)
     }
-    /// The Newton systems' solver.
-    pub fn solver_mut(&mut self) -> &mut NewtonSolver {
-        &mut self.solver
-    }
     /// What a Newton step reads and writes, each borrowed apart.
     pub fn newton_mut(&mut self) -> NewtonParts<'_> {
         NewtonParts {

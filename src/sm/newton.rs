@@ -140,36 +140,36 @@ pub fn solve_step(
     h: &Square,
     update: Update,
 ) -> Result<(), LossReason> {
-    let (problem, state, work) = ctx.parts_mut();
-    let dof = problem.dof();
-    let damping = state.damping();
-    let dp = if let Some(prior) = problem.smoothness() {
-        let w = work.newton_mut();
-        let g = with_prior(prior, &state.params(), update, g, h, w.scratch, dof);
-        w.solver.step(w.scratch, &g, dof, damping)
-    } else {
-        work.solver_mut().step(h, g, dof, damping)
-    }
-    .ok_or(LossReason::Singular)?;
-    ctx.apply(&dp, update)
+    solve_system(ctx, g, Some(h), update)
 }
 
 /// [`solve_step`] with the Hessian in the workspace's matrix.
 fn solve_own_step(ctx: &mut Context, g: &[f64; MAX_DOF], update: Update) -> Result<(), LossReason> {
+    solve_system(ctx, g, None, update)
+}
+
+/// The Newton step of `H` (`None`: the workspace's matrix) and `g`, a non-rigid SSM's
+/// smoothness prior added (into the workspace's second matrix), applied.
+fn solve_system(
+    ctx: &mut Context,
+    g: &[f64; MAX_DOF],
+    h: Option<&Square>,
+    update: Update,
+) -> Result<(), LossReason> {
     let (problem, state, work) = ctx.parts_mut();
     let dof = problem.dof();
     let w = work.newton_mut();
-    let g = match problem.smoothness() {
+    let h: &Square = h.unwrap_or(w.hessian);
+    let (h, g) = match problem.smoothness() {
         Some(prior) => {
-            let g = with_prior(prior, &state.params(), update, g, w.hessian, w.scratch, dof);
-            w.hessian[..dof * dof].copy_from_slice(&w.scratch[..dof * dof]);
-            g
+            let g = with_prior(prior, &state.params(), update, g, h, w.scratch, dof);
+            (&*w.scratch, g)
         }
-        None => *g,
+        None => (h, *g),
     };
     let dp = w
         .solver
-        .step(w.hessian, &g, dof, state.damping())
+        .step(h, &g, dof, state.damping())
         .ok_or(LossReason::Singular)?;
     ctx.apply(&dp, update)
 }

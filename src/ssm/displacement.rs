@@ -358,32 +358,38 @@ impl Displacement {
     ) {
         let m = self.m();
         let s = m + 3;
+        let want_grad = grad.is_some();
+        // The kernel U = r^2 log r^2 at each control point and, if asked, its gradient
+        // 2 (dx, dy) (log r^2 + 1) (both 0 at 0), one logarithm each.
         let mut u = [0.0; MAX_CONTROL];
         let mut du = [[0.0; 2]; MAX_CONTROL];
         for (n, q) in self.control.iter().enumerate() {
             let (dx, dy) = (x - q.x, y - q.y);
-            u[n] = kernel(dx, dy);
-            du[n] = kernel_gradient(dx, dy);
-        }
-        let inv = &self.tps;
-        let want_grad = grad.is_some();
-        let mut g = [[0.0; 2]; MAX_CONTROL];
-        for k in 0..m {
-            let mut v = inv[m * s + k] + x * inv[(m + 1) * s + k] + y * inv[(m + 2) * s + k];
-            let mut gk = [inv[(m + 1) * s + k], inv[(m + 2) * s + k]];
-            for n in 0..m {
-                let a = inv[n * s + k];
-                v += u[n] * a;
+            let r2 = dx * dx + dy * dy;
+            if r2 > 0.0 {
+                let l = r2.ln();
+                u[n] = r2 * l;
                 if want_grad {
-                    gk[0] += du[n][0] * a;
-                    gk[1] += du[n][1] * a;
+                    let t = 2.0 * (l + 1.0);
+                    du[n] = [t * dx, t * dy];
                 }
             }
-            phi[k] = v;
-            g[k] = gk;
+        }
+        let inv = &self.tps;
+        for k in 0..m {
+            let column = |n: usize| inv[n * s + k];
+            let affine = column(m) + x * column(m + 1) + y * column(m + 2);
+            phi[k] = (0..m).fold(affine, |v, n| v + u[n] * column(n));
         }
         if let Some(grad) = grad {
-            grad[..m].copy_from_slice(&g[..m]);
+            for (k, gk) in grad.iter_mut().enumerate().take(m) {
+                let column = |n: usize| inv[n * s + k];
+                *gk = [column(m + 1), column(m + 2)];
+                for n in 0..m {
+                    gk[0] += du[n][0] * column(n);
+                    gk[1] += du[n][1] * column(n);
+                }
+            }
         }
     }
 
@@ -455,17 +461,6 @@ impl Displacement {
 fn kernel(dx: f64, dy: f64) -> f64 {
     let r2 = dx * dx + dy * dy;
     if r2 > 0.0 { r2 * r2.ln() } else { 0.0 }
-}
-
-/// The kernel's gradient, `2 (dx, dy) (log r^2 + 1)` (0 at 0).
-fn kernel_gradient(dx: f64, dy: f64) -> [f64; 2] {
-    let r2 = dx * dx + dy * dy;
-    if r2 > 0.0 {
-        let s = 2.0 * (r2.ln() + 1.0);
-        [s * dx, s * dy]
-    } else {
-        [0.0, 0.0]
-    }
 }
 
 /// The `c` clamped B-spline basis functions of the knot vector `t` at `u` and their

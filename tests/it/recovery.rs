@@ -102,12 +102,17 @@ fn optimum_bias(sm: &str, am: &str, ssm: &str) -> Option<f64> {
 /// Whether a search method searches by sampling (no derivatives): its precision is that of its
 /// samples, not of a Newton step.
 fn sampling(sm_name: &str) -> bool {
+    !search_method(sm_name).requires().derivatives
+}
+
+/// The search method `name` with the default parameters.
+fn search_method(name: &str) -> Box<dyn sm::SearchMethod> {
     let (method, tracker) = (MethodParams::default(), TrackerParams::default());
     let cfg = sm::SmConfig {
         method: &method,
         tracker: &tracker,
     };
-    !sm::build(sm_name, &cfg).unwrap().requires().derivatives
+    sm::build(name, &cfg).unwrap()
 }
 
 #[test]
@@ -128,13 +133,8 @@ fn every_combination_recovers_a_known_warp() {
                     Err(e) => {
                         // Refused only where the capabilities say so, and with the reason.
                         let msg = e.to_string();
-                        let (method, tracker) = (MethodParams::default(), TrackerParams::default());
-                        let cfg = sm::SmConfig {
-                            method: &method,
-                            tracker: &tracker,
-                        };
                         let allowed = regtrack::tracker::allowed(
-                            &*sm::build(s.name, &cfg).unwrap(),
+                            &*search_method(s.name),
                             &*a.build.default_model(),
                             &*ssm::build(m.name).unwrap(),
                         );
@@ -207,14 +207,9 @@ fn every_combination_recovers_a_known_warp() {
 fn sampling_methods_are_precise_on_low_dof_and_seeded() {
     // Every method of the registry that searches elsewhere than at its parameters (NN, PF,
     // NNIC, the grid methods: not `local`), to half a pixel on the low-DOF warps.
-    let (method, tracker) = (MethodParams::default(), TrackerParams::default());
-    let cfg = sm::SmConfig {
-        method: &method,
-        tracker: &tracker,
-    };
     let nonlocal: Vec<&str> = sm::REGISTRY
         .iter()
-        .filter(|e| !sm::build(e.name, &cfg).unwrap().local())
+        .filter(|e| !search_method(e.name).local())
         .map(|e| e.name)
         .collect();
     for name in ["nn1k", "pf", "nnic", "grid", "rklt"] {

@@ -4,9 +4,14 @@
 //! search radius is scored by each fragment (the earth mover's distance between the fragment's
 //! histogram there and its template's, in 1-D the L1 distance of their cumulative histograms),
 //! and the fragments' scores are combined robustly: a candidate's score is a low quantile of
-//! them (the paper's 25%), so that fragments hidden by an occluder do not move the target. The
-//! histograms come from integral histograms of the search region (one summed-area table per
-//! bin), so a fragment's histogram costs four reads a bin whatever its size. Translation only.
+//! them, so that fragments hidden by an occluder do not move the target. As the paper's patches
+//! vote on scale as well as position, each frame, after the search at the last size, scores the
+//! box a step wider, narrower, taller, shorter, larger and smaller around the centre found and
+//! keeps the best: the fragments stay on the target while it comes nearer, moves away or turns
+//! (a target seen from an angle narrows along one axis), and the centre with them (the tracker
+//! reports the centre: its output is a translation of the first box). The histograms come from one integral histogram
+//! of the search region (one summed-area table per bin), so a fragment's histogram costs four
+//! reads a bin whatever its size.
 
 use super::{Base, Motion, Pose, WholeDef, WholeTracker, frame_f32};
 use crate::error::Result;
@@ -37,10 +42,17 @@ pub const PARAMS: &[ParamDef] = &[
     ),
     ParamDef::float(
         "quantile",
-        "a candidate's score is this quantile of its fragments' distances (robust to occlusion)",
+        "a candidate's score is this quantile of its fragments' distances (robust to occlusion of up to 1 - quantile of them; the paper's 0.25)",
         0.0,
         1.0,
-        0.25,
+        0.5,
+    ),
+    ParamDef::float(
+        "scale_step",
+        "each frame the box's width, height or both are also scored this fraction larger and smaller around the centre found, the best size kept (0: one size)",
+        0.0,
+        0.5,
+        0.05,
     ),
     ParamDef::float(
         "search_radius",
@@ -58,11 +70,14 @@ pub const PARAMS: &[ParamDef] = &[
     ),
 ];
 
+/// How far (px) from the centre found at the last size the other sizes are scored.
+const SIZE_RADIUS: f64 = 1.0;
+
 /// The registry entry.
 pub const ENTRY: Entry<WholeDef> = Entry {
     name: "fragtrack",
     aliases: &["frag"],
-    description: "fragments-based tracking (Adam et al. 2006): strip histograms from integral histograms, robust quantile vote, translation",
+    description: "fragments-based tracking (Adam et al. 2006): strip histograms from integral histograms, robust quantile vote, the box's size searched, translation",
     build: WholeDef {
         params: PARAMS,
         motion: Motion::Translation,
@@ -80,6 +95,7 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
         quantile: g("quantile"),
         radius: g("search_radius"),
         coarse_step: g("coarse_step") as i64,
+        scale_step: g("scale_step"),
         model: None,
         hist: IntegralHistogram::default(),
         scores: Vec::new(),
@@ -87,13 +103,19 @@ pub fn build(spec: &WholeSpec) -> Result<Box<dyn VisualTracker>> {
     }))
 }
 
-/// Summed-area tables of the bins of a region: `bins` tables of `(w + 1) x (h + 1)` counts.
+/// A pixel's weight in the integral histogram's counts: a pixel is shared between its two
+/// nearest bins in whole 64ths, so that every count is an exact integer (a fragment's histogram
+/// is the same wherever the region it is read from starts).
+pub(crate) const UNIT: u32 = 64;
+
+/// Summed-area tables of the bins of a region: `bins` tables of `(w + 1) x (h + 1)` counts (in
+/// [`UNIT`]s of a pixel).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct IntegralHistogram {
     pub w: usize,
     pub h: usize,
     pub bins: usize,
-    pub data: Vec<f32>,
+    pub data: Vec<u32>,
 }
 
 impl IntegralHistogram {
@@ -111,12 +133,12 @@ impl IntegralHistogram {
         self.bins = bins;
         let stride = (w + 1) * (h + 1);
         self.data.clear();
-        self.data.resize(bins * stride, 0.0);
+        self.data.resize(bins * stride, 0);
         let (iw, ih) = (img.width as i64, img.height as i64);
-        let mut row = vec![0f32; bins];
+        let mut row = vec![0u32; bins];
         let width = 256.0 / bins as f32;
         for y in 0..h {
-            row.iter_mut().for_each(|c| *c = 0.0);
+            row.iter_mut().for_each(|c| *c = 0);
             let py = (y0 + y as i64).clamp(0, ih - 1) as usize;
             for x in 0..w {
                 let px = (x0 + x as i64).clamp(0, iw - 1) as usize;
@@ -125,10 +147,10 @@ impl IntegralHistogram {
                 let t = (img.data[py * img.width + px].clamp(0.0, 255.0) / width - 0.5)
                     .clamp(0.0, (bins - 1) as f32);
                 let b = (t.floor() as usize).min(bins - 1);
-                let f = t - b as f32;
-                row[b] += 1.0 - f;
+                let upper = ((t - b as f32) * UNIT as f32).round() as u32;
+                row[b] += UNIT - upper;
                 if b + 1 < bins {
-                    row[b + 1] += f;
+                    row[b + 1] += upper;
                 }
                 for (b, count) in row.iter().enumerate() {
                     let t = &mut self.data[b * stride..(b + 1) * stride];
@@ -138,12 +160,13 @@ impl IntegralHistogram {
         }
     }
 
-    /// The count of bin `b` in the rectangle `[x0, x1) x [y0, y1)` of the region.
+    /// The count of bin `b` in the rectangle `[x0, x1) x [y0, y1)` of the region, in [`UNIT`]s.
     #[inline]
-    pub fn count(&self, b: usize, x0: usize, y0: usize, x1: usize, y1: usize) -> f32 {
+    pub fn count(&self, b: usize, x0: usize, y0: usize, x1: usize, y1: usize) -> u32 {
         let t = &self.data[b * (self.w + 1) * (self.h + 1)..];
         let at = |x: usize, y: usize| t[y * (self.w + 1) + x];
-        at(x1, y1) + at(x0, y0) - at(x1, y0) - at(x0, y1)
+        // Exact: the rectangle's count is what is left, whatever the order of the terms.
+        (at(x1, y1) + at(x0, y0)).wrapping_sub(at(x1, y0) + at(x0, y1))
     }
 }
 
@@ -188,11 +211,11 @@ fn strips(w: usize, h: usize, n: usize) -> Vec<Fragment> {
 
 /// The cumulative normalised histogram of a fragment placed at `(ox, oy)` in the region.
 fn cumulative(ih: &IntegralHistogram, f: &Fragment, ox: usize, oy: usize, out: &mut [f32]) {
-    let area = ((f.x1 - f.x0) * (f.y1 - f.y0)) as f32;
-    let mut c = 0.0;
+    let area = ((f.x1 - f.x0) * (f.y1 - f.y0)) as f32 * UNIT as f32;
+    let mut c = 0u32;
     for (b, o) in out.iter_mut().enumerate() {
         c += ih.count(b, ox + f.x0, oy + f.y0, ox + f.x1, oy + f.y1);
-        *o = c / area;
+        *o = c as f32 / area;
     }
 }
 
@@ -210,13 +233,47 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 
 #[derive(Debug)]
 struct Model {
-    bw: usize,
-    bh: usize,
-    fragments: Vec<Fragment>,
-    /// Each fragment's template cumulative histogram (`bins` values).
+    /// The first frame's box (px).
+    size0: (f64, f64),
+    /// Strips a side.
+    strips: usize,
+    /// The box's width and height now, relative to the first frame's (searched each frame).
+    scale: (f64, f64),
+    /// The least and largest scales: the strips at least two pixels wide, the box at most eight
+    /// times its first size.
+    scales: (f64, f64),
+    /// Each fragment's template cumulative histogram (`bins` values), in the order of
+    /// [`strips`]' fragments.
     templates: Vec<Vec<f32>>,
     /// The centre's offset from the whole-pixel box's centre, fixed at the start.
     offset: (f64, f64),
+}
+
+impl Model {
+    /// The whole-pixel box at `scale` (of the width, of the height).
+    fn size(&self, scale: (f64, f64)) -> (usize, usize) {
+        (
+            (self.size0.0 * scale.0).round().max(2.0) as usize,
+            (self.size0.1 * scale.1).round().max(2.0) as usize,
+        )
+    }
+
+    /// The frame position of the top-left of the box of size `(bw, bh)` around `pose`.
+    fn top_left(&self, pose: &Pose, (bw, bh): (usize, usize)) -> (i64, i64) {
+        (
+            (pose.cx - self.offset.0 - 0.5 * bw as f64).round() as i64,
+            (pose.cy - self.offset.1 - 0.5 * bh as f64).round() as i64,
+        )
+    }
+}
+
+/// One size's candidate: the box, its fragments and where its search starts in the region.
+#[derive(Clone, Debug, Default)]
+struct Candidate {
+    scale: (f64, f64),
+    fragments: Vec<Fragment>,
+    /// The box's top-left in the region at the last pose.
+    start: (i64, i64),
 }
 
 /// A FragTrack tracker.
@@ -228,6 +285,7 @@ pub struct FragTrack {
     quantile: f64,
     radius: f64,
     coarse_step: i64,
+    scale_step: f64,
     model: Option<Model>,
     hist: IntegralHistogram,
     scores: Vec<f64>,
@@ -235,17 +293,17 @@ pub struct FragTrack {
 }
 
 impl FragTrack {
-    fn top_left(m: &Model, pose: &Pose) -> (i64, i64) {
-        (
-            (pose.cx - m.offset.0 - 0.5 * m.bw as f64).round() as i64,
-            (pose.cy - m.offset.1 - 0.5 * m.bh as f64).round() as i64,
-        )
-    }
-
-    /// The robust score of the candidate at `(ox, oy)` of the region (lower is better).
-    fn score(&mut self, m: &Model, ox: usize, oy: usize, cdf: &mut [f32]) -> f64 {
+    /// The robust score of `fragments` with their top-left at `(ox, oy)` of the region (lower
+    /// is better).
+    fn score(
+        &mut self,
+        fragments: &[Fragment],
+        templates: &[Vec<f32>],
+        (ox, oy): (usize, usize),
+        cdf: &mut [f32],
+    ) -> f64 {
         self.scores.clear();
-        for (f, t) in m.fragments.iter().zip(&m.templates) {
+        for (f, t) in fragments.iter().zip(templates) {
             cumulative(&self.hist, f, ox, oy, cdf);
             self.scores.push(emd(cdf, t));
         }
@@ -262,30 +320,34 @@ impl WholeTracker for FragTrack {
         let (tw, th) = self.base.size0;
         let (bw, bh) = (tw.round().max(2.0) as usize, th.round().max(2.0) as usize);
         let n = self.strips.min(bw.min(bh) / 2).max(1);
-        let mut m = Model {
-            bw,
-            bh,
-            fragments: strips(bw, bh, n),
-            templates: Vec::new(),
-            offset: (0.0, 0.0),
-        };
-        let (x, y) = Self::top_left(&m, &self.base.pose);
-        m.offset = (
-            self.base.pose.cx - (x as f64 + 0.5 * bw as f64),
-            self.base.pose.cy - (y as f64 + 0.5 * bh as f64),
+        let fragments = strips(bw, bh, n);
+        let (x, y) = (
+            (self.base.pose.cx - 0.5 * bw as f64).round() as i64,
+            (self.base.pose.cy - 0.5 * bh as f64).round() as i64,
         );
         let img = frame_f32(input);
         self.hist.build(&img, (x, y), (bw, bh), self.bins);
         let mut cdf = vec![0f32; self.bins];
-        m.templates = m
-            .fragments
+        let templates = fragments
             .iter()
             .map(|f| {
                 cumulative(&self.hist, f, 0, 0, &mut cdf);
                 cdf.clone()
             })
             .collect();
-        self.model = Some(m);
+        // The least scale keeps a strip (2 / (n + 1) of the side) at least two pixels wide.
+        let least = (n as f64 + 1.0) / bw.min(bh) as f64;
+        self.model = Some(Model {
+            size0: (bw as f64, bh as f64),
+            strips: n,
+            scale: (1.0, 1.0),
+            scales: (least.min(1.0), 8.0),
+            templates,
+            offset: (
+                self.base.pose.cx - (x as f64 + 0.5 * bw as f64),
+                self.base.pose.cy - (y as f64 + 0.5 * bh as f64),
+            ),
+        });
         Ok(())
     }
 
@@ -293,36 +355,101 @@ impl WholeTracker for FragTrack {
         if self.base.status != TrackStatus::Tracking {
             return self.base.idle();
         }
-        let Some(m) = self.model.take() else {
+        let Some(mut m) = self.model.take() else {
             return self.base.idle();
         };
         let started = self.base.begin(observer);
         let img = frame_f32(input);
-        let r = self.radius.ceil() as usize;
-        let (x0, y0) = Self::top_left(&m, &self.base.pose);
-        let origin = (x0 - r as i64, y0 - r as i64);
-        self.hist
-            .build(&img, origin, (m.bw + 2 * r, m.bh + 2 * r), self.bins);
+        let r = self.radius.ceil() as i64;
+        // The sizes tried: the last one first (it wins ties), then a step larger and smaller.
+        let mut scales = vec![m.scale];
+        if self.scale_step > 0.0 {
+            let (lo, hi) = m.scales;
+            let (up, (sx, sy)) = (1.0 + self.scale_step, m.scale);
+            // The width, the height, or both a step larger or smaller: a target seen from an
+            // angle narrows along one axis.
+            for (fx, fy) in [
+                (up, up),
+                (1.0 / up, 1.0 / up),
+                (up, 1.0),
+                (1.0 / up, 1.0),
+                (1.0, up),
+                (1.0, 1.0 / up),
+            ] {
+                let s = ((sx * fx).clamp(lo, hi), (sy * fy).clamp(lo, hi));
+                if !scales.iter().any(|&t| m.size(t) == m.size(s)) {
+                    scales.push(s);
+                }
+            }
+        }
+        // One region holds every size's search: the largest box plus the radius around it.
+        let boxes: Vec<((usize, usize), (i64, i64))> = scales
+            .iter()
+            .map(|&s| {
+                let size = m.size(s);
+                (size, m.top_left(&self.base.pose, size))
+            })
+            .collect();
+        let x0 = boxes.iter().map(|b| b.1.0).min().unwrap_or(0) - r;
+        let y0 = boxes.iter().map(|b| b.1.1).min().unwrap_or(0) - r;
+        let x1 = boxes
+            .iter()
+            .map(|b| b.1.0 + b.0.0 as i64)
+            .max()
+            .unwrap_or(0)
+            + r;
+        let y1 = boxes
+            .iter()
+            .map(|b| b.1.1 + b.0.1 as i64)
+            .max()
+            .unwrap_or(0)
+            + r;
+        let (rw, rh) = ((x1 - x0) as usize, (y1 - y0) as usize);
+        self.hist.build(&img, (x0, y0), (rw, rh), self.bins);
         let preprocess = started.elapsed();
         let mut cdf = vec![0f32; self.bins];
-        let lim = 2 * r as i64;
         let (radius, step) = (self.radius, self.coarse_step);
-        // Lower distances are better: the search maximises their negative.
-        let (bx, by, neg) = super::search_disc((r as i64, r as i64), radius, step, |x, y| {
-            if x < 0 || y < 0 || x > lim || y > lim {
-                return f64::NEG_INFINITY;
+        let templates = std::mem::take(&mut m.templates);
+        let mut best: Option<(f64, Candidate, (i64, i64))> = None;
+        for (&scale, &(size, (bx, by))) in scales.iter().zip(&boxes) {
+            let c = Candidate {
+                scale,
+                fragments: strips(size.0, size.1, m.strips),
+                start: (bx - x0, by - y0),
+            };
+            let (xmax, ymax) = ((rw - size.0) as i64, (rh - size.1) as i64);
+            // The last size searches the disc; the others are scored around the centre it found
+            // (within SIZE_RADIUS): each at its own best position, a smaller box, free to slide
+            // inside the target, would win by the least of more near-equal scores.
+            let (centre, radius, step) = match &best {
+                Some((_, b, at)) => (
+                    (c.start.0 + at.0 - b.start.0, c.start.1 + at.1 - b.start.1),
+                    SIZE_RADIUS,
+                    1,
+                ),
+                None => (c.start, radius, step),
+            };
+            // Lower distances are better: the search maximises their negative.
+            let (x, y, neg) = super::search_disc(centre, radius, step, |x, y| {
+                if x < 0 || y < 0 || x > xmax || y > ymax {
+                    return f64::NEG_INFINITY;
+                }
+                -self.score(&c.fragments, &templates, (x as usize, y as usize), &mut cdf)
+            });
+            if best.as_ref().is_none_or(|b| -neg < b.0) {
+                best = Some((-neg, c, (x, y)));
             }
-            -self.score(&m, x as usize, y as usize, &mut cdf)
-        });
-        let best = ((bx as usize, by as usize), -neg);
-        let (at, s) = best;
-        let pose = Pose {
-            cx: self.base.pose.cx + at.0 as f64 - r as f64,
-            cy: self.base.pose.cy + at.1 as f64 - r as f64,
-            ..self.base.pose
-        };
-        // The similarity reported: 1 minus the robust distance over its largest (the bins).
+        }
+        m.templates = templates;
+        let (s, c, at) = best.unwrap_or((f64::NAN, Candidate::default(), (0, 0)));
         let found = if s.is_finite() {
+            m.scale = c.scale;
+            let pose = Pose {
+                cx: self.base.pose.cx + (at.0 - c.start.0) as f64,
+                cy: self.base.pose.cy + (at.1 - c.start.1) as f64,
+                ..self.base.pose
+            };
+            // The similarity reported: 1 minus the robust distance over its largest (the bins).
             Ok((pose, 1.0 - s / self.bins as f64))
         } else {
             Err(LossReason::NonFinite)
@@ -330,8 +457,8 @@ impl WholeTracker for FragTrack {
         let want = observer.wants_method_visuals();
         self.vis.clear();
         if want {
-            let (tx, ty) = (origin.0 + at.0 as i64, origin.1 + at.1 as i64);
-            self.vis.extend(m.fragments.iter().map(|f| {
+            let (tx, ty) = (x0 + at.0, y0 + at.1);
+            self.vis.extend(c.fragments.iter().map(|f| {
                 Quad::from_rect(
                     (tx + f.x0 as i64) as f64,
                     (ty + f.y0 as i64) as f64,
@@ -363,8 +490,12 @@ mod tests {
         };
         let mut ih = IntegralHistogram::default();
         ih.build(&img, (0, 0), (6, 4), 4);
-        assert_eq!(ih.count(0, 0, 0, 6, 4), 6.0);
-        assert_eq!(ih.count(1, 0, 0, 2, 1), 1.0, "pixels 0 and 1: one in bin 1");
+        assert_eq!(ih.count(0, 0, 0, 6, 4), 6 * UNIT);
+        assert_eq!(
+            ih.count(1, 0, 0, 2, 1),
+            UNIT,
+            "pixels 0 and 1: one in bin 1"
+        );
         // Between two centres a pixel is shared by its two bins; the mass is kept.
         let img = GrayF32 {
             width: 6,
@@ -372,14 +503,40 @@ mod tests {
             data: (0..24).map(|i| (i * 10) as f32).collect(),
         };
         ih.build(&img, (0, 0), (6, 4), 4);
-        let total: f32 = (0..4).map(|b| ih.count(b, 0, 0, 6, 4)).sum();
-        assert!((total - 24.0).abs() < 1e-4);
-        assert!((ih.count(0, 1, 0, 2, 1) - (1.0 - (10.0 / 64.0 - 0.5_f32).max(0.0))).abs() < 1e-6);
+        let total: u32 = (0..4).map(|b| ih.count(b, 0, 0, 6, 4)).sum();
+        assert_eq!(total, 24 * UNIT);
+        // 10 is below the first centre (32): all in bin 0. 50 is 0.28 of the way from the
+        // first centre to the second: 18 64ths in bin 1.
+        assert_eq!(ih.count(0, 1, 0, 2, 1), UNIT);
+        assert_eq!((ih.count(0, 5, 0, 6, 1), ih.count(1, 5, 0, 6, 1)), (46, 18));
         let s = strips(12, 9, 2);
         assert_eq!(s.len(), 4);
         assert_eq!((s[0].y0, s[0].y1, s[1].y0, s[1].y1), (0, 6, 3, 9));
         assert_eq!((s[2].x0, s[2].x1, s[3].x0, s[3].x1), (0, 8, 4, 12));
         assert_eq!(emd(&[0.5, 1.0], &[0.0, 1.0]), 0.5);
         assert_eq!(quantile(&mut [4.0, 1.0, 3.0, 2.0, 9.0], 0.25), 2.0);
+    }
+
+    #[test]
+    fn a_rectangle_counts_the_same_wherever_its_region_starts() {
+        // Values off the bins' centres (shared between two bins) on a large region: f32
+        // summed-area tables would round the large sums differently at each origin.
+        let img = GrayF32 {
+            width: 300,
+            height: 200,
+            data: (0..60_000)
+                .map(|i| ((i * 7919) % 251) as f32 + 0.37)
+                .collect(),
+        };
+        let (mut a, mut b) = (IntegralHistogram::default(), IntegralHistogram::default());
+        a.build(&img, (0, 0), (300, 200), 16);
+        b.build(&img, (250, 150), (40, 40), 16);
+        for bin in 0..16 {
+            assert_eq!(
+                a.count(bin, 260, 160, 280, 190),
+                b.count(bin, 10, 10, 30, 40),
+                "bin {bin}"
+            );
+        }
     }
 }

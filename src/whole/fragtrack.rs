@@ -361,7 +361,8 @@ impl WholeTracker for FragTrack {
         let started = self.base.begin(observer);
         let img = frame_f32(input);
         let r = self.radius.ceil() as i64;
-        // The sizes tried: the last one first (it wins ties), then a step larger and smaller.
+        // The sizes tried: the last one first (it wins ties), then its width, height or both a
+        // step larger and smaller.
         let mut scales = vec![m.scale];
         if self.scale_step > 0.0 {
             let (lo, hi) = m.scales;
@@ -418,9 +419,9 @@ impl WholeTracker for FragTrack {
                 start: (bx - x0, by - y0),
             };
             let (xmax, ymax) = ((rw - size.0) as i64, (rh - size.1) as i64);
-            // The last size searches the disc; the others are scored around the centre it found
-            // (within SIZE_RADIUS): each at its own best position, a smaller box, free to slide
-            // inside the target, would win by the least of more near-equal scores.
+            // The last size searches the disc; the others are scored around the best centre found
+            // so far (within SIZE_RADIUS): each at its own best position, a smaller box, free to
+            // slide inside the target, would win by the least of more near-equal scores.
             let (centre, radius, step) = match &best {
                 Some((_, b, at)) => (
                     (c.start.0 + at.0 - b.start.0, c.start.1 + at.1 - b.start.1),

@@ -391,20 +391,13 @@ impl WholeTracker for FragTrack {
                 (size, m.top_left(&self.base.pose, size))
             })
             .collect();
-        let x0 = boxes.iter().map(|b| b.1.0).min().unwrap_or(0) - r;
-        let y0 = boxes.iter().map(|b| b.1.1).min().unwrap_or(0) - r;
-        let x1 = boxes
-            .iter()
-            .map(|b| b.1.0 + b.0.0 as i64)
-            .max()
-            .unwrap_or(0)
-            + r;
-        let y1 = boxes
-            .iter()
-            .map(|b| b.1.1 + b.0.1 as i64)
-            .max()
-            .unwrap_or(0)
-            + r;
+        let (x0, y0, x1, y1) = boxes.iter().fold(
+            (i64::MAX, i64::MAX, i64::MIN, i64::MIN),
+            |(a, b, c, d), &((w, h), (x, y))| {
+                (a.min(x), b.min(y), c.max(x + w as i64), d.max(y + h as i64))
+            },
+        );
+        let (x0, y0, x1, y1) = (x0 - r, y0 - r, x1 + r, y1 + r);
         let (rw, rh) = ((x1 - x0) as usize, (y1 - y0) as usize);
         self.hist.build(&img, (x0, y0), (rw, rh), self.bins);
         let preprocess = started.elapsed();

@@ -73,6 +73,9 @@ pub const PARAMS: &[ParamDef] = &[
 /// How far (px) from the centre found at the last size the other sizes are scored.
 const SIZE_RADIUS: f64 = 1.0;
 
+/// The box is searched at most this many times its first size.
+const MOST_SCALE: f64 = 8.0;
+
 /// The registry entry.
 pub const ENTRY: Entry<WholeDef> = Entry {
     name: "fragtrack",
@@ -239,9 +242,8 @@ struct Model {
     strips: usize,
     /// The box's width and height now, relative to the first frame's (searched each frame).
     scale: (f64, f64),
-    /// The least and largest scales: the strips at least two pixels wide, the box at most eight
-    /// times its first size.
-    scales: (f64, f64),
+    /// The least scale: the strips at least two pixels wide (the largest is [`MOST_SCALE`]).
+    least: f64,
     /// Each fragment's template cumulative histogram (`bins` values), in the order of
     /// [`strips`]' fragments.
     templates: Vec<Vec<f32>>,
@@ -341,7 +343,7 @@ impl WholeTracker for FragTrack {
             size0: (bw as f64, bh as f64),
             strips: n,
             scale: (1.0, 1.0),
-            scales: (least.min(1.0), 8.0),
+            least: least.min(1.0),
             templates,
             offset: (
                 self.base.pose.cx - (x as f64 + 0.5 * bw as f64),
@@ -365,7 +367,6 @@ impl WholeTracker for FragTrack {
         // step larger and smaller.
         let mut scales = vec![m.scale];
         if self.scale_step > 0.0 {
-            let (lo, hi) = m.scales;
             let (up, (sx, sy)) = (1.0 + self.scale_step, m.scale);
             // The width, the height, or both a step larger or smaller: a target seen from an
             // angle narrows along one axis.
@@ -377,7 +378,10 @@ impl WholeTracker for FragTrack {
                 (1.0, up),
                 (1.0, 1.0 / up),
             ] {
-                let s = ((sx * fx).clamp(lo, hi), (sy * fy).clamp(lo, hi));
+                let s = (
+                    (sx * fx).clamp(m.least, MOST_SCALE),
+                    (sy * fy).clamp(m.least, MOST_SCALE),
+                );
                 if !scales.iter().any(|&t| m.size(t) == m.size(s)) {
                     scales.push(s);
                 }

@@ -194,9 +194,6 @@ fn fragtrack_searches_the_targets_size_and_keeps_its_centre() {
     let (fixed, sized1, within1, mean1) = run("0");
     let w0 = truth[0].0[1].x - truth[0].0[0].x;
     assert!(fixed.iter().all(|w| (w - w0).abs() <= 1.0), "one size");
-    eprintln!(
-        "sized {sized:.3} within {within:.3} mean {mean:.2} / {sized1:.3} {within1:.3} {mean1:.2}"
-    );
     assert!(
         sized >= 0.8 && within >= 0.9 && mean < 0.5 * mean1,
         "box within 10% of the target's width on {sized:.3} of the frames ({sized1:.3} with one \

@@ -240,6 +240,14 @@ impl RegistrationTracker {
 /// either way).
 fn appearance_model(spec: &RegistrationSpec) -> Result<Box<dyn am::Am>> {
     let model = lit_model(spec)?;
+    if spec.params.channels == crate::spec::Channels::Df && model.bins_grey_levels() {
+        return Err(Error::Incompatible(format!(
+            "'{}' bins grey levels 0..255 into its histogram; the descriptor fields \
+             (channels=df) are derivatives piled up near zero: use ssd, zncc, ncc, scv or \
+             another model that compares values",
+            spec.am
+        )));
+    }
     let channels = spec.params.channels.count();
     // Stacked unless the model reads the patch as its grid (neighbours, regions), which it
     // can only do channel by channel.

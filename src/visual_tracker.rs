@@ -180,8 +180,8 @@ pub trait VisualTracker: Send + std::fmt::Debug {
     fn inspection(&self) -> Option<Inspection<'_>> {
         None
     }
-    /// The channels it reads: 1 (grey, every tracker but a registration tracker with
-    /// `channels = rgb`) or 3. A caller that has colour frames hands them to a tracker of 3
+    /// The frame's channels it reads: 1 (grey, every tracker but a registration tracker with
+    /// `channels = rgb`; descriptor fields, `channels = df`, are made of the grey) or 3. A caller that has colour frames hands them to a tracker of 3
     /// ([`FrameInput::Colour`]); a grey frame given to it is read as three equal channels.
     fn channels(&self) -> usize {
         1

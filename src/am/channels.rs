@@ -154,6 +154,9 @@ impl Am for PerChannel {
     fn needs_grid(&self) -> bool {
         self.first().needs_grid()
     }
+    fn bins_grey_levels(&self) -> bool {
+        self.first().bins_grey_levels()
+    }
     fn updates_model(&self) -> bool {
         self.first().updates_model()
     }

@@ -42,6 +42,9 @@ impl Am for Mi {
     fn default_hessian(&self) -> HessianKind {
         HessianKind::AfterConvergence
     }
+    fn bins_grey_levels(&self) -> bool {
+        true
+    }
     super::forward_to_engine!();
 }
 

@@ -207,6 +207,14 @@ pub trait Am: CloneAm + Send + Sync + std::fmt::Debug {
     fn needs_grid(&self) -> bool {
         false
     }
+    /// Whether the model bins the patch's values as grey levels `0..255` in a joint histogram
+    /// whose gradient it follows (MI's and CCRE's Parzen histograms): it cannot compare descriptor fields (`channels = df`), whose
+    /// values are derivatives piled up near zero (a few of the bins hold them all; on the
+    /// coffee photograph MI and CCRE recovered almost none of the known warps), and the
+    /// factory refuses that pairing.
+    fn bins_grey_levels(&self) -> bool {
+        false
+    }
     /// Whether [`Am::update_model`] does something (the executor then samples the patch where the
     /// search settles for it).
     fn updates_model(&self) -> bool {

@@ -556,7 +556,7 @@ pub fn run_sequence_reading(
         };
     // With `ahead`, each frame decoded while the tracker works on the one before.
     // A tracker that reads colour is handed colour frames.
-    let colour = tracker.channels() > 1;
+    let colour = tracker.channels() == 3;
     let ended = seq.each_frame(
         0..seq.len(),
         ahead,

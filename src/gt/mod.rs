@@ -655,7 +655,7 @@ pub fn propagate(
     use crate::tracker::{FrameInput, TrackStatus, Tracker};
     let mut tracker = Tracker::new(spec)?;
     // A tracker that reads colour is handed colour frames.
-    let colour = tracker.channels() > 1;
+    let colour = tracker.channels() == 3;
     let img = seq.load_frame(from, colour)?;
     tracker.initialize(FrameInput::of(&img), &start)?;
     let mut frames = Vec::new();

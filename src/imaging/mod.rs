@@ -5,6 +5,7 @@
 //! Pixel `(i, j)` has its centre at the real coordinates `(i, j)`.
 
 pub mod fft;
+mod fields;
 mod filter;
 pub mod flow;
 pub mod hog;
@@ -13,6 +14,7 @@ pub mod keypoints;
 mod resample;
 mod sample;
 
+pub use fields::{FIELDS, descriptor_fields_into};
 pub use filter::{
     COARSE_EPS, GaussianKernel, Preprocessor, downsample_half, downsample_half_into,
     downsample_half_rows_into, gaussian_blur, gaussian_blur_into, gaussian_blur_rows_into,
@@ -21,8 +23,8 @@ pub use filter::{
 pub use integral::Integral;
 pub use resample::{resample_window, resample_window_on};
 pub use sample::{
-    Border, ImageView, STAMP_LEVELS, new_stamp, sample_grid_shifted, sample_value, sample_values,
-    sample_values_gradients,
+    Border, ImageView, MAX_PLANES, STAMP_LEVELS, new_stamp, sample_grid_shifted, sample_value,
+    sample_values, sample_values_gradients,
 };
 
 use crate::error::{Error, Result};

@@ -25,6 +25,9 @@ pub fn new_stamp() -> u64 {
 /// The stamps reserved by one [`new_stamp`]: level `l` of the content is stamped `stamp + l`.
 pub const STAMP_LEVELS: u64 = 8;
 
+/// The most planes a view has: the four descriptor fields ([`crate::spec::Channels::Df`]).
+pub const MAX_PLANES: usize = 4;
+
 /// A read-only window of a float image placed at `(x0, y0)` in frame coordinates: points are
 /// given in frame coordinates and sampled from the window.
 #[derive(Clone, Copy, Debug)]
@@ -39,9 +42,10 @@ pub struct ImageView<'a> {
     border: Border,
     /// What content this is (see [`ImageView::stamp`]); 0: unknown.
     stamp: u64,
-    /// The second and third planes of a colour view (the same window of the other channels;
-    /// see [`ImageView::with_planes`]), and how many planes the view has (1 or 3).
-    others: [&'a [f32]; 2],
+    /// The other planes of a view of several (the same window of a colour frame's other
+    /// channels, or of the other descriptor fields; see [`ImageView::with_planes`]), and how
+    /// many planes the view has (1 to [`MAX_PLANES`]).
+    others: [&'a [f32]; MAX_PLANES - 1],
     planes: u8,
 }
 
@@ -64,7 +68,7 @@ impl<'a> ImageView<'a> {
             scale: 1.0,
             border: Border::Replicate,
             stamp: 0,
-            others: [&[], &[]],
+            others: [&[]; MAX_PLANES - 1],
             planes: 1,
         }
     }
@@ -76,18 +80,31 @@ impl<'a> ImageView<'a> {
     ///
     /// # Panics
     /// If a plane is shorter than the window (a programming error).
-    pub fn with_planes(mut self, second: &'a [f32], third: &'a [f32]) -> Self {
+    pub fn with_planes(self, second: &'a [f32], third: &'a [f32]) -> Self {
+        self.with_more_planes(&[second, third])
+    }
+
+    /// The same window of `1 + more.len()` planes (at most [`MAX_PLANES`]): `self`'s pixels
+    /// are the first, `more` the others, laid out alike; as [`ImageView::with_planes`].
+    ///
+    /// # Panics
+    /// If a plane is shorter than the window, or there are more than [`MAX_PLANES`] (a
+    /// programming error).
+    pub fn with_more_planes(mut self, more: &[&'a [f32]]) -> Self {
         let n = self.width * self.height;
+        assert!(more.len() < MAX_PLANES, "more planes than a view holds");
         assert!(
-            second.len() >= n && third.len() >= n,
+            more.iter().all(|p| p.len() >= n),
             "image plane smaller than its view"
         );
-        self.others = [second, third];
-        self.planes = 3;
+        self.others = [&[]; MAX_PLANES - 1];
+        self.others[..more.len()].copy_from_slice(more);
+        self.planes = 1 + more.len() as u8;
         self
     }
 
-    /// How many planes the view has: 1, or 3 for a colour view ([`ImageView::with_planes`]).
+    /// How many planes the view has: 1, or more for a colour view or descriptor fields
+    /// ([`ImageView::with_planes`]).
     pub fn planes(&self) -> usize {
         self.planes as usize
     }
@@ -98,7 +115,7 @@ impl<'a> ImageView<'a> {
         if c > 0 && c < self.planes() {
             v.data = self.others[c - 1];
         }
-        v.others = [&[], &[]];
+        v.others = [&[]; MAX_PLANES - 1];
         v.planes = 1;
         v
     }

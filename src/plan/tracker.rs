@@ -71,8 +71,11 @@ impl RegistrationTracker {
         let p = spec.params.clone();
         let gradient = main.sm.requires().derivatives;
         let kernel = gaussian_kernel(p.blur_size, p.smoothing_sigma(gradient) as f32);
-        let src =
-            FrameSource::new(kernel, plan.levels()).with_channels(spec.params.channels.count());
+        let src = FrameSource::new(kernel, plan.levels());
+        let src = match spec.params.channels {
+            crate::spec::Channels::Df => src.with_descriptor_fields(),
+            c => src.with_channels(c.count()),
+        };
         RegistrationTracker {
             spec: TrackerSpec::Registration(spec),
             params: p,
@@ -484,7 +487,11 @@ impl VisualTracker for RegistrationTracker {
     }
 
     fn channels(&self) -> usize {
-        self.params.channels.count()
+        // Descriptor fields are made of the grey frame.
+        match self.params.channels {
+            crate::spec::Channels::Rgb => 3,
+            _ => 1,
+        }
     }
 
     fn warped_grid(&self) -> Option<crate::visual_tracker::WarpedGrid> {

@@ -16,8 +16,8 @@
 //! pay for them.
 
 use crate::geometry::{Quad, Rect};
-use crate::imaging::{GaussianKernel, ImageRef, ImageView, Preprocessor, gaussian_kernel};
-use crate::imaging::{GrayF32, new_stamp};
+use crate::imaging::{FIELDS, GaussianKernel, ImageRef, ImageView, Preprocessor};
+use crate::imaging::{GrayF32, descriptor_fields_into, gaussian_kernel, new_stamp};
 use crate::visual_tracker::FrameInput;
 
 /// Pixels around a patch's corners its sampling reads: the 4 x 4 neighbourhood of a point
@@ -70,8 +70,12 @@ pub struct FrameSource {
     /// The finest level's region, smoothed by the tracker's kernel, and its coarser levels:
     /// the grey frame's, or a colour tracker's first channel's.
     pre: Preprocessor,
-    /// A colour tracker's second and third channels, made as `pre` (empty for grey).
+    /// A colour tracker's second and third channels, or the other three descriptor fields,
+    /// made as `pre` (empty for grey).
     others: Vec<Preprocessor>,
+    /// A descriptor-field source's raw fields of the grey frame (frame-sized, filled around
+    /// each region before the planes smooth them; see [`FrameSource::with_descriptor_fields`]).
+    fields: Option<Box<[GrayF32; FIELDS]>>,
     /// Whether the frame last prepared had its own channels (a grey frame given to a colour
     /// tracker is read as three equal ones, from `pre`).
     colour: bool,
@@ -93,6 +97,7 @@ impl FrameSource {
         FrameSource {
             pre: Preprocessor::new(kernel),
             others: Vec::new(),
+            fields: None,
             colour: false,
             copy: Preprocessor::new(gaussian_kernel(1, 0.0)),
             levels,
@@ -110,7 +115,18 @@ impl FrameSource {
         self
     }
 
-    /// The channels its views have (1 or 3).
+    /// The same source reading the grey frame's four descriptor fields
+    /// ([`crate::imaging::descriptor_fields_into`]) as its planes, each smoothed (and its
+    /// pyramid made) by the source's kernel as a grey source smooths the frame. The whole
+    /// region is made at once (no reading in part), and a frame the caller smoothed is read as
+    /// the grey frame (its fields smoothed again).
+    pub fn with_descriptor_fields(mut self) -> Self {
+        self.others = vec![self.pre.clone(); FIELDS - 1];
+        self.fields = Some(Box::default());
+        self
+    }
+
+    /// The channels its views have (1, 3 or 4).
     pub fn channels(&self) -> usize {
         1 + self.others.len()
     }
@@ -138,6 +154,29 @@ impl FrameSource {
         self.stamp = new_stamp();
         self.built = false;
         self.region = region;
+        if let Some(fields) = self.fields.as_deref_mut() {
+            // The fields wherever the smoothing of the region reads (and a pixel more).
+            let reach = (self.pre.kernel().radius() + 1) as f64;
+            let r = region.grown(reach);
+            let clip = |v: f64| if v.is_nan() { 0 } else { v.max(0.0) as usize };
+            let rect = (
+                clip(r.x0.floor()),
+                clip(r.y0.floor()),
+                clip(r.x1.ceil()),
+                clip(r.y1.ceil()),
+            );
+            match Raw::of(input, 1, 0) {
+                Raw::U8(img) => descriptor_fields_into(img, rect, fields),
+                Raw::F32(img) => descriptor_fields_into(img, rect, fields),
+                Raw::Smoothed(img) => descriptor_fields_into(img, rect, fields),
+            }
+            let planes = std::iter::once(&mut self.pre).chain(&mut self.others);
+            for (pre, field) in planes.zip(fields.iter()) {
+                pre.process(field, region);
+            }
+            self.colour = true;
+            return;
+        }
         self.colour = self.channels() == 3 && input.colour().is_some();
         for (pre, raw) in self.planes_mut(input) {
             match raw {
@@ -155,6 +194,13 @@ impl FrameSource {
             return;
         }
         self.built = true;
+        if self.fields.is_some() {
+            let levels = self.levels;
+            for pre in std::iter::once(&mut self.pre).chain(&mut self.others) {
+                pre.build_levels(levels);
+            }
+            return;
+        }
         if let Raw::Smoothed(img) = Raw::of(input, 1, 0) {
             self.copy.process(img, self.region);
             self.copy.build_levels(self.levels);
@@ -202,6 +248,7 @@ impl FrameSource {
     /// colour tracker a view of three planes (a grey frame's three times).
     pub fn view<'a>(&'a self, input: FrameInput<'a>, level: usize) -> ImageView<'a> {
         let v = match input {
+            _ if self.fields.is_some() => self.pre.level_view(level),
             FrameInput::Smoothed(img) if level == 0 => img.view().with_stamp(self.stamp),
             FrameInput::Smoothed(_) => self.copy.level_view(level),
             _ => self.pre.level_view(level),
@@ -209,9 +256,15 @@ impl FrameSource {
         self.with_planes(v, level)
     }
 
-    /// `v` (plane 0 of `level`) with the other planes of a colour tracker.
+    /// `v` (plane 0 of `level`) with the other planes of a colour tracker, or the other
+    /// descriptor fields.
     fn with_planes<'a>(&'a self, v: ImageView<'a>, level: usize) -> ImageView<'a> {
         match self.others.as_slice() {
+            [a, b, c] => v.with_more_planes(&[
+                a.level_view(level).pixels(),
+                b.level_view(level).pixels(),
+                c.level_view(level).pixels(),
+            ]),
             [g, b] if self.colour => {
                 v.with_planes(g.level_view(level).pixels(), b.level_view(level).pixels())
             }
@@ -223,7 +276,7 @@ impl FrameSource {
     /// The finest level of the frame last prepared from `input`, to be read by a search:
     /// smoothed only in part when `part` (as [`FrameSource::prepare_part`] left it).
     pub fn reader<'a>(&'a mut self, input: FrameInput<'a>, part: bool) -> Reader<'a> {
-        if part && !matches!(input, FrameInput::Smoothed(_)) {
+        if part && self.fields.is_none() && !matches!(input, FrameInput::Smoothed(_)) {
             Reader::Part { src: self, input }
         } else {
             Reader::Whole(self.view(input, 0))
@@ -234,7 +287,7 @@ impl FrameSource {
     /// region is made again around `q` (grown by `margin`, see [`region_around`]) when `q` is
     /// not inside it, completed when it was smoothed only in part.
     pub fn hold(&mut self, input: FrameInput<'_>, q: &Quad, margin: f64) {
-        let smoothed = matches!(input, FrameInput::Smoothed(_));
+        let smoothed = matches!(input, FrameInput::Smoothed(_)) && self.fields.is_none();
         if !self.region().contains(&q.bbox()) && !smoothed {
             self.prepare(input, region_around(q, margin));
         } else if !self.pre.holds(&reads(q, 0.0)) {
@@ -408,6 +461,69 @@ mod tests {
         );
         assert_eq!(a.planes(), 1);
         assert_eq!(a.pixels(), b.pixels());
+    }
+
+    /// A descriptor-field source's views have the grey frame's four fields as planes, each
+    /// smoothed (and its pyramid made) as a grey source smooths that field made of the whole
+    /// frame; a colour frame is read as its grey, a frame the caller smoothed as a grey frame.
+    #[test]
+    fn a_descriptor_field_source_smooths_each_field_as_a_grey_one() {
+        let g = frame();
+        let input = FrameInput::Gray8(&g);
+        let mut whole: [GrayF32; FIELDS] = Default::default();
+        descriptor_fields_into(&g, (0, 0, g.width, g.height), &mut whole);
+        // Regions inside the frame and across its edges.
+        for region in [
+            Rect::new(9.0, 7.0, 41.0, 33.0),
+            Rect::new(-5.0, 3.0, 30.0, 60.0),
+        ] {
+            let mut src = FrameSource::new(gaussian_kernel(5, 1.0), 1).with_descriptor_fields();
+            assert_eq!(src.channels(), FIELDS);
+            src.prepare_part(input, region, Rect::new(20.0, 20.0, 25.0, 25.0));
+            assert!(src.is_whole(), "made whole at once");
+            src.build_levels(input);
+            for level in 0..2 {
+                let v = src.view(input, level);
+                assert_eq!(v.planes(), FIELDS);
+                for (c, field) in whole.iter().enumerate() {
+                    let plane = FrameInput::Gray32(field);
+                    let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 1);
+                    grey.prepare(plane, region);
+                    grey.build_levels(plane);
+                    let want = grey.view(plane, level);
+                    assert_eq!(
+                        v.plane(c).pixels(),
+                        want.pixels(),
+                        "level {level} field {c}"
+                    );
+                    assert_eq!(v.plane(c).origin(), want.origin());
+                }
+            }
+            let fields: Vec<Vec<f32>> = (0..FIELDS)
+                .map(|c| src.view(input, 0).plane(c).pixels().to_vec())
+                .collect();
+            // Read through a reader (never in part) and as a colour frame's grey.
+            assert_eq!(
+                src.reader(input, true).view().plane(3).pixels(),
+                &fields[3][..]
+            );
+            // Channels unlike the grey: the fields are the grey's.
+            let rgb: Vec<u8> = (0..g.data.len() * 3)
+                .map(|i| (i * 29 % 256) as u8)
+                .collect();
+            let colour = crate::imaging::ColourU8::from_rgb_and_gray(&rgb, g.clone()).unwrap();
+            src.prepare(FrameInput::Colour(&colour), region);
+            for (c, want) in fields.iter().enumerate() {
+                let v = src.view(FrameInput::Colour(&colour), 0);
+                assert_eq!(v.plane(c).pixels(), &want[..], "colour, field {c}");
+            }
+            // A frame the caller smoothed: its fields, smoothed again.
+            let f32 = g.to_f32();
+            src.prepare(FrameInput::Smoothed(&f32), region);
+            let v = src.view(FrameInput::Smoothed(&f32), 0);
+            assert_eq!(v.planes(), FIELDS);
+            assert_eq!(v.plane(1).pixels(), &fields[1][..]);
+        }
     }
 
     #[test]

@@ -216,7 +216,7 @@ impl TrackerSpec {
 
     /// `sm_am_ssm` (or the whole tracker's name), as used in result file names; a composite's
     /// `cascade:a+b` becomes `cascade-a+b`; a colour tracker's (`channels = rgb`) ends in
-    /// `_rgb` (`_rgb_pc` channel by channel).
+    /// `_rgb` (`_rgb_pc` channel by channel), one on descriptor fields in `_df` (`_df_pc`).
     pub fn label(&self) -> String {
         match self {
             TrackerSpec::Registration(r) => {
@@ -225,6 +225,8 @@ impl TrackerSpec {
                     (Channels::Gray, _) => "",
                     (Channels::Rgb, ChannelModel::Stacked) => "_rgb",
                     (Channels::Rgb, ChannelModel::PerChannel) => "_rgb_pc",
+                    (Channels::Df, ChannelModel::Stacked) => "_df",
+                    (Channels::Df, ChannelModel::PerChannel) => "_df_pc",
                 };
                 format!("{}_{}_{}{colour}", r.sm.replace(':', "-"), r.am, r.ssm)
             }

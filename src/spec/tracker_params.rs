@@ -153,9 +153,11 @@ tracker_params! {
     /// green and blue channels (the same points, smoothed alike), and the AM compares the
     /// three patches channel by channel: the sum of the three similarities (SSD's sum of
     /// squares is the same either way). A grey frame is read as three equal channels; the
-    /// learning trackers read grey.
+    /// learning trackers read grey. With `df` the channels are the grey image's four
+    /// descriptor fields (Crivellaro and Lepetit; MTF's `dft`): its x and y derivatives split by
+    /// sign, each smoothed by the pre-smoothing kernel ([`crate::imaging::descriptor_fields_into`]).
     channels: Channels = choice(Channels::NAMES),
-        "gray (the frame's luma), or rgb: sample the red, green and blue channels on the grid (targets that differ from their surroundings in hue)";
+        "gray (the frame's luma); rgb: sample the red, green and blue channels on the grid (targets that differ from their surroundings in hue); df: the four descriptor fields, the grey image's derivatives split by sign and smoothed (MTF's dft: light changes, shiny or texture-poor targets)";
     /// With `per_channel` each channel's patch has its own copy of the AM (its own means and
     /// norms, its own joint histogram: MTF's "a histogram per channel"), and the similarity is
     /// the sum of the three; with `stacked` the AM sees the three patches as one patch of
@@ -294,10 +296,14 @@ pub enum Channels {
     Gray,
     /// Red, green and blue, each its patch on the same grid.
     Rgb,
+    /// The grey image's four descriptor fields (`[dI/dx]+, [dI/dx]-, [dI/dy]+, [dI/dy]-`),
+    /// each smoothed, each its patch on the same grid.
+    Df,
 }
 choice_param!(Channels {
     Gray = "gray",
     Rgb = "rgb",
+    Df = "df",
 });
 
 impl Channels {
@@ -306,6 +312,7 @@ impl Channels {
         match self {
             Channels::Gray => 1,
             Channels::Rgb => 3,
+            Channels::Df => crate::imaging::FIELDS,
         }
     }
 }

@@ -128,7 +128,13 @@ fn update_does_not_allocate() {
             })
             .unwrap_or_else(|| panic!("no search method takes {}", am.name));
         spec.set_param("channels", "rgb").unwrap();
-        combos.push(spec);
+        combos.push(spec.clone());
+        // And on the descriptor fields (`channels = df`, the AM stacked on the four; not the
+        // models of grey-level histograms, which refuse them).
+        spec.set_param("channels", "df").unwrap();
+        if Tracker::new(&spec).is_ok() {
+            combos.push(spec);
+        }
     }
     let check = |mut spec: TrackerSpec| {
         // A pyramid too (its levels are kept between frames as well).

@@ -737,9 +737,19 @@ fn patch_image(
 }
 
 /// An image of `size` from `values` (one plane, or a colour patch's three, red, green and blue
-/// one after the other).
+/// one after the other; the descriptor fields' four are shown as their mean, the gradient's
+/// magnitude along x and y).
 fn planes_image(values: &[u8], size: [usize; 2], channels: usize) -> egui::ColorImage {
     let n = size[0] * size[1];
+    if channels > 1 && channels != 3 && values.len() == channels * n {
+        let mean: Vec<u8> = (0..n)
+            .map(|i| {
+                let sum: usize = (0..channels).map(|c| values[c * n + i] as usize).sum();
+                (sum / channels) as u8
+            })
+            .collect();
+        return egui::ColorImage::from_gray(size, &mean);
+    }
     if channels != 3 || values.len() != 3 * n {
         return egui::ColorImage::from_gray(size, &values[..n.min(values.len())]);
     }

@@ -77,11 +77,15 @@ impl std::ops::DerefMut for Tracker {
 
 impl TrackerSpec {
     /// The pre-smoothing a registration tracker of this spec applies to the region it reads
-    /// (`blur_sigma` resolved for its search method); `None` for a whole tracker.
+    /// (`blur_sigma` resolved for its search method); `None` for a whole tracker, and for one
+    /// on the descriptor fields (it smooths the fields it makes of the frame, not the frame).
     pub fn smoothing(&self) -> Result<Option<crate::imaging::GaussianKernel>> {
         let Some(spec) = self.registration() else {
             return Ok(None);
         };
+        if spec.params.channels == crate::spec::Channels::Df {
+            return Ok(None);
+        }
         Ok(Some(RegistrationTracker::new(spec)?.smoothing().clone()))
     }
 

@@ -70,7 +70,10 @@ impl RegistrationTracker {
     pub fn from_plan(spec: RegistrationSpec, main: Searcher, plan: Plan) -> Self {
         let p = spec.params.clone();
         let gradient = main.sm.requires().derivatives;
-        let kernel = gaussian_kernel(p.blur_size, p.smoothing_sigma(gradient) as f32);
+        let kernel = gaussian_kernel(
+            p.smoothing_size(gradient),
+            p.smoothing_sigma(gradient) as f32,
+        );
         let src = FrameSource::new(kernel, plan.levels());
         let src = match spec.params.channels {
             crate::spec::Channels::Df => src.with_descriptor_fields(),

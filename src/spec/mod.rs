@@ -8,8 +8,9 @@
 mod tracker_params;
 
 pub use tracker_params::{
-    AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, ChannelModel, Channels, GridLayout, LossPolicy,
-    OFF_ON, ParamValue, SecondHypothesis, Spi, TRACKER_FLAGS, TRACKER_PARAMS, TrackerParams,
+    AUTO_SIGMA_FIELDS, AUTO_SIGMA_GRADIENT, AUTO_SIGMA_SAMPLING, AUTO_SIZE_FIELDS, ChannelModel,
+    Channels, GridLayout, LossPolicy, OFF_ON, ParamValue, SecondHypothesis, Spi, TRACKER_FLAGS,
+    TRACKER_PARAMS, TrackerParams,
 };
 
 /// The tracker used when none is named, as `[sm, am, ssm]`: by `regtrack track`, `eval` and the

@@ -129,6 +129,36 @@ def test_a_colour_tracker_reads_the_channels_of_a_bgr_frame(rendered, tmp_path):
         assert np.abs(a - b).max() < 1e-3, f"frame {k + 1}: {a} vs {b}"
 
 
+def test_a_descriptor_field_tracker_matches_the_command_line(rendered, tmp_path):
+    # channels="df" (MTF's descriptor fields): made of the grey frame, so a grey frame and a
+    # BGR one track alike, and as the command line does.
+    grey = regtrack.Sequence(rendered)
+    colour = regtrack.Sequence(rendered, colour=True)
+    tracks = []
+    for seq in (grey, colour):
+        t = regtrack.Tracker("esm", "ssd", "homography", channels="df")
+        f0, g0 = seq[0]
+        t.initialize(f0, g0)
+        ours = [t.corners]
+        for f, _ in list(seq)[1:]:
+            c, s = t.update(f)
+            assert s == "tracking"
+            ours.append(c)
+        tracks.append(ours)
+    out = tmp_path / "cli.txt"
+    subprocess.run(
+        [cli(), "track", "--seq", str(rendered), "--sm", "esm", "--am", "ssd",
+         "--ssm", "homography", "--channels", "df", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    for k, (a, b, c) in enumerate(zip(tracks[0], tracks[1], read_corners(out))):
+        assert np.abs(a - c).max() < 1e-3, f"frame {k + 1}: {a} vs {c}"
+        assert np.abs(b - c).max() < 1e-3, f"frame {k + 1} (BGR): {b} vs {c}"
+    with pytest.raises(regtrack.Error, match="channels=df"):
+        regtrack.Tracker("fclk", "mi", "homography", channels="df")
+
+
 def test_errors_name_what_was_expected():
     frame = np.zeros((60, 80), np.uint8)
     frame[20:40, 30:50] = np.arange(400, dtype=np.uint8).reshape(20, 20)

@@ -401,6 +401,27 @@ mod tests {
         assert!(matches!(src.reader(s, true), Reader::Whole(_)));
     }
 
+    /// Plane `c` of `v` is level `level` of what a grey source makes of `plane` over `region`
+    /// (the same kernel, the same pyramid).
+    fn assert_plane_is_grey(
+        v: &ImageView<'_>,
+        c: usize,
+        plane: FrameInput<'_>,
+        region: Rect,
+        level: usize,
+    ) {
+        let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 1);
+        grey.prepare(plane, region);
+        grey.build_levels(plane);
+        let want = grey.view(plane, level);
+        assert_eq!(
+            v.plane(c).pixels(),
+            want.pixels(),
+            "level {level} plane {c}"
+        );
+        assert_eq!(v.plane(c).origin(), want.origin());
+    }
+
     /// A colour source's views have the frame's three channels as planes, each smoothed (and
     /// its pyramid made) as a grey source smooths that channel; read in part and covered, the
     /// same bits. A grey frame given to it is three equal planes; a grey source reads a colour
@@ -420,17 +441,8 @@ mod tests {
             let v = src.view(input, level);
             assert_eq!(v.planes(), 3);
             for c in 0..3 {
-                let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 1);
                 let plane = FrameInput::Gray8(&colour.channels[c]);
-                grey.prepare(plane, region);
-                grey.build_levels(plane);
-                let want = grey.view(plane, level);
-                assert_eq!(
-                    v.plane(c).pixels(),
-                    want.pixels(),
-                    "level {level} channel {c}"
-                );
-                assert_eq!(v.plane(c).origin(), want.origin());
+                assert_plane_is_grey(&v, c, plane, region, level);
             }
         }
         // In part, then covered: the whole region's bits in every plane.
@@ -486,17 +498,7 @@ mod tests {
                 let v = src.view(input, level);
                 assert_eq!(v.planes(), FIELDS);
                 for (c, field) in whole.iter().enumerate() {
-                    let plane = FrameInput::Gray32(field);
-                    let mut grey = FrameSource::new(gaussian_kernel(5, 1.0), 1);
-                    grey.prepare(plane, region);
-                    grey.build_levels(plane);
-                    let want = grey.view(plane, level);
-                    assert_eq!(
-                        v.plane(c).pixels(),
-                        want.pixels(),
-                        "level {level} field {c}"
-                    );
-                    assert_eq!(v.plane(c).origin(), want.origin());
+                    assert_plane_is_grey(&v, c, FrameInput::Gray32(field), region, level);
                 }
             }
             let fields: Vec<Vec<f32>> = (0..FIELDS)

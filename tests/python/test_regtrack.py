@@ -105,27 +105,40 @@ def test_colour_and_float_frames_and_any_strides(rendered):
         assert np.abs(c - results[0]).max() < 1e-3
 
 
+def track_all(t, seq):
+    """`t` initialised on `seq`'s first frame and ground truth, then updated on every other
+    frame (each must be tracked): the corners of every frame."""
+    f0, g0 = seq[0]
+    t.initialize(f0, g0)
+    corners = [t.corners]
+    for f, _ in list(seq)[1:]:
+        c, s = t.update(f)
+        assert s == "tracking"
+        corners.append(c)
+    return corners
+
+
+def cli_track(seq, tmp_path, sm, am, ssm, *args):
+    """The corners of `regtrack track` on `seq` with `sm am ssm` and `args`."""
+    out = tmp_path / f"cli_{sm}_{am}_{ssm}.txt"
+    subprocess.run(
+        [cli(), "track", "--seq", str(seq), "--sm", sm, "--am", am, "--ssm", ssm,
+         *args, "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    return read_corners(out)
+
+
 def test_a_colour_tracker_reads_the_channels_of_a_bgr_frame(rendered, tmp_path):
     seq = regtrack.Sequence(rendered, colour=True)
     grey = regtrack.Sequence(rendered)
     f0, g0 = seq[0]
     assert f0.shape[2] == 3 and f0.dtype == np.uint8 and f0.shape[:2] == grey[0][0].shape
-    t = regtrack.Tracker("fclk", "zncc", "homography", channels="rgb")
-    t.initialize(f0, g0)
-    ours = [t.corners]
-    for f, _ in list(seq)[1:]:
-        c, s = t.update(f)
-        assert s == "tracking"
-        ours.append(c)
+    ours = track_all(regtrack.Tracker("fclk", "zncc", "homography", channels="rgb"), seq)
     # The command line's colour run (it reads the frames in colour for channels=rgb).
-    out = tmp_path / "cli.txt"
-    subprocess.run(
-        [cli(), "track", "--seq", str(rendered), "--sm", "fclk", "--am", "zncc",
-         "--ssm", "homography", "--channels", "rgb", "--out", str(out)],
-        check=True,
-        capture_output=True,
-    )
-    for k, (a, b) in enumerate(zip(ours, read_corners(out))):
+    theirs = cli_track(rendered, tmp_path, "fclk", "zncc", "homography", "--channels", "rgb")
+    for k, (a, b) in enumerate(zip(ours, theirs)):
         assert np.abs(a - b).max() < 1e-3, f"frame {k + 1}: {a} vs {b}"
 
 
@@ -134,25 +147,12 @@ def test_a_descriptor_field_tracker_matches_the_command_line(rendered, tmp_path)
     # BGR one track alike, and as the command line does.
     grey = regtrack.Sequence(rendered)
     colour = regtrack.Sequence(rendered, colour=True)
-    tracks = []
-    for seq in (grey, colour):
-        t = regtrack.Tracker("esm", "ssd", "homography", channels="df")
-        f0, g0 = seq[0]
-        t.initialize(f0, g0)
-        ours = [t.corners]
-        for f, _ in list(seq)[1:]:
-            c, s = t.update(f)
-            assert s == "tracking"
-            ours.append(c)
-        tracks.append(ours)
-    out = tmp_path / "cli.txt"
-    subprocess.run(
-        [cli(), "track", "--seq", str(rendered), "--sm", "esm", "--am", "ssd",
-         "--ssm", "homography", "--channels", "df", "--out", str(out)],
-        check=True,
-        capture_output=True,
-    )
-    for k, (a, b, c) in enumerate(zip(tracks[0], tracks[1], read_corners(out))):
+    tracks = [
+        track_all(regtrack.Tracker("esm", "ssd", "homography", channels="df"), seq)
+        for seq in (grey, colour)
+    ]
+    theirs = cli_track(rendered, tmp_path, "esm", "ssd", "homography", "--channels", "df")
+    for k, (a, b, c) in enumerate(zip(tracks[0], tracks[1], theirs)):
         assert np.abs(a - c).max() < 1e-3, f"frame {k + 1}: {a} vs {c}"
         assert np.abs(b - c).max() < 1e-3, f"frame {k + 1} (BGR): {b} vs {c}"
     with pytest.raises(regtrack.Error, match="channels=df"):

@@ -10,8 +10,9 @@ const _: () = assert!(MOMENT_COLUMNS == 8, "the AVX moments sum eight columns");
 /// The most blocks per side of [`block_correlation`].
 pub const MAX_BLOCKS: usize = 8;
 
-/// The most channels of a patch (a colour grid's three, [`crate::registration::Problem::channels`]).
-pub const MAX_CHANNELS: usize = 3;
+/// The most channels of a patch (a colour grid's three, the descriptor fields' four;
+/// [`crate::registration::Problem::channels`]).
+pub const MAX_CHANNELS: usize = crate::imaging::MAX_PLANES;
 
 /// The confidence that `current` shows what `template` shows, both `res x res` patches stored
 /// row by row, in -1..1 (see [`BlockCorrelation`], which this makes for one use).

@@ -226,9 +226,34 @@ impl Problem {
         if self.selection.is_whole() || self.whole.is_some() {
             return None;
         }
-        self.selection.points(
-            (&self.grid_u, &self.grid_v),
-            (&self.template_gx, &self.template_gy),
+        let c = self.channels.max(1);
+        if c == 1 {
+            return self.selection.points(
+                (&self.grid_u, &self.grid_v),
+                (&self.template_gx, &self.template_gy),
+            );
+        }
+        // Several channels (colour, descriptor fields): the same points of each channel's
+        // part, chosen on a point's gradient over all of them, so that every part keeps as many
+        // points and the sampler's equal parts are the channels.
+        let m = self.grid_u.len() / c;
+        let (gx, gy) = (&self.template_gx, &self.template_gy);
+        let energy: Vec<f32> = (0..m)
+            .map(|i| {
+                let e: f32 = (0..c)
+                    .map(|k| gx[k * m + i].powi(2) + gy[k * m + i].powi(2))
+                    .sum();
+                e.sqrt()
+            })
+            .collect();
+        let zero = vec![0.0; m];
+        let kept = self
+            .selection
+            .points((&self.grid_u[..m], &self.grid_v[..m]), (&energy, &zero))?;
+        Some(
+            (0..c)
+                .flat_map(|k| kept.iter().map(move |&i| k * m + i))
+                .collect(),
         )
     }
 

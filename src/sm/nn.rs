@@ -174,14 +174,18 @@ impl Nn {
         cfg: &SmConfig,
     ) -> crate::error::Result<Self> {
         let samples = cfg.get(&defs[0]) as usize;
-        // A colour tracker's patches are its three channels'.
+        // A colour tracker's patches are its three channels', a field tracker's its four.
         let (res, channels) = (cfg.tracker.res, cfg.tracker.channels.count());
         let bytes = samples as u128 * (res * res * channels) as u128 * 4;
         if bytes > MAX_STORE_BYTES as u128 {
             return Err(crate::Error::InvalidParameter(format!(
                 "{name}: {samples} samples of {res}x{res} values{} would need {:.1} GB of \
                  memory, more than the {} GB allowed: lower samples or res",
-                if channels > 1 { " in 3 channels" } else { "" },
+                if channels > 1 {
+                    format!(" in {channels} channels")
+                } else {
+                    String::new()
+                },
                 bytes as f64 / 1e9,
                 MAX_STORE_BYTES >> 30
             )));

@@ -624,7 +624,8 @@ fn the_frequency_of_convergence_falls_with_the_perturbation_and_the_pyramid_wide
 /// with every gradient method (and the sampling ones with REGTRACK_FULL_TESTS=1), recovers a
 /// known warp as on the whole grid (ICLK on MI and CCRE within 0.3 px instead of 0.1); the
 /// AMs that read the patch as the whole grid (NGF, LSCV, an illumination model) are refused
-/// with the reason.
+/// with the reason. In colour and on the descriptor fields too (each channel's part keeps the
+/// same points).
 #[test]
 fn every_am_recovers_a_known_warp_reading_part_of_the_grid() {
     let trials = if full_tests() { 100 } else { 20 };
@@ -668,6 +669,15 @@ fn every_am_recovers_a_known_warp_reading_part_of_the_grid() {
     refused.sort();
     refused.dedup();
     assert_eq!(refused, ["lscv", "ngf"]);
+    // Several channels (colour, descriptor fields): the same points of each channel's part.
+    for (sm, am) in [("esm", "ssd"), ("fclk", "zncc"), ("iclk", "ssd")] {
+        for channels in ["rgb", "df"] {
+            let mut spec = TrackerSpec::from_names(sm, am, "homography").unwrap();
+            spec.set_param("spi", "gradient").unwrap();
+            spec.set_param("channels", channels).unwrap();
+            combos.push((spec, false));
+        }
+    }
     let failures: Vec<(String, usize, f64)> = combos
         .par_iter()
         .map(|(spec, sampled)| {

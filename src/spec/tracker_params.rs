@@ -463,7 +463,9 @@ pub const AUTO_SIGMA_SAMPLING: f64 = 3.0;
 /// The smoothing of the descriptor fields (`channels = df`) for the gradient methods when
 /// `blur_sigma` is auto (px): chosen on the tune half of the held-out renders under changing
 /// light (ESM SSD / ZNCC SR@5 0.749 / 0.735 at 0.7, 0.758 / 0.758 at 1, 0.776 / 0.774 at 1.5,
-/// 0.795 / 0.792 at 2 in a kernel of 7, 0.765 / 0.759 at 3 in a kernel of 9; docs/methods.md).
+/// 0.795 / 0.792 at 2 in a kernel of 7, 0.765 / 0.759 at 3 in a kernel of 9; with the
+/// confidence over all four fields 1.5 and 2 tie, 0.790 / 0.781 and 0.792 / 0.778;
+/// docs/methods.md).
 /// Crivellaro and Lepetit's point: the fields may be smoothed more than the image, since
 /// smoothing no longer cancels opposite edges.
 pub const AUTO_SIGMA_FIELDS: f64 = 2.0;

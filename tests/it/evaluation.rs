@@ -373,7 +373,7 @@ fn a_target_that_differs_only_in_hue_is_tracked_in_colour() {
 /// the template's brightness is off the truth), less ZNCC's (one gain over the patch); the
 /// descriptor fields (`channels = df`, the derivatives split by sign) see a change of brightness
 /// as a change of contrast only. On the coffee photograph (measured over 120 frames: FCLK-SSD
-/// mean error 1.41 px grey, 0.29 px on the fields; ZNCC 0.44 and 0.25) both hold the target and
+/// mean error 1.41 px grey, 0.30 px on the fields; ZNCC 0.44 and 0.26) both hold the target and
 /// the fields' error is the lower.
 #[test]
 fn a_moving_light_biases_grey_ssd_and_not_the_descriptor_fields() {

@@ -9,18 +9,20 @@
 //! each sign keeps its evidence. The fields depend on the image's gradients only, so a change
 //! of brightness (bias) leaves them, and a change of contrast (gain) scales them all alike.
 
+use super::filter::clip_rect;
 use super::{GrayF32, ImageRef, Pixel};
+use crate::geometry::Rect;
 
 /// The number of first-order descriptor fields.
 pub const FIELDS: usize = 4;
 
-/// Writes the four descriptor fields of `src` within `rect` (`x0, y0, x1, y1`, pixels, end
-/// exclusive, clipped to the image) into `out`, each the image's size (resized when it is not;
-/// pixels outside `rect` are left as they were). The derivatives are central differences, a
+/// Writes the four descriptor fields of `src` within `rect` (rounded outwards to whole pixels
+/// and clipped to the image) into `out`, each the image's size (resized when it is not; pixels
+/// outside `rect` are left as they were). The derivatives are central differences, a
 /// one-sided difference at the image's edges (the border replicated).
 pub fn descriptor_fields_into<'a, T: Pixel>(
     src: impl Into<ImageRef<'a, T>>,
-    rect: (usize, usize, usize, usize),
+    rect: Rect,
     out: &mut [GrayF32; FIELDS],
 ) {
     let src = src.into();
@@ -30,8 +32,7 @@ pub fn descriptor_fields_into<'a, T: Pixel>(
             *plane = GrayF32::new(w, h);
         }
     }
-    let (x0, y0) = (rect.0.min(w), rect.1.min(h));
-    let (x1, y1) = (rect.2.min(w), rect.3.min(h));
+    let (x0, y0, x1, y1) = clip_rect(rect, (0, 0, w, h));
     if x0 >= x1 || y0 >= y1 {
         return;
     }
@@ -68,7 +69,7 @@ mod tests {
         let ramp =
             GrayU8::from_vec(w, h, (0..w * h).map(|i| (10 * (i % w)) as u8).collect()).unwrap();
         let mut out: [GrayF32; FIELDS] = Default::default();
-        descriptor_fields_into(&ramp, (0, 0, w, h), &mut out);
+        descriptor_fields_into(&ramp, Rect::new(0.0, 0.0, w as f64, h as f64), &mut out);
         for y in 0..h {
             for x in 1..w - 1 {
                 assert_eq!(out[0].get(x, y), 10.0, "({x}, {y})");
@@ -86,7 +87,7 @@ mod tests {
             line.set(6, y, 200);
         }
         let mut out: [GrayF32; FIELDS] = Default::default();
-        descriptor_fields_into(&line, (2, 1, 10, 8), &mut out);
+        descriptor_fields_into(&line, Rect::new(2.0, 1.0, 10.0, 8.0), &mut out);
         assert_eq!((out[0].get(5, 4), out[1].get(5, 4)), (100.0, 0.0));
         assert_eq!((out[0].get(7, 4), out[1].get(7, 4)), (0.0, 100.0));
         assert_eq!(out[0].get(6, 4) + out[1].get(6, 4), 0.0);
@@ -95,7 +96,7 @@ mod tests {
         let brighter =
             GrayU8::from_vec(w, h, line.data.iter().map(|&v| v / 2 + 40).collect()).unwrap();
         let mut again: [GrayF32; FIELDS] = Default::default();
-        descriptor_fields_into(&brighter, (2, 1, 10, 8), &mut again);
+        descriptor_fields_into(&brighter, Rect::new(2.0, 1.0, 10.0, 8.0), &mut again);
         assert_eq!((again[0].get(5, 4), again[1].get(7, 4)), (50.0, 50.0));
     }
 }

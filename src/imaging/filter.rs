@@ -471,7 +471,7 @@ pub fn pyramid(src: &GrayF32, levels: usize) -> Vec<GrayF32> {
 
 /// `[x0, x1) x [y0, y1)` rounded outwards to whole pixels and clipped to `within` (NaN to its
 /// start), never reversed.
-fn clip_rect(
+pub(super) fn clip_rect(
     Rect { x0, y0, x1, y1 }: Rect,
     (wx0, wy0, wx1, wy1): (usize, usize, usize, usize),
 ) -> (usize, usize, usize, usize) {

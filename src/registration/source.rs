@@ -156,15 +156,7 @@ impl FrameSource {
         self.region = region;
         if let Some(fields) = self.fields.as_deref_mut() {
             // The fields wherever the smoothing of the region reads (and a pixel more).
-            let reach = (self.pre.kernel().radius() + 1) as f64;
-            let r = region.grown(reach);
-            let clip = |v: f64| if v.is_nan() { 0 } else { v.max(0.0) as usize };
-            let rect = (
-                clip(r.x0.floor()),
-                clip(r.y0.floor()),
-                clip(r.x1.ceil()),
-                clip(r.y1.ceil()),
-            );
+            let rect = region.grown((self.pre.kernel().radius() + 1) as f64);
             match Raw::of(input, 1, 0) {
                 Raw::U8(img) => descriptor_fields_into(img, rect, fields),
                 Raw::F32(img) => descriptor_fields_into(img, rect, fields),
@@ -194,14 +186,10 @@ impl FrameSource {
             return;
         }
         self.built = true;
-        if self.fields.is_some() {
-            let levels = self.levels;
-            for pre in std::iter::once(&mut self.pre).chain(&mut self.others) {
-                pre.build_levels(levels);
-            }
-            return;
-        }
-        if let Raw::Smoothed(img) = Raw::of(input, 1, 0) {
+        // A field source made its planes of a frame the caller smoothed as of any other.
+        if let Raw::Smoothed(img) = Raw::of(input, 1, 0)
+            && self.fields.is_none()
+        {
             self.copy.process(img, self.region);
             self.copy.build_levels(self.levels);
             return;
@@ -483,7 +471,11 @@ mod tests {
         let g = frame();
         let input = FrameInput::Gray8(&g);
         let mut whole: [GrayF32; FIELDS] = Default::default();
-        descriptor_fields_into(&g, (0, 0, g.width, g.height), &mut whole);
+        descriptor_fields_into(
+            &g,
+            Rect::new(0.0, 0.0, g.width as f64, g.height as f64),
+            &mut whole,
+        );
         // Regions inside the frame and across its edges.
         for region in [
             Rect::new(9.0, 7.0, 41.0, 33.0),

@@ -35,8 +35,8 @@ pub struct TrackerFrame {
     pub start: Option<Quad>,
     pub search_us: f64,
     pub update_us: f64,
-    /// Template, last sampled patch (res x res, once per channel: `channels` 1 or 3, red, green
-    /// and blue one after the other).
+    /// Template, last sampled patch (res x res, once per channel: `channels` 1, 3 (red, green
+    /// and blue one after the other) or 4 (the descriptor fields)).
     pub res: usize,
     pub channels: usize,
     pub template: Arc<Vec<f32>>,

@@ -131,7 +131,7 @@ impl Context {
         }
     }
 
-    /// Samples `channels` (1, or 3 for colour) from the next region on
+    /// Samples `channels` (1, 3 for colour, 4 for the descriptor fields) from the next region on
     /// ([`Problem::set_channels`]).
     pub fn set_channels(&mut self, channels: usize) {
         self.problem.set_channels(channels);

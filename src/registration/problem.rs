@@ -61,7 +61,7 @@ pub struct Problem {
     moments: Option<GridMoments>,
     /// Which points the searches read ([`super::spi`]).
     selection: Selection,
-    /// The channels sampled (1, or 3 for colour): the grid is the `res x res` points once per
+    /// The channels sampled (1, 3 for colour, 4 for the descriptor fields): the grid is the `res x res` points once per
     /// channel, channel after channel, each part read from its plane of the frame
     /// ([`crate::imaging::ImageView::with_planes`]).
     channels: usize,
@@ -117,7 +117,7 @@ impl Problem {
         }
     }
 
-    /// Samples `channels` (1, or 3 for colour) from the next region on ([`Problem::set_region`]).
+    /// Samples `channels` (1, 3 for colour, 4 for the descriptor fields) from the next region on ([`Problem::set_region`]).
     pub fn set_channels(&mut self, channels: usize) {
         self.channels = channels.max(1);
     }

@@ -233,7 +233,8 @@ impl FrameSource {
     }
 
     /// Pyramid level `level` (0: the finest) of the frame last prepared from `input`; for a
-    /// colour tracker a view of three planes (a grey frame's three times).
+    /// colour tracker a view of three planes (a grey frame's three times), for a field
+    /// tracker of its four fields.
     pub fn view<'a>(&'a self, input: FrameInput<'a>, level: usize) -> ImageView<'a> {
         let v = match input {
             _ if self.fields.is_some() => self.pre.level_view(level),

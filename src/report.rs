@@ -257,7 +257,12 @@ pub fn sr_figures(trackers: &[TrackerResult]) -> Vec<Figure> {
     }
     // The learning-based trackers beside the best registration trackers scored, as they are,
     // against translation ground truth.
-    let whole: Vec<&TrackerResult> = trackers.iter().filter(|t| !t.is_registration()).collect();
+    // (Whole trackers scored otherwise, `--gt-ssm own` scoring them against the full ground
+    // truth, are drawn with the others.)
+    let whole: Vec<&TrackerResult> = trackers
+        .iter()
+        .filter(|t| !t.is_registration() && t.summary.gt == "translation")
+        .collect();
     if !whole.is_empty() {
         let mut best: Vec<&TrackerResult> = reg
             .iter()
@@ -1127,18 +1132,28 @@ pub fn markdown(dirs: &[PathBuf], trackers: &[TrackerResult], figures: &[Figure]
             "**Not every tracker was run on every sequence**: compare the rows with care.\n\n",
         );
     }
-    md.push_str(
+    // The error the runs were scored by (`eval --error`; the same for every run pooled).
+    let (error, unit) = match trackers.first().map(|t| t.summary.error_type.as_str()) {
+        Some("center") => ("centre location error is at most t px", " (px)"),
+        Some("jaccard") => (
+            "Jaccard error, 1 - IoU, is at most t / 20 (the figures' t is 20 (1 - IoU))",
+            "",
+        ),
+        _ => ("alignment error is at most t px", " (px)"),
+    };
+    md.push_str(&format!(
         "Each tracker's frames are pooled over all its sequences (initialisation frames \
-         excluded), as the `ALL` rows of `summary.csv`. SR@t is the fraction of frames whose \
-         alignment error is at most t px (a lost frame never counts); mean SR is the mean of \
-         SR(t) over t = 0..20 px in steps of 0.1 px; the mean error (px) is over the frames with \
-         corners; a failure is the tracker lost or its error above the failure threshold; FPS are \
-         of the search alone (tracker) and of the whole update from an 8-bit frame (live).\n\n",
-    );
-    md.push_str(
-        "| tracker | frames | SR@5 | SR@10 | SR@20 | mean SR | mean error (px) | failures | \
+         excluded, and frames without ground truth), as the `ALL` rows of `summary.csv`. SR@t \
+         is the fraction of frames whose {error} (a lost frame never counts); mean SR is the \
+         mean of SR(t) over t = 0..20 in steps of 0.1; the mean error{unit} is over the frames \
+         with corners; a failure is the tracker lost or its alignment error above the failure \
+         threshold; FPS are over every frame searched (tracked or lost), of the search alone \
+         (tracker) and of the whole update from an 8-bit frame (live).\n\n",
+    ));
+    md.push_str(&format!(
+        "| tracker | frames | SR@5 | SR@10 | SR@20 | mean SR | mean error{unit} | failures | \
          iterations/frame | tracker FPS | live FPS |\n",
-    );
+    ));
     md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for t in trackers {
         let s = &t.summary;

@@ -39,7 +39,8 @@ pub fn write_run_files(out: &Path, run: &RunResult, names: &[String]) -> Result<
     }
     write_atomic(&dir.join(format!("{label}_errors.txt")), errors.as_bytes())?;
     let mut sr = String::from("threshold\tsuccess_rate\n");
-    for (t, v) in success_curve(&run.errors()) {
+    // On the success curve's 0..20 grid, as `summary.csv`'s rates (Jaccard's 0..1 scaled).
+    for (t, v) in success_curve(&run.sr_errors()) {
         sr.push_str(&format!("{t:.1}\t{v:.6}\n"));
     }
     write_atomic(&dir.join(format!("{label}_sr.txt")), sr.as_bytes())?;

@@ -132,8 +132,13 @@ impl ErrorKind {
         Self::NAMES[self as usize]
     }
 
-    /// A frame's error of this kind.
+    /// A frame's error of this kind: infinite for a frame without corners (lost or skipped),
+    /// which never counts as a success (its `iou_error` is 1, the most a frame with corners can
+    /// have, so the Jaccard error of a lost frame is not read from it).
     pub fn of(self, f: &FrameRecord) -> f64 {
+        if f.corners.is_none() {
+            return f64::INFINITY;
+        }
         match self {
             ErrorKind::Alignment => f.alignment_error,
             ErrorKind::Center => f.center_error,
@@ -370,15 +375,19 @@ impl RunResult {
 pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     let raw: Vec<f64> = runs.iter().flat_map(|r| r.errors()).collect();
     let errors: Vec<f64> = runs.iter().flat_map(|r| r.sr_errors()).collect();
-    let tracked: Vec<&FrameRecord> = runs
+    // Speed is over every frame the tracker searched, tracked or lost (a lost frame's search for
+    // the target takes its time too); not over the frames skipped before a re-initialisation,
+    // nor those a stopped tracker (`on_loss stop`) did not search. (A run file of a version
+    // before `searched` was recorded: the frames with a search time.)
+    let searched: Vec<&FrameRecord> = runs
         .iter()
         .flat_map(|r| r.frames.iter())
-        .filter(|f| !f.init && f.status == TrackStatus::Tracking && f.corners.is_some())
+        .filter(|f| !f.init && (f.searched || f.search_us > 0.0))
         .collect();
     let finite: Vec<f64> = raw.iter().copied().filter(|e| e.is_finite()).collect();
-    let search: f64 = tracked.iter().map(|f| f.search_us).sum();
-    let update: f64 = tracked.iter().map(|f| f.update_us).sum();
-    let n = tracked.len() as f64;
+    let search: f64 = searched.iter().map(|f| f.search_us).sum();
+    let update: f64 = searched.iter().map(|f| f.update_us).sum();
+    let n = searched.len() as f64;
     let fps = |us: f64| if us > 0.0 { n / (us * 1e-6) } else { 0.0 };
     let failures = runs.iter().map(|r| count_failures(r)).sum();
     let spec = runs.first().map(|r| r.spec.clone());
@@ -403,7 +412,7 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
         },
         failures,
         iterations_per_frame: if n > 0.0 {
-            tracked.iter().map(|f| f.iterations as f64).sum::<f64>() / n
+            searched.iter().map(|f| f.iterations as f64).sum::<f64>() / n
         } else {
             0.0
         },
@@ -435,13 +444,17 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
 }
 
 /// Failure events: transitions into a failed frame (lost, skipped, or E_AL above the run's
-/// failure threshold).
+/// failure threshold). A tracked frame without ground truth (occluded) cannot be judged: it
+/// leaves the state as it was.
 fn count_failures(r: &RunResult) -> usize {
     let mut count = 0;
     let mut failed = false;
     for f in &r.frames {
         if f.init {
             failed = false;
+            continue;
+        }
+        if f.corners.is_some() && f.ground_truth.is_none() {
             continue;
         }
         let now = f.corners.is_none() || f.alignment_error > r.failure_threshold;
@@ -625,8 +638,9 @@ pub fn run_sequence_reading(
             if let (Some(q), Some(g)) = (out.estimate, rec.ground_truth) {
                 rec.estimate_error = alignment_error(&q, &g);
             }
-            let failed =
-                rec.status != TrackStatus::Tracking || rec.alignment_error > opts.failure_threshold;
+            // A frame without ground truth (occluded) is a failure only if the tracker says so.
+            let failed = rec.status != TrackStatus::Tracking
+                || (rec.ground_truth.is_some() && rec.alignment_error > opts.failure_threshold);
             frames.push(rec);
             if opts.reinit && failed {
                 skip_until = Some(i + 1 + opts.reinit_skip);

@@ -206,11 +206,18 @@ pub struct LowDofTruth {
 /// (a file with another number of frames is an error naming it), fitted otherwise. Returns the
 /// quads, where they came from (`None`: fitted now) and a warning naming the file and line for
 /// each quad that cannot be a target's (folded, collinear, tiny, far beyond any frame: read as
-/// not annotated, as the sequence's own ground truth reads them). 8-DOF SSMs give the
-/// sequence's own ground truth unless an OptGT file (a corrected export) exists.
+/// not annotated, as the sequence's own ground truth reads them). 8-DOF SSMs (every
+/// parameterisation, and the non-rigid SSMs) give the sequence's own ground truth unless
+/// `<seq>_homography.txt` (a corrected export) exists.
 pub fn low_dof_ground_truth(seq: &Sequence, ssm_name: &str) -> Result<LowDofTruth> {
     let model = super::quad_model(ssm_name)?;
-    let path = opt_gt_path(&ground_truth_dir(seq), &seq.name, model.name());
+    // Under the key the corrections are kept under: the three 8-DOF parameterisations (and the
+    // non-rigid SSMs) read the same file, `_homography`, as they describe the same quads.
+    let path = opt_gt_path(
+        &ground_truth_dir(seq),
+        &seq.name,
+        &super::ssm_key(ssm_name)?,
+    );
     if path.exists() {
         let mut entries = read_ground_truth(&path)?;
         let warnings = crate::dataset::drop_unusable(&path, &mut entries);

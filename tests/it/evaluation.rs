@@ -49,6 +49,81 @@ fn esm_ssd_homography_tracks_the_rendered_tmt_sequence() {
     );
 }
 
+/// A frame without ground truth (occluded) is neither scored nor a failure, with or without
+/// `reinit` (which it must not trigger); a lost frame is never a success, whatever the error;
+/// speed is over every frame searched, lost ones too; the per-run curve file is on the same grid
+/// as the summary's rates.
+#[test]
+fn unannotated_frames_lost_frames_and_speed_are_scored_as_documented() {
+    let d = TempDir::new("occ");
+    let cfg = SynthConfig {
+        jpeg_quality: 0,
+        max_frames: Some(30),
+        ..demo_config()
+    };
+    let mut seq = render_sequence(&cfg, d.path(), "occ", &|_, _| {}).unwrap();
+    for gt in &mut seq.ground_truth[10..15] {
+        *gt = None;
+    }
+    let spec = TrackerSpec::from_names("esm", "ssd", "homography").unwrap();
+    for reinit in [false, true] {
+        let opts = EvalOptions {
+            reinit,
+            ..EvalOptions::default()
+        };
+        let run = eval::run_sequence(&seq, &spec, &opts, None, &mut NoObserver).unwrap();
+        let s = run.summary();
+        assert_eq!((s.frames, s.failures), (24, 0), "reinit {reinit}: {s:?}");
+        assert_eq!(s.sr5, 1.0, "reinit {reinit}");
+        assert!(
+            run.frames.iter().all(|f| !f.init || f.frame == 0),
+            "no re-initialisation"
+        );
+    }
+    // The same run with frames 20.. lost: never successes, by any error; searched, so timed.
+    let mut run =
+        eval::run_sequence(&seq, &spec, &EvalOptions::default(), None, &mut NoObserver).unwrap();
+    for f in &mut run.frames[20..] {
+        f.corners = None;
+        f.status = TrackStatus::Lost(regtrack::status::LossReason::LowConfidence);
+        f.alignment_error = f64::INFINITY;
+        f.center_error = f64::INFINITY;
+        f.iou_error = 1.0;
+    }
+    let searched = run.frames.iter().filter(|f| !f.init && f.searched).count();
+    assert_eq!(searched, 29, "every frame after the first was searched");
+    for kind in ["alignment", "center", "jaccard"] {
+        run.options.error = eval::ErrorKind::parse(kind).unwrap();
+        let s = run.summary();
+        // 24 frames scored (5 without ground truth), 10 of them lost.
+        assert_eq!(s.frames, 24);
+        assert!(
+            (s.sr20 - 14.0 / 24.0).abs() < 1e-12,
+            "{kind}: SR@20 {}",
+            s.sr20
+        );
+        let time: f64 = run.frames[1..].iter().map(|f| f.search_us).sum();
+        assert!((s.tracker_fps - 29.0 / (time * 1e-6)).abs() < 1e-6 * s.tracker_fps);
+        eval::write_run_files(d.path(), &run, &seq.frame_names()).unwrap();
+        let sr =
+            std::fs::read_to_string(d.path().join("tracking_data/occ/esm_ssd_homography_sr.txt"))
+                .unwrap();
+        let last: f64 = sr
+            .lines()
+            .last()
+            .unwrap()
+            .split('\t')
+            .nth(1)
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(
+            (last - s.sr20).abs() < 1e-6,
+            "{kind}: the curve file's SR(20) {last}"
+        );
+    }
+}
+
 #[test]
 fn success_rates_and_error_measures() {
     let errors = [0.0, 1.0, 4.99, 5.0, 7.0, 25.0, f64::INFINITY, 3.0];

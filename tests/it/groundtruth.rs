@@ -597,3 +597,34 @@ fn propagation_over_a_moving_brick_wall_goes_through_the_selection() {
         }
     }
 }
+
+/// `eval --gt-ssm own` scores the three parameterisations of the homography (and the non-rigid
+/// SSMs) against the same ground truth: a corrected export, `OptGT/<seq>_homography.txt`, is
+/// read for every one of them (it was read for `homography` alone, `sl3` and `corner` scoring
+/// against the sequence's own under the same label).
+#[test]
+fn every_8_dof_ssm_reads_the_corrected_homography_export() {
+    let d = TempDir::new("optgt8");
+    let frames = d.path().join("s");
+    std::fs::create_dir_all(&frames).unwrap();
+    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
+    let mut export = String::new();
+    for i in 1..=4 {
+        write_png(&frames.join(format!("frame{i:05}.png")), 60, 40, i as u8);
+        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
+        export.push_str("12 10 42 10 42 30 12 30\n");
+    }
+    std::fs::write(d.path().join("s.txt"), text).unwrap();
+    std::fs::create_dir_all(d.path().join("OptGT")).unwrap();
+    let opt = d.path().join("OptGT/s_homography.txt");
+    std::fs::write(&opt, export).unwrap();
+    let seq = Sequence::open(&d.path().join("s.txt")).unwrap();
+    for name in ["homography", "sl3", "corner", "spline", "tps5"] {
+        let low = gt::low_dof_ground_truth(&seq, name).unwrap();
+        assert_eq!(low.path.as_deref(), Some(opt.as_path()), "{name}");
+        assert_eq!(low.quads[1].unwrap().0[0].x, 12.0, "{name}");
+    }
+    // A low-DOF SSM reads its own file (none here: fitted from the sequence's).
+    let low = gt::low_dof_ground_truth(&seq, "similitude").unwrap();
+    assert_eq!(low.path, None);
+}

@@ -338,8 +338,19 @@ fn learning_trackers_are_drawn_beside_the_best_translation_trackers() {
     };
     let ts: Vec<TrackerResult> = (0..8)
         .map(|i| translation(&format!("sm{i}"), "ssd", 0.3 + 0.05 * i as f64))
-        .chain(["kcf", "dsst", "tld"].map(|w| tracker(w, "", "", 0.5)))
+        .chain(["kcf", "dsst", "tld"].map(|w| {
+            let mut t = tracker(w, "", "", 0.5);
+            t.summary.gt = "translation".into();
+            t
+        }))
         .chain([tracker("esm", "ssd", "homography", 0.99)])
+        // A whole tracker scored against the full ground truth (`--gt-ssm own`): not in the
+        // figure of translation ground truth.
+        .chain([{
+            let mut t = tracker("mil", "", "", 0.6);
+            t.summary.gt = "full".into();
+            t
+        }])
         .collect();
     let figs = report::sr_figures(&ts);
     let learning: Vec<&report::Figure> = figs
@@ -354,7 +365,7 @@ fn learning_trackers_are_drawn_beside_the_best_translation_trackers() {
         assert!(names.contains(&w));
     }
     assert!(names.contains(&"sm7_ssd_translation") && !names.contains(&"sm1_ssd_translation"));
-    assert!(!names.contains(&"esm_ssd_homography"));
+    assert!(!names.contains(&"esm_ssd_homography") && !names.contains(&"mil"));
     // The whole trackers are in no other figure.
     assert!(
         figs.iter()

@@ -213,6 +213,10 @@ pub struct Writer {
     ends_with_newline: bool,
     /// The journal has no header yet (a new file).
     needs_header: bool,
+    /// The journal's length when it was read (0: there was none): on the first append, a
+    /// journal of another length was written by someone else since (another inspector with
+    /// the same sequence open), whose records this writer's replay has not seen.
+    read_len: u64,
     faults: Faults,
 }
 
@@ -240,6 +244,7 @@ enum Pending {
 impl Writer {
     /// Prepares appending to the journal at `path` (which may not exist yet); writes nothing.
     pub fn open(path: &Path, sequence: &str) -> Result<Writer> {
+        let read_len = std::fs::metadata(path).map_or(0, |m| m.len());
         let (good_len, pending, needs_header) =
             match crate::files::read_optional(path, crate::files::JOURNAL_LIMIT) {
                 Ok(Some(b)) if b.is_empty() => (0, Pending::Nothing, true),
@@ -268,6 +273,7 @@ impl Writer {
             pending,
             ends_with_newline: pending != Pending::Newline,
             needs_header,
+            read_len,
             faults: Faults::default(),
         })
     }
@@ -295,6 +301,34 @@ impl Writer {
                 .append(true)
                 .open(&self.path)
                 .map_err(|e| Error::io(&self.path, e))?;
+            // One writer at a time: the lock is held while this writer lives (a file system
+            // without locks is written without). Then the journal must be as it was read: a
+            // writer that appended after another would number its edits from a replay that
+            // missed the other's, and its repairs would cut the other's records.
+            match f.try_lock() {
+                Ok(()) | Err(std::fs::TryLockError::Error(_)) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(Error::Report {
+                        path: self.path.clone(),
+                        message: "another regtrack is writing to this corrections journal (the \
+                                  sequence is open in another inspector); nothing was saved \
+                                  here: close the other, then reopen the sequence"
+                            .into(),
+                    });
+                }
+            }
+            let len = f.metadata().map_err(|e| Error::io(&self.path, e))?.len();
+            if len != self.read_len {
+                return Err(Error::Report {
+                    path: self.path.clone(),
+                    message: format!(
+                        "the corrections journal was written by another regtrack since the \
+                         sequence was opened ({} bytes then, {len} now); nothing was saved \
+                         here: reopen the sequence to continue from its corrections",
+                        self.read_len
+                    ),
+                });
+            }
             // A new journal's folder entry must reach the disk too.
             if created
                 && let Some(d) = self.path.parent().filter(|d| !d.as_os_str().is_empty())

@@ -628,3 +628,58 @@ fn every_8_dof_ssm_reads_the_corrected_homography_export() {
     let low = gt::low_dof_ground_truth(&seq, "similitude").unwrap();
     assert_eq!(low.path, None);
 }
+
+/// Two inspectors with the same sequence open (its exported ground truth opens under the same
+/// name, so with the same journal): the second's edits are refused, with the reason, while the
+/// first writes, and after it (its replay missed the first's edits, and its ids would repeat
+/// them); reopened, it continues from both. Nothing of the first's is lost or cut.
+#[test]
+fn a_second_writer_of_a_journal_is_refused_until_it_reopens() {
+    let d = TempDir::new("two-writers");
+    let path = d.path().join("s_corrections.jsonl");
+    let q = |x: f64| Some(Mark::Quad(Quad::from_rect(x, 10.0, 50.0, 40.0).to_array()));
+    let (mut a, _) = Corrections::open(&path, "s", 20).unwrap();
+    let (mut b, _) = Corrections::open(&path, "s", 20).unwrap();
+    a.edit("a 3", &[("homography".into(), 3, q(3.0))]).unwrap();
+    let err = b
+        .edit("b 7", &[("homography".into(), 7, q(7.0))])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("another regtrack is writing") && err.contains("s_corrections.jsonl"),
+        "{err}"
+    );
+    assert_eq!(
+        b.mark("homography", 7),
+        None,
+        "a refused edit took no effect"
+    );
+    a.edit("a 4", &[("homography".into(), 4, q(4.0))]).unwrap();
+    let written = std::fs::read(&path).unwrap();
+    drop(a);
+    let err = b
+        .edit("b 7", &[("homography".into(), 7, q(7.0))])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("written by another regtrack since"), "{err}");
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        written,
+        "nothing cut or added"
+    );
+    drop(b);
+    let (mut b, rec) = Corrections::open(&path, "s", 20).unwrap();
+    assert_eq!(rec.edits, 2);
+    b.edit("b 7", &[("homography".into(), 7, q(7.0))]).unwrap();
+    b.undo().unwrap();
+    b.undo().unwrap();
+    drop(b);
+    let (c, rec) = Corrections::open(&path, "s", 20).unwrap();
+    assert!(rec.skipped.is_empty(), "{:?}", rec.skipped);
+    assert_eq!(rec.edits, 1);
+    assert!(c.mark("homography", 3).is_some());
+    assert_eq!(
+        (c.mark("homography", 4), c.mark("homography", 7)),
+        (None, None)
+    );
+}

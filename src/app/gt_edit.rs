@@ -206,7 +206,9 @@ impl InspectorApp {
     }
 
     /// One journaled, undoable edit; errors are shown once.
-    fn gt_edit(&mut self, label: &str, changes: Vec<(usize, Option<Mark>)>) {
+    /// Returns whether it was made (or changed nothing); `false`: it could not be journaled
+    /// (a full disk, a read-only folder, another writer), and took no effect.
+    fn gt_edit(&mut self, label: &str, changes: Vec<(usize, Option<Mark>)>) -> bool {
         let key = self.gt_key();
         let changes: Vec<(String, usize, Option<Mark>)> = changes
             .into_iter()
@@ -215,9 +217,13 @@ impl InspectorApp {
         match self.rt.gt.corrections.edit().edit(label, &changes) {
             Ok(true) => {
                 self.rt.msg.status = format!("{label} (Ctrl+Z undoes)");
+                true
             }
-            Ok(false) => {}
-            Err(e) => self.error(format!("the correction was not made: {e}")),
+            Ok(false) => true,
+            Err(e) => {
+                self.error(format!("the correction was not made: {e}"));
+                false
+            }
         }
     }
 
@@ -255,10 +261,12 @@ impl InspectorApp {
             GtCommand::Step(s) => self.rt.gt.step = s.clamp(0.1, 64.0),
             GtCommand::Nudge { dx, dy } => self.nudge(frame, dx, dy),
             GtCommand::ToggleOccluded => self.toggle_occluded(frame),
-            GtCommand::Revert => self.gt_edit(
-                &format!("revert frame {} to the original", frame + 1),
-                vec![(frame, None)],
-            ),
+            GtCommand::Revert => {
+                self.gt_edit(
+                    &format!("revert frame {} to the original", frame + 1),
+                    vec![(frame, None)],
+                );
+            }
             GtCommand::Undo => self.step_history(true),
             GtCommand::Redo => self.step_history(false),
             GtCommand::Export => self.export_gt(),
@@ -281,7 +289,10 @@ impl InspectorApp {
                         .iter()
                         .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
                         .collect();
-                    self.gt_edit(&label, changes);
+                    if !self.gt_edit(&label, changes) {
+                        // Not made: the proposal stays, to be accepted once it can be.
+                        self.rt.gt.proposal = Some((label, p));
+                    }
                 }
             }
             GtCommand::Select(sel) => {
@@ -387,24 +398,31 @@ impl InspectorApp {
         let Some((a, b)) = self.rt.gt.selection else {
             return;
         };
-        let Some((label, mut p)) = self.rt.gt.proposal.take() else {
+        let Some((label, whole)) = self.rt.gt.proposal.take() else {
             return;
         };
         let (inside, outside): (Vec<_>, Vec<_>) =
-            p.frames.iter().partition(|(f, _)| (a..=b).contains(f));
+            whole.frames.iter().partition(|(f, _)| (a..=b).contains(f));
         let changes: Vec<(usize, Option<Mark>)> = inside
             .iter()
             .map(|(f, q)| (*f, Some(Mark::Quad(self.fit_to_ssm(q).to_array()))))
             .collect();
         let n = changes.len();
-        p.frames = outside;
-        if !p.frames.is_empty() {
-            self.rt.gt.proposal = Some((label.clone(), p));
-        }
-        self.gt_edit(
+        let rest = gt::Proposal {
+            frames: outside,
+            ..whole.clone()
+        };
+        if self.gt_edit(
             &format!("{label}, frames {}-{} ({n})", a + 1, b + 1),
             changes,
-        );
+        ) {
+            if !rest.frames.is_empty() {
+                self.rt.gt.proposal = Some((label, rest));
+            }
+        } else {
+            // Not made: the whole proposal stays, to be accepted once it can be.
+            self.rt.gt.proposal = Some((label, whole));
+        }
     }
 
     /// Deletes the corrections of the selected frames (one edit).
@@ -551,6 +569,7 @@ impl InspectorApp {
         let label = format!("propagate from frame {} with {}", frame + 1, spec.label());
         self.rt.worker.send(Job::Propagate(Box::new(PropagateJob {
             label,
+            sequence: seq,
             spec,
             from: (frame, start),
             old,

@@ -200,6 +200,9 @@ pub struct LandscapeJob {
 pub struct PropagateJob {
     /// What the proposal is called in the undo history.
     pub label: String,
+    /// The sequence it was asked on (the one the app shows): a sequence opened since (the open
+    /// was under way when the propagation was asked for) is not propagated over.
+    pub sequence: Arc<Sequence>,
     pub spec: TrackerSpec,
     /// The corrected frame it starts from, and its corners.
     pub from: (usize, Quad),
@@ -684,6 +687,11 @@ impl<W: Fn() + Sync> Thread<W> {
             .sequence
             .as_ref()
             .ok_or_else(|| Error::InvalidParameter("no sequence is open".into()))?;
+        if !Arc::ptr_eq(seq, &job.sequence) {
+            return Err(Error::InvalidParameter(
+                "another sequence was opened before the propagation ran: propagate again".into(),
+            ));
+        }
         gt::propagate(
             seq,
             &job.spec,

@@ -1446,6 +1446,58 @@ fn the_plots_export_as_svg_and_png() {
 
 /// The annotator's timeline: a proposal accepted on a selected range only (the rest stays
 /// proposed), and the corrections of a range deleted in one undoable edit.
+/// A proposal whose acceptance cannot be journaled (here: another inspector writes to the same
+/// journal, then wrote to it) is not lost: it stays, with the reason shown, and is accepted once
+/// the sequence is reopened.
+#[test]
+fn a_proposal_that_cannot_be_journaled_stays() {
+    use regtrack::app::command::GtCommand;
+    use regtrack::gt::{Corrections, Mark};
+    let d = TempDir::new("gui-unjournaled");
+    let path = small_sequence(d.path(), 8);
+    let journal = regtrack::gt::journal_path(&regtrack::dataset::Sequence::open(&path).unwrap());
+    let mut h = harness(state_on(&path));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    // Another inspector's writer, editing first: it holds the journal.
+    let (mut other, _) = Corrections::open(&journal, "rt", 8).unwrap();
+    let q = regtrack::geometry::Quad::from_rect(10.0, 10.0, 50.0, 40.0);
+    other
+        .edit(
+            "other",
+            &[("homography".into(), 7, Some(Mark::Quad(q.to_array())))],
+        )
+        .unwrap();
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    // Over a chosen range: proposed even where the old ground truth agrees.
+    h.state_mut()
+        .send(Command::Gt(GtCommand::Select(Some((0, 6)))));
+    h.step();
+    h.state_mut()
+        .send(Command::Gt(GtCommand::PropagateSelection));
+    step_until(&mut h, "the proposal", |a| a.gt_proposal().is_some());
+    let proposed = h.state().gt_proposal().unwrap().frames.len();
+    for (why, other_open) in [("another regtrack is writing", true), ("since", false)] {
+        if !other_open {
+            other = Corrections::in_memory(8);
+        }
+        h.state_mut().send(Command::Gt(GtCommand::AcceptProposal));
+        h.step();
+        h.step();
+        let shown = h.state().errors_shown().join("\n");
+        assert!(shown.contains(why), "{shown}");
+        assert_eq!(
+            h.state().gt_proposal().map(|p| p.frames.len()),
+            Some(proposed),
+            "the proposal stays"
+        );
+        assert!(h.state().corrections().mark("homography", 1).is_none());
+    }
+    drop(other);
+}
+
 #[test]
 fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
     use regtrack::app::command::GtCommand;

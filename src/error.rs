@@ -69,6 +69,10 @@ pub enum Error {
     /// The worker threads of a batch or of a tracker could not be started.
     #[error("cannot start {threads} worker threads: {message}")]
     Threads { threads: usize, message: String },
+    /// An action refused, the message saying why (a correction while the sequence's journal
+    /// cannot be used).
+    #[error("{0}")]
+    Refused(String),
 }
 
 impl Error {

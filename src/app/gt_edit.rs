@@ -186,11 +186,14 @@ impl InspectorApp {
                 *self.rt.gt.corrections.edit() = c;
             }
             Err(e) => {
-                *self.rt.gt.corrections.edit() = Corrections::in_memory(seq.len());
-                self.error(format!(
-                    "the corrections journal cannot be used ({e}); corrections made now are \
-                     NOT saved: fix or move the file and reopen the sequence"
-                ));
+                // Edits that could not be journaled would be lost at the next close or open:
+                // none are taken until the journal can be used.
+                let why = format!(
+                    "the corrections journal cannot be used ({e}); no correction can be kept \
+                     until it is fixed or moved away and the sequence reopened"
+                );
+                self.error(why.clone());
+                *self.rt.gt.corrections.edit() = Corrections::refusing(seq.len(), why);
             }
         }
         // The template side of the patch view.

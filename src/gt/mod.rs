@@ -72,6 +72,9 @@ pub struct Corrections {
     undone: Vec<Edit>,
     next_id: u64,
     journal: Option<Writer>,
+    /// Why edits are refused (a journal that cannot be used): an edit that is not journaled
+    /// would be lost at the next close or open.
+    refused: Option<String>,
     /// Edits (and undos/redos) since the last export.
     since_export: usize,
 }
@@ -108,8 +111,23 @@ impl Corrections {
             undone: Vec::new(),
             next_id: 1,
             journal: None,
+            refused: None,
             since_export: 0,
         }
+    }
+
+    /// No corrections, and every edit refused with `why` (the sequence's journal cannot be
+    /// used: its edits could not be kept).
+    pub fn refusing(frames: usize, why: String) -> Self {
+        Corrections {
+            refused: Some(why),
+            ..Self::in_memory(frames)
+        }
+    }
+
+    /// Why edits are refused, if they are ([`Corrections::refusing`]).
+    pub fn refused(&self) -> Option<&str> {
+        self.refused.as_deref()
     }
 
     /// Opens the journal at `path` of the sequence `sequence` of `frames` frames, replaying every
@@ -227,6 +245,9 @@ impl Corrections {
     }
 
     fn log(&mut self, r: &Record) -> Result<()> {
+        if let Some(why) = &self.refused {
+            return Err(Error::Refused(why.clone()));
+        }
         match self.journal.as_mut() {
             Some(w) => w.append(r),
             None => Ok(()),

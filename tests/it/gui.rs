@@ -1446,6 +1446,46 @@ fn the_plots_export_as_svg_and_png() {
 
 /// The annotator's timeline: a proposal accepted on a selected range only (the rest stays
 /// proposed), and the corrections of a range deleted in one undoable edit.
+/// A journal that cannot be used (here: another sequence's) is left as it is and said, and
+/// every correction is refused with the reason until it is fixed: a correction kept in memory
+/// only would be lost at the next close or open.
+#[test]
+fn corrections_are_refused_while_the_journal_cannot_be_used() {
+    use regtrack::app::command::GtCommand;
+    let d = TempDir::new("gui-unusable-journal");
+    let path = small_sequence(d.path(), 4);
+    let journal = regtrack::gt::journal_path(&regtrack::dataset::Sequence::open(&path).unwrap());
+    let other = "{\"kind\":\"header\",\"format\":1,\"sequence\":\"another\"}\n";
+    std::fs::write(&journal, other).unwrap();
+    let mut h = harness(state_on(&path));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    let gt = h.state().ground_truth(0).unwrap();
+    h.state_mut().send(Command::Gt(GtCommand::Commit {
+        frame: 0,
+        quad: gt.map(|p| Point::new(p.x + 6.0, p.y)),
+        label: "move".into(),
+    }));
+    h.step();
+    h.step();
+    let shown = h.state().errors_shown().join("\n");
+    assert!(
+        shown.contains("journal of sequence 'another'")
+            && shown.contains("no correction can be kept"),
+        "{shown}"
+    );
+    assert!(shown.contains("the correction was not made"), "{shown}");
+    assert!(h.state().corrections().mark("homography", 0).is_none());
+    assert_eq!(
+        std::fs::read_to_string(&journal).unwrap(),
+        other,
+        "left as it was"
+    );
+}
+
 /// A proposal whose acceptance cannot be journaled (here: another inspector writes to the same
 /// journal, then wrote to it) is not lost: it stays, with the reason shown, and is accepted once
 /// the sequence is reopened.

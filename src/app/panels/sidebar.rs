@@ -469,7 +469,10 @@ fn gt_journal(app: &InspectorApp, ui: &mut egui::Ui, out: &mut Vec<Command>) {
     let journal = c
         .journal_path()
         .map(|p| p.display().to_string())
-        .unwrap_or_else(|| "none: NOT saved".into());
+        .unwrap_or_else(|| match c.refused() {
+            Some(_) => "none (it cannot be used): corrections are refused".into(),
+            None => "none: NOT saved".into(),
+        });
     ui.label(
         egui::RichText::new(format!(
             "{} correction(s), kept in the journal {journal}",

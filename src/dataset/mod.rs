@@ -261,7 +261,8 @@ impl Sequence {
         if !parent.join(&name).is_dir()
             && let Some(v) = video_beside(parent, &name)
         {
-            return Self::from_video(&v);
+            // With this ground truth (an export or an OptGT file is the video's frames' too).
+            return Self::from_video_and_gt(&v, Some(gt));
         }
         let candidates = [
             parent.join(&name).join("img"),
@@ -290,6 +291,13 @@ impl Sequence {
     /// `clip.mp4`: MTF format, its lines taken in order whatever frames they name, or 8 numbers
     /// per line), if any.
     pub fn from_video(path: &Path) -> Result<Self> {
+        let gt = path.with_extension("txt");
+        Self::from_video_and_gt(path, gt.is_file().then_some(gt.as_path()))
+    }
+
+    /// A sequence from a video file and the ground-truth file `gt` (read as
+    /// [`Sequence::from_video`] reads `clip.txt`; `None`: not annotated).
+    pub fn from_video_and_gt(path: &Path, gt: Option<&Path>) -> Result<Self> {
         let v = video::Video::open(path)?;
         let name = path
             .file_stem()
@@ -298,8 +306,8 @@ impl Sequence {
         let frames: Vec<PathBuf> = (1..=v.frames)
             .map(|k| PathBuf::from(format!("{}#{k:05}", path.display())))
             .collect();
-        let gt = path.with_extension("txt");
-        let (ground_truth, gt_path, warnings) = if gt.is_file() {
+        let (ground_truth, gt_path, warnings) = if let Some(gt) = gt {
+            let gt = gt.to_path_buf();
             let mut entries = read_ground_truth(&gt)?;
             let mut warnings = Vec::new();
             // A video cut short (a copy, a recording that stopped) keeps the frames it has.

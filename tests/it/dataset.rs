@@ -317,6 +317,39 @@ fn a_video_is_a_sequence() {
     let seq = Sequence::open(&clip).unwrap();
     assert_eq!((seq.len(), seq.name.as_str()), (30, "rt"));
     assert!(seq.ground_truth(29).is_some());
+    // An exported correction beside the video (`rt_gt_homography.txt`) and an OptGT file are
+    // read with the video's frames: their corners, not `rt.txt`'s.
+    let shift = |src: &std::path::Path, dst: &std::path::Path| {
+        let entries = regtrack::dataset::read_ground_truth(src).unwrap();
+        let quads: Vec<_> = entries
+            .iter()
+            .map(|e| {
+                e.quad
+                    .map(|q| q.map(|p| regtrack::geometry::Point::new(p.x + 30.0, p.y)))
+            })
+            .collect();
+        regtrack::dataset::write_ground_truth(dst, &quads, &[], None).unwrap();
+    };
+    std::fs::create_dir_all(videos.join("OptGT")).unwrap();
+    for export in [
+        videos.join("rt_gt_homography.txt"),
+        videos.join("OptGT/rt_translation.txt"),
+    ] {
+        shift(&videos.join("rt.txt"), &export);
+        let corrected = Sequence::open(&export).unwrap();
+        assert_eq!((corrected.len(), corrected.name.as_str()), (30, "rt"));
+        assert!(corrected.video.is_some(), "{}", export.display());
+        let (a, b) = (
+            seq.ground_truth(5).unwrap(),
+            corrected.ground_truth(5).unwrap(),
+        );
+        assert!(
+            (b.0[0].x - a.0[0].x - 30.0).abs() < 1e-3,
+            "{}",
+            export.display()
+        );
+        assert_eq!(corrected.gt_path.as_deref(), Some(export.as_path()));
+    }
     // Seeking lands on the frame decoding in order gives.
     let in_order: Vec<_> = (0..30).map(|i| seq.load_gray(i).unwrap()).collect();
     let frames = Sequence::open(&data.join("rt.txt")).unwrap();

@@ -323,6 +323,9 @@ def rows(out, names):
                 continue
             with open(path) as f:
                 for r in csv.DictReader(f):
+                    # The pooled rows (`ALL`, `ALL:<factor>`) repeat the sequences' frames.
+                    if r["sequence"] == "ALL" or r["sequence"].startswith("ALL:"):
+                        continue
                     frames = int(r["frames"])
                     yield (name, half, r["tracker"], f"{half}/{r['sequence']}", frames,
                            float(r["sr5"]) * frames, r["lost_when_off"], r["lost_when_on"])

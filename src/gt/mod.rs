@@ -75,6 +75,9 @@ pub struct Corrections {
     /// Why edits are refused (a journal that cannot be used): an edit that is not journaled
     /// would be lost at the next close or open.
     refused: Option<String>,
+    /// The files this journal's exports wrote (an export replaces those freely, and keeps a
+    /// copy of any other file it would replace).
+    exported: std::collections::BTreeSet<PathBuf>,
     /// Edits (and undos/redos) since the last export.
     since_export: usize,
 }
@@ -112,6 +115,7 @@ impl Corrections {
             next_id: 1,
             journal: None,
             refused: None,
+            exported: Default::default(),
             since_export: 0,
         }
     }
@@ -219,7 +223,10 @@ impl Corrections {
                 }
                 _ => return Err(format!("redo of edit {id}, which is not the last undone")),
             },
-            Record::Export { .. } => self.since_export = 0,
+            Record::Export { paths } => {
+                self.exported.extend(paths.into_iter().map(PathBuf::from));
+                self.since_export = 0;
+            }
         }
         Ok(())
     }
@@ -405,8 +412,34 @@ impl Corrections {
         self.log(&Record::Export {
             paths: paths.iter().map(|p| p.display().to_string()).collect(),
         })?;
+        self.exported.extend(paths.iter().cloned());
         self.since_export = 0;
         Ok(())
+    }
+
+    /// Keeps a copy of each of `paths` that exists and that no export of this journal wrote
+    /// (a dataset's own OptGT file, another annotator's export), beside it as
+    /// `<name>.orig` (`.orig2`, ... when taken: not a `.txt` a dataset's listing would take for
+    /// a sequence), before an export replaces it. Returns the copies made.
+    fn keep_what_export_replaces(&self, paths: &[&Path]) -> Result<Vec<PathBuf>> {
+        let mut kept = Vec::new();
+        for &p in paths {
+            if !p.is_file() || self.exported.contains(p) {
+                continue;
+            }
+            let name = p.file_name().map(|s| s.to_string_lossy().into_owned());
+            let name = name.unwrap_or_default();
+            let copy = (1..)
+                .map(|k| {
+                    let n = if k == 1 { String::new() } else { k.to_string() };
+                    p.with_file_name(format!("{name}.orig{n}"))
+                })
+                .find(|c| !c.exists())
+                .expect("a free name");
+            std::fs::copy(p, &copy).map_err(|e| Error::io(&copy, e))?;
+            kept.push(copy);
+        }
+        Ok(kept)
     }
 }
 
@@ -517,7 +550,9 @@ fn names_frames(seq: &Sequence) -> bool {
 
 /// Writes the corrected ground truth of `ssm_name` atomically, in the sequence's own format
 /// (`<gt folder>/<seq>_gt_<ssm>.txt`) and in OptGT layout (`<gt folder>/OptGT/<seq>_<ssm>.txt`
-/// with its residuals); the original file is never written. Records the export in the journal.
+/// with its residuals); the original file is never written. A file it replaces that no export of
+/// this journal wrote (a dataset's own OptGT file) is copied aside first (`<name>.orig`).
+/// Records the export in the journal. Returns the files written, then the copies kept.
 pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec<PathBuf>> {
     let key = ssm_key(ssm_name)?;
     let (frames, residuals) = ground_truth_in(seq, c, &key)?;
@@ -532,6 +567,11 @@ pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec
             own.display()
         )));
     }
+    // Nothing another wrote is lost: a file the export replaces that no export of this
+    // journal wrote is copied aside first.
+    let opt = opt_gt_path(&dir, &seq.name, &key);
+    let res = opt.with_file_name(format!("{}_{key}_residuals.txt", seq.name));
+    let kept = c.keep_what_export_replaces(&[&own, &opt, &res])?;
     write_ground_truth(
         &own,
         &quads,
@@ -546,7 +586,7 @@ pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec
     let (opt, res) = write_opt_gt(&dir, seq, &low, &occluded)?;
     let paths = vec![own, opt, res];
     c.note_export(&paths)?;
-    Ok(paths)
+    Ok(paths.into_iter().chain(kept).collect())
 }
 
 /// Interpolates between two key frames in `ssm_name`'s parameter space: the frames strictly

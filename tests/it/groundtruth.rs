@@ -683,3 +683,42 @@ fn a_second_writer_of_a_journal_is_refused_until_it_reopens() {
         (None, None)
     );
 }
+
+/// An export that replaces a file no export of the journal wrote (a dataset's own OptGT file)
+/// keeps a copy of it first; its own earlier exports it replaces freely, after a reopen too.
+#[test]
+fn an_export_keeps_what_it_replaces_that_it_did_not_write() {
+    let d = TempDir::new("export-keeps");
+    let frames = d.path().join("s");
+    std::fs::create_dir_all(&frames).unwrap();
+    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
+    for i in 1..=4 {
+        write_png(&frames.join(format!("frame{i:05}.png")), 60, 40, i as u8);
+        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
+    }
+    std::fs::write(d.path().join("s.txt"), text).unwrap();
+    std::fs::create_dir_all(d.path().join("OptGT")).unwrap();
+    let shipped = d.path().join("OptGT/s_similitude.txt");
+    let original = "11 10 41 10 41 30 11 30\n".repeat(4);
+    std::fs::write(&shipped, &original).unwrap();
+    let seq = Sequence::open(&d.path().join("s.txt")).unwrap();
+    let journal = gt::journal_path(&seq);
+    let (mut c, _) = Corrections::open(&journal, "s", 4).unwrap();
+    let q = Quad::from_rect(12.0, 10.0, 30.0, 20.0);
+    c.edit(
+        "move",
+        &[("similitude".into(), 2, Some(Mark::Quad(q.to_array())))],
+    )
+    .unwrap();
+    let paths = gt::export(&seq, &mut c, "similitude").unwrap();
+    let kept = d.path().join("OptGT/s_similitude.txt.orig");
+    assert!(paths.contains(&kept), "{paths:?}");
+    assert_eq!(std::fs::read_to_string(&kept).unwrap(), original);
+    assert_ne!(std::fs::read_to_string(&shipped).unwrap(), original);
+    // Its own export, replaced again: nothing more kept, now or after a reopen.
+    assert_eq!(gt::export(&seq, &mut c, "similitude").unwrap().len(), 3);
+    drop(c);
+    let (mut c, _) = Corrections::open(&journal, "s", 4).unwrap();
+    assert_eq!(gt::export(&seq, &mut c, "similitude").unwrap().len(), 3);
+    assert!(!d.path().join("OptGT/s_similitude.txt.orig2").exists());
+}

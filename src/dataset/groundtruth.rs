@@ -152,26 +152,29 @@ pub fn read_ground_truth(path: &Path) -> Result<Vec<GtEntry>> {
 
 /// Writes ground truth atomically: with `names`, in the MTF format (header, frame names); else
 /// 8 numbers per line. Frames without corners are written `occluded` where `occluded` says so,
-/// `none` otherwise.
+/// `none` otherwise. Names that a line cannot hold (one with a space, an empty one) make the
+/// whole file 8 numbers per line, its lines the frames in order (the file's own frames, listed,
+/// are then taken by position): a made-up name would name a frame that does not exist.
 pub fn write_ground_truth(
     path: &Path,
     quads: &[Option<Quad>],
     occluded: &[bool],
     names: Option<&[String]>,
 ) -> Result<()> {
+    let names = names.filter(|names| {
+        (0..quads.len()).all(|i| {
+            names
+                .get(i)
+                .is_some_and(|n| !n.is_empty() && !n.contains(char::is_whitespace))
+        })
+    });
     let mut text = String::new();
     if names.is_some() {
         text.push_str("frame\tulx\tuly\turx\tury\tlrx\tlry\tllx\tlly\n");
     }
     for (i, q) in quads.iter().enumerate() {
         if let Some(names) = names {
-            match names
-                .get(i)
-                .filter(|n| !n.is_empty() && !n.contains(char::is_whitespace))
-            {
-                Some(n) => text.push_str(n),
-                None => text.push_str(&format!("frame{:05}", i + 1)),
-            }
+            text.push_str(&names[i]);
             text.push(' ');
         }
         match q {

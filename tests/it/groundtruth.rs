@@ -722,3 +722,30 @@ fn an_export_keeps_what_it_replaces_that_it_did_not_write() {
     assert_eq!(gt::export(&seq, &mut c, "similitude").unwrap().len(), 3);
     assert!(!d.path().join("OptGT/s_similitude.txt.orig2").exists());
 }
+
+/// A folder whose frames' names hold spaces, annotated from scratch: its export opens again,
+/// with its corrections on the right frames (the names, which a line cannot hold, were replaced
+/// by made-up ones that named no frame).
+#[test]
+fn an_export_of_frames_named_with_spaces_opens_again() {
+    let d = TempDir::new("spaces");
+    let folder = d.path().join("my seq");
+    std::fs::create_dir_all(&folder).unwrap();
+    for i in 1..=4 {
+        write_png(&folder.join(format!("shot {i}.png")), 60, 40, 10 * i as u8);
+    }
+    let seq = Sequence::open(&folder).unwrap();
+    let (mut c, _) = Corrections::open(&gt::journal_path(&seq), &seq.name, 4).unwrap();
+    let q = Quad::from_rect(12.0, 10.0, 30.0, 20.0);
+    c.edit(
+        "mark",
+        &[("homography".into(), 2, Some(Mark::Quad(q.to_array())))],
+    )
+    .unwrap();
+    let paths = gt::export(&seq, &mut c, "homography").unwrap();
+    let again = Sequence::open(&paths[0]).unwrap();
+    assert_eq!(again.len(), 4);
+    assert_eq!(again.frames[2].file_name().unwrap(), "shot 3.png");
+    assert!(alignment_error(&again.ground_truth(2).unwrap(), &q) < 1e-3);
+    assert!(again.ground_truth(1).is_none());
+}

@@ -228,6 +228,8 @@ pub struct Writer {
 pub struct Faults {
     pub capacity: Option<u64>,
     pub pause_before_sync: std::time::Duration,
+    /// The most a journal may hold, instead of [`crate::files::JOURNAL_LIMIT`].
+    pub limit: Option<u64>,
 }
 
 /// The state of a journal's end, before the next append.
@@ -382,6 +384,17 @@ impl Writer {
             })?;
         }
         bytes += &line(r)?;
+        // A journal is read whole, up to JOURNAL_LIMIT: a record that would take it past that
+        // is refused, so that every record it holds can still be read back.
+        let limit = self.faults.limit.unwrap_or(crate::files::JOURNAL_LIMIT);
+        if self.good_len + bytes.len() as u64 > limit {
+            return Err(Error::Refused(format!(
+                "{} is full (its reader takes {} bytes): export the ground truth, then move the \
+                 journal away to start a new one",
+                self.path.display(),
+                limit
+            )));
+        }
         let path = self.path.clone();
         let (good_len, faults) = (self.good_len, self.faults);
         let f = self.file()?;

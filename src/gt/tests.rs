@@ -464,3 +464,33 @@ fn a_damaged_header_keeps_the_edits_after_it() {
     assert!(c.mark("similitude", 3).is_some() && c.mark("homography", 4).is_some());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A journal never grows past what its reader takes: the edit that would is refused (and takes
+/// no effect), so every record in it can still be read back.
+#[test]
+fn a_full_journal_refuses_the_edit_that_would_make_it_unreadable() {
+    let d = tmp("full");
+    let j = d.join("s_corrections.jsonl");
+    let (mut c, _) = Corrections::open(&j, "s", 10).unwrap();
+    assert!(c.edit("a", &[set("similitude", 1, 1.0)]).unwrap());
+    let len = std::fs::metadata(&j).unwrap().len();
+    c.inject_faults(journal::Faults {
+        limit: Some(len + 200),
+        ..Default::default()
+    });
+    let mut made = 1;
+    let err = loop {
+        match c.edit("b", &[set("similitude", 2 + made % 5, made as f64)]) {
+            Ok(_) => made += 1,
+            Err(e) => break e.to_string(),
+        }
+    };
+    assert!(
+        err.contains("is full") && err.contains("s_corrections.jsonl"),
+        "{err}"
+    );
+    assert!(std::fs::metadata(&j).unwrap().len() <= len + 200);
+    drop(c);
+    let (_, rec) = Corrections::open(&j, "s", 10).unwrap();
+    assert_eq!((rec.edits, rec.damaged()), (made, false));
+}

@@ -310,15 +310,7 @@ fn natural_order_compares_numbers_by_value() {
 fn optgt_corners_are_checked_and_its_errors_name_it() {
     use regtrack::dataset::Sequence;
     let d = TempDir::new("optgt");
-    let frames = d.path().join("s");
-    std::fs::create_dir_all(&frames).unwrap();
-    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
-    for i in 1..=6 {
-        crate::common::write_png(&frames.join(format!("frame{i:05}.png")), 60, 40, i as u8);
-        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
-    }
-    std::fs::write(d.path().join("s.txt"), text).unwrap();
-    let seq = Sequence::open(&d.path().join("s.txt")).unwrap();
+    let seq = Sequence::open(&crate::common::tiny_sequence(d.path(), 6)).unwrap();
     std::fs::create_dir_all(d.path().join("OptGT")).unwrap();
     let opt = d.path().join("OptGT/s_translation.txt");
     let lines = [

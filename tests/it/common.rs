@@ -61,6 +61,21 @@ pub fn write_png(path: &std::path::Path, w: u32, h: u32, seed: u8) {
     img.save(path).expect("png");
 }
 
+/// A sequence of `frames` small PNG frames in `dir/s/` with its ground truth `dir/s.txt` (the
+/// same 30 x 20 box on every frame, MTF format); returns the ground truth's path.
+pub fn tiny_sequence(dir: &std::path::Path, frames: usize) -> std::path::PathBuf {
+    let folder = dir.join("s");
+    std::fs::create_dir_all(&folder).unwrap();
+    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
+    for i in 1..=frames {
+        write_png(&folder.join(format!("frame{i:05}.png")), 60, 40, i as u8);
+        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
+    }
+    let path = dir.join("s.txt");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
 /// The paper's single-level tracker: smoothing 5x5 with sigma 3, no pyramid, the classic
 /// methods (no line search, no polish), and lost until initialised again. The tests that study how the classic methods behave
 /// (where their drift comes from, what a rule of theirs changes) pin it; the defaults are the

@@ -605,20 +605,12 @@ fn propagation_over_a_moving_brick_wall_goes_through_the_selection() {
 #[test]
 fn every_8_dof_ssm_reads_the_corrected_homography_export() {
     let d = TempDir::new("optgt8");
-    let frames = d.path().join("s");
-    std::fs::create_dir_all(&frames).unwrap();
-    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
-    let mut export = String::new();
-    for i in 1..=4 {
-        write_png(&frames.join(format!("frame{i:05}.png")), 60, 40, i as u8);
-        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
-        export.push_str("12 10 42 10 42 30 12 30\n");
-    }
-    std::fs::write(d.path().join("s.txt"), text).unwrap();
+    let gt_file = crate::common::tiny_sequence(d.path(), 4);
+    let export = "12 10 42 10 42 30 12 30\n".repeat(4);
     std::fs::create_dir_all(d.path().join("OptGT")).unwrap();
     let opt = d.path().join("OptGT/s_homography.txt");
     std::fs::write(&opt, export).unwrap();
-    let seq = Sequence::open(&d.path().join("s.txt")).unwrap();
+    let seq = Sequence::open(&gt_file).unwrap();
     for name in ["homography", "sl3", "corner", "spline", "tps5"] {
         let low = gt::low_dof_ground_truth(&seq, name).unwrap();
         assert_eq!(low.path.as_deref(), Some(opt.as_path()), "{name}");
@@ -689,19 +681,12 @@ fn a_second_writer_of_a_journal_is_refused_until_it_reopens() {
 #[test]
 fn an_export_keeps_what_it_replaces_that_it_did_not_write() {
     let d = TempDir::new("export-keeps");
-    let frames = d.path().join("s");
-    std::fs::create_dir_all(&frames).unwrap();
-    let mut text = String::from("frame ulx uly urx ury lrx lry llx lly\n");
-    for i in 1..=4 {
-        write_png(&frames.join(format!("frame{i:05}.png")), 60, 40, i as u8);
-        text.push_str(&format!("frame{i:05}.png 10 10 40 10 40 30 10 30\n"));
-    }
-    std::fs::write(d.path().join("s.txt"), text).unwrap();
+    let gt_file = crate::common::tiny_sequence(d.path(), 4);
     std::fs::create_dir_all(d.path().join("OptGT")).unwrap();
     let shipped = d.path().join("OptGT/s_similitude.txt");
     let original = "11 10 41 10 41 30 11 30\n".repeat(4);
     std::fs::write(&shipped, &original).unwrap();
-    let seq = Sequence::open(&d.path().join("s.txt")).unwrap();
+    let seq = Sequence::open(&gt_file).unwrap();
     let journal = gt::journal_path(&seq);
     let (mut c, _) = Corrections::open(&journal, "s", 4).unwrap();
     let q = Quad::from_rect(12.0, 10.0, 30.0, 20.0);

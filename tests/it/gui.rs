@@ -92,6 +92,17 @@ fn step_until(
     h.step();
 }
 
+/// The inspector on `seq`, its first frame shown, in the ground-truth editing mode.
+fn editing_ground_truth(seq: &std::path::Path) -> Harness<'static, InspectorApp> {
+    let mut h = harness(state_on(seq));
+    step_until(&mut h, "the frame", |a| {
+        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
+    });
+    h.get_by_label("Edit ground-truth corners").click();
+    h.run_steps(4);
+    h
+}
+
 fn state_on(seq: &std::path::Path) -> State {
     State {
         sequence: SequenceSource::Path(seq.to_path_buf()),
@@ -977,12 +988,7 @@ fn several_presses_within_one_frame_of_the_window_all_count() {
     // A fast typist (or xdotool) can press a key several times before the window draws again.
     let d = TempDir::new("gui-presses");
     let seq = small_sequence(d.path(), 8);
-    let mut h = harness(state_on(&seq));
-    step_until(&mut h, "the frame", |a| {
-        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
-    });
-    h.get_by_label("Edit ground-truth corners").click();
-    h.run_steps(4);
+    let mut h = editing_ground_truth(&seq);
     let before = h.state().ground_truth(0).unwrap();
     press(&mut h, egui::Key::Num2, egui::Modifiers::NONE);
     for _ in 0..3 {
@@ -1457,12 +1463,7 @@ fn corrections_are_refused_while_the_journal_cannot_be_used() {
     let journal = regtrack::gt::journal_path(&regtrack::dataset::Sequence::open(&path).unwrap());
     let other = "{\"kind\":\"header\",\"format\":1,\"sequence\":\"another\"}\n";
     std::fs::write(&journal, other).unwrap();
-    let mut h = harness(state_on(&path));
-    step_until(&mut h, "the frame", |a| {
-        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
-    });
-    h.get_by_label("Edit ground-truth corners").click();
-    h.run_steps(4);
+    let mut h = editing_ground_truth(&path);
     let gt = h.state().ground_truth(0).unwrap();
     h.state_mut().send(Command::Gt(GtCommand::Commit {
         frame: 0,
@@ -1496,11 +1497,8 @@ fn a_proposal_that_cannot_be_journaled_stays() {
     let d = TempDir::new("gui-unjournaled");
     let path = small_sequence(d.path(), 8);
     let journal = regtrack::gt::journal_path(&regtrack::dataset::Sequence::open(&path).unwrap());
-    let mut h = harness(state_on(&path));
-    step_until(&mut h, "the frame", |a| {
-        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
-    });
-    // Another inspector's writer, editing first: it holds the journal.
+    let mut h = editing_ground_truth(&path);
+    // Another inspector's writer, editing after this one read the journal: it holds it.
     let (mut other, _) = Corrections::open(&journal, "rt", 8).unwrap();
     let q = regtrack::geometry::Quad::from_rect(10.0, 10.0, 50.0, 40.0);
     other
@@ -1509,8 +1507,6 @@ fn a_proposal_that_cannot_be_journaled_stays() {
             &[("homography".into(), 7, Some(Mark::Quad(q.to_array())))],
         )
         .unwrap();
-    h.get_by_label("Edit ground-truth corners").click();
-    h.run_steps(4);
     // Over a chosen range: proposed even where the old ground truth agrees.
     h.state_mut()
         .send(Command::Gt(GtCommand::Select(Some((0, 6)))));
@@ -1544,12 +1540,7 @@ fn the_timeline_selection_accepts_a_proposal_in_part_and_deletes_corrections() {
     use regtrack::gt::Mark;
     let d = TempDir::new("gui-timeline");
     let seq = small_sequence(d.path(), 8);
-    let mut h = harness(state_on(&seq));
-    step_until(&mut h, "the frame", |a| {
-        a.tracked_until() == Some(0) && a.screen_pos(Point::new(0.0, 0.0)).is_some()
-    });
-    h.get_by_label("Edit ground-truth corners").click();
-    h.run_steps(4);
+    let mut h = editing_ground_truth(&seq);
     // Frame 1 corrected 6 px to the right: the proposal carries the offset on.
     let gt = h.state().ground_truth(0).unwrap();
     let moved = gt.map(|p| Point::new(p.x + 6.0, p.y));

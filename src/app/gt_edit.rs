@@ -413,7 +413,7 @@ impl InspectorApp {
         let n = changes.len();
         let rest = gt::Proposal {
             frames: outside,
-            ..whole.clone()
+            stop: whole.stop.clone(),
         };
         if self.gt_edit(
             &format!("{label}, frames {}-{} ({n})", a + 1, b + 1),

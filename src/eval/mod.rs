@@ -443,9 +443,20 @@ pub fn summarize(name: &str, runs: &[&RunResult]) -> Summary {
     }
 }
 
-/// Failure events: transitions into a failed frame (lost, skipped, or E_AL above the run's
-/// failure threshold). A tracked frame without ground truth (occluded) cannot be judged: it
-/// leaves the state as it was.
+impl FrameRecord {
+    /// Whether the frame failed: no corners (lost, skipped), or E_AL above `threshold`; `None`
+    /// for a tracked frame without ground truth (occluded), which cannot be judged.
+    fn failed(&self, threshold: f64) -> Option<bool> {
+        match (&self.corners, &self.ground_truth) {
+            (None, _) => Some(true),
+            (Some(_), None) => None,
+            (Some(_), Some(_)) => Some(self.alignment_error > threshold),
+        }
+    }
+}
+
+/// Failure events: transitions into a failed frame ([`FrameRecord::failed`]); a frame that
+/// cannot be judged leaves the state as it was.
 fn count_failures(r: &RunResult) -> usize {
     let mut count = 0;
     let mut failed = false;
@@ -454,10 +465,9 @@ fn count_failures(r: &RunResult) -> usize {
             failed = false;
             continue;
         }
-        if f.corners.is_some() && f.ground_truth.is_none() {
+        let Some(now) = f.failed(r.failure_threshold) else {
             continue;
-        }
-        let now = f.corners.is_none() || f.alignment_error > r.failure_threshold;
+        };
         if now && !failed {
             count += 1;
         }
@@ -638,9 +648,8 @@ pub fn run_sequence_reading(
             if let (Some(q), Some(g)) = (out.estimate, rec.ground_truth) {
                 rec.estimate_error = alignment_error(&q, &g);
             }
-            // A frame without ground truth (occluded) is a failure only if the tracker says so.
-            let failed = rec.status != TrackStatus::Tracking
-                || (rec.ground_truth.is_some() && rec.alignment_error > opts.failure_threshold);
+            // A frame without ground truth (occluded) is a failure only if the tracker is lost.
+            let failed = rec.failed(opts.failure_threshold) == Some(true);
             frames.push(rec);
             if opts.reinit && failed {
                 skip_until = Some(i + 1 + opts.reinit_skip);

@@ -155,6 +155,11 @@ pub fn opt_gt_path(dir: &Path, seq: &str, ssm: &str) -> PathBuf {
     dir.join("OptGT").join(format!("{seq}_{ssm}.txt"))
 }
 
+/// Its residuals beside it: `<dir>/OptGT/<seq>_<ssm>_residuals.txt`.
+pub fn opt_gt_residuals_path(dir: &Path, seq: &str, ssm: &str) -> PathBuf {
+    dir.join("OptGT").join(format!("{seq}_{ssm}_residuals.txt"))
+}
+
 /// The frame file names of a sequence (for the MTF format).
 pub fn frame_names(seq: &Sequence) -> Vec<String> {
     seq.frames
@@ -186,7 +191,7 @@ pub fn write_opt_gt(
             None => text.push_str(&format!("{}\tnone\n", i + 1)),
         }
     }
-    let res = path.with_file_name(format!("{}_{}_residuals.txt", seq.name, low.ssm));
+    let res = opt_gt_residuals_path(dir, &seq.name, &low.ssm);
     write_atomic(&res, text.as_bytes())?;
     Ok((path, res))
 }

@@ -246,27 +246,26 @@ enum Pending {
 impl Writer {
     /// Prepares appending to the journal at `path` (which may not exist yet); writes nothing.
     pub fn open(path: &Path, sequence: &str) -> Result<Writer> {
-        let read_len = std::fs::metadata(path).map_or(0, |m| m.len());
-        let (good_len, pending, needs_header) =
-            match crate::files::read_optional(path, crate::files::JOURNAL_LIMIT) {
-                Ok(Some(b)) if b.is_empty() => (0, Pending::Nothing, true),
-                Ok(Some(b)) => {
-                    let tail_start = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
-                    let (good_len, pending) = if tail_start == b.len() {
-                        (b.len(), Pending::Nothing)
-                    } else if parse_record(&b[tail_start..]).is_ok_and(|r| r.is_some()) {
-                        (b.len(), Pending::Newline)
-                    } else {
-                        (tail_start, Pending::Cut)
-                    };
-                    let header = b[..good_len]
-                        .split(|&c| c == b'\n')
-                        .any(|l| matches!(parse_record(l), Ok(Some(Record::Header { .. }))));
-                    (good_len as u64, pending, !header)
-                }
-                Ok(None) => (0, Pending::Nothing, true),
-                Err(e) => return Err(e),
-            };
+        let bytes = crate::files::read_optional(path, crate::files::JOURNAL_LIMIT)?;
+        let read_len = bytes.as_ref().map_or(0, |b| b.len() as u64);
+        let (good_len, pending, needs_header) = match bytes {
+            Some(b) if b.is_empty() => (0, Pending::Nothing, true),
+            Some(b) => {
+                let tail_start = b.iter().rposition(|&c| c == b'\n').map_or(0, |i| i + 1);
+                let (good_len, pending) = if tail_start == b.len() {
+                    (b.len(), Pending::Nothing)
+                } else if parse_record(&b[tail_start..]).is_ok_and(|r| r.is_some()) {
+                    (b.len(), Pending::Newline)
+                } else {
+                    (tail_start, Pending::Cut)
+                };
+                let header = b[..good_len]
+                    .split(|&c| c == b'\n')
+                    .any(|l| matches!(parse_record(l), Ok(Some(Record::Header { .. }))));
+                (good_len as u64, pending, !header)
+            }
+            None => (0, Pending::Nothing, true),
+        };
         Ok(Writer {
             path: path.to_path_buf(),
             sequence: sequence.to_string(),
@@ -310,26 +309,23 @@ impl Writer {
             match f.try_lock() {
                 Ok(()) | Err(std::fs::TryLockError::Error(_)) => {}
                 Err(std::fs::TryLockError::WouldBlock) => {
-                    return Err(Error::Report {
-                        path: self.path.clone(),
-                        message: "another regtrack is writing to this corrections journal (the \
-                                  sequence is open in another inspector); nothing was saved \
-                                  here: close the other, then reopen the sequence"
-                            .into(),
-                    });
+                    return Err(Error::Refused(format!(
+                        "{}: another regtrack is writing to this corrections journal (the \
+                         sequence is open in another inspector); nothing was saved here: close \
+                         the other, then reopen the sequence",
+                        self.path.display()
+                    )));
                 }
             }
             let len = f.metadata().map_err(|e| Error::io(&self.path, e))?.len();
             if len != self.read_len {
-                return Err(Error::Report {
-                    path: self.path.clone(),
-                    message: format!(
-                        "the corrections journal was written by another regtrack since the \
-                         sequence was opened ({} bytes then, {len} now); nothing was saved \
-                         here: reopen the sequence to continue from its corrections",
-                        self.read_len
-                    ),
-                });
+                return Err(Error::Refused(format!(
+                    "{}: the corrections journal was written by another regtrack since the \
+                     sequence was opened ({} bytes then, {len} now); nothing was saved here: \
+                     reopen the sequence to continue from its corrections",
+                    self.path.display(),
+                    self.read_len
+                )));
             }
             // A new journal's folder entry must reach the disk too.
             if created

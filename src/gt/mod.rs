@@ -570,7 +570,7 @@ pub fn export(seq: &Sequence, c: &mut Corrections, ssm_name: &str) -> Result<Vec
     // Nothing another wrote is lost: a file the export replaces that no export of this
     // journal wrote is copied aside first.
     let opt = opt_gt_path(&dir, &seq.name, &key);
-    let res = opt.with_file_name(format!("{}_{key}_residuals.txt", seq.name));
+    let res = fit::opt_gt_residuals_path(&dir, &seq.name, &key);
     let kept = c.keep_what_export_replaces(&[&own, &opt, &res])?;
     write_ground_truth(
         &own,
